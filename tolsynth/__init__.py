@@ -1,0 +1,45 @@
+"""tolsynth: optimal manufacturing tolerances for robot link parameters.
+
+Chooses the cheapest tolerances ``eps_i`` for a robot's link parameters such that its absolute
+pose error stays within a specification with a stated probability (Xu Weiliang and Zhang Qixian,
+"Precision optimization design of robot mechanisms", 1988), on CasADi graphs with IPOPT, and
+with the paper's own SUMT + Powell method as a cross-check.
+
+Units: mm and rad throughout the API; tolerances in each error parameter's own unit (the paper's:
+mm and 1e-2 rad); cost in the paper's units (sum of k * eps**-alpha on those numbers).
+"""
+
+from .errors import (
+    InfeasibleSpecificationError,
+    InputError,
+    LoopClosureError,
+    ModelFileError,
+    OutOfRangeError,
+    SolverError,
+    TolsynthError,
+    UnknownNameError,
+)
+from .mechanism import Analysis, Mechanism, load_model
+from .model import bundled_models
+from .stats import p_ball, p_components, p_cone, z_of_p
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "load_model",
+    "bundled_models",
+    "Mechanism",
+    "Analysis",
+    "z_of_p",
+    "p_ball",
+    "p_components",
+    "p_cone",
+    "TolsynthError",
+    "InputError",
+    "UnknownNameError",
+    "OutOfRangeError",
+    "ModelFileError",
+    "LoopClosureError",
+    "InfeasibleSpecificationError",
+    "SolverError",
+]

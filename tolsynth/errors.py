@@ -1,0 +1,90 @@
+"""Exception classes of tolsynth (and nothing else).
+
+Every error names the offending field and, where there is one, the allowed range, so that a
+caller can correct the input without reading the source.  All inherit from :class:`TolsynthError`;
+the input errors also inherit from :class:`ValueError` so that generic ``except ValueError``
+handlers keep working.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "TolsynthError",
+    "InputError",
+    "UnknownNameError",
+    "OutOfRangeError",
+    "ModelFileError",
+    "LoopClosureError",
+    "InfeasibleSpecificationError",
+    "SolverError",
+]
+
+
+class TolsynthError(Exception):
+    """Base class of every error raised by tolsynth."""
+
+
+class InputError(TolsynthError, ValueError):
+    """A value given by the caller is not acceptable.
+
+    Attributes
+    ----------
+    field : str
+        Name of the offending argument or field.
+    allowed : str
+        Human-readable statement of what is allowed.
+    """
+
+    def __init__(self, field: str, message: str, allowed: str | None = None):
+        self.field = field
+        self.allowed = allowed
+        text = f"{field}: {message}"
+        if allowed:
+            text += f" (allowed: {allowed})"
+        super().__init__(text)
+
+
+class UnknownNameError(InputError, KeyError):
+    """A model, parameter, configuration or tolerance-set name that does not exist."""
+
+    def __str__(self) -> str:  # KeyError would otherwise quote the message
+        return self.args[0]
+
+
+class OutOfRangeError(InputError):
+    """A number outside its allowed range (R <= 0, p outside (0, 1), a joint past its limit...)."""
+
+
+class ModelFileError(TolsynthError, ValueError):
+    """A mechanism declaration is malformed: a missing field, an unknown unit, an inconsistency."""
+
+    def __init__(self, path: str, field: str, message: str):
+        self.path = path
+        self.field = field
+        super().__init__(f"{path}: {field}: {message}")
+
+
+class LoopClosureError(TolsynthError, ValueError):
+    """A closed loop cannot be assembled for the given dimensions and joint values."""
+
+
+class InfeasibleSpecificationError(TolsynthError):
+    """The accuracy specification cannot be met inside the tolerance bounds.
+
+    Attributes
+    ----------
+    constraint : str
+        The constraint that fails even at the tightest tolerances allowed.
+    value : float
+        Its value (sigma * z / R) at the tightest tolerances; it must be <= 1.
+    """
+
+    def __init__(self, constraint: str, value: float, message: str):
+        self.constraint = constraint
+        self.value = value
+        super().__init__(message)
+
+
+class SolverError(TolsynthError):
+    """A solver failed in a way that leaves no result to report (not used for non-convergence,
+    which is reported as ``success == False`` on the result)."""

@@ -1,0 +1,351 @@
+"""The :class:`Mechanism`: a validated model file plus its CasADi graphs and error analysis.
+
+>>> import tolsynth
+>>> m = tolsynth.load_model("xu_zhang_1988")
+>>> m.fk("worst")[:3, 3].round(3)
+array([ 925.,    0., 1225.])
+>>> m.error_parameters[:3]
+('h2', 'h3', 'h4')
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Mapping, Sequence, Union
+
+import numpy as np
+
+from .errors import InputError, LoopClosureError, OutOfRangeError, UnknownNameError
+from .kinematics import Graphs, build_graphs
+from .model import ErrorParameter, MechanismSpec, model_path, read_model_file
+from .stats import (
+    check_positive,
+    covariance,
+    p_ball,
+    p_components,
+    p_cone,
+    principal,
+    variance_divisor,
+)
+
+__all__ = ["Mechanism", "load_model", "Analysis"]
+
+JointInput = Union[str, Sequence[float], np.ndarray]
+ToleranceInput = Union[str, Mapping[str, float], Sequence[float], np.ndarray]
+
+
+def load_model(name_or_path: str | os.PathLike) -> "Mechanism":
+    """Load a bundled model by name (``"xu_zhang_1988"``, ``"puma560"``, ``"planar_2r"``) or a
+    model file by path.
+
+    Raises
+    ------
+    UnknownNameError
+        No such bundled model or file.
+    ModelFileError
+        The file is malformed (missing field, unknown unit, loop that cannot close, ...).
+    """
+    path = model_path(name_or_path)
+    return Mechanism(read_model_file(path))
+
+
+@dataclass(frozen=True)
+class Analysis:
+    """Linearised, Gaussian error analysis of one pose for one set of tolerances.
+
+    Units: ``position`` mm; ``sensitivity`` mm (rows 0-2) and rad (rows 3-5) per tolerance unit;
+    ``covariance`` mm^2; ``principal_std`` mm (descending) with ``principal_directions`` as
+    columns; ``orientation_covariance`` rad^2; ``R`` mm.
+    """
+
+    model: str
+    q: np.ndarray
+    distribution: str
+    tolerances: dict[str, float]
+    position: np.ndarray
+    sensitivity: np.ndarray
+    covariance: np.ndarray
+    principal_std: np.ndarray
+    principal_directions: np.ndarray
+    orientation_covariance: np.ndarray
+    orientation_principal_std: np.ndarray
+    R: float | None = None
+    p_components: np.ndarray | None = None
+    p_sphere: float | None = None
+    Phi: float | None = None
+    p_orientation_components: np.ndarray | None = None
+    p_cone: float | None = None
+
+    def to_dict(self) -> dict:
+        out = {}
+        for key, value in self.__dict__.items():
+            out[key] = value.tolist() if isinstance(value, np.ndarray) else value
+        return out
+
+
+class Mechanism:
+    """A mechanism declaration with its CasADi graphs (built once, on first use).
+
+    Attributes
+    ----------
+    name, title, source : str
+    assumptions : tuple of str
+    error_parameters : tuple of str
+        Error-parameter names in the model's order (the design variables).
+    parameters : tuple of ErrorParameter
+        Their full declarations (unit, cost factor ``k``, default bounds, symbols perturbed).
+    configurations : dict
+        Named configurations, name -> joint values in rad (order of ``joint_names``).
+    joint_names : tuple of str
+    """
+
+    def __init__(self, spec: MechanismSpec):
+        self.spec = spec
+        self.name = spec.name
+        self.title = spec.title
+        self.source = spec.source
+        self.assumptions = spec.assumptions
+        self.parameters: tuple[ErrorParameter, ...] = spec.error_parameters
+        self.error_parameters: tuple[str, ...] = tuple(p.name for p in spec.error_parameters)
+        self.joint_names: tuple[str, ...] = spec.joint_names
+        self.configurations: dict[str, np.ndarray] = {
+            k: np.array(c.q, dtype=float) for k, c in spec.configurations.items()
+        }
+        self.tolerance_sets = spec.tolerance_sets
+        self._index = {p.name: i for i, p in enumerate(spec.error_parameters)}
+        self._index.update({p.alias: i for i, p in enumerate(spec.error_parameters) if p.alias})
+        self._check_loops_close()
+
+    def __repr__(self) -> str:
+        return f"<Mechanism {self.name!r}: {len(self.joint_names)} joints, {len(self.error_parameters)} error parameters>"
+
+    # ------------------------------------------------------------------ graphs
+    @cached_property
+    def graphs(self) -> Graphs:
+        """The named CasADi Functions ``fk``, ``sensitivity``, ``closure``, ``position``."""
+        return build_graphs(self.spec)
+
+    @property
+    def n(self) -> int:
+        return len(self.error_parameters)
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        """Tolerance unit of each error parameter."""
+        return tuple(p.unit for p in self.parameters)
+
+    @property
+    def k(self) -> np.ndarray:
+        """Cost factors (the paper's k_i)."""
+        return np.array([p.k for p in self.parameters])
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Default tolerance bounds (Eq. 22) in tolerance units."""
+        return np.array([p.lower for p in self.parameters]), np.array([p.upper for p in self.parameters])
+
+    def index(self, name: str) -> int:
+        """Position of an error parameter by name or alias (``"h2"`` or ``"x1"``)."""
+        try:
+            return self._index[name]
+        except KeyError:
+            raise UnknownNameError(
+                "error parameter", f"unknown name {name!r}", "one of " + ", ".join(self.error_parameters)
+            ) from None
+
+    # ------------------------------------------------------------------ inputs
+    def joints(self, q: JointInput, check_limits: bool = True) -> np.ndarray:
+        """Joint vector (rad) from a configuration name or values, checked against the limits.
+
+        A named configuration may waive limits it declares (the paper's ``worst`` pose lies 0.33
+        deg past the interference limit); the same joint values passed as an array get the same
+        waiver.  Any other violation raises :class:`OutOfRangeError` naming the joint.
+        """
+        waive: tuple[str, ...] = ()
+        if isinstance(q, str):
+            if q not in self.spec.configurations:
+                raise UnknownNameError(
+                    "configuration", f"unknown configuration {q!r}", "one of " + ", ".join(self.configurations)
+                )
+            waive = self.spec.configurations[q].waive
+            qv = self.configurations[q].copy()
+        else:
+            qv = np.asarray(q, dtype=float).ravel()
+            if qv.shape != (len(self.joint_names),):
+                raise InputError("q", f"expected {len(self.joint_names)} joint values, got shape {np.shape(q)}",
+                                 f"{len(self.joint_names)} values in rad, order {self.joint_names}")
+            if not np.all(np.isfinite(qv)):
+                raise InputError("q", f"non-finite joint value in {qv}", "finite values in rad")
+            for cfg in self.spec.configurations.values():
+                if cfg.waive and np.array_equal(qv, np.array(cfg.q)):
+                    waive = cfg.waive
+        if check_limits:
+            for j, v in zip(self.spec.joints, qv):
+                if j.name not in waive and not (j.lower <= v <= j.upper):
+                    raise OutOfRangeError(
+                        f"q[{j.name}]", f"{math.degrees(v):.4f} deg is outside the joint limits",
+                        f"{math.degrees(j.lower):g} to {math.degrees(j.upper):g} deg",
+                    )
+            names = list(self.joint_names)
+            for c in self.spec.joint_constraints:
+                if c.name in waive:
+                    continue
+                v = sum(coef * qv[names.index(jn)] for jn, coef in c.terms.items())
+                if not (c.lower <= v <= c.upper):
+                    expr = " ".join(f"{coef:+g}*{jn}" for jn, coef in c.terms.items())
+                    raise OutOfRangeError(
+                        f"q ({c.name}: {expr})", f"{math.degrees(v):.4f} deg is outside the limit",
+                        f"{math.degrees(c.lower):g} to {math.degrees(c.upper):g} deg",
+                    )
+        return qv
+
+    def deltas(self, deltas: Mapping[str, float] | Sequence[float] | np.ndarray | None) -> np.ndarray:
+        """Error vector in tolerance units from a dict name -> value (missing = 0) or a vector."""
+        out = np.zeros(self.n)
+        if deltas is None:
+            return out
+        if isinstance(deltas, Mapping):
+            for name, value in deltas.items():
+                out[self.index(name)] = float(value)
+        else:
+            arr = np.asarray(deltas, dtype=float).ravel()
+            if arr.shape != (self.n,):
+                raise InputError("deltas", f"expected {self.n} values, got {arr.size}", f"order {self.error_parameters}")
+            out[:] = arr
+        if not np.all(np.isfinite(out)):
+            raise InputError("deltas", "non-finite value", "finite numbers in each parameter's tolerance unit")
+        return out
+
+    def tolerances(self, tolerances: ToleranceInput) -> np.ndarray:
+        """Tolerance half-widths (tolerance units) from a set name, a dict (all names) or a vector.
+
+        Raises for an unknown set or name, a missing parameter, or a negative value.
+        """
+        if isinstance(tolerances, str):
+            if tolerances not in self.tolerance_sets:
+                raise UnknownNameError(
+                    "tolerances", f"unknown tolerance set {tolerances!r}",
+                    "one of " + (", ".join(self.tolerance_sets) or "(none in this model)"),
+                )
+            tolerances = self.tolerance_sets[tolerances]
+        if isinstance(tolerances, Mapping):
+            out = np.full(self.n, np.nan)
+            for name, value in tolerances.items():
+                out[self.index(name)] = float(value)
+            missing = [self.error_parameters[i] for i in np.flatnonzero(np.isnan(out))]
+            if missing:
+                raise InputError("tolerances", f"missing value(s) for {missing}", "a value for every error parameter")
+        else:
+            out = np.asarray(tolerances, dtype=float).ravel()
+            if out.shape != (self.n,):
+                raise InputError("tolerances", f"expected {self.n} values, got {out.size}", f"order {self.error_parameters}")
+        for name, v in zip(self.error_parameters, out):
+            if not (math.isfinite(v) and v >= 0):
+                raise OutOfRangeError(f"tolerances[{name}]", f"got {v}", "a finite half-width >= 0")
+        return out
+
+    # ------------------------------------------------------------------ kinematics
+    def _check_closure(self, qv: np.ndarray, dv: np.ndarray) -> None:
+        if not self.spec.loops:
+            return
+        c = np.array(self.graphs.closure(qv, dv)).ravel()
+        for loop, value in zip(self.spec.loops, c):
+            if not abs(value) <= 1.0:
+                raise LoopClosureError(
+                    f"loop {loop.name!r} cannot close at q = {np.degrees(qv).round(4).tolist()} deg "
+                    f"(cosine argument {value:.6f}, must lie in [-1, 1])"
+                )
+
+    def fk(self, q: JointInput, deltas=None, check_limits: bool = True) -> np.ndarray:
+        """Hand pose as a 4x4 homogeneous matrix (mm), with the loops closed.
+
+        Parameters
+        ----------
+        q : str or array
+            A configuration name or the actuated joint values in rad.
+        deltas : dict, optional
+            Error-parameter deviations, name -> value in that parameter's tolerance unit.
+        """
+        qv = self.joints(q, check_limits)
+        dv = self.deltas(deltas)
+        self._check_closure(qv, dv)
+        return np.array(self.graphs.fk(qv, dv))
+
+    def sensitivity(self, q: JointInput, deltas=None, check_limits: bool = True) -> np.ndarray:
+        """6 x n sensitivity d(pose)/d(error) by exact (algorithmic) differentiation.
+
+        Rows: dx, dy, dz (mm) and the small rotation dphi_x, dphi_y, dphi_z (rad, base frame);
+        column i per one tolerance unit of error parameter i.
+        """
+        qv = self.joints(q, check_limits)
+        dv = self.deltas(deltas)
+        self._check_closure(qv, dv)
+        return np.array(self.graphs.sensitivity(qv, dv))
+
+    def _check_loops_close(self) -> None:
+        """A model whose loops do not close at its named configurations is malformed."""
+        from .errors import ModelFileError
+
+        if not self.spec.loops:
+            return
+        zero = np.zeros(self.n)
+        for name, q in self.configurations.items():
+            c = np.array(self.graphs.closure(q, zero)).ravel()
+            for loop, value in zip(self.spec.loops, c):
+                if not abs(value) <= 1.0:
+                    raise ModelFileError(
+                        self.spec.path, f"loops.{loop.name}",
+                        f"the loop cannot close at configuration {name!r} (cosine argument {value:.4f})",
+                    )
+
+    # ------------------------------------------------------------------ analysis
+    def analyze(
+        self,
+        q: JointInput,
+        tolerances: ToleranceInput,
+        distribution: str = "uniform",
+        R: float | None = None,
+        Phi: float | None = None,
+        check_limits: bool = True,
+    ) -> Analysis:
+        """Linearised error analysis (the paper's section 3) at one pose.
+
+        ``R`` (mm) adds the per-component and sphere probabilities; ``Phi`` (rad) the
+        orientation-component and cone probabilities for the hand's z axis.
+        """
+        variance_divisor(distribution)
+        if R is not None:
+            R = check_positive(R, "R")
+        if Phi is not None:
+            Phi = check_positive(Phi, "Phi", "rad")
+        eps = self.tolerances(tolerances)
+        qv = self.joints(q, check_limits)
+        T = self.fk(qv, check_limits=False)
+        S = self.sensitivity(qv, check_limits=False)
+        Vp, Vo = covariance(S, eps, distribution)
+        sig, vec = principal(Vp)
+        sig_o, _ = principal(Vo)
+        extra = {}
+        if R is not None:
+            extra.update(R=R, p_components=p_components(sig, R), p_sphere=p_ball(sig**2, R))
+        if Phi is not None:
+            extra.update(
+                Phi=Phi, p_orientation_components=p_components(sig_o, Phi), p_cone=p_cone(Vo, T[:3, 2], Phi)
+            )
+        return Analysis(
+            model=self.name,
+            q=qv,
+            distribution=distribution,
+            tolerances=dict(zip(self.error_parameters, eps.tolist())),
+            position=T[:3, 3].copy(),
+            sensitivity=S,
+            covariance=Vp,
+            principal_std=sig,
+            principal_directions=vec,
+            orientation_covariance=Vo,
+            orientation_principal_std=sig_o,
+            **extra,
+        )
