@@ -1,0 +1,330 @@
+"""The tolerance-synthesis problem of the paper's Eq. 23, built once as CasADi graphs.
+
+Decision variables are ``u_i = ln eps_i`` (``eps_i`` in the tolerance unit of parameter i).  In
+these variables
+
+* the cost ``f(u) = sum_i k_i exp(-alpha_i u_i)`` (Eq. 11-12, the paper's units) is convex;
+* the accuracy demand of Eq. 20, "every principal sigma_j of the hand position satisfies
+  sigma_j z(p) / R <= 1", is the matrix inequality
+
+      G(u) = I - (z/R)^2 V(eps) >= 0  (positive semi-definite),
+      V(eps) = sum_i eps_i^2 a_i a_i^T / c,   c = 3 (uniform) or 9 (normal),
+
+  and ``eps_i^2 a_i a_i^T = exp(2 u_i) a_i a_i^T`` is matrix-convex in u, so the feasible set is
+  convex.  Eq. 21 (orientation, with Phi) is the same with the orientation rows;
+* the bounds of Eq. 22 are a box in u.
+
+So the problem is convex and any KKT point is the global optimum; :meth:`ToleranceNLP.dual_bound`
+turns the multiplier matrix of the LMI into a rigorous lower bound on the optimal cost (a
+certificate).  The specification (R, z(p), Phi, c, alpha, k, the sensitivities at each pose) enters
+as CasADi *parameters*, so a sweep re-solves the same graph without rebuilding it.
+
+Both solvers read the graphs of this module: IPOPT the cost and ``G`` (through the factor form
+``G = B B^T``), SUMT the cost and ``-ln det G`` (the interior penalty; see
+:mod:`tolsynth.solvers.sumt`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+from .errors import InfeasibleSpecificationError, InputError, OutOfRangeError
+from .stats import check_positive, check_probability, covariance_graph, variance_divisor, z_of_p
+
+__all__ = ["Specification", "Block", "ToleranceNLP", "nlp_graphs", "make_specification"]
+
+
+@dataclass(frozen=True)
+class Block:
+    """One matrix constraint: the position (or orientation) accuracy at one pose."""
+
+    pose: str
+    kind: str  # "position" or "orientation"
+    scale: float  # z/R (1/mm) or z/Phi (1/rad)
+    A: np.ndarray  # 3 x n sensitivity rows (per tolerance unit)
+
+    @property
+    def label(self) -> str:
+        return f"{self.kind} at pose {self.pose!r}"
+
+
+@dataclass(frozen=True)
+class Specification:
+    """A validated accuracy specification and cost model.
+
+    Units: ``R`` mm; ``Phi`` rad; ``lower``/``upper`` in the tolerance units of the parameters.
+    """
+
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    R: float
+    p: float
+    z: float
+    distribution: str
+    c: float
+    alpha: np.ndarray
+    k: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    blocks: tuple[Block, ...]
+    poses: dict[str, np.ndarray] = field(default_factory=dict)
+    Phi: float | None = None
+    p_orientation: float | None = None
+
+    @property
+    def n(self) -> int:
+        return len(self.names)
+
+
+# ---------------------------------------------------------------------------------------------
+# validation of the user's specification
+# ---------------------------------------------------------------------------------------------
+def _per_parameter(value, names: Sequence[str], index, field_name: str, default=None) -> np.ndarray:
+    n = len(names)
+    if value is None:
+        if default is None:
+            raise InputError(field_name, "missing", f"a number or {n} numbers")
+        value = default
+    if isinstance(value, Mapping):
+        out = np.array(default, dtype=float).copy() if default is not None else np.full(n, np.nan)
+        for key, v in value.items():
+            out[index(key)] = v
+        if np.any(np.isnan(out)):
+            raise InputError(field_name, "a value is missing for some parameters", f"a value for each of {list(names)}")
+        return out
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        return np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise InputError(field_name, f"expected {n} values, got shape {arr.shape}", f"a number or {n} numbers")
+    return arr.astype(float)
+
+
+def make_specification(
+    mechanism,
+    R: float,
+    p: float,
+    distribution: str = "uniform",
+    alpha=0.7,
+    k=None,
+    bounds=None,
+    pose="worst",
+    poses=None,
+    Phi: float | None = None,
+    p_orientation: float | None = None,
+) -> Specification:
+    """Validate the inputs of :func:`tolsynth.synthesize` and evaluate the sensitivities.
+
+    Raises typed errors naming the field: ``R`` <= 0, ``p`` outside (0, 1), ``alpha`` <= 0,
+    ``k`` <= 0, a lower bound <= 0 or above its upper bound, an unknown pose.
+    """
+    R = check_positive(R, "R")
+    p = check_probability(p, "p")
+    c = variance_divisor(distribution)
+    names = mechanism.error_parameters
+    alpha_v = _per_parameter(alpha, names, mechanism.index, "alpha")
+    for nm, a in zip(names, alpha_v):
+        if not (math.isfinite(a) and a > 0):
+            raise OutOfRangeError(f"alpha[{nm}]", f"got {a}", "alpha > 0 (the paper: alpha <= 1, typically 0.7)")
+    k_v = _per_parameter(k, names, mechanism.index, "k", default=mechanism.k)
+    for nm, kk in zip(names, k_v):
+        if not (math.isfinite(kk) and kk > 0):
+            raise OutOfRangeError(f"k[{nm}]", f"got {kk}", "k > 0 (the paper: k >= 1)")
+    lo_default, hi_default = mechanism.bounds
+    if bounds is None:
+        lo, hi = lo_default.copy(), hi_default.copy()
+    elif isinstance(bounds, Mapping):
+        lo, hi = lo_default.copy(), hi_default.copy()
+        for key, pair in bounds.items():
+            try:
+                a, b = pair
+            except (TypeError, ValueError):
+                raise InputError(f"bounds[{key}]", f"got {pair!r}", "a pair (lower, upper)") from None
+            i = mechanism.index(key)
+            lo[i], hi[i] = float(a), float(b)
+    else:
+        try:
+            lo, hi = (np.asarray(b, dtype=float) * np.ones(len(names)) for b in bounds)
+        except (TypeError, ValueError):
+            raise InputError("bounds", f"got {bounds!r}", "(lower, upper), each a number or one per parameter, or a dict name -> (lower, upper)") from None
+    for nm, a, b, u in zip(names, lo, hi, mechanism.units):
+        if not (math.isfinite(a) and a > 0):
+            raise OutOfRangeError(f"bounds[{nm}].lower", f"got {a} {u}", f"0 < lower <= upper ({u})")
+        if not (math.isfinite(b) and b >= a):
+            raise OutOfRangeError(f"bounds[{nm}]", f"lower {a} is above upper {b} ({u})", f"0 < lower <= upper ({u})")
+    z = z_of_p(p)
+    if Phi is not None:
+        Phi = check_positive(Phi, "Phi", "rad")
+        p_orientation = p if p_orientation is None else check_probability(p_orientation, "p_orientation")
+        z_o = z_of_p(p_orientation)
+    elif p_orientation is not None:
+        raise InputError("p_orientation", "given without Phi", "give Phi (rad) with it")
+
+    pose_list = list(poses) if poses is not None else [pose]
+    if not pose_list:
+        raise InputError("poses", "empty", "at least one pose")
+    blocks, qs = [], {}
+    for i, ps in enumerate(pose_list):
+        label = ps if isinstance(ps, str) else f"#{i}"
+        q = mechanism.joints(ps)
+        S = mechanism.sensitivity(q, check_limits=False)
+        qs[label] = q
+        blocks.append(Block(label, "position", z / R, S[:3].copy()))
+        if Phi is not None:
+            blocks.append(Block(label, "orientation", z_o / Phi, S[3:].copy()))
+    return Specification(
+        names=tuple(names),
+        units=tuple(mechanism.units),
+        R=R,
+        p=p,
+        z=z,
+        distribution=distribution,
+        c=c,
+        alpha=alpha_v,
+        k=k_v,
+        lower=lo,
+        upper=hi,
+        blocks=tuple(blocks),
+        poses=qs,
+        Phi=Phi,
+        p_orientation=p_orientation,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# the graphs (built once per problem size, cached)
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class NLPGraphs:
+    n: int
+    m: int  # number of 3x3 blocks
+    cost: ca.Function  # (u, alpha, k) -> f
+    lmi: ca.Function  # (u, P) -> G (3 x 3m, blocks side by side)
+    params: int  # length of the parameter vector P
+
+
+@lru_cache(maxsize=None)
+def nlp_graphs(n: int, m: int) -> NLPGraphs:
+    """Cost and LMI graphs for n parameters and m accuracy blocks.
+
+    Parameter vector ``P = [c, scale_1..scale_m, vec(A_1)..vec(A_m)]`` with ``A_b`` 3 x n.
+    ``G_b = I - scale_b^2 Vb(eps)``, with ``Vb`` from the shared covariance graph of
+    :mod:`tolsynth.stats`.
+    """
+    u = ca.SX.sym("u", n)
+    alpha = ca.SX.sym("alpha", n)
+    k = ca.SX.sym("k", n)
+    f = ca.sum1(k * ca.exp(-alpha * u))
+    cost = ca.Function("cost", [u, alpha, k], [f], ["u", "alpha", "k"], ["f"])
+
+    P = ca.SX.sym("P", 1 + m + 3 * n * m)
+    c = P[0]
+    eps = ca.exp(u)
+    cov = covariance_graph(n)
+    blocks = []
+    for b in range(m):
+        scale = P[1 + b]
+        A = ca.reshape(P[1 + m + 3 * n * b : 1 + m + 3 * n * (b + 1)], 3, n)
+        S6 = ca.vertcat(A, ca.SX.zeros(3, n))
+        Vb, _ = cov(S6, eps, c)
+        blocks.append(ca.SX.eye(3) - scale**2 * Vb)
+    G = ca.horzcat(*blocks)
+    lmi = ca.Function("lmi", [u, P], [G], ["u", "P"], ["G"])
+    return NLPGraphs(n=n, m=m, cost=cost, lmi=lmi, params=1 + m + 3 * n * m)
+
+
+class ToleranceNLP:
+    """The problem of one specification: its graphs, parameter values and helpers."""
+
+    def __init__(self, spec: Specification):
+        self.spec = spec
+        self.graphs = nlp_graphs(spec.n, len(spec.blocks))
+        self.P = np.concatenate(
+            [[spec.c], [b.scale for b in spec.blocks]] + [b.A.ravel(order="F") for b in spec.blocks]
+        )
+        self.lu = np.log(spec.lower)
+        self.uu = np.log(spec.upper)
+
+    # -- evaluations (NumPy in, NumPy out) ----------------------------------------------------
+    def cost(self, eps: np.ndarray) -> float:
+        return float(self.graphs.cost(np.log(eps), self.spec.alpha, self.spec.k))
+
+    def G(self, eps: np.ndarray) -> list[np.ndarray]:
+        Gm = np.array(self.graphs.lmi(np.log(eps), self.P))
+        return [Gm[:, 3 * b : 3 * b + 3] for b in range(len(self.spec.blocks))]
+
+    def constraint_values(self, eps: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per block: the paper's ``sigma_j * z / R`` (descending) and the principal directions."""
+        out = []
+        for Gb in self.G(eps):
+            lam, vec = np.linalg.eigh(np.eye(3) - 0.5 * (Gb + Gb.T))  # = scale^2 * eigenvalues of V
+            order = np.argsort(lam)[::-1]
+            out.append((np.sqrt(np.clip(lam[order], 0.0, None)), vec[:, order]))
+        return out
+
+    # -- feasibility ----------------------------------------------------------------------------
+    def check_feasible(self) -> None:
+        """Raise :class:`InfeasibleSpecificationError` if even the tightest tolerances (all at
+        their lower bounds) violate a constraint: V grows with every eps, so nothing else can
+        do better."""
+        for block, (vals, _) in zip(self.spec.blocks, self.constraint_values(self.spec.lower)):
+            if vals[0] > 1.0:
+                what = "z/R" if block.kind == "position" else "z/Phi"
+                raise InfeasibleSpecificationError(
+                    block.label,
+                    float(vals[0]),
+                    f"infeasible specification: the {block.label} fails even with every tolerance at its "
+                    f"lower bound: largest principal sigma*{what} = {vals[0]:.6g} > 1.  Lower the bounds, "
+                    f"or relax R/Phi or p.",
+                )
+
+    def interior_start(self, target: float = 0.5) -> np.ndarray:
+        """A strictly feasible point: eps_i = lower_i^(1-t) upper_i^t with the largest t in [0, 1/2]
+        for which every ``(sigma z / R)^2 <= target``; t by bisection (V is monotone in t)."""
+        lo, hi = self.lu, self.uu
+
+        def worst(t):
+            eps = np.exp(lo + t * (hi - lo))
+            return max(float(v[0] ** 2) for v, _ in self.constraint_values(eps))
+
+        if worst(0.5) <= target:
+            t = 0.5
+        else:
+            a, b = 0.0, 0.5
+            for _ in range(60):
+                mid = 0.5 * (a + b)
+                if worst(mid) <= target:
+                    a = mid
+                else:
+                    b = mid
+            t = a
+        return np.exp(lo + t * (hi - lo))
+
+    # -- certificate ------------------------------------------------------------------------------
+    def dual_bound(self, Z: Sequence[np.ndarray]) -> float:
+        """Lagrangian lower bound on the optimal cost for LMI multipliers ``Z_b`` (3x3).
+
+        ``Z_b`` is projected onto the positive semi-definite cone first (any PSD Z gives a valid
+        bound), then ``min over the box of f(u) - sum_b tr(Z_b G_b(u))`` separates per parameter:
+        ``k e^{-alpha u} + w e^{2u}`` with ``w = sum_b scale_b^2 a_bi^T Z_b a_bi / c``, minimised in
+        closed form and clipped to the bounds (a convex function of one variable).
+        """
+        spec = self.spec
+        w = np.zeros(spec.n)
+        trace = 0.0
+        for block, Zb in zip(spec.blocks, Z):
+            lam, vec = np.linalg.eigh(0.5 * (Zb + Zb.T))
+            Zp = (vec * np.clip(lam, 0.0, None)) @ vec.T
+            trace += float(np.trace(Zp))
+            w += block.scale**2 * np.einsum("in,ij,jn->n", block.A, Zp, block.A) / spec.c
+        alpha, k = spec.alpha, spec.k
+        with np.errstate(divide="ignore"):
+            u_star = np.where(w > 0, np.log(alpha * k / (2 * np.where(w > 0, w, 1.0))) / (2 + alpha), self.uu)
+        u_star = np.minimum(np.maximum(u_star, self.lu), self.uu)
+        return float(np.sum(k * np.exp(-alpha * u_star) + w * np.exp(2 * u_star)) - trace)

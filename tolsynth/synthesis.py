@@ -1,0 +1,195 @@
+"""The front door: :func:`synthesize` (one solver) and :func:`compare` (IPOPT against SUMT).
+
+>>> import tolsynth
+>>> m = tolsynth.load_model("xu_zhang_1988")
+>>> res = tolsynth.synthesize(m, R=0.5, p=0.99, distribution="uniform", alpha=0.7)
+>>> res.success, round(res.tolerances["h3"], 3)  # doctest: +SKIP
+(True, 0.2...)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+from .problem import ToleranceNLP, make_specification
+from .result import SynthesisResult
+
+__all__ = ["synthesize", "compare", "Comparison", "SOLVERS"]
+
+
+def _ipopt(nlp, eps0, options):
+    from .solvers.ipopt import solve_ipopt
+
+    return solve_ipopt(nlp, eps0, **options)
+
+
+def _sumt(nlp, eps0, options):
+    from .solvers.sumt import solve_sumt
+
+    return solve_sumt(nlp, eps0, **options)
+
+
+#: solver name -> private entry point (each solver lives in its own module)
+SOLVERS = {"ipopt": _ipopt, "sumt": _sumt}
+
+
+def synthesize(
+    mechanism,
+    R: float,
+    p: float,
+    distribution: str = "uniform",
+    alpha=0.7,
+    solver: str = "ipopt",
+    *,
+    k=None,
+    bounds=None,
+    pose="worst",
+    poses=None,
+    Phi: float | None = None,
+    p_orientation: float | None = None,
+    x0=None,
+    options: dict | None = None,
+    validate: int | None = None,
+    seed: int = 0,
+) -> SynthesisResult:
+    """Cheapest tolerances meeting the accuracy specification (the paper's Eq. 23).
+
+    minimise ``sum_i k_i eps_i**-alpha_i`` subject to ``sigma_j z(p) / R <= 1`` for the three
+    principal standard deviations of the hand position at every pose (Eq. 20), optionally
+    ``sigma_j z(p_orientation) / Phi <= 1`` for the orientation (Eq. 21), and
+    ``lower_i <= eps_i <= upper_i`` (Eq. 22).
+
+    Parameters
+    ----------
+    mechanism : Mechanism or str
+        A loaded model or a model name / path.
+    R : float
+        Radius of the position accuracy specification, mm (R1 = R2 = R3 = R).
+    p : float
+        Probability per principal component, 0 < p < 1.
+    distribution : {"uniform", "normal"}
+        Distribution of each error inside its band (eps^2/3 or eps^2/9 variance).
+    alpha : float, sequence or dict
+        Cost exponent(s) alpha_i > 0.
+    solver : {"ipopt", "sumt"}
+        IPOPT with exact derivatives (default), or the paper's SUMT + Powell.
+    k : float, sequence or dict, optional
+        Cost factors (default: the model's).
+    bounds : (lower, upper) or dict name -> (lower, upper), optional
+        Tolerance bounds in tolerance units (default: the model's).
+    pose, poses : configuration name or joint vector (rad), or a list of them
+        Where the constraints are imposed (default: the model's ``worst`` pose).
+    Phi, p_orientation : float, optional
+        Orientation specification (rad) and its probability (default p).
+    x0 : sequence, optional
+        Starting tolerances (default: a strictly feasible interior point).
+    options : dict, optional
+        Solver options (IPOPT: tol, constr_viol_tol, max_iter; SUMT: see solve_sumt).
+    validate : int, optional
+        Run this many Monte Carlo samples through the nonlinear kinematics at the optimum and
+        attach the achieved probabilities as ``result.validation``.
+    seed : int
+        Seed of that Monte Carlo run.
+
+    Returns
+    -------
+    SynthesisResult
+        ``.success`` is False (with the solver's reason) if the solver did not converge.
+
+    Raises
+    ------
+    InfeasibleSpecificationError
+        If no tolerances inside the bounds can meet the specification.
+    OutOfRangeError, InputError, UnknownNameError
+        For bad inputs, naming the field.
+    """
+    from .mechanism import Mechanism, load_model
+
+    if not isinstance(mechanism, Mechanism):
+        mechanism = load_model(mechanism)
+    if solver not in SOLVERS:
+        raise InputError("solver", f"unknown solver {solver!r}", " or ".join(repr(s) for s in SOLVERS))
+    spec = make_specification(
+        mechanism, R, p, distribution, alpha, k, bounds, pose, poses, Phi, p_orientation
+    )
+    nlp = ToleranceNLP(spec)
+    nlp.check_feasible()
+    eps0 = None if x0 is None else mechanism.tolerances(x0)
+    result = SOLVERS[solver](nlp, eps0, dict(options or {}))
+    if validate:
+        from dataclasses import replace
+
+        from .montecarlo import validate as mc_validate
+
+        report = mc_validate(
+            mechanism, result, R=R, p=p, distribution=distribution,
+            pose=pose if poses is None else list(poses)[0], n=int(validate), seed=seed,
+        )
+        result = replace(result, validation=report)
+    return result
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """IPOPT and SUMT on the same specification, side by side."""
+
+    ipopt: SynthesisResult
+    sumt: SynthesisResult
+
+    @property
+    def cost_rel_diff(self) -> float:
+        return abs(self.sumt.cost - self.ipopt.cost) / abs(self.ipopt.cost)
+
+    @property
+    def tolerance_rel_diff(self) -> dict[str, float]:
+        return {
+            k: abs(self.sumt.tolerances[k] - v) / abs(v) for k, v in self.ipopt.tolerances.items()
+        }
+
+    @property
+    def time_ratio(self) -> float:
+        """SUMT wall time / IPOPT wall time."""
+        return self.sumt.wall_time / self.ipopt.wall_time
+
+    def table(self) -> str:
+        i, s = self.ipopt, self.sumt
+        rows = [
+            f"{'':>10} {'IPOPT':>14} {'SUMT+Powell':>14} {'rel.diff':>10}",
+            f"{'status':>10} {str(i.status):>14} {str(s.status):>14}",
+            f"{'cost':>10} {i.cost:>14.8g} {s.cost:>14.8g} {self.cost_rel_diff:>10.2e}",
+        ]
+        for name, d in self.tolerance_rel_diff.items():
+            rows.append(f"{name:>10} {i.tolerances[name]:>14.6g} {s.tolerances[name]:>14.6g} {d:>10.2e}")
+        rows += [
+            f"{'iter':>10} {i.iterations:>14d} {s.iterations:>14d}",
+            f"{'evals':>10} {i.function_evaluations:>14d} {s.function_evaluations:>14d}",
+            f"{'time ms':>10} {i.wall_time * 1e3:>14.2f} {s.wall_time * 1e3:>14.2f} {self.time_ratio:>9.1f}x",
+        ]
+        return "\n".join(rows)
+
+    def to_dict(self) -> dict:
+        return {
+            "ipopt": self.ipopt.to_dict(),
+            "sumt": self.sumt.to_dict(),
+            "cost_rel_diff": self.cost_rel_diff,
+            "tolerance_rel_diff": self.tolerance_rel_diff,
+            "time_ratio": self.time_ratio,
+        }
+
+
+def compare(mechanism, R: float, p: float, distribution: str = "uniform", alpha=0.7, **kwargs) -> Comparison:
+    """Solve the same specification with IPOPT and with SUMT + Powell; see :class:`Comparison`.
+
+    Keyword arguments are those of :func:`synthesize` (``options`` may be a dict with keys
+    ``"ipopt"`` and ``"sumt"``).
+    """
+    options = kwargs.pop("options", None) or {}
+    kwargs.pop("solver", None)
+    res = {
+        s: synthesize(mechanism, R, p, distribution, alpha, solver=s, options=options.get(s), **kwargs)
+        for s in ("ipopt", "sumt")
+    }
+    return Comparison(res["ipopt"], res["sumt"])
