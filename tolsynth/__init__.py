@@ -21,12 +21,19 @@ from .errors import (
 )
 from .mechanism import Analysis, Mechanism, load_model
 from .model import bundled_models
+from .result import Status, SynthesisResult
 from .stats import p_ball, p_components, p_cone, z_of_p
+from .synthesis import Comparison, compare, synthesize
 
 __version__ = "0.1.0"
 
 __all__ = [
     "load_model",
+    "synthesize",
+    "compare",
+    "Comparison",
+    "SynthesisResult",
+    "Status",
     "bundled_models",
     "Mechanism",
     "Analysis",

@@ -2,4 +2,6 @@
 
 from __future__ import annotations
 
-REGISTER: list = []
+from .cli_synthesis import register as _synthesis
+
+REGISTER: list = [_synthesis]

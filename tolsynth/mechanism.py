@@ -156,6 +156,31 @@ class Mechanism:
                 "error parameter", f"unknown name {name!r}", "one of " + ", ".join(self.error_parameters)
             ) from None
 
+    def with_units(self, units: Mapping[str, str]) -> "Mechanism":
+        """The same mechanism with other tolerance units for some parameters (name -> unit).
+
+        Bounds and tolerance sets are converted; the cost ``k eps**-alpha`` is then evaluated on
+        the numbers in the new unit (this changes the optimum when alpha applies to other numbers,
+        which is how the paper's unit choice enters its tables).
+        """
+        from dataclasses import replace
+
+        from .units import to_base, unit_kind
+
+        params = list(self.parameters)
+        factors = np.ones(self.n)
+        for name, unit in units.items():
+            i = self.index(name)
+            par = params[i]
+            if unit_kind(unit) != par.kind:
+                raise OutOfRangeError(f"units[{name}]", f"{unit!r} is not a unit of {par.kind}",
+                                      "a unit of " + par.kind)
+            f = par.scale / to_base(unit)  # old unit -> new unit
+            factors[i] = f
+            params[i] = replace(par, unit=unit, scale=to_base(unit), lower=par.lower * f, upper=par.upper * f)
+        sets = {k: {n: v * factors[self.index(n)] for n, v in s.items()} for k, s in self.spec.tolerance_sets.items()}
+        return Mechanism(replace(self.spec, error_parameters=tuple(params), tolerance_sets=sets, reference_results=()))
+
     # ------------------------------------------------------------------ inputs
     def joints(self, q: JointInput, check_limits: bool = True) -> np.ndarray:
         """Joint vector (rad) from a configuration name or values, checked against the limits.

@@ -1,0 +1,74 @@
+"""Sub-commands ``tolsynth solve`` and ``tolsynth reproduce``."""
+
+from __future__ import annotations
+
+import sys
+
+from .cli import emit_json, parse_pose
+from .mechanism import load_model
+
+__all__ = ["register"]
+
+
+def cmd_solve(args) -> int:
+    from .synthesis import compare, synthesize
+
+    mech = load_model(args.model)
+    pose = parse_pose(mech, args.pose)
+    kw = dict(pose=pose, Phi=args.Phi)
+    if args.solver == "both":
+        c = compare(mech, args.R, args.p, args.dist, args.alpha, **kw)
+        if args.json:
+            emit_json(c.to_dict())
+        else:
+            print(f"{mech.name}: R={args.R:g} mm, p={args.p:g}, alpha={args.alpha:g}, {args.dist} errors, pose {args.pose}")
+            print(c.table())
+            print(f"IPOPT: {c.ipopt.message}\nSUMT:  {c.sumt.message}")
+        ok = c.ipopt.success and c.sumt.success
+    else:
+        res = synthesize(mech, args.R, args.p, args.dist, args.alpha, solver=args.solver, **kw)
+        if args.json:
+            emit_json(res.to_dict())
+        else:
+            print(f"{mech.name}: R={args.R:g} mm, p={args.p:g}, alpha={args.alpha:g}, {args.dist} errors, pose {args.pose}")
+            print(res.summary())
+        ok = res.success
+    if not ok:
+        print("tolsynth solve: the solver did not converge; the numbers above are not an optimum", file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_reproduce(args) -> int:
+    from .reproduce import format_report, reproduce
+
+    mech = load_model(args.model)
+    reports = reproduce(mech, sumt=not args.no_sumt, progress=not args.json and sys.stderr.isatty())
+    if args.json:
+        emit_json({"model": mech.name, "columns": [r.to_dict() for r in reports]})
+    else:
+        print(f"{mech.name}: the paper's Tables 1-3 reproduced (tolerances in mm and 1e-2 rad; cost = sum k eps^-alpha)")
+        print("Model: " + mech.title + " -- a reconstruction; see the model file's assumptions.")
+        print(format_report(reports))
+    ok = all(r.printed_unit.ipopt.success and (r.printed_unit.sumt is None or r.printed_unit.sumt.success) for r in reports)
+    return 0 if ok else 1
+
+
+def register(sub) -> None:
+    p = sub.add_parser("solve", help="optimal tolerances for one specification")
+    p.add_argument("--model", required=True, help="bundled model name or path to a .toml file")
+    p.add_argument("--R", type=float, required=True, help="position accuracy radius (mm)")
+    p.add_argument("--p", type=float, required=True, help="probability per principal component, 0 < p < 1")
+    p.add_argument("--dist", choices=["uniform", "normal"], default="uniform")
+    p.add_argument("--alpha", type=float, default=0.7, help="cost exponent (default 0.7)")
+    p.add_argument("--solver", choices=["ipopt", "sumt", "both"], default="ipopt")
+    p.add_argument("--pose", default="worst", help="configuration name or joint angles in deg")
+    p.add_argument("--Phi", type=float, default=None, help="orientation accuracy half-angle (rad), optional")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_solve)
+
+    p = sub.add_parser("reproduce", help="the paper's Tables 1-3: printed vs IPOPT vs SUMT")
+    p.add_argument("--model", default="xu_zhang_1988")
+    p.add_argument("--no-sumt", action="store_true", help="skip SUMT + Powell (about 1.5 s a column)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_reproduce)
