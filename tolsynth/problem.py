@@ -307,6 +307,40 @@ class ToleranceNLP:
         return np.exp(lo + t * (hi - lo))
 
     # -- certificate ------------------------------------------------------------------------------
+    def kkt_multipliers(self, eps: np.ndarray, active_tol: float = 1e-6) -> list[np.ndarray]:
+        """LMI multipliers recomputed from the primal point alone (least squares on stationarity).
+
+        On each block, Z_b lives on the span of its active principal directions (complementary
+        slackness), ``Z_b = D_b Y_b D_b^T``; stationarity in every u_i not at a bound,
+        ``alpha_i k_i eps_i^-alpha_i = 2 eps_i^2 sum_b scale_b^2 a_bi^T Z_b a_bi / c``, is linear in
+        the entries of the symmetric Y_b.  Independent of any solver's multipliers, so the dual
+        bound from these certifies the returned point whichever solver found it.
+        """
+        spec = self.spec
+        free = (eps > spec.lower * (1 + active_tol)) & (eps < spec.upper * (1 - active_tol))
+        cols, layout = [], []
+        for b, (block, (vals, dirs)) in enumerate(zip(spec.blocks, self.constraint_values(eps))):
+            D = dirs[:, vals >= 1.0 - active_tol]
+            proj = D.T @ block.A  # r x n: components of a_bi along the active directions
+            r = D.shape[1]
+            for i in range(r):
+                for j in range(i, r):
+                    mult = 1.0 if i == j else 2.0
+                    cols.append(mult * 2 * eps**2 * block.scale**2 * proj[i] * proj[j] / spec.c)
+                    layout.append((b, i, j, D))
+        Z = [np.zeros((3, 3)) for _ in spec.blocks]
+        if not cols:
+            return Z
+        M = np.column_stack(cols)[free]
+        rhs = (spec.alpha * spec.k * eps ** (-spec.alpha))[free]
+        y, *_ = np.linalg.lstsq(M, rhs, rcond=None)
+        Ys: dict[int, np.ndarray] = {}
+        for value, (b, i, j, D) in zip(y, layout):
+            Y = Ys.setdefault(b, np.zeros((D.shape[1], D.shape[1])))
+            Y[i, j] = Y[j, i] = value
+            Z[b] = D @ Y @ D.T
+        return Z
+
     def dual_bound(self, Z: Sequence[np.ndarray]) -> float:
         """Lagrangian lower bound on the optimal cost for LMI multipliers ``Z_b`` (3x3).
 

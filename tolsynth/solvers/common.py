@@ -56,7 +56,9 @@ def assemble(
         if name in bounds_active:
             bound_mult[name] = float(bound_mult_u[i] / eps[i])  # d/d eps = (1/eps) d/du
     cost = nlp.cost(eps)
-    lower = nlp.dual_bound(Z)
+    # both are valid lower bounds: the solver's own multipliers, and those recomputed from the
+    # primal point by least squares on stationarity (sharper when the solver's are loose)
+    lower = max(nlp.dual_bound(Z), nlp.dual_bound(nlp.kkt_multipliers(eps)))
     return SynthesisResult(
         solver=solver,
         status=status,
