@@ -44,8 +44,9 @@ def parse_tolerances(mech: Mechanism, text: str) -> np.ndarray:
     for part in parts:
         if "=" in part:
             name, _, value = part.partition("=")
+            key = mech.error_parameters[mech.index(name.strip())]  # UnknownNameError for a bad name
             try:
-                overrides[mech.error_parameters[mech.index(name.strip())]] = float(value)
+                overrides[key] = float(value)
             except ValueError:
                 raise InputError("--tolerances", f"{part!r}: {value!r} is not a number", "name=value") from None
         else:

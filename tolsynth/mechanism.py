@@ -35,6 +35,8 @@ __all__ = ["Mechanism", "load_model", "Analysis"]
 
 JointInput = Union[str, Sequence[float], np.ndarray]
 ToleranceInput = Union[str, Mapping[str, float], Sequence[float], np.ndarray]
+#: rad; tolerance of the (inclusive) joint-limit checks against rounding, far below any physical angle
+LIMIT_SLACK = 1e-12
 
 
 def load_model(name_or_path: str | os.PathLike) -> "Mechanism":
@@ -208,8 +210,11 @@ class Mechanism:
                 if cfg.waive and np.array_equal(qv, np.array(cfg.q)):
                     waive = cfg.waive
         if check_limits:
+            # limits are inclusive; LIMIT_SLACK only absorbs the rounding of deg -> rad conversions
+            # and of the constraint sums (a pose given exactly on a limit in degrees is accepted)
+            eps = LIMIT_SLACK
             for j, v in zip(self.spec.joints, qv):
-                if j.name not in waive and not (j.lower <= v <= j.upper):
+                if j.name not in waive and not (j.lower - eps <= v <= j.upper + eps):
                     raise OutOfRangeError(
                         f"q[{j.name}]", f"{math.degrees(v):.4f} deg is outside the joint limits",
                         f"{math.degrees(j.lower):g} to {math.degrees(j.upper):g} deg",
@@ -219,7 +224,7 @@ class Mechanism:
                 if c.name in waive:
                     continue
                 v = sum(coef * qv[names.index(jn)] for jn, coef in c.terms.items())
-                if not (c.lower <= v <= c.upper):
+                if not (c.lower - eps <= v <= c.upper + eps):
                     expr = " ".join(f"{coef:+g}*{jn}" for jn, coef in c.terms.items())
                     raise OutOfRangeError(
                         f"q ({c.name}: {expr})", f"{math.degrees(v):.4f} deg is outside the limit",
@@ -257,10 +262,13 @@ class Mechanism:
                 )
             tolerances = self.tolerance_sets[tolerances]
         if isinstance(tolerances, Mapping):
-            out = np.full(self.n, np.nan)
+            out = np.zeros(self.n)
+            given = np.zeros(self.n, dtype=bool)
             for name, value in tolerances.items():
-                out[self.index(name)] = float(value)
-            missing = [self.error_parameters[i] for i in np.flatnonzero(np.isnan(out))]
+                i = self.index(name)
+                out[i] = float(value)
+                given[i] = True
+            missing = [self.error_parameters[i] for i in np.flatnonzero(~given)]
             if missing:
                 raise InputError("tolerances", f"missing value(s) for {missing}", "a value for every error parameter")
         else:

@@ -20,6 +20,7 @@ The hand error is linear in the errors (the sensitivity matrix ``S``, 6 x n), so
 
 from __future__ import annotations
 
+import itertools
 import math
 from functools import lru_cache
 from statistics import NormalDist
@@ -116,29 +117,50 @@ def principal(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.sqrt(lam), vec
 
 
+def _det3(A):
+    """3x3 determinant by cofactors (CasADi's MX ``det`` factorises and fails on singular input)."""
+    return (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
+            - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+            + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
+
+
 def principal_variances_cubic(V) -> ca.SX:
     """Principal variances (descending) of a symmetric 3x3 ``V`` by the closed-form cubic.
 
     The paper's appendix writes the characteristic polynomial ``lam^3 + b1 lam^2 + b2 lam + b3``
     and its trigonometric roots with ``p = -b1^2/3 + b2`` (the DIGEST's fix).  Here ``p`` is
     evaluated as ``-tr(D^2)/2`` with ``D = V - tr(V)/3 I``, which is the same number without the
-    cancellation, and ``q = -det(D)``; ``cos(3 phi) = (3q / 2p) sqrt(-3/p)``.  Where all three
-    variances coincide (``p = 0``) the roots are ``tr(V)/3``; where two coincide the formula holds
-    as it stands (``cos 3phi = +-1``).  The cosine argument is kept inside [-1, 1] against rounding.
-    Works on SX/MX symbols (a CasADi expression) and on numbers.
+    cancellation, and ``q = -det(D)``; the roots are ``m + 2 s cos(phi - 2 pi k / 3)`` with
+    ``s = sqrt(-p/3)`` and ``cos(3 phi) = -q / (2 s^3)``.
+
+    Coinciding variances: the textbook ``3 phi = acos(-q / 2 s^3)`` loses half the digits there
+    (``acos`` near +-1 turns a rounding error of 1e-16 into 1e-8), so ``3 phi`` is taken as
+    ``atan2(sin 3phi, cos 3phi)`` with ``sin 3phi = sqrt(Delta / 27) / (2 s^3)``, where ``Delta``,
+    the discriminant ``prod (lam_i - lam_j)^2``, is evaluated as a sum of squares (Cauchy-Binet
+    on the Gram determinant of ``[vec I, vec D, vec D^2]``, Parlett 2002), which keeps its full
+    relative accuracy down to 0.  Everything is scaled by ``s`` first.  Where all three variances
+    coincide (``s = 0``) the roots are ``tr(V)/3``.  The derivatives stay finite where variances
+    coincide.  Works on SX/MX symbols (a CasADi expression) and on numbers.
     """
     V = ca.SX(V) if isinstance(V, (np.ndarray, list)) else V
     m = ca.trace(V) / 3
     D = V - m * ca.DM.eye(3)
-    tr_d2 = ca.sumsqr(D)  # = tr(D^2) for symmetric D
-    p = -tr_d2 / 2  # = b2 - b1^2/3 <= 0
-    q = -ca.det(D)
-    s = ca.sqrt(-p / 3)  # >= 0
+    s2 = ca.sumsqr(D) / 6  # = -p/3, p = -tr(D^2)/2 <= 0
     tiny = 1e-300 + 1e-28 * m**2
-    safe_s = ca.if_else(s**2 > tiny, s, 1.0)
-    arg = ca.if_else(s**2 > tiny, -q / (2 * safe_s**3), 0.0)
-    arg = ca.fmin(1.0, ca.fmax(-1.0, arg))
-    phi = ca.acos(arg) / 3
+    spread = s2 > tiny
+    s = ca.if_else(spread, ca.sqrt(ca.if_else(spread, s2, 1.0)), 0.0)  # no 0/0 in the derivative
+    Dn = D / ca.if_else(spread, s, 1.0)  # scaled: sqrt(tr(Dn^2)/6) = 1
+    Dn2 = ca.mtimes(Dn, Dn)
+    # rows (i, j) of [vec I, vec Dn, vec Dn^2]; the symmetric off-diagonal pairs merged (weight sqrt 2)
+    rows = []
+    for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):
+        w = 1.0 if i == j else math.sqrt(2.0)
+        rows.append(ca.horzcat(1.0 if i == j else 0.0, w * Dn[i, j], w * Dn2[i, j]))
+    minors = [_det3(ca.vertcat(rows[a], rows[b], rows[c])) for a, b, c in itertools.combinations(range(6), 3)]
+    disc = ca.sumsqr(ca.vertcat(*minors))  # = prod (mu_i - mu_j)^2 of the eigenvalues mu of Dn
+    sin3 = ca.if_else(disc > 0, ca.sqrt(ca.if_else(disc > 0, disc, 1.0) / 27), 0.0)  # = 2 sin(3 phi)
+    cos3 = _det3(Dn)  # = -q / s^3 = 2 cos(3 phi)
+    phi = ca.if_else(spread, ca.atan2(sin3, cos3), 0.0) / 3
     two_pi_3 = 2 * math.pi / 3
     l1 = m + 2 * s * ca.cos(phi)
     l3 = m + 2 * s * ca.cos(phi + two_pi_3)
@@ -166,6 +188,7 @@ def _erf(x: np.ndarray) -> np.ndarray:
 
 def p_components(sigma, R: float) -> np.ndarray:
     """``P(|w_j| <= R)`` for independent zero-mean normals with standard deviations ``sigma``."""
+    R = check_positive(R, "R")
     sigma = np.asarray(sigma, dtype=float)
     with np.errstate(divide="ignore"):
         x = np.where(sigma > 0, R / (np.sqrt(2.0) * np.where(sigma > 0, sigma, 1.0)), np.inf)
