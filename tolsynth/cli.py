@@ -103,6 +103,7 @@ def cmd_analyze(args) -> int:
             "covariance": a.covariance,
             "principal_std": a.principal_std,
             "principal_directions": a.principal_directions,
+            "principal_std_cubic": a.principal_std_cubic,
             "R": a.R,
             "p_components": a.p_components,
             "p_sphere": a.p_sphere,

@@ -58,14 +58,20 @@ def variance_divisor(distribution: str) -> float:
         ) from None
 
 
+def _is_real(x) -> bool:
+    return not isinstance(x, (bool, np.bool_)) and isinstance(x, (int, float, np.integer, np.floating))
+
+
 def check_probability(p: float, field: str = "p") -> float:
-    if isinstance(p, bool) or not isinstance(p, (int, float, np.floating)) or not (0.0 < float(p) < 1.0):
+    """``p`` as a float, or OutOfRangeError unless 0 < p < 1."""
+    if not _is_real(p) or not (0.0 < float(p) < 1.0):
         raise OutOfRangeError(field, f"got {p!r}", "0 < p < 1")
     return float(p)
 
 
 def check_positive(x: float, field: str, unit: str = "mm") -> float:
-    if isinstance(x, bool) or not isinstance(x, (int, float, np.floating)) or not (float(x) > 0.0) or not math.isfinite(x):
+    """``x`` as a float, or OutOfRangeError unless it is finite and > 0."""
+    if not _is_real(x) or not (float(x) > 0.0) or not math.isfinite(float(x)):
         raise OutOfRangeError(field, f"got {x!r}", f"a finite number > 0 ({unit})")
     return float(x)
 
