@@ -23,11 +23,23 @@ from .mechanism import Analysis, Mechanism, load_model
 from .model import bundled_models
 from .result import Status, SynthesisResult
 from .stats import p_ball, p_components, p_cone, z_of_p
+from .montecarlo import MonteCarloResult, ValidationResult, monte_carlo, validate  # issue 4
+from .workspace import ProbabilityMap, WorstPose, plot_map, probability_map, worst_pose  # issue 4
 from .synthesis import Comparison, compare, synthesize
 
 __version__ = "0.1.0"
 
 __all__ = [
+    # issue 4: Monte Carlo, validation, worst pose, workspace map
+    "monte_carlo",
+    "MonteCarloResult",
+    "validate",
+    "ValidationResult",
+    "worst_pose",
+    "WorstPose",
+    "probability_map",
+    "ProbabilityMap",
+    "plot_map",
     "load_model",
     "synthesize",
     "compare",

@@ -1,0 +1,227 @@
+"""Worst-pose search and the workspace probability map (tolsynth.workspace).
+
+The map's reachable region is checked against a closed-form inverse kinematics of the
+reconstructed robot written here (planar two-link arm to the wrist centre, law of cosines), and
+the batched statistics against the package's one-pose analysis."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+import tolsynth
+from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
+from tolsynth.stats import p_ball
+from tolsynth.workspace import p_ball_batch, principal_std_batch, probability_map, worst_pose
+
+
+# ---------------------------------------------------------------------------------------------
+# closed-form inverse kinematics of xu_zhang_1988 with the hand roll axis vertical (up), theta1 = 0
+# ---------------------------------------------------------------------------------------------
+def closed_form_ik(x, z):
+    """Joints (theta1, theta'2, theta2, theta4, theta5) in rad and the smallest distance to a
+    limit (rad, < 0 outside; -inf out of reach) for the hand point (x, 0, z) mm.
+
+    Wrist centre W = hand - 150 mm * Z0; shoulder S = (0, 200) mm; upper arm 600 mm at elevation
+    e2 = 180 deg - theta2, forearm 800 mm at elevation e2 - gamma with the elbow angle
+    gamma = theta'2 - theta2 (the parallelogram), hand vertical when theta4 = e2 - gamma.
+    """
+    dx, dz = x, z - 150.0 - 200.0
+    c = (dx * dx + dz * dz - 600.0**2 - 800.0**2) / (2 * 600.0 * 800.0)
+    if abs(c) > 1:
+        return None, -math.inf
+    g = math.acos(c)  # the elbow branch with gamma > 0: the other one violates 50 <= gamma <= 130 deg
+    e2 = math.atan2(dz, dx) + math.atan2(800.0 * math.sin(g), 600.0 + 800.0 * math.cos(g))
+    t2 = math.pi - e2
+    tp2 = t2 + g
+    t4 = e2 - g
+    r = math.radians
+    margin = min(t2 - r(50), r(130) - t2, tp2 - r(140), r(200) - tp2, (g - r(50)) / math.sqrt(2),
+                 (r(130) - g) / math.sqrt(2), t4 + r(110), r(110) - t4)
+    return np.array([0.0, tp2, t2, t4, 0.0]), margin
+
+
+def test_closed_form_reproduces_the_paper_pose(xz):
+    q, margin = closed_form_ik(925.0, 1225.0)
+    assert np.allclose(q, xz.configurations["worst"], atol=1e-8)
+    assert -0.01 < margin < 0  # 0.33 deg past the interference limit
+
+
+# ---------------------------------------------------------------------------------------------
+# batched statistics
+# ---------------------------------------------------------------------------------------------
+def test_p_ball_batch_matches_p_ball(rng):
+    lam = np.exp(rng.normal(-3, 1.5, (150, 3)))
+    lam[0] = [0.04, 0.01, 0.0]  # degenerate rows fall back to p_ball
+    lam[1] = [0.02, 0.02, 0.02]
+    got = p_ball_batch(lam, 0.2)
+    want = np.array([p_ball(v, 0.2) for v in lam])
+    assert np.allclose(got, want, atol=1e-9)
+
+
+def test_principal_std_batch_matches_analyze(xz, rng):
+    lo = np.array([j.lower for j in xz.spec.joints])
+    hi = np.array([j.upper for j in xz.spec.joints])
+    Q = lo[:, None] + (hi - lo)[:, None] * rng.random((5, 12))
+    got = principal_std_batch(xz, Q, "figure3", "normal")
+    for k in range(Q.shape[1]):
+        a = xz.analyze(Q[:, k], "figure3", "normal", check_limits=False)
+        assert np.allclose(got[k], a.principal_std, rtol=1e-10, atol=1e-14)
+
+
+# ---------------------------------------------------------------------------------------------
+# worst pose
+# ---------------------------------------------------------------------------------------------
+def _feasible_random(xz, rng, n):
+    lo = np.array([j.lower for j in xz.spec.joints])
+    hi = np.array([j.upper for j in xz.spec.joints])
+    Q = lo[:, None] + (hi - lo)[:, None] * rng.random((5, n))
+    g = Q[1] - Q[2]
+    return Q[:, (g >= math.radians(50)) & (g <= math.radians(130))]
+
+
+def test_worst_pose_sigma_beats_the_paper_and_respects_limits(xz, rng):
+    w = worst_pose(xz, "figure3", criterion="sigma", R=0.2)
+    xz.joints(w.q)  # raises if a limit or the interference constraint is violated
+    assert w.reference == "worst"
+    assert np.allclose(w.reference_position, [925.0, 0.0, 1225.0], atol=1e-6)
+    assert w.value >= w.reference_value  # at least as bad as the paper's pose
+    assert w.value == pytest.approx(xz.analyze(w.q, "figure3").principal_std[0], rel=1e-10)
+    assert w.reference_value == pytest.approx(xz.analyze("worst", "figure3").principal_std[0], rel=1e-10)
+    assert set(w.held_joints) == {"theta1", "theta5"}  # found numerically: they do not matter
+    # no random feasible pose is worse than the one found
+    Q = _feasible_random(xz, rng, 20000)
+    assert principal_std_batch(xz, Q, "figure3")[:, 0].max() <= w.value * (1 + 1e-9)
+    assert any("interference" in a for a in w.active)
+    text = w.report(xz.joint_names)
+    assert "reference (worst)" in text and "925.000" in text
+    json.dumps(w.to_dict())
+
+
+def test_worst_pose_probability(xz, rng):
+    w = worst_pose(xz, "figure3", criterion="probability", R=0.2, grid=12, starts=2)
+    xz.joints(w.q)
+    assert w.p_sphere <= w.reference_p_sphere
+    assert w.value == pytest.approx(xz.analyze(w.q, "figure3", R=0.2).p_sphere, abs=1e-9)
+    Q = _feasible_random(xz, rng, 3000)
+    sig = principal_std_batch(xz, Q, "figure3")
+    assert p_ball_batch(sig**2, 0.2).min() >= w.value - 1e-9
+
+
+def test_worst_pose_errors(xz):
+    with pytest.raises(OutOfRangeError, match="criterion"):
+        worst_pose(xz, "figure3", criterion="largest")
+    with pytest.raises(InputError, match="R"):
+        worst_pose(xz, "figure3", criterion="probability")
+    with pytest.raises(UnknownNameError):
+        worst_pose(xz, "nope")
+    with pytest.raises(UnknownNameError):
+        worst_pose(xz, "figure3", fixed={"theta9": 0.0})
+
+
+# ---------------------------------------------------------------------------------------------
+# the map (Figure 3)
+# ---------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def fig3map():
+    xz = tolsynth.load_model("xu_zhang_1988")
+    return xz, probability_map(xz, "figure3", R=0.2, distribution="uniform", n=40, progress=False)
+
+
+def test_map_is_nan_exactly_outside_the_reachable_region(fig3map):
+    xz, pm = fig3map
+    checked_in = checked_out = 0
+    for j, z in enumerate(pm.v):
+        for i, x in enumerate(pm.u):
+            q, margin = closed_form_ik(x, z)
+            if margin > 0.01:  # clearly inside: reachable, and the same joints
+                assert np.isfinite(pm.P[j, i]), (x, z)
+                assert np.allclose(pm.Q[:, j, i], q, atol=1e-6)
+                checked_in += 1
+            elif margin < -0.01:  # clearly outside (past a limit, or out of reach)
+                assert np.isnan(pm.P[j, i]), (x, z)
+                assert np.all(np.isnan(pm.Q[:, j, i]))
+                checked_out += 1
+    assert checked_in > 300 and checked_out > 500
+    assert pm.fixed["theta1"][0] == 0.0 and pm.fixed["theta5"][0] == 0.0
+    assert pm.n_alternative_solutions == 0
+
+
+@pytest.mark.parametrize("x, z, reachable", [(925.0, 1200.0, True), (800.0, 800.0, True), (300.0, 600.0, False),
+                                             (1300.0, 900.0, False), (600.0, 1550.0, False)])
+def test_map_points_checked_one_by_one(xz, x, z, reachable):
+    pm = probability_map(xz, "figure3", R=0.2, n=5, extent=(x - 1, x + 1, z - 1, z + 1), progress=False)
+    q, margin = closed_form_ik(x, z)
+    assert (margin >= 0) == reachable
+    assert bool(np.isfinite(pm.P[2, 2])) == reachable
+    if reachable:
+        assert pm.P[2, 2] == pytest.approx(xz.analyze(q, "figure3", "uniform", R=0.2).p_sphere, abs=1e-9)
+
+
+def test_map_values_and_marks(fig3map):
+    xz, pm = fig3map
+    P = pm.P[np.isfinite(pm.P)]
+    assert 0 < P.min() < P.max() < 1
+    assert pm.worst[2] == pytest.approx(P.min())
+    assert pm.reference_point == pytest.approx((925.0, 1225.0), abs=1e-6)
+    assert pm.reference_P == pytest.approx(xz.analyze("worst", "figure3", R=0.2).p_sphere)
+    # the paper's pose lies on the region's edge: some neighbours are reachable, some are not
+    i = np.searchsorted(pm.u, 925.0)
+    j = np.searchsorted(pm.v, 1225.0)
+    block = np.isfinite(pm.P[j - 2 : j + 2, i - 2 : i + 2])
+    assert block.any() and not block.all()
+
+
+def test_map_figure(fig3map, tmp_path):
+    pytest.importorskip("matplotlib")
+    _, pm = fig3map
+    out = tmp_path / "fig3.png"
+    fig = pm.plot(out)
+    assert out.stat().st_size > 20_000
+    texts = " ".join(t.get_text() for t in fig.texts)
+    assert "vertical" in texts and "interference" in texts and "branch" in texts
+    ax = fig.axes[0]
+    assert "mm" in ax.get_xlabel() and "mm" in ax.get_ylabel()
+
+
+def test_map_errors(xz):
+    with pytest.raises(OutOfRangeError, match="R"):
+        probability_map(xz, R=0.0)
+    with pytest.raises(OutOfRangeError, match="plane"):
+        probability_map(xz, plane="xw")
+    with pytest.raises(OutOfRangeError, match="n"):
+        probability_map(xz, n=2)
+    with pytest.raises(UnknownNameError, match="tolerance"):
+        probability_map(xz, "nope")
+    with pytest.raises(InputError, match="hand_axis"):
+        probability_map(xz, hand_axis=(0, 0, 0))
+
+
+def test_cli_map_and_worst_pose(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    from tolsynth.cli import main
+
+    out = tmp_path / "map.png"
+    rc = main(["map", "--model", "xu_zhang_1988", "--tolerances", "figure3", "--dist", "uniform", "--R", "0.2",
+               "--out", str(out), "--n", "30", "--json", "--quiet"])
+    assert rc == 0 and out.exists()
+    data = json.loads(capsys.readouterr().out)
+    assert data["out"] == str(out) and len(data["P"]) == 30
+    rc = main(["worst-pose", "--model", "xu_zhang_1988", "--tolerances", "figure3", "--R", "0.2", "--json"])
+    assert rc == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["value"] >= data["reference_value"]
+    rc = main(["map", "--model", "xu_zhang_1988", "--R", "-1", "--quiet"])
+    assert rc == 2 and "R:" in capsys.readouterr().err
+
+
+def test_full_resolution_map(xz):
+    pm = probability_map(xz, "figure3", R=0.2, n=100, progress=False)
+    for j in range(0, 100, 7):
+        for i in range(0, 100, 7):
+            q, margin = closed_form_ik(pm.u[i], pm.v[j])
+            if abs(margin) > 0.005:
+                assert np.isfinite(pm.P[j, i]) == (margin > 0)
