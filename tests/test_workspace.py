@@ -15,7 +15,8 @@ import pytest
 import tolsynth
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
 from tolsynth.stats import p_ball
-from tolsynth.workspace import p_ball_batch, principal_std_batch, probability_map, worst_pose
+from tolsynth.stats import p_ball_batch
+from tolsynth.workspace import principal_std_batch, probability_map, worst_pose
 
 
 # ---------------------------------------------------------------------------------------------

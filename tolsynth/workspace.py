@@ -35,7 +35,7 @@ import numpy as np
 
 from .errors import InputError, OutOfRangeError, UnknownNameError
 from .montecarlo import NumpyEvaluator, make_bar
-from .stats import _gauss_legendre_01, check_positive, covariance_graph, p_ball, variance_divisor
+from .stats import check_positive, covariance_graph, p_ball, p_ball_batch, variance_divisor
 
 __all__ = [
     "WorstPose",
@@ -44,7 +44,6 @@ __all__ = [
     "probability_map",
     "plot_map",
     "principal_std_batch",
-    "p_ball_batch",
     "register",
 ]
 
@@ -107,66 +106,6 @@ def principal_std_batch(mechanism, Q: np.ndarray, tolerances, distribution: str 
         floor = 1e-15 * np.maximum(lam[:, :1], 0.0)
         lam = np.where(lam <= floor, 0.0, lam)
         out[a : a + chunk] = np.sqrt(lam)
-    return out
-
-
-def _erf(x: np.ndarray) -> np.ndarray:
-    try:  # SciPy's erf is ~10x faster than the fallback; SciPy is not a run-time dependency
-        from scipy.special import erf
-
-        return erf(x)
-    except ImportError:  # pragma: no cover
-        from .stats import _erf as erf_casadi
-
-        return erf_casadi(x)
-
-
-def p_ball_batch(variances: np.ndarray, R: float, tol: float = 1e-10, max_nodes: int = 1024) -> np.ndarray:
-    """``P(|w| <= R)`` (Eq. 5) for many zero-mean normal vectors with independent components.
-
-    The batched form of :func:`tolsynth.stats.p_ball` (same quadrature: Gauss-Legendre in
-    ``cos(theta)``, midpoint rule in the azimuth, over one octant, nodes doubled until two
-    successive values agree to ``tol``), for the maps and the pose search where one call per pose
-    would be too slow.  Rows with a zero variance fall back to :func:`tolsynth.stats.p_ball`.
-
-    Parameters
-    ----------
-    variances : ndarray, shape (N, 3)
-        Principal variances (mm^2).
-    R : float
-        Radius (mm), > 0.
-
-    Returns
-    -------
-    ndarray, shape (N,)
-    """
-    R = check_positive(R, "R")
-    lam = np.sort(np.atleast_2d(np.asarray(variances, dtype=float)), axis=1)[:, ::-1]
-    out = np.full(lam.shape[0], np.nan)
-    degenerate = lam[:, 2] <= 1e-15 * lam[:, 0]
-    for i in np.flatnonzero(degenerate):
-        out[i] = p_ball(lam[i], R)
-    todo = np.flatnonzero(~degenerate)
-    prev = None
-    nodes = 8
-    s2pi = math.sqrt(2.0 / math.pi)
-    while todo.size:
-        L = lam[todo]
-        phi = (np.arange(nodes) + 0.5) * (0.5 * math.pi / nodes)
-        z, wz = _gauss_legendre_01(nodes)
-        perp = L[:, 1:2] * np.cos(phi) ** 2 + L[:, 2:3] * np.sin(phi) ** 2  # (m, nodes)
-        qf = L[:, 0, None, None] * (z**2)[None, :, None] + (1.0 - z**2)[None, :, None] * perp[:, None, :]
-        x = R / np.sqrt(qf)
-        f = _erf(x / math.sqrt(2.0)) - s2pi * x * np.exp(-0.5 * x * x)  # chi CDF, 3 dimensions
-        val = np.einsum("z,mz->m", wz, f.mean(axis=2))
-        if prev is not None:
-            conv = np.abs(val - prev) <= tol
-            out[todo[conv]] = val[conv]
-            if nodes >= max_nodes:
-                raise RuntimeError(f"p_ball_batch: no convergence to {tol} with {max_nodes} nodes")
-            todo, val = todo[~conv], val[~conv]
-        prev = val
-        nodes *= 2
     return out
 
 

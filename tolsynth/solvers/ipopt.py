@@ -72,6 +72,9 @@ def _solver(n: int, m: int, tol: float, constr_viol_tol: float, max_iter: int, m
     nlp = {"x": x, "p": p, "f": g.cost(u, alpha, k), "g": ca.vertcat(*cons)}
     opts = {
         "print_time": False,
+        # a trial point may overflow (Inf) on the way; IPOPT backtracks from it by itself, so the
+        # evaluation warning is noise for the user (the outcome is in the return status)
+        "show_eval_warnings": False,
         "ipopt.print_level": 0,
         "ipopt.sb": "yes",
         "ipopt.tol": tol,
