@@ -34,11 +34,10 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
-from tqdm import tqdm
 
 import tolsynth
 from tolsynth.montecarlo import monte_carlo, validate
-from tolsynth.workspace import principal_std_batch, worst_pose
+from tolsynth.workspace import principal_std_batch
 
 # %% [markdown]
 # ## 1. The model file
@@ -212,19 +211,15 @@ print(f"largest sigma z / R over the joint space: {g1.max():.3f} (1 at the stret
 #
 # As in notebook 02: search the joint space for the worst pose at the current optimum
 # (`worst_pose`, criterion = largest principal sigma, the quantity the constraint bounds), add it to
-# the poses of `synthesize(..., poses=[...])`, and repeat until the worst pose meets the spec.
+# the poses of `synthesize(..., poses=[...])`, and repeat until the worst pose meets the spec:
+# `tolsynth.synthesize_workspace`.
 
 # %%
-poses = ["stretched"]
-history = []
-for it in tqdm(range(12), desc="exchange iterations"):
-    res = tolsynth.synthesize(m, R, p, "uniform", alpha, poses=poses, Phi=Phi)
-    assert res.success, res.message
-    w = worst_pose(m, res.x, criterion="sigma", reference="stretched")
-    history.append((len(poses), res.cost, w.value * z / R, w.q))
-    if w.value * z / R <= 1 + 1e-3:
-        break
-    poses.append(w.q)
+ws = tolsynth.synthesize_workspace(m, R, p, "uniform", alpha, pose="stretched", Phi=Phi,
+                                   search={"reference": "stretched"})
+assert ws.success, ws.result.message
+res, poses = ws.result, ws.poses
+history = [(r["n_poses"], r["cost"], r["worst_value"], r["worst_q"]) for r in ws.rounds]
 print(f"{'iter':>4} {'poses':>5} {'cost':>9} {'worst sigma1 z/R':>17}   worst pose q2, q3 (deg)")
 for k, (npose, cost, g, q) in enumerate(history):
     print(f"{k:>4} {npose:>5} {cost:9.4f} {g:17.5f}   {np.degrees(q[1:]).round(2).tolist()}")

@@ -292,3 +292,28 @@ def test_cli_reproduce_json_has_all_columns(capsys):
         k = np.array([1.0] * 8 + [1.5] * 3)
         printed = np.array(list(pr["printed"].values()))
         assert pr["printed_cost"] == pytest.approx(float(np.sum(k * printed ** -col["alpha"])), rel=1e-12)
+
+
+# ------------------------------------------------------------------------------------------
+# beyond the paper: the constraint at every reachable pose
+# ------------------------------------------------------------------------------------------
+def test_synthesize_workspace_meets_spec_at_random_poses(xz, rng):
+    R, p = 0.5, 0.99
+    w = tolsynth.synthesize_workspace(xz, R, p, "uniform", 0.7)
+    assert w.success and len(w.rounds) >= 2
+    at_paper_pose = w.rounds[0]
+    assert at_paper_pose["worst_value"] > 1.05  # the paper's single pose is not enough
+    # independent check: random feasible poses (rejection sampling inside limits and interference)
+    lo = np.array([j.lower for j in xz.spec.joints])
+    hi = np.array([j.upper for j in xz.spec.joints])
+    worst, checked = 0.0, 0
+    while checked < 400:
+        q = lo + (hi - lo) * rng.random(5)
+        gamma = math.degrees(q[1] - q[2])
+        if not 50.0 <= gamma <= 130.0:
+            continue
+        worst = max(worst, max_sigma_z_over_R(xz, w.result.x, R, p, "uniform", q))
+        checked += 1
+    assert worst <= 1 + 2e-3
+    # and the single-pose optimum fails at some of those same kinds of poses
+    assert w.result.cost > synthesize(xz, R, p, "uniform", 0.7).cost

@@ -25,7 +25,7 @@ from .result import Status, SynthesisResult
 from .stats import p_ball, p_components, p_cone, z_of_p
 from .montecarlo import MonteCarloResult, ValidationResult, monte_carlo, validate  # issue 4
 from .workspace import ProbabilityMap, WorstPose, plot_map, probability_map, worst_pose  # issue 4
-from .synthesis import Comparison, compare, synthesize
+from .synthesis import Comparison, WorkspaceSynthesis, compare, synthesize, synthesize_workspace
 
 __version__ = "0.1.0"
 
@@ -42,6 +42,8 @@ __all__ = [
     "plot_map",
     "load_model",
     "synthesize",
+    "synthesize_workspace",
+    "WorkspaceSynthesis",
     "compare",
     "Comparison",
     "SynthesisResult",

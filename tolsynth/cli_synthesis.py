@@ -5,9 +5,14 @@ from __future__ import annotations
 import sys
 
 from .cli import emit_json, parse_pose
+from .errors import InputError
 from .mechanism import load_model
 
 __all__ = ["register"]
+
+
+def _fmt(v) -> str:
+    return "(" + ", ".join(f"{x:.1f}" for x in v) + ")"
 
 
 def cmd_solve(args) -> int:
@@ -16,6 +21,26 @@ def cmd_solve(args) -> int:
     mech = load_model(args.model)
     pose = parse_pose(mech, args.pose)
     kw = dict(pose=pose, Phi=args.Phi)
+    if args.everywhere:
+        from .synthesis import synthesize_workspace
+
+        if args.solver == "both":
+            raise InputError("--solver", "'both' does not combine with --everywhere", "ipopt or sumt")
+        w = synthesize_workspace(mech, args.R, args.p, args.dist, args.alpha, solver=args.solver, **kw)
+        if args.json:
+            out = w.result.to_dict()
+            out.update(converged=w.converged, rounds=w.rounds, poses=w.poses)
+            emit_json(out)
+        else:
+            print(f"{mech.name}: R={args.R:g} mm, p={args.p:g}, alpha={args.alpha:g}, {args.dist} errors, every pose")
+            for k, r in enumerate(w.rounds):
+                print(f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.6g}, worst sigma z/R over the "
+                      f"workspace {r['worst_value']:.5f} at hand {_fmt(r['worst_position'])} mm")
+            print(w.result.summary())
+        if not w.success:
+            print("tolsynth solve: no convergence over the workspace; the numbers above are not an optimum", file=sys.stderr)
+            return 1
+        return 0
     if args.solver == "both":
         c = compare(mech, args.R, args.p, args.dist, args.alpha, **kw)
         if args.json:
@@ -64,6 +89,8 @@ def register(sub) -> None:
     p.add_argument("--solver", choices=["ipopt", "sumt", "both"], default="ipopt")
     p.add_argument("--pose", default="worst", help="configuration name or joint angles in deg")
     p.add_argument("--Phi", type=float, default=None, help="orientation accuracy half-angle (rad), optional")
+    p.add_argument("--everywhere", action="store_true",
+                   help="impose the constraint at every reachable pose (exchange method with the worst-pose search)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_solve)
 
