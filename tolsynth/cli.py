@@ -16,7 +16,7 @@ import numpy as np
 from .errors import InputError, TolsynthError
 from .mechanism import Mechanism, load_model
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "add_pose_arguments", "parse_pose", "parse_tolerances", "emit_json"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -138,17 +138,22 @@ def cmd_analyze(args) -> int:
 # ---------------------------------------------------------------------------------------------
 # parser
 # ---------------------------------------------------------------------------------------------
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="tolsynth", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-
-    p = sub.add_parser("analyze", help="linearised, Gaussian error analysis of one pose")
+def add_pose_arguments(p: argparse.ArgumentParser) -> None:
+    """The arguments of a one-pose analysis: model, pose, tolerances, distribution, R, Phi."""
     p.add_argument("--model", required=True, help="bundled model name or path to a .toml file")
     p.add_argument("--pose", default="worst", help="configuration name or joint angles in deg, comma-separated")
     p.add_argument("--tolerances", required=True, help="SET | name=value,... | SET,name=value,...")
     p.add_argument("--dist", choices=["uniform", "normal"], default="uniform")
     p.add_argument("--R", type=float, required=True, help="radius of the accuracy sphere (mm)")
     p.add_argument("--Phi", type=float, default=None, help="orientation cone half-angle (rad)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="tolsynth", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("analyze", help="linearised, Gaussian error analysis of one pose")
+    add_pose_arguments(p)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_analyze)
 

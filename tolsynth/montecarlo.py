@@ -1021,13 +1021,10 @@ def _cmd_montecarlo(args) -> int:
 
 def register(sub) -> None:
     """Add ``tolsynth montecarlo`` to the sub-command parser."""
+    from .cli import add_pose_arguments
+
     p = sub.add_parser("montecarlo", help="Monte Carlo through the nonlinear kinematics vs the analytic model")
-    p.add_argument("--model", required=True, help="bundled model name or path to a .toml file")
-    p.add_argument("--pose", default="worst", help="configuration name or joint angles in deg, comma-separated")
-    p.add_argument("--tolerances", required=True, help="SET | name=value,... | SET,name=value,...")
-    p.add_argument("--dist", choices=["uniform", "normal"], default="uniform")
-    p.add_argument("--R", type=float, required=True, help="radius of the accuracy sphere (mm)")
-    p.add_argument("--Phi", type=float, default=None, help="orientation cone half-angle (rad)")
+    add_pose_arguments(p)
     p.add_argument("--n", type=int, default=1_000_000, help="number of samples")
     p.add_argument("--seed", type=int, default=0, help="seed of the random generator (recorded)")
     p.add_argument("--batch", type=int, default=DEFAULT_BATCH, help="samples per batch (memory ~ batch, not n)")
