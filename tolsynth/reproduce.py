@@ -101,7 +101,7 @@ def reproduce(model: str | Mechanism = "xu_zhang_1988", sumt: bool = True, progr
     sumt : bool
         Also solve with SUMT + Powell (about 1-2 s a column) in the printed-unit reading.
     progress : bool
-        Show a progress bar (tqdm) on stderr.
+        Show a progress bar on stderr (if the optional tqdm is installed).
     degree_reading : bool
         Also read the printed angular numbers as degrees (and optimise with degree numbers in the
         cost).
@@ -112,13 +112,13 @@ def reproduce(model: str | Mechanism = "xu_zhang_1988", sumt: bool = True, progr
     readings = {"printed": mech}
     if degree_reading and angle_params:
         readings["deg"] = mech.with_units({n: "deg" for n in angle_params})
-    iterator = refs
-    if progress:
-        from tqdm import tqdm
+    bar = None
+    if progress:  # a bar only if the optional tqdm is installed
+        from .montecarlo import make_bar
 
-        iterator = tqdm(refs, desc="Tables 1-3", unit="column")
+        bar = make_bar(len(refs), "Tables 1-3", "column", 0.5)
     reports = []
-    for ref in iterator:
+    for ref in refs:
         col = {}
         for key, m in readings.items():
             printed = np.array(ref.tolerances, dtype=float)
@@ -128,6 +128,10 @@ def reproduce(model: str | Mechanism = "xu_zhang_1988", sumt: bool = True, progr
             unit = m.units[m.index(angle_params[0])] if angle_params else "-"
             col[key] = Reading(unit, dict(zip(m.error_parameters, printed.tolist())), cost, gmax, ip, su)
         reports.append(ColumnReport(ref.table, ref.R, ref.p, ref.alpha, ref.distribution, col))
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
     return reports
 
 
