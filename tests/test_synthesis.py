@@ -317,3 +317,16 @@ def test_synthesize_workspace_meets_spec_at_random_poses(xz, rng):
     assert worst <= 1 + 2e-3
     # and the single-pose optimum fails at some of those same kinds of poses
     assert w.result.cost > synthesize(xz, R, p, "uniform", 0.7).cost
+
+
+def test_validate_option_runs_monte_carlo_at_the_optimum(xz):
+    """Normal errors: the linear + Gaussian model is exact up to the (tiny) nonlinearity, so the two
+    active components must reach p = 0.9 within the Monte Carlo interval (independent sampling
+    through the nonlinear kinematics)."""
+    res = synthesize(xz, 0.5, 0.9, "normal", 0.7, validate=400_000, seed=11)
+    v = res.validation
+    assert v is not None and v.n == 400_000 and v.seed == 11
+    active = res.constraints[0].active
+    lo, hi = v.p_components_ci[:, 0], v.p_components_ci[:, 1]
+    assert np.all(lo[active] <= 0.9 + 1e-3) and np.all(hi[active] >= 0.9 - 1e-3)
+    np.testing.assert_allclose(v.p_components_analytic[active], 0.9, atol=1e-8)
