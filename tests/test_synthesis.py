@@ -330,3 +330,62 @@ def test_validate_option_runs_monte_carlo_at_the_optimum(xz):
     lo, hi = v.p_components_ci[:, 0], v.p_components_ci[:, 1]
     assert np.all(lo[active] <= 0.9 + 1e-3) and np.all(hi[active] >= 0.9 - 1e-3)
     np.testing.assert_allclose(v.p_components_analytic[active], 0.9, atol=1e-8)
+
+
+# ------------------------------------------------------------------------------------------
+# beyond the paper: the sphere criterion P(|dr| <= R) >= p itself
+# ------------------------------------------------------------------------------------------
+def sphere_probability(mech, eps, R, dist, pose="worst"):
+    """P(|dr| <= R) for the linear model, by scipy's chi-square CDF after a NumPy eigensolve when
+    the variances are equal, and by a 2-D scipy quadrature otherwise (independent of p_ball)."""
+    from scipy import integrate, special
+
+    S = mech.sensitivity(pose)[:3]
+    c = 3.0 if dist == "uniform" else 9.0
+    lam = np.sort(np.linalg.eigvalsh((S * (np.asarray(eps) ** 2 / c)) @ S.T))[::-1]
+
+    def f(theta, phi):  # mean over the unit sphere of F_3(R / sqrt(v^T diag(lam) v))
+        v = np.array([math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi), math.cos(theta)])
+        x = R / math.sqrt(float(lam @ v**2))
+        return (special.erf(x / math.sqrt(2)) - math.sqrt(2 / math.pi) * x * math.exp(-x * x / 2)) * math.sin(theta)
+
+    val, _ = integrate.dblquad(f, 0, math.pi / 2, 0, math.pi / 2, epsabs=1e-13, epsrel=1e-13)
+    return val * 2 / math.pi
+
+
+def test_sphere_criterion_meets_p_exactly_and_costs_more(xz):
+    R, p = 0.5, 0.99
+    sph = synthesize(xz, R, p, "uniform", 0.7, criterion="sphere")
+    comp = synthesize(xz, R, p, "uniform", 0.7)
+    assert sph.success, sph.message
+    assert sphere_probability(xz, sph.x, R, "uniform") == pytest.approx(p, abs=1e-8)
+    # the components optimum does not meet the sphere demand; the sphere optimum costs more
+    assert sphere_probability(xz, comp.x, R, "uniform") < p - 0.01
+    assert comp.cost < sph.cost
+    # the lower bound is the components optimum (which contains the sphere problem)
+    assert sph.lower_bound == pytest.approx(comp.cost, rel=1e-8)
+    assert sph.constraints[0].kind == "sphere" and sph.constraints[0].active.all()
+
+
+def test_sphere_criterion_scaling_laws(xz):
+    base = synthesize(xz, 0.5, 0.95, "uniform", 0.7, criterion="sphere", options=TIGHT)
+    scaled = synthesize(xz, 0.8, 0.95, "uniform", 0.7, criterion="sphere", options=TIGHT)
+    normal = synthesize(xz, 0.5, 0.95, "normal", 0.7, criterion="sphere", options=TIGHT)
+    np.testing.assert_allclose(scaled.x, base.x * 0.8 / 0.5, rtol=1e-6)
+    np.testing.assert_allclose(normal.x, base.x * math.sqrt(3.0), rtol=1e-6)
+
+
+def test_sphere_criterion_ipopt_and_sumt_agree():
+    mech = tolsynth.load_model("planar_2r")
+    c = tolsynth.compare(mech, 0.2, 0.9, "uniform", 0.7, pose="elbow90", criterion="sphere")
+    assert c.ipopt.success and c.sumt.success
+    assert c.cost_rel_diff < 1e-6
+    assert max(c.tolerance_rel_diff.values()) < 1e-3
+    assert sphere_probability(mech, c.ipopt.x, 0.2, "uniform", "elbow90") == pytest.approx(0.9, abs=1e-8)
+
+
+def test_sphere_criterion_validated_by_monte_carlo(xz):
+    """Normal errors: the Monte Carlo sphere probability through the nonlinear kinematics matches p."""
+    res = synthesize(xz, 0.5, 0.9, "normal", 0.7, criterion="sphere", validate=400_000, seed=5)
+    lo, hi = res.validation.p_sphere_ci
+    assert lo - 1e-3 <= 0.9 <= hi + 1e-3

@@ -20,7 +20,7 @@ def cmd_solve(args) -> int:
 
     mech = load_model(args.model)
     pose = parse_pose(mech, args.pose)
-    kw = dict(pose=pose, Phi=args.Phi)
+    kw = dict(pose=pose, Phi=args.Phi, criterion=args.criterion)
     if args.everywhere:
         from .synthesis import synthesize_workspace
 
@@ -89,6 +89,8 @@ def register(sub) -> None:
     p.add_argument("--solver", choices=["ipopt", "sumt", "both"], default="ipopt")
     p.add_argument("--pose", default="worst", help="configuration name or joint angles in deg")
     p.add_argument("--Phi", type=float, default=None, help="orientation accuracy half-angle (rad), optional")
+    p.add_argument("--criterion", choices=["components", "sphere"], default="components",
+                   help="per principal component (the paper's Eq. 20) or the sphere P(|dr| <= R) >= p")
     p.add_argument("--everywhere", action="store_true",
                    help="impose the constraint at every reachable pose (exchange method with the worst-pose search)")
     p.add_argument("--json", action="store_true")

@@ -20,8 +20,16 @@ certificate).  The specification (R, z(p), Phi, c, alpha, k, the sensitivities a
 as CasADi *parameters*, so a sweep re-solves the same graph without rebuilding it.
 
 Both solvers read the graphs of this module: IPOPT the cost and ``G`` (through the factor form
-``G = B B^T``), SUMT the cost and ``-ln det G`` (the interior penalty; see
+``G = L L^T``), SUMT the cost and ``-ln det G`` (the interior penalty; see
 :mod:`tolsynth.solvers.sumt`).
+
+Beyond the paper, ``criterion="sphere"`` asks for ``P(|dr| <= R) >= p`` itself (the sphere of Eq.
+5/13, which the paper replaces by the per-component Eq. 14/20).  Its probability is a smooth
+function of the covariance, ``P = mean over unit v of F_3(R / sqrt(v^T V v))`` (``F_3`` the chi
+CDF; no eigen-decomposition), written as a CasADi expression with a fixed product quadrature over
+the hemisphere (:func:`sphere_graph`) and checked a posteriori against :func:`tolsynth.stats.p_ball`.
+That problem is not known to be convex; its lower bound is the optimum of the per-component
+problem with the same p, which contains it (the sphere lies inside every component's slab).
 """
 
 from __future__ import annotations
@@ -37,7 +45,20 @@ import numpy as np
 from .errors import InfeasibleSpecificationError, InputError, OutOfRangeError
 from .stats import check_positive, check_probability, covariance_graph, variance_divisor, z_of_p
 
-__all__ = ["Specification", "Block", "ToleranceNLP", "nlp_graphs", "make_specification"]
+__all__ = [
+    "Specification",
+    "Block",
+    "SphereBlock",
+    "ToleranceNLP",
+    "nlp_graphs",
+    "sphere_graph",
+    "make_specification",
+    "CRITERIA",
+]
+
+#: accuracy criteria for the position: the paper's per-principal-component form, or the sphere
+CRITERIA = ("components", "sphere")
+SPHERE_NODES = 24  # Gauss-Legendre nodes in v_z (twice as many in the azimuth); refined if needed
 
 
 @dataclass(frozen=True)
@@ -52,6 +73,21 @@ class Block:
     @property
     def label(self) -> str:
         return f"{self.kind} at pose {self.pose!r}"
+
+
+@dataclass(frozen=True)
+class SphereBlock:
+    """The sphere criterion at one pose: ``P(|dr| <= R) >= p`` (position, Eq. 5/13)."""
+
+    pose: str
+    R: float  # mm
+    p: float
+    A: np.ndarray  # 3 x n sensitivity rows (per tolerance unit)
+    kind: str = "sphere"
+
+    @property
+    def label(self) -> str:
+        return f"sphere P(|dr| <= R) at pose {self.pose!r}"
 
 
 @dataclass(frozen=True)
@@ -76,10 +112,20 @@ class Specification:
     poses: dict[str, np.ndarray] = field(default_factory=dict)
     Phi: float | None = None
     p_orientation: float | None = None
+    criterion: str = "components"
+    sphere_blocks: tuple[SphereBlock, ...] = ()
 
     @property
     def n(self) -> int:
         return len(self.names)
+
+    def relaxed(self) -> "Specification":
+        """The per-component problem with the same p at the same poses: for the sphere criterion
+        its feasible set contains this one, so its optimum is a lower bound."""
+        from dataclasses import replace
+
+        extra = tuple(Block(b.pose, "position", z_of_p(b.p) / b.R, b.A) for b in self.sphere_blocks)
+        return replace(self, blocks=extra + self.blocks, sphere_blocks=(), criterion="components")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -118,6 +164,7 @@ def make_specification(
     poses=None,
     Phi: float | None = None,
     p_orientation: float | None = None,
+    criterion: str = "components",
 ) -> Specification:
     """Validate the inputs of :func:`tolsynth.synthesize` and evaluate the sensitivities.
 
@@ -127,6 +174,8 @@ def make_specification(
     R = check_positive(R, "R")
     p = check_probability(p, "p")
     c = variance_divisor(distribution)
+    if criterion not in CRITERIA:
+        raise InputError("criterion", f"unknown criterion {criterion!r}", " or ".join(repr(c) for c in CRITERIA))
     names = mechanism.error_parameters
     alpha_v = _per_parameter(alpha, names, mechanism.index, "alpha")
     for nm, a in zip(names, alpha_v):
@@ -169,13 +218,16 @@ def make_specification(
     pose_list = list(poses) if poses is not None else [pose]
     if not pose_list:
         raise InputError("poses", "empty", "at least one pose")
-    blocks, qs = [], {}
+    blocks, sphere, qs = [], [], {}
     for i, ps in enumerate(pose_list):
         label = ps if isinstance(ps, str) else f"#{i}"
         q = mechanism.joints(ps)
         S = mechanism.sensitivity(q, check_limits=False)
         qs[label] = q
-        blocks.append(Block(label, "position", z / R, S[:3].copy()))
+        if criterion == "sphere":
+            sphere.append(SphereBlock(label, R, p, S[:3].copy()))
+        else:
+            blocks.append(Block(label, "position", z / R, S[:3].copy()))
         if Phi is not None:
             blocks.append(Block(label, "orientation", z_o / Phi, S[3:].copy()))
     return Specification(
@@ -194,6 +246,8 @@ def make_specification(
         poses=qs,
         Phi=Phi,
         p_orientation=p_orientation,
+        criterion=criterion,
+        sphere_blocks=tuple(sphere),
     )
 
 
@@ -239,10 +293,41 @@ def nlp_graphs(n: int, m: int) -> NLPGraphs:
     return NLPGraphs(n=n, m=m, cost=cost, lmi=lmi, params=1 + m + 3 * n * m)
 
 
+@lru_cache(maxsize=None)
+def sphere_graph(n: int, m: int, nodes: int = SPHERE_NODES) -> ca.Function:
+    """``sphere(u, Ps) -> P`` (m x 1): ``P(|dr| <= R_b)`` at m poses, a smooth CasADi expression.
+
+    ``Ps = [c, R_1..R_m, vec(A_1)..vec(A_m)]``.  With ``w ~ N(0, V)`` written ``w = V^(1/2) r v``
+    (``r`` chi-distributed with 3 degrees of freedom, ``v`` uniform on the unit sphere),
+    ``|w|^2 = r^2 v^T V v``, so ``P = mean_v F_3(R / sqrt(v^T V v))``: Gauss-Legendre in ``v_z`` on
+    the upper hemisphere (``v`` and ``-v`` give the same term) times the trapezoid rule in the
+    azimuth (periodic), ``nodes`` x ``2 nodes`` points.  V comes from the shared covariance graph.
+    """
+    u = ca.SX.sym("u", n)
+    Ps = ca.SX.sym("Ps", 1 + m + 3 * n * m)
+    c = Ps[0]
+    cov = covariance_graph(n)
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    z, wz = 0.5 * (x + 1.0), 0.5 * w
+    phi = 2 * math.pi * np.arange(2 * nodes) / (2 * nodes)
+    s = np.sqrt(1.0 - z**2)
+    dirs = np.stack([np.outer(s, np.cos(phi)).ravel(), np.outer(s, np.sin(phi)).ravel(), np.repeat(z, 2 * nodes)])
+    weights = np.repeat(wz, 2 * nodes) / (2 * nodes)
+    out = []
+    for b in range(m):
+        A = ca.reshape(Ps[1 + m + 3 * n * b : 1 + m + 3 * n * (b + 1)], 3, n)
+        Vb, _ = cov(ca.vertcat(A, ca.SX.zeros(3, n)), ca.exp(u), c)
+        q = ca.sum1(dirs * ca.mtimes(Vb, ca.DM(dirs)))  # v^T V v for every node, 1 x N
+        xr = Ps[1 + b] / ca.sqrt(q)
+        F = ca.erf(xr / math.sqrt(2.0)) - math.sqrt(2.0 / math.pi) * xr * ca.exp(-0.5 * xr**2)
+        out.append(ca.mtimes(F, ca.DM(weights)))
+    return ca.Function("sphere", [u, Ps], [ca.vertcat(*out) if out else ca.SX(0, 1)], ["u", "Ps"], ["P"])
+
+
 class ToleranceNLP:
     """The problem of one specification: its graphs, parameter values and helpers."""
 
-    def __init__(self, spec: Specification):
+    def __init__(self, spec: Specification, sphere_nodes: int = SPHERE_NODES):
         self.spec = spec
         self.graphs = nlp_graphs(spec.n, len(spec.blocks))
         self.P = np.concatenate(
@@ -250,6 +335,11 @@ class ToleranceNLP:
         )
         self.lu = np.log(spec.lower)
         self.uu = np.log(spec.upper)
+        self.sphere_nodes = sphere_nodes
+        sb = spec.sphere_blocks
+        self.sphere = sphere_graph(spec.n, len(sb), sphere_nodes)
+        self.Ps = np.concatenate([[spec.c], [b.R for b in sb]] + [b.A.ravel(order="F") for b in sb])
+        self.p_sphere = np.array([b.p for b in sb])
 
     # -- evaluations (NumPy in, NumPy out) ----------------------------------------------------
     def cost(self, eps: np.ndarray) -> float:
@@ -268,6 +358,27 @@ class ToleranceNLP:
             out.append((np.sqrt(np.clip(lam[order], 0.0, None)), vec[:, order]))
         return out
 
+    def sphere_quadrature(self, eps: np.ndarray) -> np.ndarray:
+        """``P(|dr| <= R)`` per sphere block by the graph's fixed quadrature (what the solvers see)."""
+        return np.array(self.sphere(np.log(eps), self.Ps)).ravel()
+
+    def sphere_values(self, eps: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float]]:
+        """Per sphere block: ``[(1 - P) / (1 - p)]`` (<= 1 meets it), the principal directions and
+        P itself, with P by the error-controlled quadrature of :func:`tolsynth.stats.p_ball`."""
+        from .stats import p_ball, principal
+
+        out = []
+        for b in self.spec.sphere_blocks:
+            V = (b.A * (eps**2 / self.spec.c)) @ b.A.T
+            sig, dirs = principal(V)
+            P = p_ball(sig**2, b.R)
+            out.append((np.array([(1.0 - P) / (1.0 - b.p)]), dirs, P))
+        return out
+
+    def all_values(self, eps: np.ndarray) -> list[np.ndarray]:
+        """Constraint values of every block (LMI blocks, then sphere blocks); each <= 1 to meet it."""
+        return [v for v, _ in self.constraint_values(eps)] + [v for v, _, _ in self.sphere_values(eps)]
+
     # -- feasibility ----------------------------------------------------------------------------
     def check_feasible(self) -> None:
         """Raise :class:`InfeasibleSpecificationError` if even the tightest tolerances (all at
@@ -283,15 +394,24 @@ class ToleranceNLP:
                     f"lower bound: largest principal sigma*{what} = {vals[0]:.6g} > 1.  Lower the bounds, "
                     f"or relax R/Phi or p.",
                 )
+        for block, (vals, _, P) in zip(self.spec.sphere_blocks, self.sphere_values(self.spec.lower)):
+            if vals[0] > 1.0:
+                raise InfeasibleSpecificationError(
+                    block.label,
+                    float(vals[0]),
+                    f"infeasible specification: the {block.label} fails even with every tolerance at its "
+                    f"lower bound: P = {P:.6g} < p = {block.p:g}.  Lower the bounds, or relax R or p.",
+                )
 
     def interior_start(self, target: float = 0.5) -> np.ndarray:
         """A strictly feasible point: eps_i = lower_i^(1-t) upper_i^t with the largest t in [0, 1/2]
-        for which every ``(sigma z / R)^2 <= target``; t by bisection (V is monotone in t)."""
+        for which every constraint value squared is ``<= target`` (``(sigma z / R)^2``, or
+        ``((1 - P) / (1 - p))^2``); t by bisection (V is monotone in t)."""
         lo, hi = self.lu, self.uu
 
         def worst(t):
             eps = np.exp(lo + t * (hi - lo))
-            return max(float(v[0] ** 2) for v, _ in self.constraint_values(eps))
+            return max(float(v[0]) ** 2 for v in self.all_values(eps))
 
         if worst(0.5) <= target:
             t = 0.5

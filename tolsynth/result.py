@@ -35,7 +35,8 @@ class ConstraintBlock:
     """The accuracy constraints of one pose and kind, at the returned tolerances.
 
     ``values`` are the paper's ``sigma_j * z(p) / R`` (``/ Phi`` for orientation), descending, each
-    required <= 1; ``directions`` the principal directions (columns, base frame); ``active`` which
+    required <= 1 (for the sphere criterion, kind ``"sphere"``: the one value ``(1 - P)/(1 - p)``,
+    P = P(|dr| <= R) by :func:`tolsynth.stats.p_ball`); ``directions`` the principal directions (columns, base frame); ``active`` which
     values are at 1 (within 1e-6); ``multipliers`` the Lagrange multipliers of the constraints
     ``g_j = sigma_j z / R - 1 <= 0`` (cost units per unit of g).
     """
@@ -70,6 +71,8 @@ class SynthesisResult:
     lower_bound, gap : float
         Lagrangian (dual) lower bound on the optimal cost from the constraint multipliers, and
         ``cost - lower_bound``; the problem is convex, so a small gap certifies global optimality.
+        (Sphere criterion: the certified optimum of the per-component relaxation, a valid but
+        not tight bound.)
     iterations, function_evaluations : int
         For IPOPT: iterations and NLP function evaluations; for SUMT: Powell iterations summed
         over the outer loop, and penalty-function evaluations.
@@ -121,7 +124,8 @@ class SynthesisResult:
         for b in self.constraints:
             vals = ", ".join(f"{v:.6f}" for v in b.values)
             mult = ", ".join(f"{m:.4g}" for m in b.multipliers)
-            lines.append(f"  {b.label}: sigma z/limit = ({vals}); multipliers ({mult})")
+            what = "(1-P)/(1-p)" if b.kind == "sphere" else "sigma z/limit"
+            lines.append(f"  {b.label}: {what} = ({vals}); multipliers ({mult})")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:

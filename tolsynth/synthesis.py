@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError
-from .problem import ToleranceNLP, make_specification
-from .result import SynthesisResult
+from .problem import SPHERE_NODES, ToleranceNLP, make_specification
+from .result import Status, SynthesisResult
 from .stats import z_of_p
 
 __all__ = ["synthesize", "compare", "Comparison", "SOLVERS", "synthesize_workspace", "WorkspaceSynthesis"]
@@ -32,6 +32,9 @@ def _sumt(nlp, eps0, options):
 
     return solve_sumt(nlp, eps0, **options)
 
+
+#: largest allowed difference between the NLP's fixed sphere quadrature and stats.p_ball
+SPHERE_QUADRATURE_TOL = 1e-9
 
 #: solver name -> private entry point (each solver lives in its own module)
 SOLVERS = {"ipopt": _ipopt, "sumt": _sumt}
@@ -51,6 +54,7 @@ def synthesize(
     poses=None,
     Phi: float | None = None,
     p_orientation: float | None = None,
+    criterion: str = "components",
     x0=None,
     options: dict | None = None,
     validate: int | None = None,
@@ -85,6 +89,14 @@ def synthesize(
         Where the constraints are imposed (default: the model's ``worst`` pose).
     Phi, p_orientation : float, optional
         Orientation specification (rad) and its probability (default p).
+    criterion : {"components", "sphere"}
+        ``"components"`` (the paper's Eq. 20: ``P(|w_j| <= R) >= p`` for every principal
+        component, a convex problem with a certificate) or ``"sphere"`` (beyond the paper:
+        ``P(|dr| <= R) >= p`` itself, Eq. 5/13; smooth but not known to be convex, so
+        ``lower_bound`` is the components optimum, which it contains).  The sphere probability is
+        a fixed quadrature inside the NLP, checked at the result against the error-controlled
+        :func:`tolsynth.stats.p_ball` and refined (re-solved with more nodes) until they agree
+        to 1e-9.
     x0 : sequence, optional
         Starting tolerances (default: a strictly feasible interior point).
     options : dict, optional
@@ -114,12 +126,27 @@ def synthesize(
     if solver not in SOLVERS:
         raise InputError("solver", f"unknown solver {solver!r}", " or ".join(repr(s) for s in SOLVERS))
     spec = make_specification(
-        mechanism, R, p, distribution, alpha, k, bounds, pose, poses, Phi, p_orientation
+        mechanism, R, p, distribution, alpha, k, bounds, pose, poses, Phi, p_orientation, criterion
     )
     nlp = ToleranceNLP(spec)
     nlp.check_feasible()
     eps0 = None if x0 is None else mechanism.tolerances(x0)
     result = SOLVERS[solver](nlp, eps0, dict(options or {}))
+    while spec.sphere_blocks and result.success:
+        # the NLP's sphere probability is a fixed quadrature: check it where it matters
+        exact = np.array([P for _, _, P in nlp.sphere_values(result.x)])
+        if np.max(np.abs(nlp.sphere_quadrature(result.x) - exact)) <= SPHERE_QUADRATURE_TOL:
+            break
+        if nlp.sphere_nodes >= 4 * SPHERE_NODES:
+            from dataclasses import replace
+
+            result = replace(result, success=False, status=Status.NUMERICAL_ERROR,
+                             message=f"{result.message}; sphere quadrature still off by "
+                                     f"{np.max(np.abs(nlp.sphere_quadrature(result.x) - exact)):.1e} "
+                                     f"with {nlp.sphere_nodes} nodes")
+            break
+        nlp = ToleranceNLP(spec, sphere_nodes=2 * nlp.sphere_nodes)
+        result = SOLVERS[solver](nlp, result.x, dict(options or {}))
     if validate:
         from dataclasses import replace
 
@@ -207,8 +234,8 @@ class WorkspaceSynthesis:
     poses : list of ndarray
         The poses (rad) whose constraints were imposed, the starting pose first.
     rounds : list of dict
-        Per round: ``n_poses``, ``cost``, ``worst_value`` (largest sigma z / R found over the
-        workspace at that round's optimum), ``worst_q`` (rad), ``worst_position`` (mm).
+        Per round: ``n_poses``, ``cost``, ``worst_value`` (largest sigma z / R, or for the sphere
+        criterion (1 - P)/(1 - p), found over the workspace at that round's optimum), ``worst_q`` (rad), ``worst_position`` (mm).
     converged : bool
         True when the worst pose found meets the specification to ``tol``.
     """
@@ -248,6 +275,7 @@ def synthesize_workspace(
     if not isinstance(mechanism, Mechanism):
         mechanism = load_model(mechanism)
     z = z_of_p(p)
+    sphere = kwargs.get("criterion", "components") == "sphere"
     poses = [mechanism.joints(pose)]
     rounds = []
     converged = False
@@ -256,8 +284,12 @@ def synthesize_workspace(
         res = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
         if not res.success:
             break
-        w = worst_pose(mechanism, res.x, criterion="sigma", distribution=distribution, **(search or {}))
-        g = w.value * z / R
+        if sphere:  # the worst pose is the one of lowest P(|dr| <= R)
+            w = worst_pose(mechanism, res.x, criterion="probability", R=R, distribution=distribution, **(search or {}))
+            g = (1.0 - w.value) / (1.0 - p)
+        else:
+            w = worst_pose(mechanism, res.x, criterion="sigma", distribution=distribution, **(search or {}))
+            g = w.value * z / R
         rounds.append({"n_poses": len(poses), "cost": res.cost, "worst_value": g, "worst_q": w.q,
                        "worst_position": w.position})
         if g <= 1 + tol:

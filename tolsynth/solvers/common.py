@@ -24,6 +24,7 @@ def assemble(
     evaluations: int,
     wall_time: float,
     history: list,
+    mu_sphere: np.ndarray | None = None,
 ) -> SynthesisResult:
     """Constraint values, activity, multipliers and the dual-bound certificate at ``eps``.
 
@@ -31,6 +32,10 @@ def assemble(
     ``bound_mult_u`` the multipliers of the bounds in u = ln(eps) (positive: upper bound active,
     negative: lower).  The multiplier of ``g_j = sigma_j z/R - 1 <= 0`` is ``2 d_j^T Z d_j`` with
     ``d_j`` the j-th principal direction (d(1 - (1+g)^2)/dg = -2 at g = 0).
+
+    ``mu_sphere`` are the multipliers of ``P_b >= p_b`` (sphere criterion), reported for
+    ``g = (1 - P)/(1 - p) <= 1`` as ``mu (1 - p)``.  With sphere blocks the lower bound is the
+    certified optimum of the per-component relaxation (same p), solved here by IPOPT.
     """
     spec = nlp.spec
     blocks = []
@@ -47,6 +52,20 @@ def assemble(
                 multipliers=mult,
             )
         )
+    sphere_vals = nlp.sphere_values(eps)
+    mu_sphere = np.zeros(len(sphere_vals)) if mu_sphere is None else np.asarray(mu_sphere, dtype=float)
+    for block, (vals, dirs, _), mu in zip(spec.sphere_blocks, sphere_vals, mu_sphere):
+        blocks.append(
+            ConstraintBlock(
+                label=block.label,
+                pose=block.pose,
+                kind="sphere",
+                values=vals,
+                directions=dirs,
+                active=vals >= 1.0 - ACTIVE_TOL,
+                multipliers=np.array([mu * (1.0 - block.p)]),
+            )
+        )
     bounds_active, bound_mult = {}, {}
     for i, name in enumerate(spec.names):
         if eps[i] <= spec.lower[i] * (1 + ACTIVE_TOL):
@@ -56,9 +75,12 @@ def assemble(
         if name in bounds_active:
             bound_mult[name] = float(bound_mult_u[i] / eps[i])  # d/d eps = (1/eps) d/du
     cost = nlp.cost(eps)
-    # both are valid lower bounds: the solver's own multipliers, and those recomputed from the
-    # primal point by least squares on stationarity (sharper when the solver's are loose)
-    lower = max(nlp.dual_bound(Z), nlp.dual_bound(nlp.kkt_multipliers(eps)))
+    if spec.sphere_blocks:
+        lower = _relaxation_bound(nlp)
+    else:
+        # both are valid lower bounds: the solver's own multipliers, and those recomputed from the
+        # primal point by least squares on stationarity (sharper when the solver's are loose)
+        lower = max(nlp.dual_bound(Z), nlp.dual_bound(nlp.kkt_multipliers(eps)))
     return SynthesisResult(
         solver=solver,
         status=status,
@@ -78,3 +100,12 @@ def assemble(
         spec=spec,
         history=history,
     )
+
+
+def _relaxation_bound(nlp: ToleranceNLP) -> float:
+    """Certified lower bound for the sphere criterion: the per-component problem with the same p
+    contains its feasible set; its own dual bound is valid whatever its solver's status."""
+    from .ipopt import solve_ipopt
+
+    relaxed = ToleranceNLP(nlp.spec.relaxed())
+    return solve_ipopt(relaxed).lower_bound

@@ -12,6 +12,9 @@ Hessian from CasADi, and the equality multipliers form the LMI multiplier matrix
 positive semi-definiteness, with the dual bound of :meth:`ToleranceNLP.dual_bound`, certifies the
 global optimum of the convex problem in u.
 
+For the sphere criterion (beyond the paper) each sphere block adds the smooth inequality
+``P_b(u) >= p_b`` from :func:`tolsynth.problem.sphere_graph`.
+
 Return codes are mapped to :class:`tolsynth.result.Status` here (``Solved_To_Acceptable_Level``
 is *not* plain success).
 """
@@ -24,7 +27,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from ..problem import ToleranceNLP, nlp_graphs
+from ..problem import ToleranceNLP, nlp_graphs, sphere_graph
 from ..result import Status
 from .common import assemble
 
@@ -55,12 +58,14 @@ _TRIL = [(i, j) for i in range(3) for j in range(i + 1)]
 
 
 @lru_cache(maxsize=32)
-def _solver(n: int, m: int, tol: float, constr_viol_tol: float, max_iter: int, mu_strategy: str) -> ca.Function:
+def _solver(n: int, m: int, tol: float, constr_viol_tol: float, max_iter: int, mu_strategy: str,
+            m_sphere: int = 0, sphere_nodes: int = 0) -> ca.Function:
     g = nlp_graphs(n, m)
+    n_ps = 1 + m_sphere + 3 * n * m_sphere if m_sphere else 0
     x = ca.SX.sym("x", n + 6 * m)
-    p = ca.SX.sym("p", g.params + 2 * n)
+    p = ca.SX.sym("p", g.params + 2 * n + n_ps)
     u = x[:n]
-    P, alpha, k = p[: g.params], p[g.params : g.params + n], p[g.params + n :]
+    P, alpha, k = p[: g.params], p[g.params : g.params + n], p[g.params + n : g.params + 2 * n]
     G = g.lmi(u, P)
     cons = []
     for b in range(m):
@@ -69,6 +74,8 @@ def _solver(n: int, m: int, tol: float, constr_viol_tol: float, max_iter: int, m
             L[i, j] = x[n + 6 * b + e]
         H = G[:, 3 * b : 3 * b + 3] - ca.mtimes(L, L.T)
         cons += [H[i, j] for i, j in _TRIU]
+    if m_sphere:  # P(|dr| <= R_b) >= p_b, bounds given through lbg
+        cons.append(sphere_graph(n, m_sphere, sphere_nodes)(u, p[g.params + 2 * n :]))
     nlp = {"x": x, "p": p, "f": g.cost(u, alpha, k), "g": ca.vertcat(*cons)}
     opts = {
         "print_time": False,
@@ -89,7 +96,11 @@ def _solver(n: int, m: int, tol: float, constr_viol_tol: float, max_iter: int, m
 
 
 def _cholesky_start(Gb: np.ndarray) -> np.ndarray:
-    L = np.linalg.cholesky(0.5 * (Gb + Gb.T))
+    """Factor L of G at the start; for a start outside the constraint (G indefinite, a user's x0)
+    the factor of G's projection on the PSD cone, so IPOPT starts from the user's tolerances."""
+    lam, vec = np.linalg.eigh(0.5 * (Gb + Gb.T))
+    Gp = (vec * np.maximum(lam, 1e-12)) @ vec.T
+    L = np.linalg.cholesky(0.5 * (Gp + Gp.T))
     return np.array([L[i, j] for i, j in _TRIL])
 
 
@@ -103,18 +114,20 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
 
         raise InputError("options", f"unknown IPOPT option(s) {sorted(unknown)}", ", ".join(DEFAULT_OPTIONS))
     spec = nlp.spec
-    n, m = spec.n, len(spec.blocks)
+    n, m, ms = spec.n, len(spec.blocks), len(spec.sphere_blocks)
     eps0 = nlp.interior_start() if eps0 is None else np.asarray(eps0, dtype=float)
     x0 = np.concatenate([np.log(eps0)] + [_cholesky_start(Gb) for Gb in nlp.G(eps0)])
     lbx = np.concatenate([nlp.lu, np.full(6 * m, -np.inf)])
     ubx = np.concatenate([nlp.uu, np.full(6 * m, np.inf)])
-    pval = np.concatenate([nlp.P, spec.alpha, spec.k])
+    pval = np.concatenate([nlp.P, spec.alpha, spec.k] + ([nlp.Ps] if ms else []))
+    lbg = np.concatenate([np.zeros(6 * m), nlp.p_sphere])
+    ubg = np.concatenate([np.zeros(6 * m), np.full(ms, np.inf)])
     wall, iters, nfev, tried = 0.0, 0, 0, []
     for attempt in ATTEMPTS:
         solver = _solver(n, m, float(opts["tol"]), float(opts["constr_viol_tol"]), int(opts["max_iter"]),
-                         attempt["mu_strategy"])
+                         attempt["mu_strategy"], ms, nlp.sphere_nodes if ms else 0)
         t0 = time.perf_counter()
-        sol = solver(x0=x0, p=pval, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0)
+        sol = solver(x0=x0, p=pval, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         wall += time.perf_counter() - t0
         stats = solver.stats()
         code = stats.get("return_status", "unknown")
@@ -138,6 +151,8 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             else:
                 L[i, j] = L[j, i] = v / 2.0
         Z.append(-L)  # CasADi's Lagrangian is f + lam^T g; the LMI form is f - tr(Z G)
+    # P_b >= p_b active at its lower bound: CasADi's lam is <= 0 there; f - mu (P - p) with mu >= 0
+    mu_sphere = -lam_g[6 * m :]
     it = stats.get("iterations", {})
     history = [
         {"iteration": i, "objective": float(o), "inf_pr": float(ip), "inf_du": float(idu)}
@@ -155,4 +170,5 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         nfev,
         wall,
         history,
+        mu_sphere=mu_sphere,
     )

@@ -12,7 +12,8 @@ evaluated here for *values only*):
 at the paper's constraint boundary ``g_j = 0``, but stays smooth where principal sigma coincide
 (a symmetric function of the eigenvalues), which a per-eigenvalue penalty does not.  As in the
 paper, the accuracy constraints carry the larger weight (``w_acc`` = 1 against ``w_bnd`` = 0.01).
-Outside the interior (a leading minor of some G_b <= 0, or a bound crossed) P is +inf.
+Outside the interior (a leading minor of some G_b <= 0, or a bound crossed) P is +inf.  For the
+sphere criterion each sphere block adds ``-w_acc ln(P_b(u) - p_b)`` from the shared sphere graph.
 
 The outer loop lowers ``r`` by ``reduction`` from ``r0`` until the barrier's duality-gap bound
 ``r * (3 m w_acc + 2 n w_bnd)`` is below ``gap_tol * f``; each minimisation starts from the
@@ -29,7 +30,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import InputError
-from ..problem import ToleranceNLP, nlp_graphs
+from ..problem import ToleranceNLP, nlp_graphs, sphere_graph
 from ..result import Status
 from .common import assemble
 from .powell import powell
@@ -50,8 +51,9 @@ DEFAULT_OPTIONS = {
 
 
 @lru_cache(maxsize=None)
-def penalty_graph(n: int, m: int) -> ca.Function:
-    """``penalty(u, P, alpha, k, lu, uu, r, w_acc, w_bnd) -> (penalty, f)`` for n parameters, m blocks."""
+def penalty_graph(n: int, m: int, m_sphere: int = 0, sphere_nodes: int = 0) -> ca.Function:
+    """``penalty(u, P, alpha, k, lu, uu, r, w_acc, w_bnd, Ps, ps) -> (penalty, f)`` for n
+    parameters, m LMI blocks and m_sphere sphere blocks (``-ln(P_b - p_b)`` each)."""
     g = nlp_graphs(n, m)
     u = ca.SX.sym("u", n)
     P = ca.SX.sym("P", g.params)
@@ -69,13 +71,19 @@ def penalty_graph(n: int, m: int) -> ca.Function:
         m3 = ca.det(Gb)
         inside = ca.logic_and(inside, ca.logic_and(m1 > 0, ca.logic_and(m2 > 0, m3 > 0)))
         barrier_acc = barrier_acc - ca.log(ca.fmax(m3, 1e-300))
+    Ps = ca.SX.sym("Ps", 1 + m_sphere + 3 * n * m_sphere if m_sphere else 0)
+    ps = ca.SX.sym("ps", m_sphere)
+    if m_sphere:
+        margin = sphere_graph(n, m_sphere, sphere_nodes)(u, Ps) - ps
+        inside = ca.logic_and(inside, ca.mmin(margin) > 0)
+        barrier_acc = barrier_acc - ca.sum1(ca.log(ca.fmax(margin, 1e-300)))
     barrier_bnd = -ca.sum1(ca.log(ca.fmax(u - lu, 1e-300)) + ca.log(ca.fmax(uu - u, 1e-300)))
     value = ca.if_else(inside, f + r * (w_acc * barrier_acc + w_bnd * barrier_bnd), ca.inf)
     return ca.Function(
         "sumt_penalty",
-        [u, P, alpha, k, lu, uu, r, w_acc, w_bnd],
+        [u, P, alpha, k, lu, uu, r, w_acc, w_bnd, Ps, ps],
         [value, f],
-        ["u", "P", "alpha", "k", "lu", "uu", "r", "w_acc", "w_bnd"],
+        ["u", "P", "alpha", "k", "lu", "uu", "r", "w_acc", "w_bnd", "Ps", "ps"],
         ["penalty", "f"],
     )
 
@@ -97,18 +105,19 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     fixed = [nm for nm, a, b in zip(spec.names, spec.lower, spec.upper) if not a < b]
     if fixed:
         raise InputError("bounds", f"SUMT needs lower < upper (an interior), not for {fixed}", "lower < upper")
-    n, m = spec.n, len(spec.blocks)
-    F = penalty_graph(n, m)
+    n, m, ms = spec.n, len(spec.blocks), len(spec.sphere_blocks)
+    F = penalty_graph(n, m, ms, nlp.sphere_nodes if ms else 0)
     eps0 = nlp.interior_start() if eps0 is None else np.asarray(eps0, dtype=float)
     u = np.log(eps0)
-    nu = 3 * m * o["w_acc"] + 2 * n * o["w_bnd"]  # barrier parameter: gap <= r * nu
+    nu = (3 * m + ms) * o["w_acc"] + 2 * n * o["w_bnd"]  # barrier parameter: gap <= r * nu
 
     # the shared penalty graph with this problem's numbers fixed: two inputs per call instead of
     # nine (CasADi's per-call overhead dominates an evaluation of this small graph)
     us, rs = ca.SX.sym("u", n), ca.SX.sym("r")
     Fp = ca.Function(
         "sumt_penalty_fixed", [us, rs],
-        [F(us, nlp.P, spec.alpha, spec.k, nlp.lu, nlp.uu, rs, o["w_acc"], o["w_bnd"])[0]],
+        [F(us, nlp.P, spec.alpha, spec.k, nlp.lu, nlp.uu, rs, o["w_acc"], o["w_bnd"],
+           nlp.Ps if ms else ca.DM(0, 1), nlp.p_sphere)[0]],
     )
 
     def penalty(r):
@@ -132,7 +141,7 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         nfev += res.nfev
         u, directions = res.x, res.directions
         f = nlp.cost(np.exp(u))
-        gmax = max(float(v[0]) for v, _ in nlp.constraint_values(np.exp(u)))
+        gmax = max(float(v[0]) for v in nlp.all_values(np.exp(u)))
         history.append(
             {"outer": outer, "r": r, "penalty": res.fun, "cost": f, "max_constraint": gmax,
              "inner_iterations": res.nit, "inner_evaluations": res.nfev, "inner_history": res.history,
@@ -152,4 +161,6 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     # multipliers implied by the barrier: Z_b = r w_acc G_b^-1; bounds r w_bnd / distance
     Z = [r * o["w_acc"] * np.linalg.inv(Gb) for Gb in nlp.G(eps)]
     bound_mult = r * o["w_bnd"] * (1.0 / (nlp.uu - u) - 1.0 / (u - nlp.lu))
-    return assemble("sumt", nlp, eps, Z, bound_mult, status, message, nit, nfev, wall, history)
+    mu_sphere = r * o["w_acc"] / (nlp.sphere_quadrature(eps) - nlp.p_sphere) if ms else None
+    return assemble("sumt", nlp, eps, Z, bound_mult, status, message, nit, nfev, wall, history,
+                    mu_sphere=mu_sphere)
