@@ -7,7 +7,6 @@ Agg matplotlib backend.  A notebook that is not run rots: a broken one fails the
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 

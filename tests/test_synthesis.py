@@ -18,9 +18,9 @@ import pytest
 
 import tolsynth
 from tolsynth import synthesize
-from tolsynth.errors import InfeasibleSpecificationError, InputError, OutOfRangeError
+from tolsynth.errors import InfeasibleSpecificationError, InputError
 from tolsynth.result import Status
-from tolsynth.stats import covariance, z_of_p
+from tolsynth.stats import z_of_p
 
 TIGHT = {"tol": 1e-12, "constr_viol_tol": 1e-13, "max_iter": 1000}
 

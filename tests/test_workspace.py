@@ -14,7 +14,6 @@ import pytest
 
 import tolsynth
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
-from tolsynth.stats import p_ball
 from tolsynth.stats import p_ball_batch
 from tolsynth.workspace import principal_std_batch, probability_map, worst_pose
 
@@ -54,15 +53,6 @@ def test_closed_form_reproduces_the_paper_pose(xz):
 # ---------------------------------------------------------------------------------------------
 # batched statistics
 # ---------------------------------------------------------------------------------------------
-def test_p_ball_batch_matches_p_ball(rng):
-    lam = np.exp(rng.normal(-3, 1.5, (150, 3)))
-    lam[0] = [0.04, 0.01, 0.0]  # degenerate rows fall back to p_ball
-    lam[1] = [0.02, 0.02, 0.02]
-    got = p_ball_batch(lam, 0.2)
-    want = np.array([p_ball(v, 0.2) for v in lam])
-    assert np.allclose(got, want, atol=1e-9)
-
-
 def test_principal_std_batch_matches_analyze(xz, rng):
     lo = np.array([j.lower for j in xz.spec.joints])
     hi = np.array([j.upper for j in xz.spec.joints])

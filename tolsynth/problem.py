@@ -43,7 +43,7 @@ import casadi as ca
 import numpy as np
 
 from .errors import InfeasibleSpecificationError, InputError, OutOfRangeError
-from .stats import check_positive, check_probability, covariance_graph, variance_divisor, z_of_p
+from .stats import check_positive, check_probability, chi3_cdf, covariance_graph, variance_divisor, z_of_p
 
 __all__ = [
     "Specification",
@@ -319,7 +319,7 @@ def sphere_graph(n: int, m: int, nodes: int = SPHERE_NODES) -> ca.Function:
         Vb, _ = cov(ca.vertcat(A, ca.SX.zeros(3, n)), ca.exp(u), c)
         q = ca.sum1(dirs * ca.mtimes(Vb, ca.DM(dirs)))  # v^T V v for every node, 1 x N
         xr = Ps[1 + b] / ca.sqrt(q)
-        F = ca.erf(xr / math.sqrt(2.0)) - math.sqrt(2.0 / math.pi) * xr * ca.exp(-0.5 * xr**2)
+        F = chi3_cdf(xr, ca.erf, ca.exp)
         out.append(ca.mtimes(F, ca.DM(weights)))
     return ca.Function("sphere", [u, Ps], [ca.vertcat(*out) if out else ca.SX(0, 1)], ["u", "Ps"], ["P"])
 
@@ -368,9 +368,10 @@ class ToleranceNLP:
         from .stats import p_ball, principal
 
         out = []
+        cov = covariance_graph(self.spec.n)
         for b in self.spec.sphere_blocks:
-            V = (b.A * (eps**2 / self.spec.c)) @ b.A.T
-            sig, dirs = principal(V)
+            V, _ = cov(np.vstack([b.A, np.zeros_like(b.A)]), eps, self.spec.c)
+            sig, dirs = principal(np.array(V))
             P = p_ball(sig**2, b.R)
             out.append((np.array([(1.0 - P) / (1.0 - b.p)]), dirs, P))
         return out

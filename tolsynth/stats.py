@@ -212,13 +212,23 @@ def p_components(sigma, R: float) -> np.ndarray:
     return np.where(np.isinf(x), 1.0, _erf(np.where(np.isinf(x), 0.0, x)))
 
 
+def chi3_cdf(x, erf=None, exp=np.exp):
+    """P(|Z| <= x) for Z standard normal in 3 dimensions: ``erf(x/sqrt2) - sqrt(2/pi) x e^(-x^2/2)``.
+
+    On NumPy arrays by default; pass ``erf=casadi.erf, exp=casadi.exp`` for a CasADi expression
+    (the sphere constraint of :mod:`tolsynth.problem` uses that: one copy of the formula).
+    """
+    erf = _erf if erf is None else erf
+    return erf(x / math.sqrt(2.0)) - math.sqrt(2.0 / math.pi) * x * exp(-0.5 * x * x)
+
+
 def _chi_cdf_radial(n: int, x: np.ndarray) -> np.ndarray:
     """P(|Z| <= x) for Z standard normal in n = 1, 2, 3 dimensions (chi distribution CDF)."""
     if n == 1:
         return _erf(x / math.sqrt(2.0))
     if n == 2:
         return -np.expm1(-0.5 * x * x)
-    return _erf(x / math.sqrt(2.0)) - math.sqrt(2.0 / math.pi) * x * np.exp(-0.5 * x * x)
+    return chi3_cdf(x)
 
 
 @lru_cache(maxsize=None)

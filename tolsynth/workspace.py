@@ -431,7 +431,7 @@ def worst_pose(
             picked.append(int(i))
         if len(picked) >= starts:
             break
-    best_u, best_v = U[:, picked[0]].copy(), vals[picked[0]]
+    best_u = U[:, picked[0]].copy()
     if k:
         D = _tangent_directions(mechanism, free, hi[free] - lo[free])
         X = U[:, picked].copy()  # (k, S)
@@ -451,7 +451,7 @@ def worst_pose(
                 else:
                     h[s] *= 0.5
         b = int(np.argmax(F))
-        best_u, best_v = X[:, b], F[b]
+        best_u = X[:, b]
     q = full(best_u[:, None])[:, 0]
     value, sig, P = _criterion_batch(mechanism, q[:, None], eps, distribution, criterion, R)
     p_sph = float(p_ball(sig[0] ** 2, R)) if R is not None else None
@@ -923,7 +923,6 @@ def probability_map(
     free = tuple(j for j in range(nq) if j not in held)
     if not free:
         raise InputError("fixed", "every joint is held fixed", "at least one free joint")
-    ev = _ik_evaluator(mechanism, free, axis is not None)
     iu, iv, inorm = PLANES[plane]
 
     ik = _GridIK(mechanism, free, held, ref_q, axis, plane, offset, int(seeds))
