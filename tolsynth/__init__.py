@@ -23,8 +23,11 @@ from .mechanism import Analysis, Mechanism, load_model
 from .model import bundled_models
 from .result import Status, SynthesisResult
 from .stats import p_ball, p_components, p_cone, z_of_p
-from .montecarlo import MonteCarloResult, ValidationResult, monte_carlo, validate  # issue 4
-from .workspace import ProbabilityMap, WorstPose, plot_map, probability_map, worst_pose  # issue 4
+from .montecarlo import MonteCarloResult, monte_carlo  # issue 4
+from .validation import ValidationResult, validate
+from .pose_search import WorstPose, worst_pose
+from .workspace_map import ProbabilityMap, probability_map
+from .plot import plot_map
 from .synthesis import Comparison, WorkspaceSynthesis, compare, synthesize, synthesize_workspace
 
 __version__ = "0.1.0"

@@ -8,12 +8,16 @@ formula), and reports the covariance and the probabilities ``P(|w_j| <= R)`` alo
 principal directions and ``P(|dr| <= R)`` in the sphere, each with a confidence interval, next to
 the analytic values of :meth:`tolsynth.Mechanism.analyze`.
 
-Speed: the CasADi SX graph is evaluated on whole NumPy batches by :class:`NumpyEvaluator`, a
-small interpreter of the graph's instruction list (one NumPy ufunc per CasADi operation, the
-sub-graph that does not depend on the sampled errors evaluated once).  On one core this runs the
+Speed: the CasADi SX graph is evaluated on whole NumPy batches by
+:class:`tolsynth.numpy_eval.NumpyEvaluator`, a small interpreter of the graph's instruction list
+(one NumPy ufunc per CasADi operation, the sub-graph that does not depend on the sampled errors
+evaluated once).  On one core this runs the
 paper's robot at several million samples per second; ``benchmarks/bench_montecarlo.py`` compares
 it with CasADi's own ``map`` evaluation and with per-sample calls.  Samples are drawn and
 evaluated in batches of fixed size, so memory does not grow with ``n``.
+
+The validation of an optimum against the ``p`` asked for is :func:`tolsynth.validation.validate`
+(also importable from here).
 
 Units: mm and rad; tolerances in each error parameter's tolerance unit; covariances in mm^2.
 
@@ -27,16 +31,17 @@ True
 from __future__ import annotations
 
 import math
-import sys
 import time
 from dataclasses import dataclass, field
 from statistics import NormalDist
-from typing import Any, Callable, Mapping, Sequence
+from typing import Callable
 
 import casadi as ca
 import numpy as np
 
-from .errors import InputError, LoopClosureError, OutOfRangeError
+from .errors import LoopClosureError, OutOfRangeError
+from .numpy_eval import NumpyEvaluator
+from .progress import Progress, make_bar  # noqa: F401  (make_bar: re-exported for older imports)
 from .stats import check_positive, check_probability, principal, variance_divisor
 
 __all__ = [
@@ -46,279 +51,9 @@ __all__ = [
     "monte_carlo",
     "validate",
     "wilson_interval",
-    "register",
 ]
 
 DEFAULT_BATCH = 1 << 14  # samples per batch: a few MB of work arrays, whatever n is
-_AUTO_PROGRESS_DELAY = 2.0  # s: with progress=None the bar appears only on runs longer than this
-
-
-# =============================================================================================
-# A NumPy interpreter of CasADi SX Functions
-# =============================================================================================
-def _if_else_zero(c, x, out=None):
-    r = np.where(c != 0, x, 0.0)
-    if out is None:
-        return r
-    out[...] = r
-    return out
-
-
-def _twice(x, out=None):
-    return np.add(x, x, out=out)
-
-
-def _assign(x, out=None):
-    if out is None:
-        return np.array(x, dtype=float)
-    out[...] = x
-    return out
-
-
-def _erf(x, out=None):  # NumPy has no erf; CasADi's own (slow path, never used by the kinematics)
-    x = np.asarray(x, dtype=float)
-    r = np.array(ca.erf(ca.DM(x.reshape(-1, 1)))).reshape(x.shape)
-    if out is None:
-        return r
-    out[...] = r
-    return out
-
-
-_UNARY = {
-    ca.OP_ASSIGN: _assign,
-    ca.OP_NEG: np.negative,
-    ca.OP_EXP: np.exp,
-    ca.OP_LOG: np.log,
-    ca.OP_SQRT: np.sqrt,
-    ca.OP_SQ: np.square,
-    ca.OP_TWICE: _twice,
-    ca.OP_SIN: np.sin,
-    ca.OP_COS: np.cos,
-    ca.OP_TAN: np.tan,
-    ca.OP_ASIN: np.arcsin,
-    ca.OP_ACOS: np.arccos,
-    ca.OP_ATAN: np.arctan,
-    ca.OP_NOT: np.logical_not,
-    ca.OP_FLOOR: np.floor,
-    ca.OP_CEIL: np.ceil,
-    ca.OP_FABS: np.fabs,
-    ca.OP_SIGN: np.sign,
-    ca.OP_ERF: _erf,
-    ca.OP_INV: np.reciprocal,
-    ca.OP_SINH: np.sinh,
-    ca.OP_COSH: np.cosh,
-    ca.OP_TANH: np.tanh,
-    ca.OP_ASINH: np.arcsinh,
-    ca.OP_ACOSH: np.arccosh,
-    ca.OP_ATANH: np.arctanh,
-}
-_BINARY = {
-    ca.OP_ADD: np.add,
-    ca.OP_SUB: np.subtract,
-    ca.OP_MUL: np.multiply,
-    ca.OP_DIV: np.divide,
-    ca.OP_POW: np.power,
-    ca.OP_CONSTPOW: np.power,
-    ca.OP_LT: np.less,
-    ca.OP_LE: np.less_equal,
-    ca.OP_EQ: np.equal,
-    ca.OP_NE: np.not_equal,
-    ca.OP_AND: np.logical_and,
-    ca.OP_OR: np.logical_or,
-    ca.OP_FMOD: np.fmod,
-    ca.OP_COPYSIGN: np.copysign,
-    ca.OP_IF_ELSE_ZERO: _if_else_zero,
-    ca.OP_FMIN: np.fmin,
-    ca.OP_FMAX: np.fmax,
-    ca.OP_ATAN2: np.arctan2,
-}
-_OP_NAMES = {getattr(ca, n): n for n in dir(ca) if n.startswith("OP_")}
-
-
-class NumpyEvaluator:
-    """Evaluate a CasADi SX ``Function`` on NumPy batches by interpreting its instruction list.
-
-    Every CasADi operation of the graph (``f.instruction_id(k)``, ``OP_ADD``, ``OP_COS``, ...)
-    maps to one NumPy ufunc applied to a whole batch at once, so the *one* symbolic copy of a
-    formula is evaluated for ``batch`` samples per ufunc call, with no second implementation.
-    Inputs are given per input as an array of shape ``(nnz,)`` (the same for every sample) or
-    ``(nnz, batch)``; a ``(nnz,)`` row that is the same for all samples is cheaper.  Instructions
-    that depend only on batch-invariant entries are evaluated once per :meth:`bind` (for the
-    Monte Carlo: everything that depends on the joints only).
-
-    Parameters
-    ----------
-    f : casadi.Function
-        An SX function (``f.is_a("SXFunction")``) with dense or sparse inputs and outputs.
-
-    Examples
-    --------
-    >>> import casadi as ca, numpy as np
-    >>> x = ca.SX.sym("x", 2)
-    >>> ev = NumpyEvaluator(ca.Function("f", [x], [ca.sin(x[0]) * x[1]]))
-    >>> ev([np.array([[0.0, np.pi / 2], [2.0, 3.0]])])[0].round(12).tolist()
-    [[0.0, 3.0]]
-    """
-
-    def __init__(self, f: ca.Function):
-        if not f.is_a("SXFunction"):
-            raise InputError("f", f"{f.name()} is not an SX Function", "a casadi.Function built from SX expressions")
-        self.function = f
-        self.nnz_in = [f.nnz_in(i) for i in range(f.n_in())]
-        self.nnz_out = [f.nnz_out(i) for i in range(f.n_out())]
-        self.n_work = f.sz_w()
-        code = []
-        for k in range(f.n_instructions()):
-            op = f.instruction_id(k)
-            ins = list(f.instruction_input(k))
-            outs = list(f.instruction_output(k))
-            const = f.instruction_constant(k) if op == ca.OP_CONST else None
-            if op not in _UNARY and op not in _BINARY and op not in (ca.OP_CONST, ca.OP_INPUT, ca.OP_OUTPUT):
-                raise InputError(
-                    "f", f"operation {_OP_NAMES.get(op, op)} in {f.name()} has no NumPy counterpart here",
-                    "elementwise SX operations (no calls, no parameters)",
-                )
-            code.append((op, ins, outs, const))
-        self._code = code
-
-    def dense(self, i: int, values: np.ndarray) -> np.ndarray:
-        """Output ``i`` from its nonzeros ``(nnz, batch)`` to a dense ``(rows, cols, batch)`` array."""
-        sp = self.function.sparsity_out(i)
-        values = np.asarray(values)
-        out = np.zeros((sp.size1(), sp.size2()) + values.shape[1:])
-        rows, cols = sp.get_triplet()
-        out[np.asarray(rows, int), np.asarray(cols, int)] = values
-        return out
-
-    def bind(self, fixed: Sequence[np.ndarray], varying: Sequence[np.ndarray]) -> "_BoundProgram":
-        """Specialise the program to a set of batch-varying input entries.
-
-        Parameters
-        ----------
-        fixed : list of array (nnz_in[i],)
-            Values of every input entry that is the same for all samples (entries that vary are
-            ignored here).
-        varying : list of bool array (nnz_in[i],)
-            True where the entry varies over the batch.
-
-        Returns
-        -------
-        program
-            Callable ``program(rows, out=None)`` with ``rows`` one array ``(n_varying, batch)``
-            holding the varying entries in input order; returns one ``(nnz_out[i], batch)`` array
-            per output (a batch-invariant output entry is broadcast).
-        """
-        return _BoundProgram(self, fixed, varying)
-
-    def __call__(self, args: Sequence[np.ndarray]) -> list[np.ndarray]:
-        """Evaluate on inputs of shape ``(nnz,)`` or ``(nnz, batch)`` (see the class docstring)."""
-        fixed, varying, rows = [], [], []
-        batch = None
-        for i, a in enumerate(args):
-            a = np.asarray(a, dtype=float)
-            if a.ndim == 1:
-                fixed.append(a.reshape(-1))
-                varying.append(np.zeros(self.nnz_in[i], bool))
-            else:
-                if batch is not None and a.shape[1] != batch:
-                    raise InputError("args", "inputs with different batch sizes", "one batch size")
-                batch = a.shape[1]
-                fixed.append(np.zeros(self.nnz_in[i]))
-                varying.append(np.ones(self.nnz_in[i], bool))
-                rows.append(a)
-        prog = self.bind(fixed, varying)
-        if batch is None:
-            return [o[:, 0] for o in prog(np.zeros((0, 1)))]
-        return prog(np.vstack(rows))
-
-
-class _BoundProgram:
-    """The instruction list of a :class:`NumpyEvaluator` split into a once-only scalar part and a
-    per-batch vector part (see :meth:`NumpyEvaluator.bind`)."""
-
-    def __init__(self, ev: NumpyEvaluator, fixed, varying):
-        self.ev = ev
-        fixed = [np.asarray(v, dtype=float).reshape(-1) for v in fixed]
-        varying = [np.asarray(v, dtype=bool).reshape(-1) for v in varying]
-        for i, (fv, vv) in enumerate(zip(fixed, varying)):
-            if fv.shape != (ev.nnz_in[i],) or vv.shape != (ev.nnz_in[i],):
-                raise InputError(f"input {i}", f"expected {ev.nnz_in[i]} entries", "one value per nonzero")
-        # row of each varying input entry in the rows array
-        self.row_of = {}
-        for i, vv in enumerate(varying):
-            for j in np.flatnonzero(vv):
-                self.row_of[(i, int(j))] = len(self.row_of)
-        self.n_rows = len(self.row_of)
-        # symbolic pass: which work slot is batch-varying at each point; evaluate the rest now
-        scal: list[Any] = [None] * ev.n_work
-        is_vec = [False] * ev.n_work
-        steps = []  # (kind, payload)
-        self.out_fixed = [np.zeros(n) for n in ev.nnz_out]
-        with np.errstate(all="ignore"):
-            for op, ins, outs, const in ev._code:
-                if op == ca.OP_CONST:
-                    scal[outs[0]], is_vec[outs[0]] = np.float64(const), False
-                elif op == ca.OP_INPUT:
-                    i, j = ins
-                    if varying[i][j]:
-                        is_vec[outs[0]] = True
-                        steps.append(("input", (outs[0], self.row_of[(i, j)])))
-                    else:
-                        scal[outs[0]], is_vec[outs[0]] = np.float64(fixed[i][j]), False
-                elif op == ca.OP_OUTPUT:
-                    o, nz = outs
-                    if is_vec[ins[0]]:
-                        steps.append(("output", (o, nz, ins[0])))  # copied when reached: slots are reused
-                    else:
-                        self.out_fixed[o][nz] = float(scal[ins[0]])
-                else:
-                    fn = _UNARY.get(op) or _BINARY[op]
-                    srcs = ins[:1] if op in _UNARY else ins[:2]
-                    if any(is_vec[s] for s in srcs):
-                        args = tuple(("v", s) if is_vec[s] else ("s", scal[s]) for s in srcs)
-                        steps.append(("op", (fn, args, outs[0])))
-                        is_vec[outs[0]] = True
-                    else:
-                        scal[outs[0]] = np.float64(fn(*[scal[s] for s in srcs]))
-                        is_vec[outs[0]] = False
-        self._steps = steps
-        self._buffers: dict[int, np.ndarray] = {}
-
-    def _work(self, batch: int) -> np.ndarray:
-        buf = self._buffers.get(batch)
-        if buf is None:
-            self._buffers.clear()  # keep one batch size only: memory stays bounded
-            buf = self._buffers[batch] = np.empty((self.ev.n_work, batch))
-        return buf
-
-    @property
-    def n_vector_ops(self) -> int:
-        """Number of ufunc calls per batch (the rest was evaluated once at bind time)."""
-        return sum(1 for kind, _ in self._steps if kind == "op")
-
-    def __call__(self, rows: np.ndarray, out: list[np.ndarray] | None = None) -> list[np.ndarray]:
-        rows = np.asarray(rows, dtype=float)
-        if rows.ndim != 2 or rows.shape[0] != self.n_rows:
-            raise InputError("rows", f"expected shape ({self.n_rows}, batch), got {rows.shape}", "(n_varying, batch)")
-        batch = rows.shape[1]
-        W = self._work(batch)
-        slot: list[Any] = [None] * self.ev.n_work
-        if out is None:
-            out = [np.empty((n, batch)) for n in self.ev.nnz_out]
-        for o, vals in enumerate(self.out_fixed):
-            out[o][...] = vals[:, None]
-        with np.errstate(all="ignore"):  # acos(>1) -> NaN is how a loop failure shows; counted by the caller
-            for kind, payload in self._steps:
-                if kind == "op":
-                    fn, args, o = payload
-                    slot[o] = fn(*[slot[b] if t == "v" else b for t, b in args], out=W[o])
-                elif kind == "input":
-                    s, r = payload
-                    slot[s] = rows[r]
-                else:
-                    o, nz, s = payload
-                    out[o][nz] = slot[s]
-        return out
 
 
 # =============================================================================================
@@ -362,44 +97,6 @@ def _check_seed(seed) -> int:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or int(seed) < 0:
         raise OutOfRangeError("seed", f"got {seed!r}", "an integer >= 0 (recorded in the result)")
     return int(seed)
-
-
-def make_bar(total: int, desc: str, unit: str, delay: float):
-    """A tqdm bar on stderr (tqdm is the optional extra ``progress``), or None without tqdm."""
-    try:
-        from tqdm import tqdm
-    except ImportError:
-        return None
-    kw = dict(total=total, desc=desc, unit=unit, unit_scale=True, file=sys.stderr, leave=False)
-    try:
-        return tqdm(delay=delay, **kw)
-    except TypeError:  # tqdm < 4.62 has no delay
-        return tqdm(**kw)
-
-
-class _Progress:
-    """tqdm to stderr if wanted and installed; a callable ``progress(done, total)`` also works."""
-
-    def __init__(self, progress, total: int, desc: str):
-        self.bar = None
-        self.callback = None
-        self.total = total
-        if callable(progress) and not isinstance(progress, bool):
-            self.callback = progress
-            return
-        show = progress if progress is not None else sys.stderr.isatty()
-        if show:  # auto (None): only runs longer than ~2 s show the bar
-            self.bar = make_bar(total, desc, "sample", 0.0 if progress else _AUTO_PROGRESS_DELAY)
-
-    def update(self, done: int, step: int) -> None:
-        if self.bar is not None:
-            self.bar.update(step)
-        if self.callback is not None:
-            self.callback(done, self.total)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
 
 
 # =============================================================================================
@@ -716,7 +413,7 @@ def monte_carlo(
     s2 = np.zeros((3, 3))
     w_shift = None
     wpow = np.zeros((4, 3))  # sums of (w - w_shift)^k, k = 1..4
-    bar = _Progress(progress, n, "monte carlo")
+    bar = Progress(progress, n, "monte carlo")
     t0 = time.perf_counter()
     done = 0
     try:
@@ -844,191 +541,11 @@ def monte_carlo(
     )
 
 
-# =============================================================================================
-# validation of an optimum
-# =============================================================================================
-@dataclass(frozen=True)
-class ValidationResult:
-    """Probabilities achieved at a set of tolerances, by Monte Carlo, against the ``p`` asked for.
+def __getattr__(name):
+    # validate / ValidationResult live in tolsynth.validation (which imports this module); they
+    # are re-exported lazily so that ``from tolsynth.montecarlo import validate`` keeps working
+    if name in ("validate", "ValidationResult"):
+        from . import validation
 
-    Attributes
-    ----------
-    p : float
-        Probability asked for (per principal component, the paper's Eq. 14/20).
-    p_components, p_components_ci : ndarray
-        Achieved ``P(|w_j| <= R)`` and interval.
-    components_met : ndarray of bool
-        Point estimate >= p.
-    components_short : ndarray of bool
-        Significantly short: the interval's upper end < p.
-    p_sphere, p_sphere_ci : float, ndarray
-        Achieved ``P(|dr| <= R)`` (the sphere is not the constraint of Eq. 20; it is reported so
-        that the stricter reading can be judged).
-    sphere_met : bool
-    montecarlo : MonteCarloResult
-        The full run (analytic values, kurtosis, ...).
-    """
-
-    p: float
-    R: float
-    distribution: str
-    pose: Any
-    tolerances: dict
-    p_components: np.ndarray
-    p_components_ci: np.ndarray
-    p_components_analytic: np.ndarray
-    components_met: np.ndarray
-    components_short: np.ndarray
-    p_sphere: float
-    p_sphere_ci: np.ndarray
-    p_sphere_analytic: float
-    sphere_met: bool
-    n: int
-    seed: int
-    montecarlo: MonteCarloResult
-
-    @property
-    def met(self) -> bool:
-        """All three components reach p (point estimates)."""
-        return bool(np.all(self.components_met))
-
-    def to_dict(self) -> dict:
-        out = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items() if k != "montecarlo"}
-        out["pose"] = self.pose if isinstance(self.pose, str) else np.asarray(self.pose).tolist()
-        out["met"] = self.met
-        return out
-
-    def report(self) -> str:
-        pct = int(round(100 * self.montecarlo.confidence))
-        lines = [f"validation   p = {self.p:g} asked, R = {self.R:g} mm, {self.distribution}, n = {self.n}, seed = {self.seed}"]
-        for j in range(3):
-            lo, hi = self.p_components_ci[j]
-            state = "met" if self.components_met[j] else ("SHORT" if self.components_short[j] else "below p (within noise)")
-            lines.append(f"P(|w{j + 1}|<=R)  {self.p_components[j]:.5f} [{lo:.5f}, {hi:.5f}] ({pct}%)  analytic "
-                         f"{self.p_components_analytic[j]:.5f}  {state}")
-        lo, hi = self.p_sphere_ci
-        lines.append(f"P(|dr|<=R)  {self.p_sphere:.5f} [{lo:.5f}, {hi:.5f}]  analytic {self.p_sphere_analytic:.5f}  "
-                     + ("met" if self.sphere_met else "below p (sphere is stricter than Eq. 20)"))
-        return "\n".join(lines)
-
-
-def _attr(obj, name):
-    for o in (obj, getattr(obj, "spec", None), getattr(obj, "problem", None)):
-        if o is not None and getattr(o, name, None) is not None:
-            return getattr(o, name)
-    return None
-
-
-def validate(
-    mechanism,
-    tolerances_or_result,
-    R: float | None = None,
-    p: float | None = None,
-    distribution: str | None = None,
-    pose="worst",
-    n: int = 1_000_000,
-    seed: int = 0,
-    batch: int = DEFAULT_BATCH,
-    confidence: float = 0.95,
-    progress=None,
-) -> ValidationResult:
-    """Monte Carlo check of an optimum: the probability achieved against the ``p`` asked for.
-
-    Parameters
-    ----------
-    mechanism : Mechanism
-    tolerances_or_result : dict, array, str or object with a ``.tolerances`` dict
-        The tolerances (tolerance units), e.g. the result of ``tolsynth.synthesize``.
-    R : float
-        Radius (mm).  If None, taken from ``result.R`` or ``result.spec.R`` when present.
-    p : float
-        Probability asked for, 0 < p < 1 (same fallback).
-    distribution : {"uniform", "normal"}
-        Same fallback; default "uniform".
-    pose : str or array
-        Where to check (the paper's pose of largest error by default).
-    n, seed, batch, confidence, progress
-        As for :func:`monte_carlo`.
-
-    Returns
-    -------
-    ValidationResult
-
-    Examples
-    --------
-    >>> import tolsynth
-    >>> m = tolsynth.load_model("xu_zhang_1988")
-    >>> v = tolsynth.validate(m, "figure3", R=0.5, p=0.9, n=100_000, seed=3)
-    >>> v.p_components.shape
-    (3,)
-    """
-    tol = tolerances_or_result
-    if not isinstance(tol, (str, Mapping, np.ndarray, list, tuple)) and hasattr(tol, "tolerances"):
-        R = R if R is not None else _attr(tol, "R")
-        p = p if p is not None else _attr(tol, "p")
-        distribution = distribution if distribution is not None else _attr(tol, "distribution")
-        tol = tol.tolerances
-    if R is None:
-        raise InputError("R", "no radius given", "a finite number > 0 (mm)")
-    if p is None:
-        raise InputError("p", "no probability given", "0 < p < 1")
-    p = check_probability(p, "p")
-    distribution = distribution or "uniform"
-    mc = monte_carlo(mechanism, pose, tol, distribution, R=R, n=n, seed=seed, batch=batch,
-                     confidence=confidence, progress=progress)
-    return ValidationResult(
-        p=p,
-        R=mc.R,
-        distribution=distribution,
-        pose=pose,
-        tolerances=mc.tolerances,
-        p_components=mc.p_components,
-        p_components_ci=mc.p_components_ci,
-        p_components_analytic=mc.p_components_analytic,
-        components_met=mc.p_components >= p,
-        components_short=mc.p_components_ci[:, 1] < p,
-        p_sphere=mc.p_sphere,
-        p_sphere_ci=mc.p_sphere_ci,
-        p_sphere_analytic=mc.p_sphere_analytic,
-        sphere_met=bool(mc.p_sphere >= p),
-        n=mc.n,
-        seed=mc.seed,
-        montecarlo=mc,
-    )
-
-
-# =============================================================================================
-# command line
-# =============================================================================================
-def _cmd_montecarlo(args) -> int:
-    from .cli import emit_json, parse_pose, parse_tolerances
-    from .mechanism import load_model
-
-    mech = load_model(args.model)
-    q = parse_pose(mech, args.pose)
-    eps = parse_tolerances(mech, args.tolerances)
-    progress = False if args.quiet else None  # None: a bar on stderr for long runs on a terminal
-    r = monte_carlo(mech, q, eps, args.dist, R=args.R, n=args.n, seed=args.seed, batch=args.batch,
-                    Phi=args.Phi, progress=progress, confidence=args.confidence)
-    if args.json:
-        out = r.to_dict()
-        out["pose"] = args.pose
-        emit_json(out)
-    else:
-        print(r.report())
-    return 0
-
-
-def register(sub) -> None:
-    """Add ``tolsynth montecarlo`` to the sub-command parser."""
-    from .cli import add_pose_arguments
-
-    p = sub.add_parser("montecarlo", help="Monte Carlo through the nonlinear kinematics vs the analytic model")
-    add_pose_arguments(p)
-    p.add_argument("--n", type=int, default=1_000_000, help="number of samples")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random generator (recorded)")
-    p.add_argument("--batch", type=int, default=DEFAULT_BATCH, help="samples per batch (memory ~ batch, not n)")
-    p.add_argument("--confidence", type=float, default=0.95, help="level of the intervals")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--json", action="store_true")
-    p.set_defaults(func=_cmd_montecarlo)
+        return getattr(validation, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

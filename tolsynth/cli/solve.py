@@ -1,12 +1,12 @@
-"""Sub-commands ``tolsynth solve`` and ``tolsynth reproduce``."""
+"""``tolsynth solve``: optimal tolerances for one specification."""
 
 from __future__ import annotations
 
 import sys
 
-from .cli import emit_json, parse_pose
-from .errors import InputError
-from .mechanism import load_model
+from ..errors import InputError
+from ..mechanism import load_model
+from .args import emit_json, parse_pose
 
 __all__ = ["register"]
 
@@ -16,13 +16,13 @@ def _fmt(v) -> str:
 
 
 def cmd_solve(args) -> int:
-    from .synthesis import compare, synthesize
+    from ..synthesis import compare, synthesize
 
     mech = load_model(args.model)
     pose = parse_pose(mech, args.pose)
     kw = dict(pose=pose, Phi=args.Phi, criterion=args.criterion)
     if args.everywhere:
-        from .synthesis import synthesize_workspace
+        from ..synthesis import synthesize_workspace
 
         if args.solver == "both":
             raise InputError("--solver", "'both' does not combine with --everywhere", "ipopt or sumt")
@@ -64,21 +64,6 @@ def cmd_solve(args) -> int:
     return 0
 
 
-def cmd_reproduce(args) -> int:
-    from .reproduce import format_report, reproduce
-
-    mech = load_model(args.model)
-    reports = reproduce(mech, sumt=not args.no_sumt, progress=not args.json and sys.stderr.isatty())
-    if args.json:
-        emit_json({"model": mech.name, "columns": [r.to_dict() for r in reports]})
-    else:
-        print(f"{mech.name}: the paper's Tables 1-3 reproduced (tolerances in mm and 1e-2 rad; cost = sum k eps^-alpha)")
-        print("Model: " + mech.title + " -- a reconstruction; see the model file's assumptions.")
-        print(format_report(reports))
-    ok = all(r.printed_unit.ipopt.success and (r.printed_unit.sumt is None or r.printed_unit.sumt.success) for r in reports)
-    return 0 if ok else 1
-
-
 def register(sub) -> None:
     p = sub.add_parser("solve", help="optimal tolerances for one specification")
     p.add_argument("--model", required=True, help="bundled model name or path to a .toml file")
@@ -95,9 +80,3 @@ def register(sub) -> None:
                    help="impose the constraint at every reachable pose (exchange method with the worst-pose search)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_solve)
-
-    p = sub.add_parser("reproduce", help="the paper's Tables 1-3: printed vs IPOPT vs SUMT")
-    p.add_argument("--model", default="xu_zhang_1988")
-    p.add_argument("--no-sumt", action="store_true", help="skip SUMT + Powell (about 1.5 s a column)")
-    p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_reproduce)

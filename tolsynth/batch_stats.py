@@ -1,0 +1,83 @@
+"""The analytic (linear, Gaussian) error statistics on whole batches of poses.
+
+:func:`principal_std_batch` gives the same numbers as ``Mechanism.analyze(q, ...).principal_std``
+for thousands of poses at once, by evaluating the model's sensitivity graph and the package's
+covariance graph with :class:`tolsynth.numpy_eval.NumpyEvaluator` (not second copies of either).
+The evaluators are cached per mechanism.  Used by the pose search and the workspace map.
+Units: mm and rad; tolerances in each parameter's tolerance unit.
+"""
+
+from __future__ import annotations
+
+import weakref
+
+import numpy as np
+
+from .numpy_eval import NumpyEvaluator
+from .stats import covariance_graph, p_ball_batch, variance_divisor
+
+__all__ = ["principal_std_batch"]
+
+_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _cache(mech) -> dict:
+    c = _CACHE.get(mech)
+    if c is None:
+        c = _CACHE[mech] = {}
+    return c
+
+
+def _evaluator(mech, name: str) -> NumpyEvaluator:
+    c = _cache(mech)
+    if name not in c:
+        if name == "covariance":
+            c[name] = NumpyEvaluator(covariance_graph(mech.n))
+        else:
+            c[name] = NumpyEvaluator(getattr(mech.graphs, name))
+    return c[name]
+
+
+def principal_std_batch(mechanism, Q: np.ndarray, tolerances, distribution: str = "uniform") -> np.ndarray:
+    """Principal standard deviations (mm, descending) of the linearised position error at many poses.
+
+    Parameters
+    ----------
+    mechanism : Mechanism
+    Q : ndarray, shape (n_joints, N)
+        Joint values (rad), one pose per column.  Not checked against the limits.
+    tolerances : str, dict or array
+        Tolerance set name or half-widths in tolerance units.
+    distribution : {"uniform", "normal"}
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        The same numbers as ``mechanism.analyze(q, ...).principal_std`` for each column.
+    """
+    eps = mechanism.tolerances(tolerances)
+    c = variance_divisor(distribution)
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    sens = _evaluator(mechanism, "sensitivity")
+    cov = _evaluator(mechanism, "covariance")
+    out = np.empty((Q.shape[1], 3))
+    chunk = 20000
+    for a in range(0, Q.shape[1], chunk):
+        Qc = Q[:, a : a + chunk]
+        S = sens.dense(0, sens([Qc, np.zeros(mechanism.n)])[0])  # (6, n, N)
+        S = S.transpose(1, 0, 2).reshape(6 * mechanism.n, -1)  # column-major vec of each S
+        V = cov.dense(0, cov([S, eps, np.array([c])])[0]).transpose(2, 0, 1)  # (N, 3, 3) mm^2
+        lam = np.linalg.eigvalsh(0.5 * (V + V.transpose(0, 2, 1)))[:, ::-1]
+        floor = 1e-15 * np.maximum(lam[:, :1], 0.0)
+        lam = np.where(lam <= floor, 0.0, lam)
+        out[a : a + chunk] = np.sqrt(lam)
+    return out
+
+
+def _criterion_batch(mech, Q, eps, distribution, criterion, R):
+    """Values to be *maximised* (sigma_1, or -P), plus sigma (N,3) and P (N,) for the report."""
+    sig = principal_std_batch(mech, Q, eps, distribution)
+    if criterion == "sigma":
+        return sig[:, 0], sig, None
+    P = p_ball_batch(sig**2, R)
+    return -P, sig, P

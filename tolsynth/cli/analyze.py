@@ -1,0 +1,70 @@
+"""``tolsynth analyze``: linearised, Gaussian error analysis of one pose."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..mechanism import load_model
+from .args import add_pose_arguments, emit_json, fmt_vec as _fmt_vec, parse_pose, parse_tolerances
+
+__all__ = ["register"]
+
+
+def cmd_analyze(args) -> int:
+    mech = load_model(args.model)
+    q = parse_pose(mech, args.pose)
+    eps = parse_tolerances(mech, args.tolerances)
+    a = mech.analyze(q, eps, args.dist, R=args.R, Phi=args.Phi)
+    if args.json:
+        out = {
+            "model": mech.name,
+            "pose": args.pose,
+            "q_rad": a.q,
+            "distribution": args.dist,
+            "tolerances": a.tolerances,
+            "units": {"position": "mm", "covariance": "mm^2", "principal_std": "mm", "R": "mm",
+                      "sensitivity": "rows mm, mm, mm, rad, rad, rad per tolerance unit",
+                      "tolerances": dict(zip(mech.error_parameters, mech.units))},
+            "position": a.position,
+            "sensitivity": a.sensitivity,
+            "covariance": a.covariance,
+            "principal_std": a.principal_std,
+            "principal_directions": a.principal_directions,
+            "principal_std_cubic": a.principal_std_cubic,
+            "R": a.R,
+            "p_components": a.p_components,
+            "p_sphere": a.p_sphere,
+        }
+        if args.Phi is not None:
+            out.update(Phi=a.Phi, orientation_covariance=a.orientation_covariance,
+                       orientation_principal_std=a.orientation_principal_std,
+                       p_orientation_components=a.p_orientation_components, p_cone=a.p_cone)
+        emit_json(out)
+        return 0
+    print(f"model        {mech.name}: {mech.title}")
+    print(f"pose         {args.pose}  q = {_fmt_vec(np.degrees(a.q), '{:.4f}')} deg")
+    print(f"errors       {args.dist} ({'eps^2/3' if args.dist == 'uniform' else 'eps^2/9, 3 sigma = eps'})")
+    print("tolerances   " + ", ".join(f"{n}={v:g} {u}" for (n, v), u in zip(a.tolerances.items(), mech.units)))
+    print(f"hand         {_fmt_vec(a.position, '{:.4f}')} mm")
+    print("covariance   (mm^2)")
+    for row in a.covariance:
+        print("             " + "  ".join(f"{x:+.6e}" for x in row))
+    print(f"principal    sigma = {_fmt_vec(a.principal_std)} mm")
+    for j in range(3):
+        print(f"  direction {j + 1} {_fmt_vec(a.principal_directions[:, j], '{:+.4f}')}")
+    print(f"R            {args.R:g} mm")
+    print("P(|w_j|<=R)  " + _fmt_vec(a.p_components, "{:.6f}"))
+    print(f"P(dr<=R)     {a.p_sphere:.6f}  (sphere, Eq. 5)")
+    if args.Phi is not None:
+        print(f"Phi          {args.Phi:g} rad; orientation sigma = {_fmt_vec(a.orientation_principal_std)} rad")
+        print("P(|phi_j|<=Phi) " + _fmt_vec(a.p_orientation_components, "{:.6f}"))
+        print(f"P(cone)      {a.p_cone:.6f}  (hand z axis inside the cone, Eq. 8)")
+    return 0
+
+
+def register(sub) -> None:
+    """Add ``tolsynth analyze`` to the sub-command parser."""
+    p = sub.add_parser("analyze", help="linearised, Gaussian error analysis of one pose")
+    add_pose_arguments(p)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_analyze)

@@ -1,0 +1,212 @@
+"""Inverse kinematics on the model's forward-kinematics graph, for grids of hand positions.
+
+A batched Levenberg-Marquardt iteration on all grid points at once (residual and Jacobian from
+the model's CasADi fk graph, evaluated by :class:`tolsynth.numpy_eval.NumpyEvaluator`), with
+continuation over a grid in a base-frame plane from a reference configuration and deterministic
+quasi-random seeds for the points it misses.  Used by :mod:`tolsynth.workspace_map`.  Units: mm
+and rad.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from .batch_stats import _cache
+from .joint_space import _feasible, _limit_margin, _limits, _wrap
+from .numpy_eval import NumpyEvaluator
+
+__all__ = ["PLANES"]
+
+PLANES = {"xz": (0, 2, 1), "xy": (0, 1, 2), "yz": (1, 2, 0)}  # (horizontal, vertical, normal) axis
+
+_ORIENT_WEIGHT = 1000.0  # mm per unit of axis-direction error in the residual (1 mrad ~ 1 mm)
+
+
+def _ik_evaluator(mech, free: tuple[int, ...], with_axis: bool) -> NumpyEvaluator:
+    key = ("ik", free, with_axis)
+    c = _cache(mech)
+    if key not in c:
+        nq = len(mech.joint_names)
+        q = ca.SX.sym("q", nq)
+        target = ca.SX.sym("target", 3)
+        axis = ca.SX.sym("axis", 3)
+        T = mech.graphs.fk(q, ca.DM.zeros(mech.n))
+        r = T[:3, 3] - target
+        if with_axis:
+            r = ca.vertcat(r, _ORIENT_WEIGHT * (T[:3, 2] - axis))
+        J = ca.densify(ca.jacobian(r, q[list(free)]))
+        c[key] = NumpyEvaluator(ca.Function("ik_residual", [q, target, axis], [ca.densify(r), J],
+                                            ["q", "target", "axis"], ["r", "J"]))
+    return c[key]
+
+
+def _solve_ik(ev: NumpyEvaluator, free: tuple[int, ...], Q0: np.ndarray, targets: np.ndarray,
+              axis: np.ndarray, tol: float = 1e-7, max_iter: int = 60) -> tuple[np.ndarray, np.ndarray]:
+    """Levenberg-Marquardt on all columns at once.  Returns joints (nq, N) and a converged flag
+    (residual norm below ``tol``: mm, and 1e-3 * tol in the axis direction)."""
+    Q = Q0.copy()
+    N = Q.shape[1]
+    if N == 0:
+        return Q, np.zeros(0, bool)
+    fr = list(free)
+    nf = len(fr)
+
+    def residual(Qa, Ta):
+        r, J = ev([Qa, Ta, axis])
+        return r, J.reshape(r.shape[0], nf, -1, order="F")  # column-major dense J (nr x nf)
+
+    r, J = residual(Q, targets)
+    cost = np.einsum("rb,rb->b", r, r)
+    cost = np.where(np.isfinite(cost), cost, np.inf)
+    mu = np.full(N, 1e-3)
+    conv = cost <= tol * tol
+    active = ~conv
+    eye = np.eye(nf)
+    for _ in range(max_iter):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        Ja, ra = J[:, :, idx], r[:, idx]
+        A = np.einsum("rkb,rlb->bkl", Ja, Ja)
+        g = np.einsum("rkb,rb->bk", Ja, ra)
+        diag = np.einsum("bkk->bk", A)
+        Ad = A + (mu[idx, None] * (diag + 1e-9))[:, :, None] * eye
+        try:
+            step = np.linalg.solve(Ad, -g[:, :, None])[:, :, 0]
+        except np.linalg.LinAlgError:
+            step = np.linalg.lstsq(Ad.reshape(-1, nf), -g.reshape(-1), rcond=None)[0].reshape(-1, nf)
+        Qn = Q[:, idx].copy()
+        Qn[fr] += step.T
+        rn, Jn = residual(Qn, targets[:, idx])
+        cn = np.einsum("rb,rb->b", rn, rn)
+        acc = np.isfinite(cn) & (cn < cost[idx])
+        a = idx[acc]
+        Q[:, a] = Qn[:, acc]
+        r[:, a] = rn[:, acc]
+        J[:, :, a] = Jn[:, :, acc]
+        small_gain = acc & (cost[idx] - cn <= 1e-14 * cost[idx])
+        cost[a] = cn[acc]
+        mu[idx] = np.where(acc, np.maximum(mu[idx] / 3.0, 1e-12), mu[idx] * 4.0)
+        conv[idx] = cost[idx] <= tol * tol
+        stalled = (mu[idx] > 1e8) | small_gain | (np.max(np.abs(step), axis=1) < 1e-13)
+        active[idx] = ~conv[idx] & ~stalled
+    return Q, conv
+
+
+def _halton(n: int, dim: int) -> np.ndarray:
+    primes = [2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37][:dim]
+    out = np.empty((n, dim))
+    for d, b in enumerate(primes):
+        for i in range(n):
+            f, r, k = 1.0, 0.0, i + 1
+            while k > 0:
+                f /= b
+                r += f * (k % b)
+                k //= b
+            out[i, d] = r
+    return out
+
+
+class _GridIK:
+    """Inverse kinematics on a grid of a plane: Levenberg-Marquardt on the fk graph, continuation
+    over the grid from the reference configuration, quasi-random seeds for what it misses."""
+
+    def __init__(self, mech, free, held, ref_q, axis, plane, offset, seeds):
+        self.mech = mech
+        self.free = free
+        self.axis_in = axis if axis is not None else np.zeros(3)
+        self.ev = _ik_evaluator(mech, free, axis is not None)
+        self.iu, self.iv, self.inorm = PLANES[plane]
+        self.offset = offset
+        self.ref_q = ref_q.copy()
+        for j, (v, _) in held.items():
+            self.ref_q[j] = v
+        lo, hi = _limits(mech)
+        seed_set = [cq.copy() for cq in mech.configurations.values()]  # named configurations,
+        for hrow in _halton(max(seeds, 0), len(free)):  # then Halton points inside the limits
+            s = ref_q.copy()
+            for i, j in enumerate(free):
+                s[j] = lo[j] + (hi[j] - lo[j]) * hrow[i]
+            seed_set.append(s)
+        for s in seed_set:
+            for j, (v, _) in held.items():
+                s[j] = v
+        self.seed_set = seed_set
+
+    def targets(self, U, V) -> np.ndarray:
+        T = np.empty((3, U.size))
+        T[self.iu], T[self.iv], T[self.inorm] = U, V, self.offset
+        return T
+
+    def attempt(self, Q0, T):
+        """Solve from Q0; returns wrapped joints, valid (converged and inside every limit), and
+        the limit margin of converged solutions (-inf where not converged)."""
+        Q, conv = _solve_ik(self.ev, self.free, Q0, T, self.axis_in)
+        Q = _wrap(self.mech, Q)
+        margin = np.where(conv, _limit_margin(self.mech, Q), -np.inf)
+        return Q, conv & _feasible(self.mech, Q), margin
+
+    def solve(self, u, v, bar=None):
+        """Joints (nq, N), reachable flag (N,) and limit margin (N,) for the grid u x v (rows v)."""
+        nu, nv = u.size, v.size
+        Ug, Vg = np.meshgrid(u, v)
+        T = self.targets(Ug.ravel(), Vg.ravel())
+        N = T.shape[1]
+        nq = len(self.ref_q)
+        Qs = np.full((nq, N), np.nan)
+        ok = np.zeros(N, bool)
+        margin = np.full(N, -np.inf)
+        tried = np.zeros(N, bool)
+
+        def take(idx, Q, good, mg):
+            better = mg > margin[idx]
+            margin[idx[better]] = mg[better]
+            Qs[:, idx[good]] = Q[:, good]
+            ok[idx[good]] = True
+
+        # start: the grid point nearest the reference hand point, from the reference joints
+        p_ref = np.asarray(self.mech.graphs.position(self.ref_q, np.zeros(self.mech.n))).ravel()
+        start = int(np.argmin((T[self.iu] - p_ref[self.iu]) ** 2 + (T[self.iv] - p_ref[self.iv]) ** 2))
+        for s in [self.ref_q] + self.seed_set:
+            take(np.array([start]), *self.attempt(s[:, None].copy(), T[:, [start]]))
+            if ok[start]:
+                break
+        tried[start] = True
+        flat = np.arange(N).reshape(nv, nu)
+        last = np.full(N, -1)  # the neighbour a point was last seeded from
+
+        def continuation():
+            # sweeps: unsolved points next to solved ones, seeded with a solved neighbour's joints
+            while True:
+                grid_ok = ok.reshape(nv, nu)
+                src = np.full((nv, nu), -1)
+                for dv, du in ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (-1, -1), (1, -1), (-1, 1)):
+                    vs, vd = slice(max(dv, 0), nv + min(dv, 0)), slice(max(-dv, 0), nv + min(-dv, 0))
+                    us, ud = slice(max(du, 0), nu + min(du, 0)), slice(max(-du, 0), nu + min(-du, 0))
+                    cand = np.where(grid_ok[vs, us], flat[vs, us], -1)
+                    dst = src[vd, ud]
+                    src[vd, ud] = np.where(dst < 0, cand, dst)
+                src = src.ravel()
+                front = np.flatnonzero((src >= 0) & ~ok & ~tried)
+                if front.size == 0:
+                    return
+                tried[front] = True
+                last[front] = src[front]
+                take(front, *self.attempt(Qs[:, src[front]], T[:, front]))
+                if bar is not None:
+                    bar.update(front.size)
+
+        continuation()
+        for s in self.seed_set:  # points not reached: quasi-random seeds, then continuation again
+            rest = np.flatnonzero(~ok)
+            if rest.size == 0:
+                break
+            before = int(ok.sum())
+            take(rest, *self.attempt(np.repeat(s[:, None], rest.size, axis=1), T[:, rest]))
+            if ok.sum() > before:
+                tried[:] = ok
+                continuation()
+        if bar is not None:
+            bar.update(max(0, N - bar.n))
+        return Qs, ok, margin
