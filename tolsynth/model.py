@@ -11,6 +11,7 @@ file; ``models/planar_2r.toml`` is the smallest complete example.
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 from dataclasses import dataclass, field
@@ -23,6 +24,7 @@ try:  # Python >= 3.11
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
+from .checks import HUGE, P_MAX, P_MIN, TINY
 from .errors import ModelFileError, UnknownNameError
 from .units import ANGLE_UNITS, LENGTH_UNITS, allowed_units, to_base, unit_kind
 
@@ -38,6 +40,7 @@ __all__ = [
     "bundled_models",
     "model_path",
     "read_model_file",
+    "FORMAT",
 ]
 
 CONVENTIONS = {
@@ -198,6 +201,79 @@ def model_path(name_or_path: str | os.PathLike) -> Path:
 
 
 # --------------------------------------------------------------------------------------------
+# the format: every table and its keys
+# --------------------------------------------------------------------------------------------
+#: Every table of the model-file format and its keys: ``True`` required, ``False`` optional.
+#: A key that is not listed here is a ModelFileError ("did you mean ...?").  Adding a field to the
+#: format is one line here, plus its parsing in ``_parse`` (or in the module that owns it).
+#: Sections: "" is the top level; "configurations.*" lists the keys besides the joint names;
+#: "tolerance_value" is the ``{ value, unit }`` form of a tolerance.
+FORMAT: dict[str, dict[str, bool]] = {
+    "": {
+        "model": True,
+        "units": True,
+        "symbols": True,
+        "chain": True,
+        "joints": True,
+        "loops": False,
+        "joint_constraints": False,
+        "configurations": True,
+        "error_parameters": True,
+        "tolerance_sets": False,
+        "reference_results": False,
+    },
+    "model": {"name": True, "title": False, "source": True, "assumptions": True, "notes": False},
+    "units": {"length": True, "angle": True},
+    "chain": {"convention": True, "links": True, "base": False, "tool": False},
+    "joints": {"name": True, "limits": True},
+    "loops": {
+        "name": True,
+        "kind": True,
+        "passive_joint": True,
+        "ground": True,
+        "ground_angle": True,
+        "crank": True,
+        "crank_angle": True,
+        "coupler": True,
+        "lever": True,
+        "branch": True,
+    },
+    "joint_constraints": {"name": True, "terms": True, "limits": True},
+    "configurations.*": {"note": False, "waive": False},
+    "error_parameters": {
+        "name": True,
+        "perturbs": True,
+        "unit": True,
+        "k": True,
+        "bounds": True,
+        "label": False,
+        "alias": False,
+    },
+    "tolerance_value": {"value": True, "unit": True},
+    "reference_results": {
+        "table": True,
+        "R": True,
+        "p": True,
+        "alpha": True,
+        "distribution": True,
+        "tolerances": True,
+    },
+}
+
+
+def _nearest(key: str, valid) -> str:
+    """`` (did you mean `x`?)`` for the closest valid name, or an empty string."""
+    match = difflib.get_close_matches(str(key), [str(v) for v in valid], n=1, cutoff=0.5)
+    return f" (did you mean `{match[0]}`?)" if match else ""
+
+
+def _type_name(value: Any) -> str:
+    return {dict: "a table", list: "a list", str: "a string", bool: "a boolean"}.get(
+        type(value), type(value).__name__
+    )
+
+
+# --------------------------------------------------------------------------------------------
 # parsing
 # --------------------------------------------------------------------------------------------
 class _Reader:
@@ -209,40 +285,106 @@ class _Reader:
     def fail(self, field_name: str, message: str) -> ModelFileError:
         return ModelFileError(self.path, field_name, message)
 
+    # ---- tables and keys
+    def keys(self, table: dict, where: str, valid, required=()) -> None:
+        """Unknown keys and missing required keys of ``table`` are errors."""
+        for key in table:
+            if key not in valid:
+                raise self.fail(
+                    f"{where}.{key}" if where else str(key),
+                    f"unknown key{_nearest(key, valid)} (allowed here: {', '.join(map(str, valid))})",
+                )
+        for key in required:
+            if key not in table:
+                raise self.fail(f"{where}.{key}" if where else key, "missing required field")
+
+    def table(self, value: Any, where: str, section: str | None = None, extra=()) -> dict:
+        """``value`` must be a table; with ``section``, its keys must be those of FORMAT[section]
+        (plus ``extra``)."""
+        if not isinstance(value, dict):
+            raise self.fail(where or "(file)", f"expected a table, got {_type_name(value)}: {value!r:.60}")
+        if section is not None:
+            spec = FORMAT[section]
+            self.keys(value, where, list(spec) + list(extra), [k for k, req in spec.items() if req])
+        return value
+
+    def tables(self, value: Any, where: str, section: str) -> list[dict]:
+        """An array of tables (``[[section]]``), each with the keys of FORMAT[section]."""
+        if not isinstance(value, list):
+            raise self.fail(where, f"expected an array of tables [[{where}]], got {_type_name(value)}")
+        return [self.table(item, f"{where}[{i}]", section) for i, item in enumerate(value)]
+
     def get(self, table: dict, key: str, where: str, kind=None, default: Any = ...):
+        field_name = f"{where}.{key}" if where else key
         if key not in table:
             if default is ...:
-                raise self.fail(f"{where}.{key}", "missing required field")
+                raise self.fail(field_name, "missing required field")
             return default
         value = table[key]
         if kind is float:
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise self.fail(f"{where}.{key}", f"expected a number, got {value!r}")
-            if not math.isfinite(value):
-                raise self.fail(f"{where}.{key}", f"expected a finite number, got {value!r}")
-            return float(value)
+            return self.number(value, field_name)
+        if kind is str:
+            return self.name(value, field_name)
+        if kind is int and (isinstance(value, bool) or not isinstance(value, int)):
+            raise self.fail(field_name, f"expected an integer, got {_type_name(value)}: {value!r}")
         if kind is not None and not isinstance(value, kind):
-            raise self.fail(f"{where}.{key}", f"expected {kind.__name__}, got {value!r}")
+            raise self.fail(field_name, f"expected {kind.__name__}, got {_type_name(value)}: {value!r:.60}")
         return value
+
+    # ---- values
+    def name(self, value: Any, where: str) -> str:
+        """A non-empty string."""
+        if not isinstance(value, str):
+            raise self.fail(where, f"expected a string, got {_type_name(value)}: {value!r:.60}")
+        if not value.strip():
+            raise self.fail(where, "expected a non-empty string")
+        return value
+
+    def names(self, value: Any, where: str, allow_empty: bool = True) -> list[str]:
+        """A list of distinct non-empty strings."""
+        if not isinstance(value, list):
+            raise self.fail(where, f"expected a list of strings, got {_type_name(value)}: {value!r:.60}")
+        out = [self.name(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        if not allow_empty and not out:
+            raise self.fail(where, "expected at least one name")
+        dup = sorted({v for v in out if out.count(v) > 1})
+        if dup:
+            raise self.fail(where, f"{dup} given more than once")
+        return out
+
+    def number(self, value: Any, where: str, lower: float = -HUGE, upper: float = HUGE) -> float:
+        """A finite number in ``[lower, upper]`` (the shared limits of :mod:`tolsynth.checks`)."""
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(where, f"expected a number, got {_type_name(value)}: {value!r:.60}")
+        try:
+            v = float(value)
+        except OverflowError:  # an integer beyond double range
+            v = math.inf
+        if not (math.isfinite(v) and lower <= v <= upper):
+            raise self.fail(where, f"expected a finite number from {lower:g} to {upper:g}, got {value!r}")
+        return v
+
+    def positive(self, value: Any, where: str) -> float:
+        """A number from TINY to HUGE."""
+        return self.number(value, where, TINY, HUGE)
 
     def unit(self, value: Any, where: str, kind: str | None = None) -> str:
         if not isinstance(value, str) or unit_kind(value) is None:
-            raise self.fail(where, f"unknown unit {value!r} (known: {allowed_units()})")
+            raise self.fail(where, f"unknown unit {value!r}{_nearest(value, _UNIT_NAMES)} (known: {allowed_units()})")
         if kind is not None and unit_kind(value) != kind:
             raise self.fail(where, f"unit {value!r} is not a unit of {kind}")
         return value
 
     def pair(self, value: Any, where: str) -> tuple[float, float]:
-        if (
-            not isinstance(value, list)
-            or len(value) != 2
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
-        ):
-            raise self.fail(where, f"expected [lower, upper], got {value!r}")
-        lo, hi = float(value[0]), float(value[1])
+        if not isinstance(value, list) or len(value) != 2:
+            raise self.fail(where, f"expected [lower, upper], got {value!r:.60}")
+        lo, hi = (self.number(v, f"{where}[{i}]") for i, v in enumerate(value))
         if not lo < hi:
             raise self.fail(where, f"lower {lo} must be below upper {hi}")
         return lo, hi
+
+
+_UNIT_NAMES = list(LENGTH_UNITS) + list(ANGLE_UNITS)
 
 
 def read_model_file(path: str | os.PathLike) -> MechanismSpec:
@@ -254,38 +396,48 @@ def read_model_file(path: str | os.PathLike) -> MechanismSpec:
             data = tomllib.load(fh)
     except tomllib.TOMLDecodeError as exc:
         raise r.fail("(file)", f"not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise r.fail("(file)", f"not UTF-8 text (TOML is UTF-8): {exc.reason} at byte {exc.start}") from None
+    except RecursionError:
+        raise r.fail("(file)", "nested too deeply") from None
+    except OSError as exc:
+        raise r.fail("(file)", f"cannot be read: {exc.strerror or exc}") from None
     return _parse(data, r)
 
 
 def _parse(data: dict, r: _Reader) -> MechanismSpec:
-    meta = r.get(data, "model", "(top level)", dict)
+    r.table(data, "", "")
+    meta = r.table(data["model"], "model", "model")
     name = r.get(meta, "name", "model", str)
     title = r.get(meta, "title", "model", str, default=name)
     source = r.get(meta, "source", "model", str)
     assumptions = r.get(meta, "assumptions", "model", list)
-    if not all(isinstance(a, str) for a in assumptions):
-        raise r.fail("model.assumptions", "expected a list of strings")
-    notes = r.get(meta, "notes", "model", str, default="")
+    for i, a in enumerate(assumptions):
+        r.name(a, f"model.assumptions[{i}]")
+    notes = meta.get("notes", "")
+    if not isinstance(notes, str):
+        raise r.fail("model.notes", f"expected a string, got {_type_name(notes)}")
 
-    units = r.get(data, "units", "(top level)", dict)
+    units = r.table(data["units"], "units", "units")
     length_unit = r.unit(r.get(units, "length", "units"), "units.length", "length")
     angle_unit = r.unit(r.get(units, "angle", "units"), "units.angle", "angle")
     lf, af = LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
 
     # ---- chain ------------------------------------------------------------------------------
-    chain = r.get(data, "chain", "(top level)", dict)
+    chain = r.table(data["chain"], "chain", "chain")
     convention = r.get(chain, "convention", "chain", str)
     if convention not in CONVENTIONS:
-        raise r.fail("chain.convention", f"unknown convention {convention!r} (known: {', '.join(CONVENTIONS)})")
+        raise r.fail("chain.convention",
+                     f"unknown convention {convention!r}{_nearest(convention, CONVENTIONS)} (known: {', '.join(CONVENTIONS)})")
     fields, _ = CONVENTIONS[convention]
-    raw_symbols = r.get(data, "symbols", "(top level)", dict)
+    raw_symbols = r.table(data["symbols"], "symbols")
     symbol_kinds: dict[str, str] = {}
 
     def use_symbol(sym: Any, kind: str, where: str) -> str:
         if not isinstance(sym, str):
-            raise r.fail(where, f"expected a symbol name (a key of [symbols]), got {sym!r}")
+            raise r.fail(where, f"expected a symbol name (a key of [symbols]), got {_type_name(sym)}: {sym!r:.60}")
         if sym not in raw_symbols:
-            raise r.fail(where, f"symbol {sym!r} is not declared in [symbols]")
+            raise r.fail(where, f"symbol {sym!r} is not declared in [symbols]{_nearest(sym, raw_symbols)}")
         previous = symbol_kinds.setdefault(sym, kind)
         if previous != kind:
             raise r.fail(where, f"symbol {sym!r} is used both as a {previous} and as a {kind}")
@@ -300,7 +452,8 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
                 raise r.fail(f"{where}[{i}]", "expected a one-key table like { Tz = \"s0\" }")
             (op, sym), = item.items()
             if op not in ELEMENTARY:
-                raise r.fail(f"{where}[{i}]", f"unknown transform {op!r} (known: {', '.join(ELEMENTARY)})")
+                raise r.fail(f"{where}[{i}].{op}",
+                             f"unknown transform{_nearest(op, ELEMENTARY)} (known: {', '.join(ELEMENTARY)})")
             out.append((op, use_symbol(sym, ELEMENTARY[op], f"{where}[{i}].{op}")))
         return tuple(out)
 
@@ -310,18 +463,17 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
     if not raw_links:
         raise r.fail("chain.links", "a chain needs at least one link")
     links = []
-    allowed_keys = set(fields) | {"theta_offset", "name"}
+    link_keys = list(fields) + ["theta_offset", "name"]
     for i, raw in enumerate(raw_links):
         where = f"chain.links[{i}]"
-        if not isinstance(raw, dict):
-            raise r.fail(where, "expected a table")
-        extra = set(raw) - allowed_keys
-        if extra:
-            raise r.fail(
-                where,
-                f"field(s) {sorted(extra)} do not belong to the {convention} D-H convention "
-                f"(its fields: {', '.join(fields)}, theta_offset)",
-            )
+        r.table(raw, where)
+        for key in raw:
+            if key not in link_keys:
+                raise r.fail(
+                    f"{where}.{key}",
+                    f"field {key!r} does not belong to the {convention} D-H convention{_nearest(key, link_keys)} "
+                    f"(its fields: {', '.join(fields)}, theta_offset, name)",
+                )
         dims = {}
         for fname in fields:
             if fname == "theta":
@@ -329,6 +481,8 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
             kind = "length" if fname in _LENGTH_FIELDS else "angle"
             dims[fname] = use_symbol(r.get(raw, fname, where), kind, f"{where}.{fname}")
         theta = r.get(raw, "theta", where, str)
+        if "name" in raw:
+            r.name(raw["name"], f"{where}.name")
         offset = raw.get("theta_offset")
         if offset is not None:
             offset = use_symbol(offset, "angle", f"{where}.theta_offset")
@@ -336,22 +490,24 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
 
     # ---- joints -----------------------------------------------------------------------------
     joints = []
-    for i, raw in enumerate(r.get(data, "joints", "(top level)", list)):
+    raw_joints = r.tables(data["joints"], "joints", "joints")
+    if not raw_joints:
+        raise r.fail("joints", "at least one actuated joint is needed")
+    for i, raw in enumerate(raw_joints):
         where = f"joints[{i}]"
         jname = r.get(raw, "name", where, str)
         lo, hi = r.pair(r.get(raw, "limits", where), f"{where}.limits")
         joints.append(Joint(jname, lo * af, hi * af))
     joint_names = [j.name for j in joints]
-    if len(set(joint_names)) != len(joint_names):
-        raise r.fail("joints", "joint names must be unique")
+    _unique(r, joint_names, "joints", "joint name")
 
     # ---- loops ------------------------------------------------------------------------------
     loops = []
-    for i, raw in enumerate(data.get("loops", [])):
+    for i, raw in enumerate(r.tables(data.get("loops", []), "loops", "loops")):
         where = f"loops[{i}]"
         kind = r.get(raw, "kind", where, str)
         if kind != "four_bar":
-            raise r.fail(f"{where}.kind", f"unknown loop kind {kind!r} (known: four_bar)")
+            raise r.fail(f"{where}.kind", f"unknown loop kind {kind!r}{_nearest(kind, ['four_bar'])} (known: four_bar)")
         branch = r.get(raw, "branch", where, int)
         if branch not in (1, -1):
             raise r.fail(f"{where}.branch", f"expected +1 or -1, got {branch}")
@@ -368,26 +524,32 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
         )
         for key in ("ground_angle", "crank_angle"):
             if getattr(loop, key) not in joint_names:
-                raise r.fail(f"{where}.{key}", f"{getattr(loop, key)!r} is not an actuated joint (joints: {joint_names})")
+                raise r.fail(f"{where}.{key}", f"{getattr(loop, key)!r} is not an actuated joint "
+                                               f"{_nearest(getattr(loop, key), joint_names)}(joints: {joint_names})")
+        if loop.crank_angle == loop.ground_angle:
+            raise r.fail(f"{where}.crank_angle", f"is the same joint as ground_angle ({loop.ground_angle!r}): "
+                                                 "the loop would not move")
         if loop.passive_joint in joint_names:
             raise r.fail(f"{where}.passive_joint", f"{loop.passive_joint!r} is declared as an actuated joint")
         loops.append(loop)
+    _unique(r, [lp.name for lp in loops], "loops", "loop name")
     passive = [lp.passive_joint for lp in loops]
+    _unique(r, passive, "loops", "passive joint (one loop per passive joint)")
     for i, link in enumerate(links):
         if link.theta not in joint_names and link.theta not in passive:
             raise r.fail(
                 f"chain.links[{i}].theta",
-                f"{link.theta!r} is neither an actuated joint {joint_names} nor a loop's passive joint {passive}",
+                f"{link.theta!r} is neither an actuated joint {joint_names} nor a loop's passive joint {passive}"
+                + _nearest(link.theta, joint_names + passive),
             )
+    _unique(r, [link.theta for link in links], "chain.links", "joint turned by a link (theta)")
 
     # ---- symbols: all used, all numbers -----------------------------------------------------
     symbols: dict[str, float] = {}
     for sym, value in raw_symbols.items():
         if sym not in symbol_kinds:
             raise r.fail(f"symbols.{sym}", "declared but not used by the chain or a loop")
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise r.fail(f"symbols.{sym}", f"expected a finite number, got {value!r}")
-        symbols[sym] = float(value) * (lf if symbol_kinds[sym] == "length" else af)
+        symbols[sym] = r.number(value, f"symbols.{sym}") * (lf if symbol_kinds[sym] == "length" else af)
     for loop in loops:
         for key in ("ground", "crank", "coupler", "lever"):
             if symbols[getattr(loop, key)] <= 0:
@@ -395,69 +557,69 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
 
     # ---- joint constraints ------------------------------------------------------------------
     jcons = []
-    for i, raw in enumerate(data.get("joint_constraints", [])):
+    for i, raw in enumerate(r.tables(data.get("joint_constraints", []), "joint_constraints", "joint_constraints")):
         where = f"joint_constraints[{i}]"
-        terms = r.get(raw, "terms", where, dict)
+        terms = r.table(r.get(raw, "terms", where), f"{where}.terms")
+        if not terms:
+            raise r.fail(f"{where}.terms", "names no joint")
         for jn, coef in terms.items():
             if jn not in joint_names:
-                raise r.fail(f"{where}.terms.{jn}", f"not an actuated joint (joints: {joint_names})")
-            if isinstance(coef, bool) or not isinstance(coef, (int, float)):
-                raise r.fail(f"{where}.terms.{jn}", f"expected a number, got {coef!r}")
+                raise r.fail(f"{where}.terms.{jn}", f"not an actuated joint{_nearest(jn, joint_names)} (joints: {joint_names})")
+            if r.number(coef, f"{where}.terms.{jn}") == 0:
+                raise r.fail(f"{where}.terms.{jn}", "a coefficient of 0 (leave the joint out)")
         lo, hi = r.pair(r.get(raw, "limits", where), f"{where}.limits")
         jcons.append(JointConstraint(r.get(raw, "name", where, str), {k: float(v) for k, v in terms.items()}, lo * af, hi * af))
+    _unique(r, joint_names + [c.name for c in jcons], "joint_constraints", "name (joints and joint constraints share names)")
 
     # ---- configurations ---------------------------------------------------------------------
     configurations = {}
-    for cname, raw in r.get(data, "configurations", "(top level)", dict).items():
+    limit_names = set(joint_names) | {c.name for c in jcons}
+    for cname, raw in r.table(data["configurations"], "configurations").items():
         where = f"configurations.{cname}"
-        if not isinstance(raw, dict):
-            raise r.fail(where, "expected a table of joint values")
+        r.table(raw, where, "configurations.*", extra=joint_names)
         missing = [j for j in joint_names if j not in raw]
         if missing:
             raise r.fail(where, f"missing joint value(s) {missing}")
-        extra = set(raw) - set(joint_names) - {"note", "waive"}
-        if extra:
-            raise r.fail(where, f"unknown joint(s) {sorted(extra)} (joints: {joint_names})")
         q = tuple(r.get(raw, j, where, float) * af for j in joint_names)
-        waive = r.get(raw, "waive", where, list, default=[])
-        limit_names = set(joint_names) | {c.name for c in jcons}
+        waive = r.names(raw.get("waive", []), f"{where}.waive")
         for w in waive:
             if w not in limit_names:
-                raise r.fail(f"{where}.waive", f"{w!r} names no joint or joint constraint")
-        if waive and not raw.get("note"):
+                raise r.fail(f"{where}.waive", f"{w!r} names no joint or joint constraint{_nearest(w, limit_names)}")
+        note = raw.get("note", "")
+        if not isinstance(note, str):
+            raise r.fail(f"{where}.note", f"expected a string, got {_type_name(note)}")
+        if waive and not note.strip():
             raise r.fail(f"{where}.note", "a configuration that waives a limit must say why in 'note'")
-        configurations[cname] = Configuration(cname, q, raw.get("note", ""), tuple(waive))
+        configurations[cname] = Configuration(cname, q, note, tuple(waive))
 
     # ---- error parameters -------------------------------------------------------------------
     eparams = []
     seen: set[str] = set()
-    for i, raw in enumerate(r.get(data, "error_parameters", "(top level)", list)):
+    raw_params = r.tables(data["error_parameters"], "error_parameters", "error_parameters")
+    for i, raw in enumerate(raw_params):
         where = f"error_parameters[{i}]"
         pname = r.get(raw, "name", where, str)
-        alias = raw.get("alias")
-        for n in (pname, alias):
+        alias = r.get(raw, "alias", where, str, default=None)
+        label = r.get(raw, "label", where, str, default=pname)
+        for key, n in (("name", pname), ("alias", alias)):
             if n is not None and n in seen:
-                raise r.fail(f"{where}.name", f"name {n!r} is used twice")
+                raise r.fail(f"{where}.{key}", f"name {n!r} is used twice")
             if n is not None:
                 seen.add(n)
-        perturbs = r.get(raw, "perturbs", where, list)
-        if not perturbs:
-            raise r.fail(f"{where}.perturbs", "names no symbol")
+        perturbs = r.names(r.get(raw, "perturbs", where), f"{where}.perturbs", allow_empty=False)
         kinds = set()
         for j, sym in enumerate(perturbs):
             if sym not in symbols:
-                raise r.fail(f"{where}.perturbs[{j}]", f"{sym!r} is not a declared symbol")
+                raise r.fail(f"{where}.perturbs[{j}]", f"{sym!r} is not a declared symbol{_nearest(sym, symbols)}")
             kinds.add(symbol_kinds[sym])
         if len(kinds) != 1:
             raise r.fail(f"{where}.perturbs", "mixes lengths and angles")
         kind = kinds.pop()
         unit = r.unit(r.get(raw, "unit", where), f"{where}.unit", kind)
-        k = r.get(raw, "k", where, float)
-        if k <= 0:
-            raise r.fail(f"{where}.k", f"cost factor must be > 0, got {k}")
+        k = r.positive(raw["k"], f"{where}.k")
         lo, hi = r.pair(r.get(raw, "bounds", where), f"{where}.bounds")
-        if lo <= 0:
-            raise r.fail(f"{where}.bounds", f"lower bound must be > 0 (cost eps**-alpha), got {lo}")
+        if lo < TINY:
+            raise r.fail(f"{where}.bounds", f"lower bound must be > 0 (cost eps**-alpha), at least {TINY:g}, got {lo}")
         eparams.append(
             ErrorParameter(
                 name=pname,
@@ -467,7 +629,7 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
                 k=k,
                 lower=lo,
                 upper=hi,
-                label=raw.get("label", pname),
+                label=label,
                 alias=alias,
                 kind=kind,
             )
@@ -479,21 +641,26 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
 
     # ---- tolerance sets ---------------------------------------------------------------------
     tolerance_sets = {}
-    for sname, raw in data.get("tolerance_sets", {}).items():
+    for sname, raw in r.table(data.get("tolerance_sets", {}), "tolerance_sets").items():
         where = f"tolerance_sets.{sname}"
+        r.table(raw, where)
         values = {}
         for key, value in raw.items():
             if key not in by_name:
-                raise r.fail(f"{where}.{key}", f"unknown error parameter (known: {[p.name for p in eparams]})")
+                raise r.fail(f"{where}.{key}",
+                             f"unknown error parameter{_nearest(key, by_name)} (known: {[p.name for p in eparams]})")
             par = by_name[key]
+            if par.name in values:
+                raise r.fail(f"{where}.{key}", f"{par.name!r} is given twice (by its name and its alias)")
             if isinstance(value, dict):
-                v = r.get(value, "value", f"{where}.{key}", float)
-                u = r.unit(r.get(value, "unit", f"{where}.{key}"), f"{where}.{key}.unit", par.kind)
+                r.table(value, f"{where}.{key}", "tolerance_value")
+                v = r.number(value["value"], f"{where}.{key}.value")
+                u = r.unit(value["unit"], f"{where}.{key}.unit", par.kind)
                 v = v * to_base(u) / par.scale
             else:
-                v = r.get(raw, key, where, float)
-            if v < 0:
-                raise r.fail(f"{where}.{key}", f"a tolerance must be >= 0, got {v}")
+                v = r.number(value, f"{where}.{key}")
+            if not 0 <= v <= HUGE:
+                raise r.fail(f"{where}.{key}", f"a tolerance must be >= 0 (and at most {HUGE:g} {par.unit}), got {v}")
             values[par.name] = v
         missing = [p.name for p in eparams if p.name not in values]
         if missing:
@@ -502,22 +669,23 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
 
     # ---- reference results ------------------------------------------------------------------
     refs = []
-    for i, raw in enumerate(data.get("reference_results", [])):
+    for i, raw in enumerate(r.tables(data.get("reference_results", []), "reference_results", "reference_results")):
         where = f"reference_results[{i}]"
         tol = r.get(raw, "tolerances", where, list)
         if len(tol) != len(eparams):
             raise r.fail(f"{where}.tolerances", f"expected {len(eparams)} values, got {len(tol)}")
+        tolerances = tuple(r.positive(t, f"{where}.tolerances[{j}]") for j, t in enumerate(tol))
         dist = r.get(raw, "distribution", where, str)
         if dist not in ("uniform", "normal"):
             raise r.fail(f"{where}.distribution", f"expected 'uniform' or 'normal', got {dist!r}")
         refs.append(
             ReferenceResult(
                 table=r.get(raw, "table", where, str),
-                R=r.get(raw, "R", where, float),
-                p=r.get(raw, "p", where, float),
-                alpha=r.get(raw, "alpha", where, float),
+                R=r.positive(raw["R"], f"{where}.R"),
+                p=r.number(raw["p"], f"{where}.p", P_MIN, P_MAX),
+                alpha=r.positive(raw["alpha"], f"{where}.alpha"),
                 distribution=dist,
-                tolerances=tuple(float(t) for t in tol),
+                tolerances=tolerances,
             )
         )
 
@@ -542,3 +710,10 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
         reference_results=tuple(refs),
         notes=notes,
     )
+
+
+def _unique(r: _Reader, names: list, where: str, what: str) -> None:
+    """Each name at most once."""
+    dup = sorted({str(n) for n in names if names.count(n) > 1})
+    if dup:
+        raise r.fail(where, f"{what} {dup} declared more than once")

@@ -1,0 +1,54 @@
+"""Helpers of the model-file tests: a bundled model as a dict, and a dict back to TOML text.
+
+The writer is deliberately small (inline tables and arrays only, which TOML allows anywhere) so
+that the tests need no TOML-writing package; it writes what the fuzz tests produce, including
+NaN, infinities and empty tables.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
+
+
+def model_dict(name: str) -> dict:
+    """The bundled model file ``name`` parsed into plain Python values."""
+    with open(MODELS_DIR / f"{name}.toml", "rb") as fh:
+        return tomllib.load(fh)
+
+
+def _key(k) -> str:
+    return json.dumps(str(k))
+
+
+def _value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + " }"
+    if isinstance(v, (list, tuple)):
+        return "[ " + ", ".join(_value(x) for x in v) + " ]"
+    raise TypeError(f"no TOML for {type(v).__name__}")
+
+
+def toml_text(data: dict) -> str:
+    """TOML text whose parse is ``data`` (top-level keys as ``key = value`` lines)."""
+    return "".join(f"{_key(k)} = {_value(v)}\n" for k, v in data.items())

@@ -1,0 +1,144 @@
+"""Strict model files (issue 12 point 4, issue 10): every defect is a ModelFileError naming the
+file and the field, with the nearest valid name for a misspelt key.
+
+Each case edits one bundled model (as a dict, written back as TOML) and asserts the field named;
+the unmodified dict written the same way loads (``test_round_trip_loads``), so the edit is the
+only defect.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import pytest
+
+import tolsynth
+from tolsynth.errors import ModelFileError
+from tolsynth.model import FORMAT
+
+from model_text import model_dict, toml_text
+
+
+def _load(tmp_path, data, name="m.toml"):
+    path = tmp_path / name
+    path.write_text(toml_text(data))
+    return tolsynth.load_model(path)
+
+
+def _edit(model, fn):
+    data = copy.deepcopy(model_dict(model))
+    fn(data)
+    return data
+
+
+def _rename(table, old, new):
+    table[new] = table.pop(old)
+
+
+def _dup_loop(d):
+    d["loops"].append(copy.deepcopy(d["loops"][0]))
+
+
+def _set(path, value):
+    def fn(d):
+        t = d
+        for key in path[:-1]:
+            t = t[key]
+        t[path[-1]] = value
+    return fn
+
+
+CASES = [
+    # (model, edit, field named, fragment of the message)
+    ("xu_zhang_1988", lambda d: _rename(d, "error_parameters", "error_parameter"), "error_parameter",
+     "did you mean `error_parameters`?"),
+    ("planar_2r", lambda d: _rename(d["model"], "title", "titel"), "model.titel", "did you mean `title`?"),
+    ("planar_2r", lambda d: _rename(d, "configurations", "configuration"), "configuration",
+     "did you mean `configurations`?"),
+    ("planar_2r", _set(["error_parameters", 0, "bound"], [0.001, 1.0]), "error_parameters[0].bound",
+     "did you mean `bounds`?"),
+    ("puma560", _set(["units", "lenght"], "mm"), "units.lenght", "did you mean `length`?"),
+    ("xu_zhang_1988", _set(["loops", 0, "brnch"], 1), "loops[0].brnch", "did you mean `branch`?"),
+    ("planar_2r", _set(["tolerance_sets", "coarse", "l1"], {"value": 1.0, "units": "mm"}),
+     "tolerance_sets.coarse.l1.units", "did you mean `unit`?"),
+    ("planar_2r", _set(["configurations", "worst", "nots"], "x"), "configurations.worst.nots",
+     "did you mean `note`?"),
+    # types
+    ("xu_zhang_1988", _set(["error_parameters", 0, "alias"], ["x1"]), "error_parameters[0].alias", "a list"),
+    ("xu_zhang_1988", _set(["configurations", "worst", "waive"], [["interference"]]),
+     "configurations.worst.waive[0]", "a list"),
+    ("planar_2r", _set(["tolerance_sets", "coarse"], "abc"), "tolerance_sets.coarse", "a string"),
+    ("xu_zhang_1988", _set(["loops"], True), "loops", "a boolean"),
+    ("xu_zhang_1988", _set(["joint_constraints"], True), "joint_constraints", "a boolean"),
+    ("xu_zhang_1988", _set(["reference_results"], False), "reference_results", "a boolean"),
+    ("xu_zhang_1988", _set(["reference_results", 0, "R"], "0.5"), "reference_results[0].R", "a string"),
+    ("xu_zhang_1988", _set(["reference_results", 0, "tolerances", 0], [1]), "reference_results[0].tolerances[0]",
+     "a list"),
+    ("planar_2r", _set(["model"], "planar"), "model", "a string"),
+    ("planar_2r", _set(["joints", 0], 5), "joints[0]", "expected a table"),
+    ("planar_2r", _set(["model", "assumptions"], "one"), "model.assumptions", "a string"),
+    # duplicates
+    ("planar_2r", _set(["error_parameters", 0, "perturbs"], ["l1", "l1"]), "error_parameters[0].perturbs",
+     "more than once"),
+    ("xu_zhang_1988", _dup_loop, "loops", "more than once"),
+    ("planar_2r", _set(["joints", 1, "name"], "q1"), "joints", "more than once"),
+    ("xu_zhang_1988", _set(["joint_constraints", 0, "name"], "theta1"), "joint_constraints", "more than once"),
+    ("xu_zhang_1988", _set(["error_parameters", 1, "alias"], "x1"), "error_parameters[1].alias", "used twice"),
+    # numbers that make no sense
+    ("planar_2r", _set(["joints", 0, "limits"], [-math.inf, math.inf]), "joints[0].limits[0]", "finite"),
+    ("xu_zhang_1988", _set(["joint_constraints", 0, "terms", "theta2"], math.nan),
+     "joint_constraints[0].terms.theta2", "finite"),
+    ("xu_zhang_1988", _set(["loops", 0, "crank_angle"], "theta2"), "loops[0].crank_angle", "ground_angle"),
+    ("planar_2r", _set(["symbols", "l1"], 1e300), "symbols.l1", "1e+09"),
+    ("planar_2r", _set(["error_parameters", 0, "k"], -1.0), "error_parameters[0].k", "1e-12"),
+    ("planar_2r", _set(["error_parameters", 0, "bounds"], [1e-300, 1.0]), "error_parameters[0].bounds", "> 0"),
+    ("xu_zhang_1988", _set(["reference_results", 0, "p"], 1.0), "reference_results[0].p", "1e-12 to 1"),
+    ("planar_2r", _set(["configurations", "worst", "q1"], math.inf), "configurations.worst.q1", "finite"),
+    # empty
+    ("planar_2r", _set(["joints"], []), "joints", "at least one"),
+    ("planar_2r", _set(["model", "name"], ""), "model.name", "non-empty"),
+]
+
+
+@pytest.mark.parametrize("model, edit, field, fragment", CASES, ids=[c[2] for c in CASES])
+def test_defect_names_field(tmp_path, model, edit, field, fragment):
+    with pytest.raises(ModelFileError) as info:
+        _load(tmp_path, _edit(model, edit))
+    assert info.value.field == field, str(info.value)
+    assert fragment in str(info.value)
+    assert str(tmp_path / "m.toml") in str(info.value)
+
+
+@pytest.mark.parametrize("model", ["planar_2r", "puma560", "xu_zhang_1988"])
+def test_round_trip_loads(tmp_path, model):
+    """The writer of these tests loses nothing: an unmodified model written by it loads, with the
+    same numbers as the bundled file."""
+    m = _load(tmp_path, model_dict(model))
+    ref = tolsynth.load_model(model)
+    assert m.spec.symbols == ref.spec.symbols and m.error_parameters == ref.error_parameters
+
+
+@pytest.mark.parametrize("blob, fragment", [
+    (b"\xff\xfe[model]\n", "UTF-8"),
+    (b"[model]\nname = \"\xe9\"\n", "UTF-8"),
+    (b"[model\n", "not valid TOML"),
+    (b"", "missing required field"),
+])
+def test_bytes_that_are_not_a_model(tmp_path, blob, fragment):
+    path = tmp_path / "m.toml"
+    path.write_bytes(blob)
+    with pytest.raises(ModelFileError, match=fragment):
+        tolsynth.load_model(path)
+
+
+def test_format_table_lists_every_key_the_bundled_models_use():
+    """FORMAT is the one list of allowed keys: every key of every bundled table is in it."""
+    for name in tolsynth.bundled_models():
+        d = model_dict(name)
+        assert set(d) <= set(FORMAT[""])
+        for section in ("model", "units", "chain"):
+            assert set(d[section]) <= set(FORMAT[section])
+        for section in ("joints", "loops", "joint_constraints", "error_parameters", "reference_results"):
+            for item in d.get(section, []):
+                assert set(item) <= set(FORMAT[section]), (name, section)

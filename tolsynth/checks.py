@@ -1,0 +1,137 @@
+"""Shared validators of the numbers a caller gives (one copy of each rule).
+
+Every public function checks its arguments with these before any work starts, so that bad input
+raises a typed error (:mod:`tolsynth.errors`) naming the field and the allowed range, and extreme
+input never reaches a formula that would overflow, divide by zero or loop forever.  The rules:
+
+* a number is a real (``int``/``float``/NumPy scalar, not ``bool``), finite, and of magnitude at
+  most :data:`HUGE` (1e9 of its unit: a kilometre in mm, far beyond any robot);
+* a positive quantity (a radius, a tolerance bound, a cost factor, a step) is at least
+  :data:`TINY` (1e-12 of its unit);
+* a probability lies in ``[P_MIN, P_MAX]`` = [1e-12, 1 - 1e-12] (beyond, the normal quantile is
+  not representable in double precision: ``z(1 - 1e-16)`` is infinite);
+* a count is an integer (an integral float such as ``1e4`` is accepted) inside stated limits.
+
+The model-file reader (:mod:`tolsynth.model`) applies the same limits to the numbers in a file.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .errors import InputError, OutOfRangeError
+
+__all__ = [
+    "HUGE",
+    "TINY",
+    "P_MIN",
+    "P_MAX",
+    "is_real",
+    "check_real",
+    "check_positive",
+    "check_probability",
+    "check_count",
+    "check_seed",
+    "check_vector",
+]
+
+#: largest magnitude of any number given, in its own unit (mm, rad, tolerance unit, ...)
+HUGE = 1e9
+#: smallest positive quantity, in its own unit
+TINY = 1e-12
+#: probabilities must lie in [P_MIN, P_MAX]
+P_MIN = 1e-12
+P_MAX = 1.0 - 1e-12
+
+
+def is_real(x: Any) -> bool:
+    """True for a real scalar (Python or NumPy int/float), False for bool, str, None, arrays..."""
+    return not isinstance(x, (bool, np.bool_)) and isinstance(x, (int, float, np.integer, np.floating))
+
+
+def _as_float(x: Any, field: str, allowed: str) -> float:
+    if not is_real(x):
+        raise InputError(field, f"expected a number, got {x!r}", allowed)
+    try:
+        v = float(x)
+    except OverflowError:  # a Python int beyond double range
+        raise OutOfRangeError(field, f"got {x!r}", allowed) from None
+    if not math.isfinite(v):
+        raise OutOfRangeError(field, f"got {x!r}", allowed)
+    return v
+
+
+def check_real(x: Any, field: str, unit: str = "", lower: float = -HUGE, upper: float = HUGE) -> float:
+    """``x`` as a float, or a typed error unless it is a finite number in ``[lower, upper]``."""
+    u = f" {unit}" if unit else ""
+    allowed = f"a finite number from {lower:g} to {upper:g}{u}"
+    v = _as_float(x, field, allowed)
+    if not lower <= v <= upper:
+        raise OutOfRangeError(field, f"got {x!r}", allowed)
+    return v
+
+
+def check_positive(x: Any, field: str, unit: str = "mm", upper: float = HUGE) -> float:
+    """``x`` as a float, or a typed error unless ``TINY <= x <= upper`` (a positive quantity)."""
+    allowed = f"a finite number > 0, from {TINY:g} to {upper:g} ({unit})"
+    v = _as_float(x, field, allowed)
+    if not TINY <= v <= upper:
+        raise OutOfRangeError(field, f"got {x!r}", allowed)
+    return v
+
+
+def check_probability(p: Any, field: str = "p") -> float:
+    """``p`` as a float, or a typed error unless ``P_MIN <= p <= P_MAX`` (0 < p < 1 with the
+    normal quantile representable)."""
+    allowed = f"0 < {field} < 1, from {P_MIN:g} to 1 - {1 - P_MAX:.0e}"
+    v = _as_float(p, field, allowed)
+    if not P_MIN <= v <= P_MAX:
+        raise OutOfRangeError(field, f"got {p!r}", allowed)
+    return v
+
+
+def check_count(n: Any, field: str, lower: int = 1, upper: int = 10**12) -> int:
+    """``n`` as an int, or a typed error unless it is an integer (or integral float) in
+    ``[lower, upper]``."""
+    allowed = f"an integer from {lower} to {upper}"
+    if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, float, np.integer, np.floating)):
+        raise InputError(field, f"expected an integer, got {n!r}", allowed)
+    if isinstance(n, (float, np.floating)) and not (math.isfinite(n) and float(n).is_integer()):
+        raise OutOfRangeError(field, f"got {n!r}", allowed)
+    v = int(n)
+    if not lower <= v <= upper:
+        raise OutOfRangeError(field, f"got {n!r}", allowed)
+    return v
+
+
+def check_seed(seed: Any, field: str = "seed") -> int:
+    """A seed for ``numpy.random.default_rng``: an integer >= 0 (not a float, not a bool)."""
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or int(seed) < 0:
+        raise OutOfRangeError(field, f"got {seed!r}", "an integer >= 0 (recorded in the result)")
+    return int(seed)
+
+
+def check_vector(x: Any, field: str, size: int | None = None, unit: str = "",
+                 lower: float = -HUGE, upper: float = HUGE) -> np.ndarray:
+    """A 1-D float array of finite numbers in ``[lower, upper]`` (of length ``size`` if given)."""
+    u = f" {unit}" if unit else ""
+    allowed = f"{size if size is not None else 'some'} finite numbers from {lower:g} to {upper:g}{u}"
+    if isinstance(x, (str, bytes)) or x is None:
+        raise InputError(field, f"expected numbers, got {x!r}", allowed)
+    try:
+        arr = np.asarray(x, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(field, f"expected numbers, got {x!r}", allowed) from None
+    if arr.ndim > 1 and arr.size == max(arr.shape):
+        arr = arr.ravel()
+    if arr.ndim != 1 or (size is not None and arr.shape != (size,)):
+        raise InputError(field, f"expected {size if size is not None else 'a vector of'} values, "
+                                f"got shape {arr.shape}", allowed)
+    bad = ~(np.isfinite(arr) & (arr >= lower) & (arr <= upper))
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise OutOfRangeError(f"{field}[{i}]", f"got {arr[i]!r}", allowed)
+    return arr
