@@ -11,7 +11,38 @@ import numpy as np
 
 from .errors import UnknownNameError
 
-__all__: list[str] = []  # internal helpers of tolsynth.pose_search and tolsynth.workspace_map
+__all__ = ["MODEL_REFERENCE", "model_reference"]
+
+
+class _ModelReference:
+    """Default of ``reference=``: the model's own reference pose (see :func:`model_reference`)."""
+
+    _instance = None
+
+    def __new__(cls):
+        if cls._instance is None:
+            cls._instance = super().__new__(cls)
+        return cls._instance
+
+    def __repr__(self) -> str:
+        return "MODEL_REFERENCE"
+
+    def __reduce__(self):
+        return (_ModelReference, ())
+
+
+#: ``reference=MODEL_REFERENCE`` (the default): the model's reference pose, or none if it has none
+MODEL_REFERENCE = _ModelReference()
+
+
+def model_reference(mech) -> str | None:
+    """The model's reference pose: the configuration its file names as ``reference`` (when the
+    format has that field), else its configuration ``worst`` (the paper's pose of largest error),
+    else None -- a model without one works everywhere, with no pose marked or compared."""
+    name = getattr(mech.spec, "reference", None)
+    if isinstance(name, str) and name in mech.configurations:
+        return name
+    return "worst" if "worst" in mech.configurations else None
 
 
 def _limits(mech) -> tuple[np.ndarray, np.ndarray]:
@@ -44,6 +75,10 @@ def _wrap(mech, Q: np.ndarray) -> np.ndarray:
 
 
 def _reference(mech, reference) -> tuple[str | None, np.ndarray | None]:
+    """``(name, joints)`` of a reference: ``MODEL_REFERENCE``, None, a configuration name or
+    joint values (rad); the name is ``"given"`` for joint values, None for no reference."""
+    if reference is MODEL_REFERENCE:
+        reference = model_reference(mech)
     if reference is None:
         return None, None
     if isinstance(reference, str):

@@ -24,7 +24,7 @@ import numpy as np
 
 from .batch_stats import _criterion_batch, principal_std_batch
 from .errors import InputError, OutOfRangeError, UnknownNameError
-from .joint_space import _feasible, _limits, _reference
+from .joint_space import MODEL_REFERENCE, _feasible, _limits, _reference
 from .stats import check_positive, p_ball, variance_divisor
 
 __all__ = ["WorstPose", "worst_pose"]
@@ -65,7 +65,8 @@ class WorstPose:
         ``P(|dr| <= R)`` there (with ``R``).
     reference, reference_q, reference_position, reference_value, reference_principal_std,
     reference_p_sphere
-        The same at the reference configuration (the model's ``worst``: the paper's pose
+        The same at the reference configuration (None without one; for ``xu_zhang_1988`` by
+        default its ``worst``: the paper's pose
         (925, 0, 1225) mm, which lies 0.33 deg past the interference limit).
     held_joints : dict
         Joints held fixed (rad) because they do not change the error statistics (found
@@ -160,7 +161,7 @@ def worst_pose(
     R: float | None = None,
     distribution: str = "uniform",
     grid: int | None = None,
-    reference: str | Sequence[float] | None = "worst",
+    reference=MODEL_REFERENCE,
     fixed: Mapping[str, float] | None = None,
     starts: int = 4,
     step_tol: float = 1e-7,
@@ -194,8 +195,10 @@ def worst_pose(
     grid : int, optional
         Grid points per searched joint (default: as many as keep the grid under
         ``max_grid_points``).
-    reference : str or array, optional
-        Configuration reported beside the result (default: the model's ``worst``).
+    reference : str, array or None
+        Configuration reported beside the result: a configuration name, joint values (rad), or
+        None for none.  Default: the model's reference pose (its ``worst`` configuration if it
+        has one, else none; :func:`tolsynth.joint_space.model_reference`).
     fixed : dict, optional
         Joint name -> value (rad) to hold in addition to the invariant joints.
     starts : int

@@ -1,20 +1,65 @@
-"""Progress reports on stderr for long runs (Monte Carlo, the workspace map, Tables 1-3)."""
+"""Progress reports on stderr for long runs (Monte Carlo, the workspace map, Tables 1-3).
+
+A tqdm bar where the optional extra ``progress`` (tqdm) is installed; without it, plain lines
+(:class:`LineProgress`: one line every few seconds, then one when done), so that a long run is
+never silent after the core install.  tqdm stays optional: the core path is casadi + numpy, and
+the plain lines carry the same information (done, total, elapsed, estimated time left).
+"""
 
 from __future__ import annotations
 
 import sys
+import time
 
-__all__ = ["make_bar", "Progress", "AUTO_PROGRESS_DELAY"]
+__all__ = ["make_bar", "Progress", "LineProgress", "AUTO_PROGRESS_DELAY"]
 
 AUTO_PROGRESS_DELAY = 2.0  # s: with progress=None the bar appears only on runs longer than this
 
 
+class LineProgress:
+    """Plain-text progress on a stream: nothing during the first ``delay`` s, then a line such as
+    ``map (inverse kinematics): 4200/10000 pt (42%), 3.1 s, about 4 s left`` at most every
+    ``every`` s, and a last line when closed (only if a line was printed).  The interface is the
+    part of tqdm's that the package uses: ``update(step)``, ``n``, ``total``, ``close()``."""
+
+    def __init__(self, total: int, desc: str, unit: str, delay: float = AUTO_PROGRESS_DELAY,
+                 every: float = 5.0, file=None):
+        self.total, self.desc, self.unit = int(total), desc, unit
+        self.delay, self.every = float(delay), float(every)
+        self.file = file if file is not None else sys.stderr
+        self.n = 0
+        self.t0 = time.perf_counter()
+        self._last = None  # time of the last line printed
+
+    def _line(self, text: str) -> None:
+        try:
+            print(text, file=self.file, flush=True)
+        except (OSError, ValueError):  # a closed stream: progress is not worth an error
+            pass
+
+    def update(self, step: int = 1) -> None:
+        self.n += int(step)
+        now = time.perf_counter()
+        elapsed = now - self.t0
+        if elapsed < self.delay or (self._last is not None and now - self._last < self.every):
+            return
+        self._last = now
+        frac = self.n / self.total if self.total else 0.0
+        left = f", about {elapsed * (1 - frac) / frac:.0f} s left" if 0 < frac < 1 else ""
+        self._line(f"{self.desc}: {self.n}/{self.total} {self.unit} ({100 * frac:.0f}%), {elapsed:.1f} s{left}")
+
+    def close(self) -> None:
+        if self._last is not None:
+            self._line(f"{self.desc}: {self.n}/{self.total} {self.unit}, done in {time.perf_counter() - self.t0:.1f} s")
+            self._last = None
+
+
 def make_bar(total: int, desc: str, unit: str, delay: float):
-    """A tqdm bar on stderr (tqdm is the optional extra ``progress``), or None without tqdm."""
+    """A tqdm bar on stderr (tqdm is the optional extra ``progress``), or plain lines without tqdm."""
     try:
         from tqdm import tqdm
     except ImportError:
-        return None
+        return LineProgress(total, desc, unit, delay)
     kw = dict(total=total, desc=desc, unit=unit, unit_scale=True, file=sys.stderr, leave=False)
     try:
         return tqdm(delay=delay, **kw)
@@ -23,7 +68,7 @@ def make_bar(total: int, desc: str, unit: str, delay: float):
 
 
 class Progress:
-    """tqdm to stderr if wanted and installed; a callable ``progress(done, total)`` also works."""
+    """tqdm (or plain lines) on stderr if wanted; a callable ``progress(done, total)`` also works."""
 
     def __init__(self, progress, total: int, desc: str):
         self.bar = None

@@ -113,7 +113,7 @@ def reproduce(model: str | Mechanism = "xu_zhang_1988", sumt: bool = True, progr
     if degree_reading and angle_params:
         readings["deg"] = mech.with_units({n: "deg" for n in angle_params})
     bar = None
-    if progress:  # a bar only if the optional tqdm is installed
+    if progress:  # a tqdm bar, or plain lines without the optional tqdm
         from .progress import make_bar
 
         bar = make_bar(len(refs), "Tables 1-3", "column", 0.5)

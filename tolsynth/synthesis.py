@@ -268,6 +268,10 @@ def synthesize_workspace(
     For the paper's robot at R = 0.5 mm, p = 0.99, uniform, alpha = 0.7 this takes 5 rounds and
     costs 5 % more than the optimum at the paper's pose, which violates the specification
     elsewhere by a factor 1.14.
+
+    ``pose`` is where the exchange starts (a configuration name or joint values, rad); None starts
+    from the worst pose the search finds at tolerances in the middle of the bounds, so that a model
+    without a ``worst`` configuration works too.
     """
     from .mechanism import Mechanism, load_model
     from .workspace import worst_pose
@@ -276,6 +280,10 @@ def synthesize_workspace(
         mechanism = load_model(mechanism)
     z = z_of_p(p)
     sphere = kwargs.get("criterion", "components") == "sphere"
+    if pose is None:  # no starting pose: the worst pose found at tolerances in the middle of the bounds
+        lo, hi = mechanism.bounds
+        pose = worst_pose(mechanism, np.sqrt(lo * hi), criterion="sigma", distribution=distribution,
+                          reference=None, **(search or {})).q
     poses = [mechanism.joints(pose)]
     rounds = []
     converged = False

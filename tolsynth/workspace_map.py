@@ -19,7 +19,7 @@ import numpy as np
 from .batch_stats import _evaluator, principal_std_batch
 from .errors import InputError, OutOfRangeError, UnknownNameError
 from .ik import PLANES, _GridIK, _ik_evaluator
-from .joint_space import _limits, _reference
+from .joint_space import MODEL_REFERENCE, _limits, _reference
 from .progress import make_bar
 from .stats import check_positive, p_ball_batch, variance_divisor
 
@@ -134,7 +134,7 @@ def probability_map(
     hand_axis: Sequence[float] | None = (0.0, 0.0, 1.0),
     fixed: Mapping[str, float] | None = None,
     extent: Sequence[float] | None = None,
-    reference: str | None = "worst",
+    reference=MODEL_REFERENCE,
     seeds: int = 8,
     check_points: int = 200,
     progress: bool | None = None,
@@ -175,8 +175,10 @@ def probability_map(
         Joint name -> value (rad) to hold fixed, replacing the automatic choice.
     extent : (umin, umax, vmin, vmax), optional
         Grid extent (mm); default: the reachable region's bounding box from a coarse pass.
-    reference : str or None
-        Configuration to start the continuation from and to mark (default ``worst``).
+    reference : str, array or None
+        Configuration to start the continuation from and to mark: a configuration name, joint
+        values (rad), or None (start from the joints' zeros, clipped into the limits, and mark
+        nothing).  Default: the model's reference pose (its ``worst`` if it has one, else none).
     seeds : int
         Quasi-random seeds for points not reached by continuation.
     check_points : int
@@ -213,6 +215,7 @@ def probability_map(
 
     # joints held fixed
     held: dict[int, tuple[float, str]] = {}
+    yaw_held = None  # the waist, held at 0 automatically for a plane through Z0
     if fixed is not None:
         for name, val in fixed.items():
             if name not in names:
@@ -230,15 +233,18 @@ def probability_map(
             yaw = _yaw_joint(mechanism, ref_q, rng)
             if yaw is not None and yaw not in held and lo[yaw] <= 0.0 <= hi[yaw]:
                 held[yaw] = (0.0, "turns the arm about Z0; the map is at its zero")
-    free = tuple(j for j in range(nq) if j not in held)
-    if not free:
-        raise InputError("fixed", "every joint is held fixed", "at least one free joint")
-    iu, iv, inorm = PLANES[plane]
+                yaw_held = yaw
+    given_extent = extent
+    for attempt in (0, 1):
+        free = tuple(j for j in range(nq) if j not in held)
+        if not free:
+            raise InputError("fixed", "every joint is held fixed", "at least one free joint")
+        iu, iv, inorm = PLANES[plane]
 
-    ik = _GridIK(mechanism, free, held, ref_q, axis, plane, offset, int(seeds))
-
-    # extent: reachable bounding box from a coarse pass (unless given)
-    if extent is None:
+        ik = _GridIK(mechanism, free, held, ref_q, axis, plane, offset, int(seeds))
+        if given_extent is not None:
+            break
+        # extent: reachable bounding box from a coarse pass
         pos = _evaluator(mechanism, "position")
         Qr = lo[:, None] + (hi - lo)[:, None] * rng.random((nq, 4000))
         for j, (v, _) in held.items():
@@ -251,15 +257,22 @@ def probability_map(
         uc = np.linspace(cu - span, cu + span, m0)
         vc = np.linspace(cv - span, cv + span, m0)
         okc = ik.solve(uc, vc)[1].reshape(m0, m0)
-        if not np.any(okc):
-            raise InputError("plane", f"no reachable point found in the {plane} plane at offset {offset:g} mm "
-                             "with this hand axis", "a plane and hand axis the arm can reach")
-        du, dv = uc[1] - uc[0], vc[1] - vc[0]
-        cols, rows = np.flatnonzero(okc.any(axis=0)), np.flatnonzero(okc.any(axis=1))
-        # two coarse cells of margin: thin tips of the region can fall between coarse points
-        extent = (uc[cols[0]] - 2 * du, uc[cols[-1]] + 2 * du, vc[rows[0]] - 2 * dv, vc[rows[-1]] + 2 * dv)
-    else:
-        extent = tuple(float(e) for e in extent)
+        if np.any(okc):
+            du, dv = uc[1] - uc[0], vc[1] - vc[0]
+            cols, rows = np.flatnonzero(okc.any(axis=0)), np.flatnonzero(okc.any(axis=1))
+            # two coarse cells of margin: thin tips of the region can fall between coarse points
+            extent = (uc[cols[0]] - 2 * du, uc[cols[-1]] + 2 * du, vc[rows[0]] - 2 * dv, vc[rows[-1]] + 2 * dv)
+            break
+        if attempt == 0 and yaw_held is not None:
+            # an arm with a shoulder offset (a Puma) reaches a plane through Z0 only with the waist
+            # turned: free it (the map then follows the continuation's waist angle)
+            del held[yaw_held]
+            yaw_held = None
+            continue
+        raise InputError("plane", f"no reachable point found in the {plane} plane at offset {offset:g} mm "
+                         "with this hand axis", "a plane and hand axis the arm can reach")
+    if given_extent is not None:
+        extent = tuple(float(e) for e in given_extent)
         if len(extent) != 4 or not (extent[0] < extent[1] and extent[2] < extent[3]):
             raise InputError("extent", f"got {extent!r}", "(umin, umax, vmin, vmax) in mm with min < max")
     u = np.linspace(extent[0], extent[1], n)
@@ -308,12 +321,13 @@ def probability_map(
     ref_point = None
     ref_P = None
     if ref_name is not None:
-        Tref = np.asarray(mechanism.fk(ref_name))
+        ref_pose = ref_name if ref_name != "given" else ref_q
+        Tref = np.asarray(mechanism.fk(ref_pose))
         pr = Tref[:3, 3]
         on_plane = abs(pr[inorm] - offset) < 1e-6 and (axis is None or np.allclose(Tref[:3, 2], axis, atol=1e-6))
         if on_plane:
             ref_point = (float(pr[iu]), float(pr[iv]))
-            ref_P = float(mechanism.analyze(ref_name, eps, distribution, R=R).p_sphere)
+            ref_P = float(mechanism.analyze(ref_pose, eps, distribution, R=R).p_sphere)
     return ProbabilityMap(
         model=mechanism.name,
         u=u,

@@ -5,20 +5,23 @@ from __future__ import annotations
 import numpy as np
 
 from ..mechanism import load_model
-from .args import add_pose_arguments, emit_json, fmt_vec as _fmt_vec, parse_pose, parse_tolerances
+from .args import add_pose_arguments, default_pose, emit_json, fmt_vec as _fmt_vec, inputs_record, parse_pose, parse_tolerances, pose_label
 
 __all__ = ["register"]
 
 
 def cmd_analyze(args) -> int:
     mech = load_model(args.model)
-    q = parse_pose(mech, args.pose)
+    q = parse_pose(mech, args.pose) if args.pose is not None else default_pose(mech)
     eps = parse_tolerances(mech, args.tolerances)
     a = mech.analyze(q, eps, args.dist, R=args.R, Phi=args.Phi)
+    pose_name = pose_label(q) if isinstance(q, str) else args.pose
     if args.json:
         out = {
+            "inputs": inputs_record(args, mech, pose=pose_label(q), q_rad=a.q, tolerances=a.tolerances,
+                                    distribution=args.dist, R_mm=args.R, Phi_rad=args.Phi),
             "model": mech.name,
-            "pose": args.pose,
+            "pose": pose_name,
             "q_rad": a.q,
             "distribution": args.dist,
             "tolerances": a.tolerances,
@@ -42,7 +45,7 @@ def cmd_analyze(args) -> int:
         emit_json(out)
         return 0
     print(f"model        {mech.name}: {mech.title}")
-    print(f"pose         {args.pose}  q = {_fmt_vec(np.degrees(a.q), '{:.4f}')} deg")
+    print(f"pose         {pose_name}  q = {_fmt_vec(np.degrees(a.q), '{:.4f}')} deg")
     print(f"errors       {args.dist} ({'eps^2/3' if args.dist == 'uniform' else 'eps^2/9, 3 sigma = eps'})")
     print("tolerances   " + ", ".join(f"{n}={v:g} {u}" for (n, v), u in zip(a.tolerances.items(), mech.units)))
     print(f"hand         {_fmt_vec(a.position, '{:.4f}')} mm")
@@ -64,7 +67,9 @@ def cmd_analyze(args) -> int:
 
 def register(sub) -> None:
     """Add ``tolsynth analyze`` to the sub-command parser."""
-    p = sub.add_parser("analyze", help="linearised, Gaussian error analysis of one pose")
+    p = sub.add_parser("analyze", help="linearised, Gaussian error analysis of one pose",
+                       description="Linearised, Gaussian error analysis of one pose: covariance, principal "
+                                   "standard deviations and the probabilities of the paper's Eqs. 5-8.")
     add_pose_arguments(p)
-    p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_analyze)
+    p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
+    p.set_defaults(func=cmd_analyze, task="the analysis")

@@ -1,57 +1,425 @@
-"""Argument helpers shared by the sub-commands: poses, tolerances, JSON output."""
+"""Argument helpers shared by the sub-commands: numbers with units, poses, per-parameter values
+(tolerances, bounds, k, alpha), output paths, JSON output with the inputs recorded.
+
+Units on the command line: every option has one unit, stated in its help, used for a bare number
+(lengths mm, joint angles deg, ``--Phi`` rad, tolerances each parameter's own tolerance unit);
+a number may carry another unit as a suffix (``0.1mm``, ``5um``, ``2mrad``, ``0.01deg``).  Bad
+input raises a :class:`tolsynth.InputError` naming the option and quoting the same unit.
+"""
 
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import json
 import math
+import os
+import re
+from typing import Callable
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, UnknownNameError
 from ..mechanism import Mechanism
+from ..units import ANGLE_UNITS, LENGTH_UNITS, to_base, unit_kind
 
-__all__ = ["add_pose_arguments", "parse_pose", "parse_tolerances", "emit_json", "fmt_vec"]
+__all__ = [
+    "HelpFormatter",
+    "version",
+    "quantity",
+    "split_items",
+    "parse_pose",
+    "parse_poses",
+    "parse_reference",
+    "parse_tolerances",
+    "parse_per_parameter",
+    "parse_bounds",
+    "check_figure_path",
+    "inputs_record",
+    "add_pose_arguments",
+    "emit_json",
+    "fmt_vec",
+]
+
+#: unit suffixes accepted after a number (the model files' units, less the spaced "1e-2 rad")
+SUFFIXES = {u: u for u in list(LENGTH_UNITS) + list(ANGLE_UNITS) if " " not in u}
+SUFFIXES.update({"µm": "um", "μm": "um", "°": "deg"})
+_QTY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(\S*)\s*$")
+_WILDCARD = re.compile(r"[*?\[]")
 
 
-def parse_pose(mech: Mechanism, text: str):
-    """A configuration name, or comma-separated joint values in degrees."""
+def version() -> str:
+    """The installed package version (the distribution's metadata, else ``tolsynth.__version__``)."""
+    try:
+        from importlib.metadata import PackageNotFoundError, version as _v
+
+        try:
+            return _v("tolsynth")
+        except PackageNotFoundError:
+            pass
+    except ImportError:  # pragma: no cover
+        pass
+    from .. import __version__
+
+    return __version__
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Shows ``(default: X)`` after every option that has a default (not for flags or None)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if "%(default)" in text or action.default in (None, False, argparse.SUPPRESS) or not action.option_strings:
+            return text
+        if isinstance(action, (argparse._StoreTrueAction, argparse._VersionAction, argparse._HelpAction)):
+            return text
+        return text + " (default: %(default)s)"
+
+
+# ---------------------------------------------------------------------------------------------
+# numbers with units
+# ---------------------------------------------------------------------------------------------
+def _suffixes(kind: str) -> str:
+    table = LENGTH_UNITS if kind == "length" else ANGLE_UNITS
+    return ", ".join(u for u in table if " " not in u)
+
+
+def _split_quantity(text: str, field: str, allowed: str) -> tuple[float, str | None]:
+    m = _QTY.match(str(text))
+    if not m:
+        raise InputError(field, f"{text!r} is not a number", allowed)
+    value = float(m.group(1))
+    if not math.isfinite(value):  # pragma: no cover - the pattern admits finite numbers only
+        raise InputError(field, f"{text!r} is not finite", allowed)
+    suffix = m.group(2)
+    if not suffix:
+        return value, None
+    if suffix not in SUFFIXES:
+        raise InputError(field, f"{text!r}: unknown unit {suffix!r}", allowed)
+    return value, SUFFIXES[suffix]
+
+
+def quantity(text: str, field: str, kind: str, unit: str) -> float:
+    """A number in ``unit``, or with a unit suffix of the same kind (converted to ``unit``).
+
+    >>> quantity("500um", "--R", "length", "mm")
+    0.5
+    """
+    allowed = f"a number in {unit}, or with a{'n' if kind == 'angle' else ''} {kind} unit suffix ({_suffixes(kind)})"
+    value, suffix = _split_quantity(text, field, allowed)
+    if suffix is None:
+        return value
+    if unit_kind(suffix) != kind:
+        raise InputError(field, f"{text!r}: {suffix} is not a{'n' if kind == 'angle' else ''} {kind} unit", allowed)
+    return value * to_base(suffix) / to_base(unit)
+
+
+def _arg_type(fn, name: str):
+    """An argparse ``type=`` from a parser that raises InputError: argparse reports the message
+    (``argument --R: ...``) instead of a generic "invalid value"."""
+
+    def parse(text):
+        try:
+            return fn(text)
+        except InputError as exc:
+            msg = str(exc)
+            prefix = f"{exc.field}: "
+            raise argparse.ArgumentTypeError(msg[len(prefix):] if msg.startswith(prefix) else msg) from None
+
+    parse.__name__ = name
+    return parse
+
+
+def length_mm(field: str):
+    """argparse ``type=``: a length in mm (suffixes allowed)."""
+    return _arg_type(lambda text: quantity(text, field, "length", "mm"), "length")
+
+
+def angle_rad(field: str):
+    """argparse ``type=``: an angle in rad (suffixes allowed)."""
+    return _arg_type(lambda text: quantity(text, field, "angle", "rad"), "angle")
+
+
+def number(field: str, allowed: str, check: Callable[[float], bool] | None = None, integer: bool = False):
+    """argparse ``type=``: a plain finite number (int with ``integer``), optionally range-checked."""
+    return _arg_type(_number(field, allowed, check, integer), "number")
+
+
+def _number(field: str, allowed: str, check: Callable[[float], bool] | None = None, integer: bool = False):
+    def parse(text):
+        try:
+            v = float(text)
+        except (TypeError, ValueError):
+            raise InputError(field, f"{text!r} is not a number", allowed) from None
+        if not math.isfinite(v) or (integer and v != int(v)) or (check is not None and not check(v)):
+            raise InputError(field, f"got {text}", allowed)
+        return int(v) if integer else v
+
+    return parse
+
+
+def split_items(text: str, field: str) -> list[str]:
+    """Comma-separated items, none empty (``'figure3,,'`` is an error, not ``'figure3'``)."""
+    items = [t.strip() for t in str(text).split(",")]
+    for i, t in enumerate(items):
+        if not t:
+            raise InputError(field, f"empty item {i + 1} in {text!r}", "comma-separated items, none empty")
+    return items
+
+
+# ---------------------------------------------------------------------------------------------
+# poses
+# ---------------------------------------------------------------------------------------------
+def parse_pose(mech: Mechanism, text: str, field: str = "--pose"):
+    """A configuration name, or comma-separated joint values in deg (a suffix ``rad`` allowed)."""
     if text in mech.configurations:
         return text
-    try:
-        values = [math.radians(float(v)) for v in text.split(",")]
-    except ValueError:
-        raise InputError(
-            "--pose", f"{text!r} is neither a configuration nor joint values",
-            "one of " + ", ".join(mech.configurations) + f", or {len(mech.joint_names)} comma-separated angles in deg",
-        ) from None
+    allowed = ("one of " + ", ".join(mech.configurations) + " (configurations), or "
+               f"{len(mech.joint_names)} comma-separated joint values in deg ({', '.join(mech.joint_names)})")
+    items = [t.strip() for t in str(text).split(",")]
+    if not any(_QTY.match(t) for t in items):
+        raise UnknownNameError(field, f"{text!r} is neither a configuration nor joint values", allowed)
+    values = []
+    for t in items:
+        if not t:
+            raise InputError(field, f"empty item in {text!r}", allowed)
+        values.append(math.radians(quantity(t, field, "angle", "deg")))
+    if len(values) != len(mech.joint_names):
+        raise InputError(field, f"{len(values)} joint values q given for {len(mech.joint_names)} joints", allowed)
     return np.array(values)
 
 
-def parse_tolerances(mech: Mechanism, text: str) -> np.ndarray:
-    """``SET``, ``name=value,...`` (every parameter) or ``SET,name=value,...`` (overrides)."""
-    parts = [p.strip() for p in text.split(",") if p.strip()]
-    base: dict[str, float] = {}
-    overrides: dict[str, float] = {}
-    for part in parts:
-        if "=" in part:
-            name, _, value = part.partition("=")
-            key = mech.error_parameters[mech.index(name.strip())]  # UnknownNameError for a bad name
-            try:
-                overrides[key] = float(value)
-            except ValueError:
-                raise InputError("--tolerances", f"{part!r}: {value!r} is not a number", "name=value") from None
+def default_pose(mech: Mechanism, field: str = "--pose"):
+    """The model's reference pose, or an error asking for ``--pose`` if it has none."""
+    from ..joint_space import model_reference
+
+    ref = model_reference(mech)
+    if ref is None:
+        raise InputError(field, f"not given, and model {mech.name} has no reference pose",
+                         "one of " + ", ".join(mech.configurations) + " (configurations), or "
+                         f"{len(mech.joint_names)} comma-separated joint values in deg")
+    return ref
+
+
+def parse_poses(mech: Mechanism, texts: list[str] | None, field: str = "--pose") -> list:
+    """Every ``--pose`` given (the option repeated), or the model's reference pose."""
+    if not texts:
+        return [default_pose(mech, field)]
+    return [parse_pose(mech, t, field) for t in texts]
+
+
+def parse_reference(mech: Mechanism, text: str | None):
+    """``--reference``: None (the model's reference pose), ``none``, a configuration or joints (deg)."""
+    from ..joint_space import MODEL_REFERENCE
+
+    if text is None:
+        return MODEL_REFERENCE
+    if text.strip().lower() == "none" and "none" not in mech.configurations:
+        return None
+    return parse_pose(mech, text, "--reference")
+
+
+def pose_label(pose) -> str | list:
+    """A pose for reports and JSON: its name, or its joint values in rad."""
+    return pose if isinstance(pose, str) else np.asarray(pose, dtype=float).tolist()
+
+
+# ---------------------------------------------------------------------------------------------
+# per-parameter values: tolerances, bounds, k, alpha
+# ---------------------------------------------------------------------------------------------
+def _param_kind(mech: Mechanism, i: int) -> str | None:
+    return unit_kind(mech.units[i])
+
+
+def _tolerance_value(mech: Mechanism, field: str):
+    """A tolerance: bare number in the parameter's tolerance unit, or a length / angle suffix."""
+
+    def parse(text: str, where: str):
+        allowed = ("a number in each parameter's tolerance unit, or with a unit suffix "
+                   f"(lengths: {_suffixes('length')}; angles: {_suffixes('angle')})")
+        value, suffix = _split_quantity(text, f"{field}[{where}]" if where else field, allowed)
+        kind = unit_kind(suffix) if suffix else None
+
+        def convert(i: int) -> float:
+            return value if suffix is None else value * to_base(suffix) / to_base(mech.units[i])
+
+        return kind, convert
+
+    return parse
+
+
+def _apply_items(mech: Mechanism, text: str, field: str, base: np.ndarray, parse_value,
+                 set_lookup=None, bare_allowed: bool = True) -> list:
+    """Resolve ``SET``, ``VALUE``, ``pattern=VALUE`` and ``name=VALUE`` items onto ``base``.
+
+    Order of precedence, whatever the order written: the set (tolerances only), then a bare value
+    for every parameter, then patterns (``*``, ``?``, ``[..]``, in the order given), then exact
+    names.  A value with a unit suffix applied by a pattern sets only the parameters of that
+    unit's kind (``*=0.02mm`` every length, ``*=1mrad`` every angle).  Duplicates are errors.
+    """
+    names = list(mech.error_parameters)
+    out = list(base)
+    seen_exact: dict[str, str] = {}
+    seen_pattern: set = set()
+    set_name = None
+    bare = None
+    patterns = []
+    exact = []
+    for item in split_items(text, field):
+        if "=" in item:
+            key, _, val = (s.strip() for s in item.partition("="))
+            if not key or not val:
+                raise InputError(field, f"{item!r}", "name=value with both sides given")
+            kind, conv = parse_value(val, key)
+            if _WILDCARD.search(key):
+                if (key, kind) in seen_pattern:
+                    raise InputError(field, f"pattern {key!r} given twice", "each name or pattern once")
+                seen_pattern.add((key, kind))
+                hits = [i for i, n in enumerate(names) if fnmatch.fnmatchcase(n, key)
+                        and (kind is None or _param_kind(mech, i) == kind)]
+                if not hits:
+                    raise UnknownNameError(field, f"pattern {key!r} matches no{' ' + kind if kind else ''} "
+                                                  "error parameter", "patterns over " + ", ".join(names))
+                patterns.append((hits, conv))
+            else:
+                i = mech.index(key)  # UnknownNameError for a bad name
+                canon = names[i]
+                if canon in seen_exact:
+                    raise InputError(field, f"{canon} given twice ({seen_exact[canon]!r} and {item!r})",
+                                     "each name or pattern once")
+                seen_exact[canon] = item
+                if kind is not None and _param_kind(mech, i) != kind:
+                    raise InputError(field, f"{item!r}: {canon} is a{'n' if _param_kind(mech, i) == 'angle' else ''} "
+                                            f"{_param_kind(mech, i)} (tolerance unit {mech.units[i]})",
+                                     f"a {_param_kind(mech, i)} unit or a bare number in {mech.units[i]}")
+                exact.append((i, conv))
+        elif set_lookup is not None and not _QTY.match(item):
+            if set_name is not None:
+                raise InputError(field, f"two tolerance sets named ({set_name!r}, {item!r})",
+                                 "one SET, then name=value overrides")
+            set_name = item
+            out = list(set_lookup(item))
+        elif bare_allowed:
+            if bare is not None:
+                raise InputError(field, f"two values for every parameter ({bare[0]!r}, {item!r})",
+                                 "one bare value, then name=value overrides")
+            kind, conv = parse_value(item, "")
+            if kind is not None:  # a suffixed bare value: every parameter of that kind
+                hits = [i for i in range(len(names)) if _param_kind(mech, i) == kind]
+            else:
+                hits = list(range(len(names)))
+            bare = (item, hits, conv)
         else:
-            if base:
-                raise InputError("--tolerances", "more than one tolerance set named", "one SET, then name=value overrides")
-            base = dict(zip(mech.error_parameters, mech.tolerances(part)))
-    base.update(overrides)
-    return mech.tolerances(base)
+            raise InputError(field, f"{item!r}", "name=value items")
+    if set_name is not None and bare is not None:
+        raise InputError(field, f"both a set ({set_name!r}) and a value for every parameter ({bare[0]!r})",
+                         "a SET or a value, then name=value overrides")
+    if bare is not None:
+        for i in bare[1]:
+            out[i] = bare[2](i)
+    for hits, conv in patterns:
+        for i in hits:
+            out[i] = conv(i)
+    for i, conv in exact:
+        out[i] = conv(i)
+    return out
 
 
+def parse_tolerances(mech: Mechanism, text: str, field: str = "--tolerances") -> np.ndarray:
+    """``SET``, ``VALUE``, ``name=VALUE,...`` or ``SET,name=VALUE,...``; patterns such as ``*=0.02``.
+
+    Bare numbers are in each parameter's tolerance unit; a suffix converts (``h2=5um``,
+    ``alpha1=2mrad``).  Without a set or a value for every parameter, every parameter must be named.
+    """
+    n = mech.n
+    vals = _apply_items(mech, text, field, [math.nan] * n, _tolerance_value(mech, field),
+                        set_lookup=lambda s: mech.tolerances(s))
+    missing = [mech.error_parameters[i] for i in range(n) if not math.isfinite(vals[i])]
+    if missing:
+        raise InputError(field, "no tolerance for " + ", ".join(missing),
+                         "a SET, a value for every parameter (VALUE or *=VALUE), or every name=VALUE")
+    return mech.tolerances(dict(zip(mech.error_parameters, vals)))
+
+
+def _plain_value(field: str, what: str):
+    def parse(text: str, where: str):
+        try:
+            v = float(text)
+        except ValueError:
+            raise InputError(f"{field}[{where}]" if where else field, f"{text!r} is not a number", what) from None
+        if not math.isfinite(v):
+            raise InputError(f"{field}[{where}]" if where else field, f"got {text}", what)
+        return None, (lambda i: v)
+
+    return parse
+
+
+def parse_per_parameter(mech: Mechanism, text: str | None, field: str, default, what: str) -> np.ndarray | None:
+    """``--k`` / ``--alpha``: ``VALUE`` for every parameter, ``name=VALUE`` / ``pattern=VALUE`` overrides."""
+    if text is None:
+        return None
+    base = np.broadcast_to(np.asarray(default, dtype=float), (mech.n,)).tolist()
+    return np.array(_apply_items(mech, text, field, base, _plain_value(field, what)), dtype=float)
+
+
+def parse_bounds(mech: Mechanism, text: str | None, field: str = "--bounds"):
+    """``LOW:HIGH`` for every parameter, ``name=LOW:HIGH`` / ``pattern=LOW:HIGH`` overrides; a side
+    left empty keeps the model's bound; units as for the tolerances.  Returns ``(lower, upper)``."""
+    if text is None:
+        return None
+    lo0, hi0 = (np.asarray(b, dtype=float) for b in mech.bounds)
+    tol = _tolerance_value(mech, field)
+    allowed = "LOW:HIGH in each parameter's tolerance unit (or with a unit suffix); a side may be empty"
+
+    def parse(val: str, where: str):
+        if val.count(":") != 1:
+            raise InputError(f"{field}[{where}]" if where else field, f"{val!r}", allowed)
+        a, b = (s.strip() for s in val.split(":"))
+        ka, ca_ = tol(a, where) if a else (None, None)
+        kb, cb = tol(b, where) if b else (None, None)
+        if ka and kb and ka != kb:
+            raise InputError(f"{field}[{where}]" if where else field, f"{val!r} mixes a length and an angle", allowed)
+        return ka or kb, (lambda i: (ca_(i) if ca_ else None, cb(i) if cb else None))
+
+    pairs = _apply_items(mech, text, field, [(None, None)] * mech.n, parse)
+    lo = np.array([p[0] if p[0] is not None else lo0[i] for i, p in enumerate(pairs)])
+    hi = np.array([p[1] if p[1] is not None else hi0[i] for i, p in enumerate(pairs)])
+    return lo, hi
+
+
+# ---------------------------------------------------------------------------------------------
+# output files
+# ---------------------------------------------------------------------------------------------
+PLOT_INSTALL = 'pip install "tolsynth[plot]"'
+
+
+def check_figure_path(path: str | None, field: str = "--out") -> None:
+    """Before any work: matplotlib is installed, it can write the suffix, the folder is writable."""
+    if path is None:
+        return
+    try:
+        from matplotlib.backend_bases import FigureCanvasBase
+    except ImportError:
+        raise InputError(field, "writing a figure needs matplotlib, which is not installed",
+                         f"install it with: {PLOT_INSTALL}") from None
+    types = FigureCanvasBase.get_supported_filetypes()
+    ext = os.path.splitext(path)[1].lstrip(".").lower()
+    if ext not in types:
+        raise InputError(field, f"{path!r}: unsupported figure format {('.' + ext) if ext else '(no suffix)'}",
+                         "a file name ending in " + ", ".join("." + t for t in sorted(types)))
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise InputError(field, f"{path!r}: the folder {folder} does not exist", "a path in an existing folder")
+    if os.path.isdir(path) or not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+        raise InputError(field, f"{path!r} cannot be written", "a writable file path")
+
+
+# ---------------------------------------------------------------------------------------------
+# output
+# ---------------------------------------------------------------------------------------------
 def _jsonable(obj):
     if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
+        return {str(k): _jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [_jsonable(v) for v in obj]
     if isinstance(obj, np.ndarray):
@@ -59,8 +427,10 @@ def _jsonable(obj):
     if isinstance(obj, (np.floating, float)):
         v = float(obj)
         return v if math.isfinite(v) else str(v)
-    if isinstance(obj, np.integer):
+    if isinstance(obj, (np.integer,)):
         return int(obj)
+    if isinstance(obj, (np.bool_,)):
+        return bool(obj)
     return obj
 
 
@@ -68,15 +438,46 @@ def emit_json(obj) -> None:
     print(json.dumps(_jsonable(obj), indent=2))
 
 
+def inputs_record(args, mech: Mechanism | None = None, **resolved) -> dict:
+    """What a ``--json`` output records about its inputs: the package version, the command, every
+    argument as given, the model (name, title, file) and the resolved values (mm, rad and
+    tolerance units), so that the run can be repeated and audited."""
+    given = {k: v for k, v in vars(args).items() if k not in ("func", "task")}
+    rec = {"tolsynth_version": version(), "command": getattr(args, "command", None), "arguments": given}
+    if mech is not None:
+        rec["model"] = {"name": mech.name, "title": mech.title,
+                        "file": str(getattr(mech.spec, "path", "") or "")}
+        rec["error_parameters"] = list(mech.error_parameters)
+        rec["tolerance_units"] = dict(zip(mech.error_parameters, mech.units))
+    rec.update(resolved)
+    return _jsonable(rec)
+
+
 def fmt_vec(v, fmt="{:.6g}") -> str:
     return "(" + ", ".join(fmt.format(x) for x in np.asarray(v).ravel()) + ")"
 
 
+def add_model_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--model", required=True, help="bundled model name (see tolsynth.bundled_models()) or path to a .toml model file")
+
+
+def add_dist_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dist", choices=["uniform", "normal"], default="uniform",
+                   help="distribution of each error in its band: uniform (variance eps^2/3) or normal (3 sigma = eps)")
+
+
+TOLERANCES_HELP = ("SET | VALUE | name=VALUE,... | SET,name=VALUE,...; patterns such as *=0.02 or h*=0.01; "
+                   "bare numbers in each parameter's tolerance unit, or with a unit suffix (0.1mm, 5um, 2mrad, 0.01deg)")
+POSE_HELP = "configuration name, or joint values in deg, comma-separated (a suffix such as 1.2rad allowed)"
+
+
 def add_pose_arguments(p: argparse.ArgumentParser) -> None:
     """The arguments of a one-pose analysis: model, pose, tolerances, distribution, R, Phi."""
-    p.add_argument("--model", required=True, help="bundled model name or path to a .toml file")
-    p.add_argument("--pose", default="worst", help="configuration name or joint angles in deg, comma-separated")
-    p.add_argument("--tolerances", required=True, help="SET | name=value,... | SET,name=value,...")
-    p.add_argument("--dist", choices=["uniform", "normal"], default="uniform")
-    p.add_argument("--R", type=float, required=True, help="radius of the accuracy sphere (mm)")
-    p.add_argument("--Phi", type=float, default=None, help="orientation cone half-angle (rad)")
+    add_model_argument(p)
+    p.add_argument("--pose", default=None, help=POSE_HELP + "; default: the model's reference pose")
+    p.add_argument("--tolerances", required=True, help=TOLERANCES_HELP)
+    add_dist_argument(p)
+    p.add_argument("--R", type=length_mm("--R"), required=True,
+                   help="radius of the accuracy sphere, mm (or with a suffix: 500um)")
+    p.add_argument("--Phi", type=angle_rad("--Phi"), default=None,
+                   help="orientation cone half-angle, rad (or with a suffix: 2mrad, 0.1deg); default: none")

@@ -1,38 +1,125 @@
-"""``tolsynth solve``: optimal tolerances for one specification."""
+"""``tolsynth solve``: optimal tolerances for one specification (IPOPT, SUMT + Powell, or both)."""
 
 from __future__ import annotations
 
 import sys
 
+import numpy as np
+
 from ..errors import InputError
 from ..mechanism import load_model
-from .args import emit_json, parse_pose
+from .args import (
+    POSE_HELP,
+    add_dist_argument,
+    add_model_argument,
+    angle_rad,
+    emit_json,
+    inputs_record,
+    length_mm,
+    number,
+    parse_bounds,
+    parse_per_parameter,
+    parse_poses,
+    parse_reference,
+    pose_label,
+)
 
-__all__ = ["register"]
+__all__ = ["register", "side_by_side"]
 
 
 def _fmt(v) -> str:
     return "(" + ", ".join(f"{x:.1f}" for x in v) + ")"
 
 
+def side_by_side(c, width: int = 22) -> str:
+    """Everything a single solve's summary shows, for IPOPT and SUMT + Powell side by side: status,
+    cost, dual lower bound and gap, tolerances with units and bound markers, the constraint values
+    and multipliers, iterations, evaluations and time, with relative differences."""
+    i, s = c.ipopt, c.sumt
+    w = width
+    labels = [f"  {b.label} [{j + 1}]" for b in i.constraints for j in range(len(b.values))]
+    lw = max([24] + [len(x) + 2 for x in labels])
+
+    def row(label, a, b, diff=""):
+        return f"{label:<{lw}}{a:>{w}}{b:>{w}}{diff:>12}"
+
+    def rel(a, b):
+        return f"{abs(b - a) / abs(a):.2e}" if a not in (0, None) and np.isfinite(a) and np.isfinite(b) else "-"
+
+    lines = [row("", "IPOPT", "SUMT + Powell", "rel. diff"),
+             row("status", str(i.status), str(s.status)),
+             row("cost", f"{i.cost:.8g}", f"{s.cost:.8g}", rel(i.cost, s.cost)),
+             row("dual lower bound", f"{i.lower_bound:.8g}", f"{s.lower_bound:.8g}"),
+             row("gap (cost - bound)", f"{i.gap:.2e}", f"{s.gap:.2e}"),
+             row("max sigma z / limit", f"{i.max_constraint:.6f}", f"{s.max_constraint:.6f}")]
+    lines.append("tolerances (bound markers: [lower] / [upper] = at that bound)")
+    for name, v in i.tolerances.items():
+        u = i.units[name]
+        a = f"{v:.6g} {u}" + (f" [{i.bounds_active[name]}]" if name in i.bounds_active else "")
+        vs = s.tolerances[name]
+        b = f"{vs:.6g} {u}" + (f" [{s.bounds_active[name]}]" if name in s.bounds_active else "")
+        lines.append(row(f"  {name}", a, b, rel(v, vs)))
+    lines.append("constraints: sigma z / limit (for the sphere (1-P)/(1-p)), <= 1; (Lagrange multiplier)")
+    for bi, bs in zip(i.constraints, s.constraints):
+        for j in range(len(bi.values)):
+            lines.append(row(f"  {bi.label} [{j + 1}]", f"{bi.values[j]:.6f} ({bi.multipliers[j]:.4g})",
+                             f"{bs.values[j]:.6f} ({bs.multipliers[j]:.4g})"))
+    lines += [row("iterations", str(i.iterations), str(s.iterations)),
+              row("evaluations", str(i.function_evaluations), str(s.function_evaluations)),
+              row("time (ms)", f"{i.wall_time * 1e3:.2f}", f"{s.wall_time * 1e3:.2f}",
+                  f"{c.time_ratio:.1f}x" if i.wall_time > 0 else "-"),
+              f"IPOPT: {i.message}", f"SUMT:  {s.message}"]
+    return "\n".join(lines)
+
+
+def _spec_kwargs(mech, args) -> tuple:
+    kw = dict(Phi=args.Phi, criterion=args.criterion)
+    if args.p_orientation is not None:
+        if args.Phi is None:
+            raise InputError("--p-orientation", "given without --Phi", "--Phi ANGLE together with --p-orientation P")
+        kw["p_orientation"] = args.p_orientation
+    alpha = parse_per_parameter(mech, args.alpha, "--alpha", 0.7, "a number > 0 (the paper: 0.7)")
+    k = parse_per_parameter(mech, args.k, "--k", mech.k, "a number > 0")
+    bounds = parse_bounds(mech, args.bounds)
+    if k is not None:
+        kw["k"] = k
+    if bounds is not None:
+        kw["bounds"] = bounds
+    return alpha if alpha is not None else 0.7, kw
+
+
 def cmd_solve(args) -> int:
     from ..synthesis import compare, synthesize
 
     mech = load_model(args.model)
-    pose = parse_pose(mech, args.pose)
-    kw = dict(pose=pose, Phi=args.Phi, criterion=args.criterion)
+    alpha, kw = _spec_kwargs(mech, args)
+    head = (f"{mech.name}: R={args.R:g} mm, p={args.p:g}, alpha={args.alpha or 0.7}, {args.dist} errors"
+            + (f", Phi={args.Phi:g} rad" if args.Phi is not None else ""))
+    record = dict(R_mm=args.R, p=args.p, distribution=args.dist, alpha=alpha, criterion=args.criterion,
+                  Phi_rad=args.Phi, p_orientation=kw.get("p_orientation"), solver=args.solver,
+                  k=kw.get("k", mech.k), bounds=kw.get("bounds", mech.bounds))
     if args.everywhere:
+        from ..joint_space import _reference
         from ..synthesis import synthesize_workspace
 
         if args.solver == "both":
             raise InputError("--solver", "'both' does not combine with --everywhere", "ipopt or sumt")
-        w = synthesize_workspace(mech, args.R, args.p, args.dist, args.alpha, solver=args.solver, **kw)
+        if args.pose and len(args.pose) > 1:
+            raise InputError("--pose", "given more than once with --everywhere", "one starting pose, or --reference")
+        if args.pose:
+            start = parse_poses(mech, args.pose)[0]
+        else:
+            name, q = _reference(mech, parse_reference(mech, args.reference))
+            start = name if (name is not None and name != "given") else q  # None: the search's worst pose
+        w = synthesize_workspace(mech, args.R, args.p, args.dist, alpha, solver=args.solver, pose=start, **kw)
         if args.json:
             out = w.result.to_dict()
             out.update(converged=w.converged, rounds=w.rounds, poses=w.poses)
+            out["inputs"] = inputs_record(args, mech, start_pose=pose_label(start) if start is not None else None,
+                                          everywhere=True, **record)
             emit_json(out)
         else:
-            print(f"{mech.name}: R={args.R:g} mm, p={args.p:g}, alpha={args.alpha:g}, {args.dist} errors, every pose")
+            print(f"{head}, every pose")
             for k, r in enumerate(w.rounds):
                 print(f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.6g}, worst sigma z/R over the "
                       f"workspace {r['worst_value']:.5f} at hand {_fmt(r['worst_position'])} mm")
@@ -41,21 +128,32 @@ def cmd_solve(args) -> int:
             print("tolsynth solve: no convergence over the workspace; the numbers above are not an optimum", file=sys.stderr)
             return 1
         return 0
+    if args.reference is not None:
+        raise InputError("--reference", "only used with --everywhere (the pose the search starts from)",
+                         "--pose for the poses of a single solve")
+    poses = parse_poses(mech, args.pose)
+    kw["poses"] = poses
+    record["poses"] = [pose_label(q) for q in poses]
+    where = ", ".join(q if isinstance(q, str) else "(" + ", ".join(f"{np.degrees(v):.4g}" for v in q) + ") deg"
+                      for q in poses)
     if args.solver == "both":
-        c = compare(mech, args.R, args.p, args.dist, args.alpha, **kw)
+        c = compare(mech, args.R, args.p, args.dist, alpha, **kw)
         if args.json:
-            emit_json(c.to_dict())
+            out = c.to_dict()
+            out["inputs"] = inputs_record(args, mech, **record)
+            emit_json(out)
         else:
-            print(f"{mech.name}: R={args.R:g} mm, p={args.p:g}, alpha={args.alpha:g}, {args.dist} errors, pose {args.pose}")
-            print(c.table())
-            print(f"IPOPT: {c.ipopt.message}\nSUMT:  {c.sumt.message}")
+            print(f"{head}, pose{'s' if len(poses) > 1 else ''} {where}")
+            print(side_by_side(c))
         ok = c.ipopt.success and c.sumt.success
     else:
-        res = synthesize(mech, args.R, args.p, args.dist, args.alpha, solver=args.solver, **kw)
+        res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
         if args.json:
-            emit_json(res.to_dict())
+            out = res.to_dict()
+            out["inputs"] = inputs_record(args, mech, **record)
+            emit_json(out)
         else:
-            print(f"{mech.name}: R={args.R:g} mm, p={args.p:g}, alpha={args.alpha:g}, {args.dist} errors, pose {args.pose}")
+            print(f"{head}, pose{'s' if len(poses) > 1 else ''} {where}")
             print(res.summary())
         ok = res.success
     if not ok:
@@ -65,18 +163,44 @@ def cmd_solve(args) -> int:
 
 
 def register(sub) -> None:
-    p = sub.add_parser("solve", help="optimal tolerances for one specification")
-    p.add_argument("--model", required=True, help="bundled model name or path to a .toml file")
-    p.add_argument("--R", type=float, required=True, help="position accuracy radius (mm)")
-    p.add_argument("--p", type=float, required=True, help="probability per principal component, 0 < p < 1")
-    p.add_argument("--dist", choices=["uniform", "normal"], default="uniform")
-    p.add_argument("--alpha", type=float, default=0.7, help="cost exponent (default 0.7)")
-    p.add_argument("--solver", choices=["ipopt", "sumt", "both"], default="ipopt")
-    p.add_argument("--pose", default="worst", help="configuration name or joint angles in deg")
-    p.add_argument("--Phi", type=float, default=None, help="orientation accuracy half-angle (rad), optional")
+    """Add ``tolsynth solve`` to the sub-command parser."""
+    p = sub.add_parser(
+        "solve", help="optimal tolerances for one specification",
+        description="Cheapest tolerances such that each principal component of the hand position error "
+                    "stays within R with probability p (the paper's Eq. 20), or the sphere P(|dr| <= R) >= p; "
+                    "at one or more poses, or at every reachable pose (--everywhere).")
+    add_model_argument(p)
+    p.add_argument("--R", type=length_mm("--R"), required=True,
+                   help="position accuracy radius, mm (or with a suffix: 500um)")
+    p.add_argument("--p", type=number("--p", "0 < p < 1"), required=True,
+                   help="probability per principal component (or of the sphere), 0 < p < 1")
+    add_dist_argument(p)
+    p.add_argument("--alpha", default=None,
+                   help="cost exponent: VALUE for every parameter, name=VALUE or pattern=VALUE overrides "
+                        "(e.g. 0.7,alpha*=0.5); default: 0.7")
+    p.add_argument("--k", default=None,
+                   help="cost factors k in sum k eps^-alpha: VALUE, name=VALUE, pattern=VALUE; default: the model's")
+    p.add_argument("--bounds", default=None,
+                   help="tolerance bounds LOW:HIGH (either side may be empty: the model's), for every parameter "
+                        "or as name=LOW:HIGH / pattern=LOW:HIGH; in each parameter's tolerance unit or with a "
+                        "suffix (h*=5um:0.2mm); default: the model's")
+    p.add_argument("--solver", choices=["ipopt", "sumt", "both"], default="ipopt",
+                   help="IPOPT (exact derivatives), the paper's SUMT + Powell, or both side by side")
+    p.add_argument("--pose", action="append", default=None,
+                   help=POSE_HELP + "; repeat the option for several poses (the constraints hold at each); "
+                        "default: the model's reference pose")
+    p.add_argument("--Phi", type=angle_rad("--Phi"), default=None,
+                   help="orientation accuracy half-angle, rad (or with a suffix: 2mrad, 0.1deg); default: none")
+    p.add_argument("--p-orientation", dest="p_orientation",
+                   type=number("--p-orientation", "0 < p < 1"), default=None,
+                   help="probability of the orientation specification, 0 < p < 1; default: --p")
     p.add_argument("--criterion", choices=["components", "sphere"], default="components",
                    help="per principal component (the paper's Eq. 20) or the sphere P(|dr| <= R) >= p")
     p.add_argument("--everywhere", action="store_true",
                    help="impose the constraint at every reachable pose (exchange method with the worst-pose search)")
-    p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_solve)
+    p.add_argument("--reference", default=None,
+                   help="with --everywhere: the pose the exchange method starts from: NAME, none (the search's "
+                        "worst pose at mid-bound tolerances), or joint values in deg; default: the model's "
+                        "reference pose (its 'worst' configuration if it has one, else none)")
+    p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
+    p.set_defaults(func=cmd_solve, task="the solve")

@@ -10,24 +10,60 @@ from ..errors import InputError
 from ..mechanism import load_model
 from ..pose_search import worst_pose
 from ..workspace_map import PLANES, ProbabilityMap, probability_map
-from .args import emit_json, parse_tolerances
+from .args import (
+    TOLERANCES_HELP,
+    add_dist_argument,
+    add_model_argument,
+    check_figure_path,
+    emit_json,
+    inputs_record,
+    length_mm,
+    number,
+    parse_reference,
+    parse_tolerances,
+    quantity,
+    split_items,
+)
 
 __all__ = ["register"]
 
+REFERENCE_HELP = ("reference pose: a configuration NAME, none, or joint values in deg, comma-separated; "
+                  "default: the model's reference pose (its 'worst' configuration if it has one, else none)")
+
+
+def _hand_axis(text: str):
+    if text.strip().lower() == "free":
+        return None
+    allowed = "3 comma-separated numbers (a direction in the base frame, not all 0), or 'free'"
+    items = split_items(text, "--hand-axis")
+    try:
+        axis = np.array([float(x) for x in items])
+    except ValueError:
+        raise InputError("--hand-axis", f"{text!r}", allowed) from None
+    if axis.shape != (3,) or not np.all(np.isfinite(axis)) or not np.any(axis):
+        raise InputError("--hand-axis", f"{text!r}", allowed)
+    return axis
+
+
+def _extent(text: str | None):
+    if text is None:
+        return None
+    items = split_items(text, "--extent")
+    if len(items) != 4:
+        raise InputError("--extent", f"{text!r}: {len(items)} values", "umin,umax,vmin,vmax in mm (suffixes allowed)")
+    return [quantity(x, "--extent", "length", "mm") for x in items]
+
 
 def _cmd_map(args) -> int:
+    check_figure_path(args.out)  # before any work: matplotlib, the format, the folder
     mech = load_model(args.model)
     eps = parse_tolerances(mech, args.tolerances)
     label = args.tolerances
-    extent = None
-    if args.extent:
-        try:
-            extent = [float(x) for x in args.extent.split(",")]
-        except ValueError:
-            raise InputError("--extent", f"{args.extent!r}", "umin,umax,vmin,vmax in mm") from None
-    axis = None if args.hand_axis == "free" else [float(x) for x in args.hand_axis.split(",")]
+    extent = _extent(args.extent)
+    axis = _hand_axis(args.hand_axis)
+    reference = parse_reference(mech, args.reference)
     pm = probability_map(mech, eps, R=args.R, distribution=args.dist, n=args.n, plane=args.plane,
-                         offset=args.offset, hand_axis=axis, extent=extent,
+                         offset=args.offset, hand_axis=axis, extent=extent, reference=reference,
                          progress=False if args.quiet else None)
     pm = ProbabilityMap(**{**pm.__dict__, "tolerance_label": label})
     if args.out:
@@ -40,15 +76,20 @@ def _cmd_map(args) -> int:
     if args.json:
         out = {k: v for k, v in pm.to_dict().items() if k not in ("Q", "sigma")}
         out["out"] = args.out
+        out["inputs"] = inputs_record(args, mech, tolerances=pm.tolerances, distribution=args.dist, R_mm=args.R,
+                                      plane=args.plane, offset_mm=args.offset, hand_axis=axis, extent_mm=extent,
+                                      reference=pm.reference, n=args.n)
         emit_json(out)
     else:
         rch = pm.reachable
         print(f"map          {mech.name}, plane {pm.plane}, {args.n} x {args.n} points, {int(rch.sum())} reachable")
         print(f"extent       {pm.u[0]:.1f} .. {pm.u[-1]:.1f} x {pm.v[0]:.1f} .. {pm.v[-1]:.1f} mm")
-        print(f"P(dr<=R)     {np.nanmin(pm.P):.4f} .. {np.nanmax(pm.P):.4f}  (R = {pm.R:g} mm, {pm.distribution})")
-        print(f"lowest P     {pm.worst[2]:.4f} at ({pm.worst[0]:.1f}, {pm.worst[1]:.1f}) mm")
+        if rch.any():
+            print(f"P(dr<=R)     {np.nanmin(pm.P):.4f} .. {np.nanmax(pm.P):.4f}  (R = {pm.R:g} mm, {pm.distribution})")
+            print(f"lowest P     {pm.worst[2]:.4f} at ({pm.worst[0]:.1f}, {pm.worst[1]:.1f}) mm")
+        print(f"reference    {pm.reference or 'none'}")
         print(f"branch       {pm.branch}")
-        print("held         " + "; ".join(f"{k} = {math.degrees(v):g} deg ({w})" for k, (v, w) in pm.fixed.items()))
+        print("held         " + ("; ".join(f"{k} = {math.degrees(v):g} deg ({w})" for k, (v, w) in pm.fixed.items()) or "none"))
         print(f"time         {pm.elapsed_s:.2f} s")
         if args.out:
             print(f"figure       {args.out}")
@@ -59,9 +100,12 @@ def _cmd_worst(args) -> int:
     mech = load_model(args.model)
     eps = parse_tolerances(mech, args.tolerances)
     w = worst_pose(mech, eps, criterion=args.criterion, R=args.R, distribution=args.dist, grid=args.grid,
-                   reference=args.reference if args.reference != "none" else None)
+                   reference=parse_reference(mech, args.reference))
     if args.json:
-        emit_json(w.to_dict())
+        out = w.to_dict()
+        out["inputs"] = inputs_record(args, mech, tolerances=w.tolerances, distribution=args.dist, R_mm=args.R,
+                                      criterion=args.criterion, reference=w.reference)
+        emit_json(out)
     else:
         print(w.report(mech.joint_names))
     return 0
@@ -69,28 +113,42 @@ def _cmd_worst(args) -> int:
 
 def register(sub) -> None:
     """Add ``tolsynth map`` and ``tolsynth worst-pose`` to the sub-command parser."""
-    p = sub.add_parser("map", help="P(dr <= R) over the reachable part of a plane (the paper's Figure 3)")
-    p.add_argument("--model", required=True, help="bundled model name or path to a .toml file")
-    p.add_argument("--tolerances", default="figure3", help="SET | name=value,... | SET,name=value,...")
-    p.add_argument("--dist", choices=["uniform", "normal"], default="uniform")
-    p.add_argument("--R", type=float, default=0.2, help="radius of the accuracy sphere (mm)")
-    p.add_argument("--n", type=int, default=100, help="grid points per axis")
-    p.add_argument("--plane", choices=sorted(PLANES), default="xz")
-    p.add_argument("--offset", type=float, default=0.0, help="offset of the plane along its normal (mm)")
-    p.add_argument("--hand-axis", default="0,0,1", help="hand z axis in the base frame, or 'free'")
-    p.add_argument("--extent", default=None, help="umin,umax,vmin,vmax (mm); default: the reachable box")
-    p.add_argument("--out", default=None, help="figure file (.png, .pdf, ...)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--json", action="store_true")
-    p.set_defaults(func=_cmd_map)
+    p = sub.add_parser("map", help="P(dr <= R) over the reachable part of a plane (the paper's Figure 3)",
+                       description="P(|dr| <= R) of the linear, Gaussian model over the reachable part of a "
+                                   "base-frame plane for a fixed hand axis, by inverse kinematics on the model's "
+                                   "forward-kinematics graph; optionally drawn as the paper's Figure 3.")
+    add_model_argument(p)
+    p.add_argument("--tolerances", default="figure3", help=TOLERANCES_HELP)
+    add_dist_argument(p)
+    p.add_argument("--R", type=length_mm("--R"), default=0.2, help="radius of the accuracy sphere, mm (suffixes allowed)")
+    p.add_argument("--n", type=number("--n", "an integer >= 5", integer=True), default=100,
+                   help="grid points per axis")
+    p.add_argument("--plane", choices=sorted(PLANES), default="xz", help="base-frame plane of the map")
+    p.add_argument("--offset", type=length_mm("--offset"), default=0.0,
+                   help="offset of the plane along its normal, mm (suffixes allowed)")
+    p.add_argument("--hand-axis", default="0,0,1",
+                   help="hand z axis in the base frame (3 numbers, normalised), or 'free' for any orientation")
+    p.add_argument("--extent", default=None,
+                   help="umin,umax,vmin,vmax of the grid, mm (suffixes allowed); default: the reachable box")
+    p.add_argument("--reference", default=None, help=REFERENCE_HELP + "; the continuation starts there and it is marked")
+    p.add_argument("--out", default=None,
+                   help="figure file (.png, .pdf, .svg, ...; needs matplotlib: pip install \"tolsynth[plot]\"); default: none")
+    p.add_argument("--quiet", action="store_true", help="no progress report on stderr")
+    p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
+    p.set_defaults(func=_cmd_map, task="the workspace map")
 
-    p = sub.add_parser("worst-pose", help="search the joint space for the pose of worst accuracy")
-    p.add_argument("--model", required=True, help="bundled model name or path to a .toml file")
-    p.add_argument("--tolerances", default="figure3", help="SET | name=value,... | SET,name=value,...")
-    p.add_argument("--dist", choices=["uniform", "normal"], default="uniform")
-    p.add_argument("--criterion", choices=["sigma", "probability"], default="sigma")
-    p.add_argument("--R", type=float, default=None, help="radius (mm); needed for --criterion probability")
-    p.add_argument("--grid", type=int, default=None, help="grid points per searched joint")
-    p.add_argument("--reference", default="worst", help="configuration to report beside the result, or 'none'")
-    p.add_argument("--json", action="store_true")
-    p.set_defaults(func=_cmd_worst)
+    p = sub.add_parser("worst-pose", help="search the joint space for the pose of worst accuracy",
+                       description="Grid plus pattern search over the joint space (inside the joint limits and "
+                                   "constraints) for the pose of largest principal sigma or lowest P(|dr| <= R).")
+    add_model_argument(p)
+    p.add_argument("--tolerances", default="figure3", help=TOLERANCES_HELP)
+    add_dist_argument(p)
+    p.add_argument("--criterion", choices=["sigma", "probability"], default="sigma",
+                   help="largest principal standard deviation, or lowest P(|dr| <= R) (needs --R)")
+    p.add_argument("--R", type=length_mm("--R"), default=None,
+                   help="radius, mm (suffixes allowed); needed for --criterion probability; default: none")
+    p.add_argument("--grid", type=number("--grid", "an integer >= 2", integer=True), default=None,
+                   help="grid points per searched joint; default: as many as keep the grid under 20000 points")
+    p.add_argument("--reference", default=None, help=REFERENCE_HELP + "; reported beside the result")
+    p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
+    p.set_defaults(func=_cmd_worst, task="the worst-pose search")
