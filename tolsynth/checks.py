@@ -67,18 +67,18 @@ def _as_float(x: Any, field: str, allowed: str) -> float:
 def check_real(x: Any, field: str, unit: str = "", lower: float = -HUGE, upper: float = HUGE) -> float:
     """``x`` as a float, or a typed error unless it is a finite number in ``[lower, upper]``."""
     u = f" {unit}" if unit else ""
-    allowed = f"a finite number from {lower:g} to {upper:g}{u}"
+    allowed = f"a finite number >= {lower:g} and <= {upper:g}{u}"
     v = _as_float(x, field, allowed)
     if not lower <= v <= upper:
         raise OutOfRangeError(field, f"got {x!r}", allowed)
     return v
 
 
-def check_positive(x: Any, field: str, unit: str = "mm", upper: float = HUGE) -> float:
-    """``x`` as a float, or a typed error unless ``TINY <= x <= upper`` (a positive quantity)."""
-    allowed = f"a finite number > 0, from {TINY:g} to {upper:g} ({unit})"
+def check_positive(x: Any, field: str, unit: str = "mm", upper: float = HUGE, lower: float = TINY) -> float:
+    """``x`` as a float, or a typed error unless ``lower <= x <= upper`` (a positive quantity)."""
+    allowed = f"a finite number > 0, from {lower:g} to {upper:g}" + (f" ({unit})" if unit else "")
     v = _as_float(x, field, allowed)
-    if not TINY <= v <= upper:
+    if not (v > 0 and lower <= v <= upper):
         raise OutOfRangeError(field, f"got {x!r}", allowed)
     return v
 
@@ -115,10 +115,11 @@ def check_seed(seed: Any, field: str = "seed") -> int:
 
 
 def check_vector(x: Any, field: str, size: int | None = None, unit: str = "",
-                 lower: float = -HUGE, upper: float = HUGE) -> np.ndarray:
-    """A 1-D float array of finite numbers in ``[lower, upper]`` (of length ``size`` if given)."""
+                 lower: float = -HUGE, upper: float = HUGE, names=None) -> np.ndarray:
+    """A 1-D float array of finite numbers in ``[lower, upper]`` (of length ``size`` if given);
+    an offending element is named ``field[names[i]]`` (or ``field[i]``)."""
     u = f" {unit}" if unit else ""
-    allowed = f"{size if size is not None else 'some'} finite numbers from {lower:g} to {upper:g}{u}"
+    allowed = f"{size if size is not None else 'some'} finite numbers >= {lower:g} and <= {upper:g}{u}"
     if isinstance(x, (str, bytes)) or x is None:
         raise InputError(field, f"expected numbers, got {x!r}", allowed)
     try:
@@ -133,5 +134,42 @@ def check_vector(x: Any, field: str, size: int | None = None, unit: str = "",
     bad = ~(np.isfinite(arr) & (arr >= lower) & (arr <= upper))
     if np.any(bad):
         i = int(np.flatnonzero(bad)[0])
-        raise OutOfRangeError(f"{field}[{i}]", f"got {arr[i]!r}", allowed)
+        raise OutOfRangeError(f"{field}[{names[i] if names is not None else i}]", f"got {float(arr[i])!r}", allowed)
     return arr
+
+
+def check_mapping(x: Any, field: str, allowed: str = "a dict", optional: bool = True) -> dict:
+    """``x`` as a dict (``None`` -> ``{}`` when ``optional``), or InputError unless it is a mapping."""
+    from collections.abc import Mapping
+
+    if x is None and optional:
+        return {}
+    if not isinstance(x, Mapping):
+        raise InputError(field, f"expected a dict, got {type(x).__name__}: {x!r:.60}", allowed)
+    return dict(x)
+
+
+def check_options(options: Any, defaults: dict, field: str = "options") -> dict:
+    """Solver options: a dict whose keys are those of ``defaults``; each value of the type of its
+    default (a float default: a positive number; an int: a count >= 0; None: None or a positive
+    number; a string: a string)."""
+    import difflib
+
+    options = check_mapping(options, field, "a dict with keys " + ", ".join(defaults))
+    for key, value in options.items():
+        if key not in defaults:
+            near = difflib.get_close_matches(str(key), list(defaults), n=1)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise InputError(field, f"unknown option {key!r}{hint}", ", ".join(defaults))
+        default = defaults[key]
+        where = f"{field}[{key!r}]"
+        if isinstance(default, bool):
+            if not isinstance(value, (bool, np.bool_)):
+                raise InputError(where, f"got {value!r}", "True or False")
+        elif isinstance(default, int):
+            check_count(value, where, lower=0, upper=10**9)
+        elif isinstance(default, float) or (default is None and value is not None):
+            check_positive(value, where, "", lower=1e-300)  # solver tolerances may be tiny
+        elif isinstance(default, str) and not isinstance(value, str):
+            raise InputError(where, f"got {value!r}", "a string")
+    return options

@@ -18,6 +18,7 @@ from typing import Mapping, Sequence, Union
 
 import numpy as np
 
+from .checks import HUGE, check_mapping, check_real, check_vector
 from .errors import InputError, LoopClosureError, OutOfRangeError, UnknownNameError
 from .kinematics import Graphs, build_graphs
 from .model import ErrorParameter, MechanismSpec, model_path, read_model_file
@@ -156,7 +157,7 @@ class Mechanism:
         """Position of an error parameter by name or alias (``"h2"`` or ``"x1"``)."""
         try:
             return self._index[name]
-        except KeyError:
+        except (KeyError, TypeError):
             raise UnknownNameError(
                 "error parameter", f"unknown name {name!r}", "one of " + ", ".join(self.error_parameters)
             ) from None
@@ -174,7 +175,7 @@ class Mechanism:
 
         params = list(self.parameters)
         factors = np.ones(self.n)
-        for name, unit in units.items():
+        for name, unit in check_mapping(units, "units", "a dict parameter name -> unit").items():
             i = self.index(name)
             par = params[i]
             if unit_kind(unit) != par.kind:
@@ -203,12 +204,7 @@ class Mechanism:
             waive = self.spec.configurations[q].waive
             qv = self.configurations[q].copy()
         else:
-            qv = np.asarray(q, dtype=float).ravel()
-            if qv.shape != (len(self.joint_names),):
-                raise InputError("q", f"expected {len(self.joint_names)} joint values, got shape {np.shape(q)}",
-                                 f"{len(self.joint_names)} values in rad, order {self.joint_names}")
-            if not np.all(np.isfinite(qv)):
-                raise InputError("q", f"non-finite joint value in {qv}", "finite values in rad")
+            qv = check_vector(q, "q", len(self.joint_names), "rad", names=self.joint_names)
             for cfg in self.spec.configurations.values():
                 if cfg.waive and np.array_equal(qv, np.array(cfg.q)):
                     waive = cfg.waive
@@ -242,14 +238,9 @@ class Mechanism:
             return out
         if isinstance(deltas, Mapping):
             for name, value in deltas.items():
-                out[self.index(name)] = float(value)
+                out[self.index(name)] = check_real(value, f"deltas[{name}]", "tolerance units")
         else:
-            arr = np.asarray(deltas, dtype=float).ravel()
-            if arr.shape != (self.n,):
-                raise InputError("deltas", f"expected {self.n} values, got {arr.size}", f"order {self.error_parameters}")
-            out[:] = arr
-        if not np.all(np.isfinite(out)):
-            raise InputError("deltas", "non-finite value", "finite numbers in each parameter's tolerance unit")
+            out[:] = check_vector(deltas, "deltas", self.n, "tolerance units", names=self.error_parameters)
         return out
 
     def tolerances(self, tolerances: ToleranceInput) -> np.ndarray:
@@ -269,18 +260,15 @@ class Mechanism:
             given = np.zeros(self.n, dtype=bool)
             for name, value in tolerances.items():
                 i = self.index(name)
-                out[i] = float(value)
+                if given[i]:
+                    raise InputError(f"tolerances[{name}]", "given twice (by name and alias)", "one value per parameter")
+                out[i] = check_real(value, f"tolerances[{name}]", "tolerance units", 0.0, HUGE)
                 given[i] = True
             missing = [self.error_parameters[i] for i in np.flatnonzero(~given)]
             if missing:
                 raise InputError("tolerances", f"missing value(s) for {missing}", "a value for every error parameter")
         else:
-            out = np.asarray(tolerances, dtype=float).ravel()
-            if out.shape != (self.n,):
-                raise InputError("tolerances", f"expected {self.n} values, got {out.size}", f"order {self.error_parameters}")
-        for name, v in zip(self.error_parameters, out):
-            if not (math.isfinite(v) and v >= 0):
-                raise OutOfRangeError(f"tolerances[{name}]", f"got {v}", "a finite half-width >= 0")
+            out = check_vector(tolerances, "tolerances", self.n, "tolerance units", 0.0, HUGE, self.error_parameters)
         return out
 
     # ------------------------------------------------------------------ kinematics

@@ -39,7 +39,8 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from .errors import LoopClosureError, OutOfRangeError
+from .checks import check_count, check_seed
+from .errors import LoopClosureError
 from .numpy_eval import NumpyEvaluator
 from .progress import Progress, make_bar  # noqa: F401  (make_bar: re-exported for older imports)
 from .stats import check_positive, check_probability, principal, variance_divisor
@@ -54,6 +55,7 @@ __all__ = [
 ]
 
 DEFAULT_BATCH = 1 << 14  # samples per batch: a few MB of work arrays, whatever n is
+MAX_BATCH = 1 << 20  # a few hundred MB of work arrays
 
 
 # =============================================================================================
@@ -88,15 +90,11 @@ def wilson_interval(k, n: int, confidence: float = 0.95) -> np.ndarray:
 
 
 def _check_n(n, field: str = "n") -> int:
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer, float)) or n != int(n) or int(n) <= 0:
-        raise OutOfRangeError(field, f"got {n!r}", "an integer >= 1")
-    return int(n)
+    """Samples (up to 1e12) or a batch size (up to MAX_BATCH: its work arrays must fit in memory)."""
+    return check_count(n, field, 1, MAX_BATCH if field == "batch" else 10**12)
 
 
-def _check_seed(seed) -> int:
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or int(seed) < 0:
-        raise OutOfRangeError("seed", f"got {seed!r}", "an integer >= 0 (recorded in the result)")
-    return int(seed)
+_check_seed = check_seed
 
 
 # =============================================================================================

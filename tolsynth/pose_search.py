@@ -23,11 +23,15 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .batch_stats import _criterion_batch, principal_std_batch
+from .checks import check_count, check_mapping, check_positive, check_real, check_seed
 from .errors import InputError, OutOfRangeError, UnknownNameError
 from .joint_space import MODEL_REFERENCE, _feasible, _limits, _reference
-from .stats import check_positive, p_ball, variance_divisor
+from .stats import p_ball, variance_divisor
 
 __all__ = ["WorstPose", "worst_pose"]
+
+#: largest number of grid points of the coarse search (memory ~ 100 bytes per point and joint)
+MAX_GRID_POINTS = 10**6
 
 
 def _invariant_joints(mech, eps, distribution, rng) -> list[int]:
@@ -228,9 +232,13 @@ def worst_pose(
         R = check_positive(R, "R")
     elif criterion == "probability":
         raise InputError("R", "criterion 'probability' needs a radius", "a finite number > 0 (mm)")
-    starts = int(starts)
-    if starts < 1:
-        raise OutOfRangeError("starts", f"got {starts}", "an integer >= 1")
+    starts = check_count(starts, "starts", 1, 1000)
+    step_tol = check_positive(step_tol, "step_tol", "fraction of each joint's range", upper=1.0)
+    max_grid_points = check_count(max_grid_points, "max_grid_points", 1, MAX_GRID_POINTS)
+    grid = None if grid is None else check_count(grid, "grid", 2, MAX_GRID_POINTS)
+    seed = check_seed(seed)
+    fixed = {name: check_real(v, f"fixed[{name}]", "rad")
+             for name, v in check_mapping(fixed, "fixed", "a dict joint name -> value (rad)").items()}
     eps = mechanism.tolerances(tolerances)
     ref_name, ref_q = _reference(mechanism, reference)
     lo, hi = _limits(mechanism)
@@ -280,6 +288,9 @@ def worst_pose(
         g = int(grid) if grid is not None else max(5, int(math.floor(max_grid_points ** (1.0 / k))))
         if g < 2:
             raise OutOfRangeError("grid", f"got {grid}", "an integer >= 2")
+        if g**k > MAX_GRID_POINTS:
+            raise OutOfRangeError("grid", f"{g}**{k} searched joints = {g**k} points",
+                                  f"at most {MAX_GRID_POINTS} points (grid <= {int(MAX_GRID_POINTS ** (1 / k))})")
         axes = [np.linspace(0.0, 1.0, g)] * k
         U = np.array([a.ravel() for a in np.meshgrid(*axes, indexing="ij")])
         vals = evaluate(U)

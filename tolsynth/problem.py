@@ -42,6 +42,7 @@ from typing import Mapping, Sequence
 import casadi as ca
 import numpy as np
 
+from .checks import HUGE, TINY, check_real, check_vector
 from .errors import InfeasibleSpecificationError, InputError, OutOfRangeError
 from .stats import check_positive, check_probability, chi3_cdf, covariance_graph, variance_divisor, z_of_p
 
@@ -58,6 +59,8 @@ __all__ = [
 
 #: accuracy criteria for the position: the paper's per-principal-component form, or the sphere
 CRITERIA = ("components", "sphere")
+#: largest cost exponent: k eps**-alpha stays finite for eps >= 1e-12 (the paper: alpha <= 1)
+ALPHA_MAX = 10.0
 SPHERE_NODES = 24  # Gauss-Legendre nodes in v_z (twice as many in the azimuth); refined if needed
 
 
@@ -140,13 +143,13 @@ def _per_parameter(value, names: Sequence[str], index, field_name: str, default=
     if isinstance(value, Mapping):
         out = np.array(default, dtype=float).copy() if default is not None else np.full(n, np.nan)
         for key, v in value.items():
-            out[index(key)] = v
+            out[index(key)] = check_real(v, f"{field_name}[{key}]")
         if np.any(np.isnan(out)):
             raise InputError(field_name, "a value is missing for some parameters", f"a value for each of {list(names)}")
         return out
-    arr = np.asarray(value, dtype=float)
-    if arr.ndim == 0:
-        return np.full(n, float(arr))
+    if np.ndim(value) == 0:
+        return np.full(n, check_real(value, field_name))
+    arr = check_vector(value, field_name, n)
     if arr.shape != (n,):
         raise InputError(field_name, f"expected {n} values, got shape {arr.shape}", f"a number or {n} numbers")
     return arr.astype(float)
@@ -179,12 +182,12 @@ def make_specification(
     names = mechanism.error_parameters
     alpha_v = _per_parameter(alpha, names, mechanism.index, "alpha")
     for nm, a in zip(names, alpha_v):
-        if not (math.isfinite(a) and a > 0):
-            raise OutOfRangeError(f"alpha[{nm}]", f"got {a}", "alpha > 0 (the paper: alpha <= 1, typically 0.7)")
+        if not (math.isfinite(a) and TINY <= a <= ALPHA_MAX):
+            raise OutOfRangeError(f"alpha[{nm}]", f"got {a}", f"{TINY:g} <= alpha <= {ALPHA_MAX:g} (the paper: alpha <= 1, typically 0.7)")
     k_v = _per_parameter(k, names, mechanism.index, "k", default=mechanism.k)
     for nm, kk in zip(names, k_v):
-        if not (math.isfinite(kk) and kk > 0):
-            raise OutOfRangeError(f"k[{nm}]", f"got {kk}", "k > 0 (the paper: k >= 1)")
+        if not (math.isfinite(kk) and TINY <= kk <= HUGE):
+            raise OutOfRangeError(f"k[{nm}]", f"got {kk}", f"{TINY:g} <= k <= {HUGE:g} (the paper: k >= 1)")
     lo_default, hi_default = mechanism.bounds
     if bounds is None:
         lo, hi = lo_default.copy(), hi_default.copy()
@@ -196,17 +199,17 @@ def make_specification(
             except (TypeError, ValueError):
                 raise InputError(f"bounds[{key}]", f"got {pair!r}", "a pair (lower, upper)") from None
             i = mechanism.index(key)
-            lo[i], hi[i] = float(a), float(b)
+            lo[i], hi[i] = check_real(a, f"bounds[{key}].lower"), check_real(b, f"bounds[{key}].upper")
     else:
         try:
             lo, hi = (np.asarray(b, dtype=float) * np.ones(len(names)) for b in bounds)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise InputError("bounds", f"got {bounds!r}", "(lower, upper), each a number or one per parameter, or a dict name -> (lower, upper)") from None
     for nm, a, b, u in zip(names, lo, hi, mechanism.units):
-        if not (math.isfinite(a) and a > 0):
-            raise OutOfRangeError(f"bounds[{nm}].lower", f"got {a} {u}", f"0 < lower <= upper ({u})")
-        if not (math.isfinite(b) and b >= a):
-            raise OutOfRangeError(f"bounds[{nm}]", f"lower {a} is above upper {b} ({u})", f"0 < lower <= upper ({u})")
+        if not (math.isfinite(a) and TINY <= a <= HUGE):
+            raise OutOfRangeError(f"bounds[{nm}].lower", f"got {a} {u}", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})")
+        if not (math.isfinite(b) and a <= b <= HUGE):
+            raise OutOfRangeError(f"bounds[{nm}]", f"lower {a}, upper {b} ({u})", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})")
     z = z_of_p(p)
     if Phi is not None:
         Phi = check_positive(Phi, "Phi", "rad")
@@ -215,6 +218,8 @@ def make_specification(
     elif p_orientation is not None:
         raise InputError("p_orientation", "given without Phi", "give Phi (rad) with it")
 
+    if poses is not None and (isinstance(poses, (str, bytes)) or np.ndim(poses) == 0):
+        raise InputError("poses", f"got {poses!r}", "a list of configuration names or joint vectors (rad)")
     pose_list = list(poses) if poses is not None else [pose]
     if not pose_list:
         raise InputError("poses", "empty", "at least one pose")

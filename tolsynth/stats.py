@@ -59,22 +59,23 @@ def variance_divisor(distribution: str) -> float:
         ) from None
 
 
-def _is_real(x) -> bool:
-    return not isinstance(x, (bool, np.bool_)) and isinstance(x, (int, float, np.integer, np.floating))
+# the argument rules live in tolsynth.checks (one copy); re-exported here for older imports
+from .checks import HUGE, check_positive, check_probability, check_vector  # noqa: E402,F401
 
 
-def check_probability(p: float, field: str = "p") -> float:
-    """``p`` as a float, or OutOfRangeError unless 0 < p < 1."""
-    if not _is_real(p) or not (0.0 < float(p) < 1.0):
-        raise OutOfRangeError(field, f"got {p!r}", "0 < p < 1")
-    return float(p)
+def _array(x, field: str) -> np.ndarray:
+    """A float array of finite numbers of magnitude <= HUGE**2 (variances), or a typed error."""
+    from .errors import InputError
 
-
-def check_positive(x: float, field: str, unit: str = "mm") -> float:
-    """``x`` as a float, or OutOfRangeError unless it is finite and > 0."""
-    if not _is_real(x) or not (float(x) > 0.0) or not math.isfinite(float(x)):
-        raise OutOfRangeError(field, f"got {x!r}", f"a finite number > 0 ({unit})")
-    return float(x)
+    if isinstance(x, (str, bytes)) or x is None:
+        raise InputError(field, f"expected numbers, got {x!r}", "an array of finite numbers")
+    try:
+        arr = np.asarray(x, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(field, f"expected numbers, got {x!r:.60}", "an array of finite numbers") from None
+    if not np.all(np.isfinite(arr) & (np.abs(arr) <= HUGE**2)):
+        raise OutOfRangeError(field, "a non-finite or huge value", f"finite numbers of magnitude <= {HUGE**2:g}")
+    return arr
 
 
 def z_of_p(p: float) -> float:
@@ -206,8 +207,10 @@ _ERF_UFUNC = np.frompyfunc(math.erf, 1, 1)
 def p_components(sigma, R: float) -> np.ndarray:
     """``P(|w_j| <= R)`` for independent zero-mean normals with standard deviations ``sigma``."""
     R = check_positive(R, "R")
-    sigma = np.asarray(sigma, dtype=float)
-    with np.errstate(divide="ignore"):
+    sigma = _array(sigma, "sigma")
+    if np.any(sigma < 0):
+        raise OutOfRangeError("sigma", "a negative standard deviation", "finite numbers >= 0")
+    with np.errstate(divide="ignore", over="ignore"):  # R / tiny sigma -> inf -> probability 1
         x = np.where(sigma > 0, R / (np.sqrt(2.0) * np.where(sigma > 0, sigma, 1.0)), np.inf)
     return np.where(np.isinf(x), 1.0, _erf(np.where(np.isinf(x), 0.0, x)))
 
@@ -222,13 +225,35 @@ def chi3_cdf(x, erf=None, exp=np.exp):
     return erf(x / math.sqrt(2.0)) - math.sqrt(2.0 / math.pi) * x * exp(-0.5 * x * x)
 
 
+#: the chi CDFs in 1-3 dimensions equal 1 to double precision beyond this argument
+CHI_SATURATION = 40.0
+
+
+def _chi3_small(x: np.ndarray) -> np.ndarray:
+    """chi3_cdf for x <= 0.5 by its Taylor series ``sqrt(2/pi) sum (-1)^k x^(2k+3) / (2^k k! (2k+3))``
+    (the closed form cancels there: at x = 1e-12 it gives -8e-28 instead of 3e-37); 12 terms
+    reach double precision for x <= 0.5."""
+    x2 = -0.5 * x * x
+    term = np.ones_like(x)
+    total = term / 3.0
+    for k in range(1, 12):
+        term = term * x2 / k
+        total = total + term / (2 * k + 3)
+    return math.sqrt(2.0 / math.pi) * x**3 * total
+
+
 def _chi_cdf_radial(n: int, x: np.ndarray) -> np.ndarray:
-    """P(|Z| <= x) for Z standard normal in n = 1, 2, 3 dimensions (chi distribution CDF)."""
+    """P(|Z| <= x) for Z standard normal in n = 1, 2, 3 dimensions (chi distribution CDF).
+
+    Arguments beyond CHI_SATURATION are evaluated there (where the CDF is 1 to double precision),
+    so that ``x * x`` cannot overflow; small arguments in 3-D by the series."""
+    x = np.minimum(x, CHI_SATURATION)
     if n == 1:
         return _erf(x / math.sqrt(2.0))
     if n == 2:
         return -np.expm1(-0.5 * x * x)
-    return chi3_cdf(x)
+    small = x <= 0.5
+    return np.where(small, _chi3_small(np.where(small, x, 0.0)), chi3_cdf(np.where(small, 1.0, x)))
 
 
 @lru_cache(maxsize=None)
@@ -338,7 +363,7 @@ def p_ball_batch(variances, R: float, tol: float = 1e-12, max_nodes: int = 512, 
     unconverged value is never returned.
     """
     R = check_positive(R, "R")
-    lam = np.sort(np.atleast_2d(np.asarray(variances, dtype=float)), axis=1)[:, ::-1]
+    lam = np.sort(np.atleast_2d(_array(variances, "variances")), axis=1)[:, ::-1]
     if lam.ndim != 2 or lam.shape[1] > 3:
         raise OutOfRangeError("variances", f"shape {np.shape(variances)}", "(N, k) with k <= 3")
     top = np.maximum(lam[:, :1], 0.0)
@@ -364,7 +389,7 @@ def p_ball(variances, R: float, tol: float = 1e-12, max_nodes: int = 512, return
     Returns the probability, and its error estimate (change at the last doubling) if
     ``return_error``.
     """
-    value, err = p_ball_batch(np.asarray(variances, dtype=float).ravel()[None, :], R, tol, max_nodes, True)
+    value, err = p_ball_batch(_array(variances, "variances").ravel()[None, :], R, tol, max_nodes, True)
     return (float(value[0]), float(err[0])) if return_error else float(value[0])
 
 
@@ -377,13 +402,18 @@ def p_cone(Vo: np.ndarray, axis, Phi: float) -> float:
     covariance of ``Vo`` projected on the plane normal to the axis.
     """
     Phi = check_positive(Phi, "Phi", "rad")
-    a = np.asarray(axis, dtype=float)
+    a = check_vector(axis, "axis", 3)
+    if not np.linalg.norm(a) > 0:
+        raise OutOfRangeError("axis", "the zero vector", "a nonzero 3-vector")
     a = a / np.linalg.norm(a)
+    Vo = _array(Vo, "Vo")
+    if Vo.shape != (3, 3):
+        raise OutOfRangeError("Vo", f"shape {Vo.shape}", "a 3 x 3 covariance (rad^2)")
     helper = np.eye(3)[int(np.argmin(np.abs(a)))]
     e1 = np.cross(a, helper)
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(a, e1)
     E = np.column_stack([e1, e2])
-    C = E.T @ np.asarray(Vo, dtype=float) @ E
+    C = E.T @ Vo @ E
     lam = np.linalg.eigvalsh(0.5 * (C + C.T))
     return p_ball(lam, Phi)

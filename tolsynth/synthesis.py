@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .checks import TINY, check_count, check_mapping, check_options, check_positive, check_vector
 from .errors import InputError
 from .problem import SPHERE_NODES, ToleranceNLP, make_specification
 from .result import Status, SynthesisResult
@@ -31,6 +32,15 @@ def _sumt(nlp, eps0, options):
     from .solvers.sumt import solve_sumt
 
     return solve_sumt(nlp, eps0, **options)
+
+
+def _solver_defaults(solver: str) -> dict:
+    """The options a solver accepts, with their defaults."""
+    if solver == "ipopt":
+        from .solvers.ipopt import DEFAULT_OPTIONS
+    else:
+        from .solvers.sumt import DEFAULT_OPTIONS
+    return DEFAULT_OPTIONS
 
 
 #: largest allowed difference between the NLP's fixed sphere quadrature and stats.p_ball
@@ -123,14 +133,17 @@ def synthesize(
 
     if not isinstance(mechanism, Mechanism):
         mechanism = load_model(mechanism)
-    if solver not in SOLVERS:
+    if not isinstance(solver, str) or solver not in SOLVERS:
         raise InputError("solver", f"unknown solver {solver!r}", " or ".join(repr(s) for s in SOLVERS))
+    options = check_options(options, _solver_defaults(solver))
+    if validate is not None and validate is not False:
+        validate = check_count(validate, "validate", lower=0)
     spec = make_specification(
         mechanism, R, p, distribution, alpha, k, bounds, pose, poses, Phi, p_orientation, criterion
     )
     nlp = ToleranceNLP(spec)
     nlp.check_feasible()
-    eps0 = None if x0 is None else mechanism.tolerances(x0)
+    eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0), "x0", lower=TINY)
     result = SOLVERS[solver](nlp, eps0, dict(options or {}))
     while spec.sphere_blocks and result.success:
         # the NLP's sphere probability is a fixed quadrature: check it where it matters
@@ -214,7 +227,8 @@ def compare(mechanism, R: float, p: float, distribution: str = "uniform", alpha=
     Keyword arguments are those of :func:`synthesize` (``options`` may be a dict with keys
     ``"ipopt"`` and ``"sumt"``).
     """
-    options = kwargs.pop("options", None) or {}
+    options = check_mapping(kwargs.pop("options", None), "options", "a dict with keys 'ipopt' and 'sumt'")
+    check_options(options, {"ipopt": {}, "sumt": {}})
     kwargs.pop("solver", None)
     res = {
         s: synthesize(mechanism, R, p, distribution, alpha, solver=s, options=options.get(s), **kwargs)
@@ -279,6 +293,9 @@ def synthesize_workspace(
     if not isinstance(mechanism, Mechanism):
         mechanism = load_model(mechanism)
     z = z_of_p(p)
+    tol = check_positive(tol, "tol", "relative", upper=1.0)
+    max_rounds = check_count(max_rounds, "max_rounds", lower=1, upper=1000)
+    search = check_mapping(search, "search", "keyword arguments of tolsynth.worst_pose")
     sphere = kwargs.get("criterion", "components") == "sphere"
     if pose is None:  # no starting pose: the worst pose found at tolerances in the middle of the bounds
         lo, hi = mechanism.bounds

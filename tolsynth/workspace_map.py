@@ -17,6 +17,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .batch_stats import _evaluator, principal_std_batch
+from .checks import check_count, check_mapping, check_real, check_vector
 from .errors import InputError, OutOfRangeError, UnknownNameError
 from .ik import PLANES, _GridIK, _ik_evaluator
 from .joint_space import MODEL_REFERENCE, _limits, _reference
@@ -193,16 +194,22 @@ def probability_map(
     t0 = time.perf_counter()
     R = check_positive(R, "R")
     variance_divisor(distribution)
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 5:
-        raise OutOfRangeError("n", f"got {n!r}", "an integer >= 5 (grid points per axis)")
-    if plane not in PLANES:
+    n = check_count(n, "n", 5, 2000)  # grid points per axis
+    offset = check_real(offset, "offset", "mm")
+    seeds = check_count(seeds, "seeds", 1, 1000)
+    check_points = check_count(check_points, "check_points", 0, 10**6)
+    if fixed is not None:
+        fixed = check_mapping(fixed, "fixed", "a dict joint name -> value (rad)")
+    if extent is not None:
+        extent = tuple(check_vector(extent, "extent", 4, "mm"))
+    if not isinstance(plane, str) or plane not in PLANES:
         raise OutOfRangeError("plane", f"got {plane!r}", "one of " + ", ".join(PLANES))
     eps = mechanism.tolerances(tolerances)
     label = tolerances if isinstance(tolerances, str) else "given"
     axis = None
     if hand_axis is not None:
-        axis = np.asarray(hand_axis, dtype=float).ravel()
-        if axis.shape != (3,) or not np.all(np.isfinite(axis)) or np.linalg.norm(axis) == 0:
+        axis = check_vector(hand_axis, "hand_axis", 3)
+        if np.linalg.norm(axis) == 0:
             raise InputError("hand_axis", f"got {hand_axis!r}", "3 finite numbers, not all 0, or None")
         axis = axis / np.linalg.norm(axis)
     names = list(mechanism.joint_names)
@@ -220,7 +227,7 @@ def probability_map(
         for name, val in fixed.items():
             if name not in names:
                 raise UnknownNameError("fixed", f"unknown joint {name!r}", "one of " + ", ".join(names))
-            held[names.index(name)] = (float(val), "given")
+            held[names.index(name)] = (check_real(val, f"fixed[{name}]", "rad"), "given")
     else:
         ev_all = _ik_evaluator(mechanism, tuple(range(nq)), axis is not None)
         Qr = lo[:, None] + (hi - lo)[:, None] * rng.random((nq, 6))
