@@ -286,6 +286,14 @@ def _check_synthesis(mech, res, R, p, distribution, poses):
             raise BadNumbers(f"optimum violates the specification: {lam.max()} > {(R / z) ** 2}")
 
 
+def accepted(**values) -> None:
+    """Called after a call returned normally: a NaN or an infinity among its arguments must have
+    been rejected (no argument accepts one), so its acceptance is a silent failure."""
+    for name, v in values.items():
+        if isinstance(v, (float, np.floating)) and not math.isfinite(v):
+            raise Silent(f"{name} = {v} was accepted")
+
+
 def _args(draw, defaults: dict, pool: dict | None = None, k: int = 2) -> dict:
     """``defaults`` with 1..k arguments replaced by bad or extreme values."""
     args = dict(defaults)
@@ -304,7 +312,8 @@ def case_synthesize(draw):
                  {"distribution": ["normal", "Uniform"], "criterion": ["sphere", "sphre"],
                   "options": [{"tol": -1}, {"tol": 1e-8}, {"max_iter": 0}, {"max_iter": 2.5}, {"nope": 1},
                               {"tol": math.nan}, "tol"],
-                  "x0": [np.zeros(mech.n), np.full(mech.n, 1e155), np.full(mech.n, 0.01), [1.0]],
+                  "x0": [np.zeros(mech.n), np.full(mech.n, 1e155), np.full(mech.n, 0.01), [1.0],
+                         np.full(mech.n, 1e8), np.full(mech.n, 1e-12)],
                   "bounds": [(1e-3, 1e300), (0.0, 1.0), (2.0, 1.0), {"zz": (1, 2)}, ("a", "b")],
                   "alpha": [{"x": 1}, np.full(mech.n, 0.7), 1e9, 50.0],
                   "k": [1e155, np.full(mech.n, -1.0), {"zz": 1}],
@@ -312,6 +321,7 @@ def case_synthesize(draw):
 
     def run():
         res = tolsynth.synthesize(mech, pose=pose, **args)
+        accepted(**args)
         if args.get("criterion") == "components" and args.get("Phi") is None:
             _check_synthesis(mech, res, args["R"], args["p"], args["distribution"], [pose])
         elif res.success:
@@ -346,6 +356,7 @@ def case_analyze(draw):
 
     def run():
         a = mech.analyze(**args)
+        accepted(**args)
         finite(a.position, a.sensitivity, a.covariance, a.principal_std, a.p_components, a.p_sphere,
                a.p_cone, a.p_orientation_components)
         probability(a.p_components, a.p_sphere, a.p_cone, a.p_orientation_components)
@@ -361,6 +372,7 @@ def case_monte_carlo(draw):
 
     def run():
         r = tolsynth.monte_carlo(mech, **args)
+        accepted(**args)
         finite(r.p_components, r.p_sphere)
         probability(r.p_components, r.p_sphere)
     return run
@@ -374,6 +386,7 @@ def case_validate(draw):
 
     def run():
         v = tolsynth.validate(mech, **args)
+        accepted(**args)
         probability(v.p_components, v.p_sphere)
     return run
 
@@ -390,6 +403,7 @@ def case_worst_pose(draw):
 
     def run():
         w = tolsynth.worst_pose(mech, **args)
+        accepted(**args)
         finite(w.q, w.value, w.position)
     return run
 
@@ -405,6 +419,7 @@ def case_probability_map(draw):
 
     def run():
         pm = tolsynth.probability_map(mech, progress=False, **args)
+        accepted(**args)
         P = np.asarray(pm.P, dtype=float)
         probability(P[np.isfinite(P)])
     return run
@@ -418,6 +433,7 @@ def case_synthesize_workspace(draw):
 
     def run():
         ws = tolsynth.synthesize_workspace(mech, pose="elbow90", **args)
+        accepted(**args)
         if ws.result is None:
             raise BadNumbers("result is None")
         if ws.success:
@@ -432,6 +448,7 @@ def case_compare(draw):
 
     def run():
         c = tolsynth.compare(mech, pose="elbow90", **args)
+        accepted(**args)
         finite(c.ipopt.cost, c.sumt.cost)
     return run
 
@@ -465,6 +482,7 @@ def case_mechanism(draw):
             out = getattr(mech, method)(value)
             if not isinstance(out, int):
                 finite(out)
+        accepted(value=value)
     return run
 
 
@@ -486,6 +504,7 @@ def case_stats(draw):
         finite(out)
         if fn != "z_of_p":
             probability(out)
+        accepted(**({"a": a} if fn == "z_of_p" else {"b": b} if fn == "p_cone" else {"a": a, "b": b}))
     return run
 
 
