@@ -250,6 +250,14 @@ def load_mutated(tmp: Path, blob: bytes, must_reject: bool):
         except TolsynthError:
             continue
         finite(T, S)
+    # and used: an analysis with its first tolerance set, and a synthesis (checked independently)
+    for name in list(m.configurations)[:1]:
+        for tset in list(m.tolerance_sets)[:1]:
+            a = m.analyze(name, tset, R=0.5)
+            finite(a.covariance, a.p_sphere)
+            probability(a.p_components, a.p_sphere)
+        res = tolsynth.synthesize(m, 0.5, 0.99, pose=name)
+        _check_synthesis(m, res, 0.5, 0.99, "uniform", [name])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -527,25 +535,29 @@ API_CASES = {
 # command line
 # ---------------------------------------------------------------------------------------------
 CLI_VALUES = ("0", "-1", "nan", "inf", "1e300", "1e-300", "", "abc", "0.99", "0.5", "1,2", ",,,", "worst",
-              "figure3", "figure3,h2=0.1,h2=0.2", "figure3,,,", "free", "0,0,1", "-0")
+              "figure3", "figure3,h2=0.1,h2=0.2", "figure3,,,", "free", "0,0,1", "-0", "0.1mm", "5um", "1e9m",
+              "2mrad", "h*=0.01", "1:", ":0", "x.xyz", "/nonexistent/dir/x.png", "none", "0,0,0,0,0")
+#: command -> (fixed arguments that make a valid, quick run, options fuzzed)
 CLI_COMMANDS = {
-    "analyze": ["--model", "--pose", "--tolerances", "--R", "--Phi", "--distribution"],
-    "solve": ["--model", "--R", "--p", "--alpha", "--pose", "--distribution", "--criterion"],
-    "montecarlo": ["--model", "--pose", "--tolerances", "--R", "--n", "--seed"],
-    "worst-pose": ["--model", "--tolerances", "--R", "--grid"],
+    "analyze": (["--model", "xu_zhang_1988", "--pose", "worst", "--tolerances", "figure3", "--R", "0.5"],
+                ["--model", "--pose", "--tolerances", "--R", "--Phi", "--dist"]),
+    "solve": (["--model", "planar_2r", "--pose", "elbow90", "--R", "0.5", "--p", "0.99"],
+              ["--model", "--R", "--p", "--alpha", "--k", "--bounds", "--pose", "--Phi", "--p-orientation",
+               "--criterion", "--solver"]),
+    "montecarlo": (["--model", "planar_2r", "--pose", "worst", "--tolerances", "coarse", "--R", "0.5", "--n", "2000",
+                    "--quiet"], ["--pose", "--tolerances", "--R", "--n", "--seed", "--batch", "--confidence"]),
+    "worst-pose": (["--model", "planar_2r", "--tolerances", "coarse", "--grid", "5"],
+                   ["--tolerances", "--R", "--grid", "--reference", "--criterion"]),
+    "map": (["--model", "planar_2r", "--tolerances", "coarse", "--plane", "xy", "--n", "6", "--quiet"],
+            ["--R", "--n", "--plane", "--offset", "--hand-axis", "--extent", "--reference", "--out"]),
 }
-CLI_DEFAULTS = {"--model": "xu_zhang_1988", "--pose": "worst", "--tolerances": "figure3", "--R": "0.5",
-                "--p": "0.99", "--n": "2000", "--grid": "4"}
 
 
 @st.composite
 def cli_argv(draw):
     cmd = draw(st.sampled_from(sorted(CLI_COMMANDS)))
-    opts = CLI_COMMANDS[cmd]
-    argv = [cmd]
-    for opt in opts:
-        if opt in CLI_DEFAULTS:
-            argv += [opt, CLI_DEFAULTS[opt]]
+    base, opts = CLI_COMMANDS[cmd]
+    argv = [cmd, *base]
     for opt in draw(st.lists(st.sampled_from(opts), min_size=1, max_size=2, unique=True)):
         argv += [opt, draw(st.sampled_from(CLI_VALUES))]
     return argv
