@@ -28,11 +28,15 @@ from .validation import ValidationResult, validate
 from .pose_search import WorstPose, worst_pose
 from .workspace_map import ProbabilityMap, probability_map
 from .plot import plot_map
+from .contributions import Contributions, contributions  # issue 13
 from .synthesis import Comparison, WorkspaceSynthesis, compare, synthesize, synthesize_workspace
 
 __version__ = "0.1.0"
 
 __all__ = [
+    # issue 13: designer's cost
+    "contributions",
+    "Contributions",
     # issue 4: Monte Carlo, validation, worst pose, workspace map
     "monte_carlo",
     "MonteCarloResult",
