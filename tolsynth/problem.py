@@ -269,6 +269,15 @@ class NLPGraphs:
 
 
 @lru_cache(maxsize=None)
+def cost_graph(n: int) -> ca.Function:
+    """``cost(u, alpha, k) -> f = sum_i k_i exp(-alpha_i u_i)``: Eq. 11-12 in ``u = ln eps``."""
+    u = ca.SX.sym("u", n)
+    alpha = ca.SX.sym("alpha", n)
+    k = ca.SX.sym("k", n)
+    return ca.Function("cost", [u, alpha, k], [ca.sum1(k * ca.exp(-alpha * u))], ["u", "alpha", "k"], ["f"])
+
+
+@lru_cache(maxsize=None)
 def nlp_graphs(n: int, m: int) -> NLPGraphs:
     """Cost and LMI graphs for n parameters and m accuracy blocks.
 
@@ -277,10 +286,7 @@ def nlp_graphs(n: int, m: int) -> NLPGraphs:
     :mod:`tolsynth.stats`.
     """
     u = ca.SX.sym("u", n)
-    alpha = ca.SX.sym("alpha", n)
-    k = ca.SX.sym("k", n)
-    f = ca.sum1(k * ca.exp(-alpha * u))
-    cost = ca.Function("cost", [u, alpha, k], [f], ["u", "alpha", "k"], ["f"])
+    cost = cost_graph(n)
 
     P = ca.SX.sym("P", 1 + m + 3 * n * m)
     c = P[0]
@@ -330,11 +336,16 @@ def sphere_graph(n: int, m: int, nodes: int = SPHERE_NODES) -> ca.Function:
 
 
 class ToleranceNLP:
-    """The problem of one specification: its graphs, parameter values and helpers."""
+    """The problem of one specification: its graphs, parameter values and helpers.
+
+    The per-block LMI graph (:func:`nlp_graphs`, read by SUMT) is built on first use only: at
+    hundreds of poses its SX graph is large, and IPOPT's exchange method never needs it.  The
+    constraint values of *all* blocks are evaluated at once by :meth:`block_values` (the shared
+    covariance graph on a batch, through :class:`tolsynth.numpy_eval.NumpyEvaluator`).
+    """
 
     def __init__(self, spec: Specification, sphere_nodes: int = SPHERE_NODES):
         self.spec = spec
-        self.graphs = nlp_graphs(spec.n, len(spec.blocks))
         self.P = np.concatenate(
             [[spec.c], [b.scale for b in spec.blocks]] + [b.A.ravel(order="F") for b in spec.blocks]
         )
@@ -345,23 +356,45 @@ class ToleranceNLP:
         self.sphere = sphere_graph(spec.n, len(sb), sphere_nodes)
         self.Ps = np.concatenate([[spec.c], [b.R for b in sb]] + [b.A.ravel(order="F") for b in sb])
         self.p_sphere = np.array([b.p for b in sb])
+        # scaled rows of every block, (m, 3, n): block b's constraint is lambda_max(As V As^T) <= 1
+        self.As = np.array([b.scale * b.A for b in spec.blocks]).reshape(len(spec.blocks), 3, spec.n)
+        self._graphs = None
+
+    @property
+    def graphs(self) -> "NLPGraphs":
+        """Cost and LMI graphs of this problem's size (built on first use)."""
+        if self._graphs is None:
+            self._graphs = nlp_graphs(self.spec.n, len(self.spec.blocks))
+        return self._graphs
 
     # -- evaluations (NumPy in, NumPy out) ----------------------------------------------------
     def cost(self, eps: np.ndarray) -> float:
-        return float(self.graphs.cost(np.log(eps), self.spec.alpha, self.spec.k))
+        return float(cost_graph(self.spec.n)(np.log(eps), self.spec.alpha, self.spec.k))
 
     def G(self, eps: np.ndarray) -> list[np.ndarray]:
         Gm = np.array(self.graphs.lmi(np.log(eps), self.P))
         return [Gm[:, 3 * b : 3 * b + 3] for b in range(len(self.spec.blocks))]
 
+    def block_covariances(self, eps: np.ndarray) -> np.ndarray:
+        """``scale_b^2 V_b(eps)`` of every block, shape (m, 3, 3) (block b's constraint is
+        ``lambda_max <= 1``): the covariance ``S diag(eps^2 / c) S^T`` of
+        :func:`tolsynth.stats.covariance_graph` on the whole stack of blocks at once (one einsum;
+        the tests check it against that graph)."""
+        w = np.asarray(eps, dtype=float) ** 2 / self.spec.c
+        return np.einsum("bin,n,bjn->bij", self.As, w, self.As, optimize=True)
+
+    def block_values(self, eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``sigma_j z / R`` (or ``/ Phi``) of every block, descending, shape (m, 3), and the
+        principal directions (m, 3, 3; columns), by NumPy's batched symmetric eigensolver."""
+        V = self.block_covariances(eps)
+        lam, vec = np.linalg.eigh(0.5 * (V + V.transpose(0, 2, 1)))
+        lam, vec = lam[:, ::-1], vec[:, :, ::-1]
+        return np.sqrt(np.clip(lam, 0.0, None)), vec
+
     def constraint_values(self, eps: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per block: the paper's ``sigma_j * z / R`` (descending) and the principal directions."""
-        out = []
-        for Gb in self.G(eps):
-            lam, vec = np.linalg.eigh(np.eye(3) - 0.5 * (Gb + Gb.T))  # = scale^2 * eigenvalues of V
-            order = np.argsort(lam)[::-1]
-            out.append((np.sqrt(np.clip(lam[order], 0.0, None)), vec[:, order]))
-        return out
+        vals, dirs = self.block_values(eps)
+        return list(zip(vals, dirs))
 
     def sphere_quadrature(self, eps: np.ndarray) -> np.ndarray:
         """``P(|dr| <= R)`` per sphere block by the graph's fixed quadrature (what the solvers see)."""
@@ -410,15 +443,20 @@ class ToleranceNLP:
                 )
 
     def interior_start(self, target: float = 0.5) -> np.ndarray:
-        """A strictly feasible point: eps_i = lower_i^(1-t) upper_i^t with the largest t in [0, 1/2]
-        for which every constraint value squared is ``<= target`` (``(sigma z / R)^2``, or
-        ``((1 - P) / (1 - p))^2``); t by bisection (V is monotone in t)."""
+        """A strictly feasible point, strictly inside the bounds: ``eps_i = lower_i^(1-t) upper_i^t``
+        with every constraint value squared ``<= target``, where the target is raised towards 1
+        when even the lower bounds give more than it (a specification close to its limit R0 is
+        still strictly feasible, just with less room).  t by bisection (V is monotone in t); used
+        by SUMT, whose barrier needs an interior start (IPOPT does not: see :meth:`start_point`).
+        """
         lo, hi = self.lu, self.uu
 
         def worst(t):
             eps = np.exp(lo + t * (hi - lo))
             return max(float(v[0]) ** 2 for v in self.all_values(eps))
 
+        w0 = worst(0.0)
+        target = max(target, 0.5 * (w0 + 1.0)) if w0 < 1.0 else target
         if worst(0.5) <= target:
             t = 0.5
         else:
@@ -429,8 +467,19 @@ class ToleranceNLP:
                     a = mid
                 else:
                     b = mid
-            t = a
+            t = a if a > 0 else 0.5 * b
         return np.exp(lo + t * (hi - lo))
+
+    def start_point(self) -> np.ndarray:
+        """A cheap start for IPOPT (which needs no interior point): the geometric middle of the
+        bounds scaled as a whole so that the largest ``sigma z / R`` is about 1/2 (V is homogeneous
+        of degree 2 in eps: one eigen-decomposition, no bisection), then clipped to the bounds."""
+        mid = np.exp(0.5 * (self.lu + self.uu))
+        if self.As.shape[0] == 0:
+            return mid
+        worst = float(np.max(self.block_values(mid)[0][:, 0]))
+        t = 0.5 / worst if worst > 0 else 1.0
+        return np.clip(mid * t, self.spec.lower, self.spec.upper)
 
     # -- certificate ------------------------------------------------------------------------------
     def kkt_multipliers(self, eps: np.ndarray, active_tol: float = 1e-6) -> list[np.ndarray]:

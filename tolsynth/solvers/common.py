@@ -11,6 +11,13 @@ __all__ = ["assemble"]
 
 ACTIVE_TOL = 1e-6
 
+#: ``success`` needs, whatever the solver's own status, the returned point to meet every constraint
+#: by an independent check (largest ``sigma z / R`` by NumPy's eigensolver, or ``(1-P)/(1-p)``
+#: by the error-controlled ``p_ball``) within FEAS_TOL ...
+FEAS_TOL = 1e-6
+#: ... and, for the convex (per-component) problem, a certificate gap within GAP_TOL of the cost
+GAP_TOL = 1e-6
+
 
 def assemble(
     solver: str,
@@ -81,6 +88,7 @@ def assemble(
         # both are valid lower bounds: the solver's own multipliers, and those recomputed from the
         # primal point by least squares on stationarity (sharper when the solver's are loose)
         lower = max(nlp.dual_bound(Z), nlp.dual_bound(nlp.kkt_multipliers(eps)))
+    status, message = _verified(status, message, blocks, cost, lower, certified=not spec.sphere_blocks)
     return SynthesisResult(
         solver=solver,
         status=status,
@@ -109,3 +117,19 @@ def _relaxation_bound(nlp: ToleranceNLP) -> float:
 
     relaxed = ToleranceNLP(nlp.spec.relaxed())
     return solve_ipopt(relaxed).lower_bound
+
+
+def _verified(status: Status, message: str, blocks, cost: float, lower: float, certified: bool):
+    """An optimum is reported only if the point is feasible by an independent check and, for the
+    convex problem, certified by a small gap; otherwise the status says why it is not."""
+    if status is not Status.OPTIMAL:
+        return status, message
+    worst = max((float(b.values[0]) for b in blocks), default=0.0)
+    if not np.isfinite(cost) or not worst <= 1.0 + FEAS_TOL:
+        return Status.NUMERICAL_ERROR, (f"{message}; rejected: the point violates the specification "
+                                        f"(largest constraint value {worst:.6g} > 1 + {FEAS_TOL:g})")
+    gap = cost - lower
+    if certified and not gap <= GAP_TOL * abs(cost):
+        return Status.OPTIMAL_INACCURATE, (f"{message}; not certified: dual gap {gap:.3g} "
+                                           f"({gap / abs(cost):.2e} of the cost) > {GAP_TOL:g}")
+    return status, message

@@ -1,33 +1,44 @@
-"""IPOPT (through CasADi) on the tolerance problem, with exact first and second derivatives.
+"""IPOPT (through CasADi) on the tolerance problem, by an exchange (cutting-plane) method.
 
-Smooth formulation.  The principal sigma_j are eigenvalues, which are not differentiable where two
-coincide, and at the optimum of the paper's example two are active at once.  So the accuracy
-constraint is posed as the matrix inequality ``G(u) = I - (z/R)^2 V >= 0`` of
-:mod:`tolsynth.problem`, written with a lower-triangular 3x3 factor ``L`` as the smooth equalities
+Formulation.  The accuracy demand of a block b (a pose, position or orientation) is the matrix
+inequality ``lambda_max(scale_b^2 V_b(eps)) <= 1``, i.e. for *every* unit direction w
 
-    G(u) - L L^T = 0          (6 equations and 6 extra variables per block)
+    sum_i exp(2 u_i) C_i(w) <= 1,     C_i(w) = scale_b^2 (a_bi . w)^2 / c,   u = ln eps,
 
-(every PSD matrix has such a Cholesky-type factor, zero pivots allowed).  The problem in (u, B) is smooth, IPOPT gets the exact
-Hessian from CasADi, and the equality multipliers form the LMI multiplier matrix Z, whose
-positive semi-definiteness, with the dual bound of :meth:`ToleranceNLP.dual_bound`, certifies the
-global optimum of the convex problem in u.
+a sum of exponentials: smooth and convex in u for every w.  IPOPT solves a small NLP over a finite
+set of such cuts (pose, direction) with the exact Hessian; NumPy then evaluates every block at the
+IPOPT point at once (batched ``eigh``), adds the principal directions of the blocks that are still
+violated as new cuts, and IPOPT re-solves from the previous point.  This repeats until the largest
+``sigma z / R`` over all blocks is within ``feas_tol`` of 1.  Why this and not the former factor form
+``G(u) - L L^T = 0``: the factor variables made the NLP non-convex (IPOPT reported local
+infeasibility on feasible multi-pose sets), and its size grew with the number of poses, while the
+cut NLP stays convex in every variable IPOPT sees and only as large as the set of cuts that matter
+(a handful of (pose, direction) pairs even at 1000 poses).
+
+The cut multipliers ``mu_k >= 0`` give the LMI multipliers ``Z_b = sum_k mu_k w_k w_k^T``, positive
+semi-definite by construction, for the dual-bound certificate of :meth:`ToleranceNLP.dual_bound`.
+
+Scaling: the cost is divided by its value at the start point (so k, alpha and the tolerance units
+can be extreme); the cuts are normalised to 1 by construction.
 
 For the sphere criterion (beyond the paper) each sphere block adds the smooth inequality
-``P_b(u) >= p_b`` from :func:`tolsynth.problem.sphere_graph`.
+``P_b(u) >= p_b`` from :func:`tolsynth.problem.sphere_graph` to the same NLP.
 
 Return codes are mapped to :class:`tolsynth.result.Status` here (``Solved_To_Acceptable_Level``
-is *not* plain success).
+is *not* plain success).  A solve interrupted by Ctrl-C is never retried: KeyboardInterrupt is
+raised again.
 """
 
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from functools import lru_cache
 
 import casadi as ca
 import numpy as np
 
-from ..problem import ToleranceNLP, nlp_graphs, sphere_graph
+from ..problem import ToleranceNLP, cost_graph, sphere_graph
 from ..result import Status
 from .common import assemble
 
@@ -47,36 +58,37 @@ IPOPT_STATUS = {
     "Invalid_Number_Detected": Status.NUMERICAL_ERROR,
 }
 
-DEFAULT_OPTIONS = {"tol": 1e-9, "constr_viol_tol": 1e-12, "max_iter": 500}
+#: IPOPT's own tolerances, its iteration limit per cut NLP, and the exchange method's limits
+DEFAULT_OPTIONS = {"tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500, "feas_tol": 1e-9, "max_rounds": 60}
 
-#: tried in turn until one ends in Solve_Succeeded (measured on Tables 1-3: the adaptive barrier
-#: update alone converges on all 18 columns; the monotone update is the fallback)
-ATTEMPTS = ({"mu_strategy": "adaptive"}, {"mu_strategy": "monotone"})
+#: tried in turn on a cut NLP until one ends in Solve_Succeeded
+ATTEMPTS = ("adaptive", "monotone")
 
-_TRIU = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
-_TRIL = [(i, j) for i in range(3) for j in range(i + 1)]
+#: cut slots come in these sizes (padded with zero rows), so one compiled NLP serves many cut sets
+_SLOTS = (4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096)
+
+#: new cuts per round at most (the most violated blocks first)
+MAX_NEW_CUTS = 64
+AGGREGATE = True  # aggregate multiplier directions as cuts and drop inactive cuts (bundle-style)
+
+#: principal directions within this fraction of a block's largest sigma count as near-active
+NEAR_ACTIVE = 0.9
 
 
-@lru_cache(maxsize=32)
-def _solver(n: int, m: int, tol: float, constr_viol_tol: float, max_iter: int, mu_strategy: str,
+@lru_cache(maxsize=64)
+def _solver(n: int, K: int, tol: float, constr_viol_tol: float, max_iter: int, mu_strategy: str,
             m_sphere: int = 0, sphere_nodes: int = 0) -> ca.Function:
-    g = nlp_graphs(n, m)
+    """The cut NLP for n parameters and K cut slots: ``min f(u)/f0  s.t.  C exp(2u) <= 1``."""
     n_ps = 1 + m_sphere + 3 * n * m_sphere if m_sphere else 0
-    x = ca.SX.sym("x", n + 6 * m)
-    p = ca.SX.sym("p", g.params + 2 * n + n_ps)
-    u = x[:n]
-    P, alpha, k = p[: g.params], p[g.params : g.params + n], p[g.params + n : g.params + 2 * n]
-    G = g.lmi(u, P)
-    cons = []
-    for b in range(m):
-        L = ca.SX.zeros(3, 3)
-        for e, (i, j) in enumerate(_TRIL):
-            L[i, j] = x[n + 6 * b + e]
-        H = G[:, 3 * b : 3 * b + 3] - ca.mtimes(L, L.T)
-        cons += [H[i, j] for i, j in _TRIU]
+    u = ca.SX.sym("u", n)
+    p = ca.SX.sym("p", K * n + 2 * n + 1 + n_ps)
+    C = ca.reshape(p[: K * n], K, n)
+    alpha, k = p[K * n : K * n + n], p[K * n + n : K * n + 2 * n]
+    f0 = p[K * n + 2 * n]
+    g = [ca.mtimes(C, ca.exp(2 * u))]
     if m_sphere:  # P(|dr| <= R_b) >= p_b, bounds given through lbg
-        cons.append(sphere_graph(n, m_sphere, sphere_nodes)(u, p[g.params + 2 * n :]))
-    nlp = {"x": x, "p": p, "f": g.cost(u, alpha, k), "g": ca.vertcat(*cons)}
+        g.append(sphere_graph(n, m_sphere, sphere_nodes)(u, p[K * n + 2 * n + 1 :]))
+    nlp = {"x": u, "p": p, "f": cost_graph(n)(u, alpha, k) / f0, "g": ca.vertcat(*g)}
     opts = {
         "print_time": False,
         # a trial point may overflow (Inf) on the way; IPOPT backtracks from it by itself, so the
@@ -92,21 +104,47 @@ def _solver(n: int, m: int, tol: float, constr_viol_tol: float, max_iter: int, m
         "ipopt.hessian_approximation": "exact",
         "ipopt.mu_strategy": mu_strategy,
     }
-    return ca.nlpsol("tolerance_ipopt", "ipopt", nlp, opts)
+    return ca.nlpsol("tolerance_cuts", "ipopt", nlp, opts)
 
 
-def _cholesky_start(Gb: np.ndarray) -> np.ndarray:
-    """Factor L of G at the start; for a start outside the constraint (G indefinite, a user's x0)
-    the factor of G's projection on the PSD cone, so IPOPT starts from the user's tolerances."""
-    lam, vec = np.linalg.eigh(0.5 * (Gb + Gb.T))
-    Gp = (vec * np.maximum(lam, 1e-12)) @ vec.T
-    L = np.linalg.cholesky(0.5 * (Gp + Gp.T))
-    return np.array([L[i, j] for i, j in _TRIL])
+#: the active cuts at the end of recent solves, by the blocks' sensitivity rows (directions do not
+#: depend on R, p, c or the cost, only on where the optimum sits)
+_CUT_CACHE: "OrderedDict[tuple, tuple[np.ndarray, np.ndarray]]" = OrderedDict()
+_CUT_CACHE_SIZE = 256
+
+
+def _cache_key(nlp: ToleranceNLP) -> tuple:
+    spec = nlp.spec
+    return (spec.n, len(spec.blocks), b"".join(np.ascontiguousarray(b.A).tobytes() for b in spec.blocks),
+            spec.alpha.tobytes(), spec.lower.tobytes(), spec.upper.tobytes())
+
+
+def _remember(key: tuple, cut_b: np.ndarray, cut_w: np.ndarray) -> None:
+    _CUT_CACHE[key] = (cut_b.copy(), cut_w.copy())
+    _CUT_CACHE.move_to_end(key)
+    while len(_CUT_CACHE) > _CUT_CACHE_SIZE:
+        _CUT_CACHE.popitem(last=False)
+
+
+def _slots(k: int) -> int:
+    for s in _SLOTS:
+        if s >= k:
+            return s
+    return k
+
+
+def _cut_rows(nlp: ToleranceNLP, blocks: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """``C_i = (As_b^T w)_i^2 / c`` for cuts (block b, unit direction w); shape (K, n)."""
+    proj = np.einsum("kin,ki->kn", nlp.As[blocks], W)
+    return proj**2 / nlp.spec.c
 
 
 def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
-    """Solve with IPOPT from ``eps0`` (default: the interior start).  Options: tol,
-    constr_viol_tol, max_iter (IPOPT's own)."""
+    """Solve with IPOPT by the exchange method from ``eps0`` (default: :meth:`ToleranceNLP.start_point`).
+
+    Options: tol, constr_viol_tol, max_iter (IPOPT's own, per cut NLP), feas_tol (largest
+    ``sigma z / R - 1`` accepted over all blocks) and max_rounds (exchange rounds).
+    """
     opts = {**DEFAULT_OPTIONS, **options}
     unknown = set(opts) - set(DEFAULT_OPTIONS)
     if unknown:
@@ -115,57 +153,146 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         raise InputError("options", f"unknown IPOPT option(s) {sorted(unknown)}", ", ".join(DEFAULT_OPTIONS))
     spec = nlp.spec
     n, m, ms = spec.n, len(spec.blocks), len(spec.sphere_blocks)
-    eps0 = nlp.interior_start() if eps0 is None else np.asarray(eps0, dtype=float)
-    x0 = np.concatenate([np.log(eps0)] + [_cholesky_start(Gb) for Gb in nlp.G(eps0)])
-    lbx = np.concatenate([nlp.lu, np.full(6 * m, -np.inf)])
-    ubx = np.concatenate([nlp.uu, np.full(6 * m, np.inf)])
-    pval = np.concatenate([nlp.P, spec.alpha, spec.k] + ([nlp.Ps] if ms else []))
-    lbg = np.concatenate([np.zeros(6 * m), nlp.p_sphere])
-    ubg = np.concatenate([np.zeros(6 * m), np.full(ms, np.inf)])
-    wall, iters, nfev, tried = 0.0, 0, 0, []
-    for attempt in ATTEMPTS:
-        solver = _solver(n, m, float(opts["tol"]), float(opts["constr_viol_tol"]), int(opts["max_iter"]),
-                         attempt["mu_strategy"], ms, nlp.sphere_nodes if ms else 0)
-        t0 = time.perf_counter()
-        sol = solver(x0=x0, p=pval, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
-        wall += time.perf_counter() - t0
-        stats = solver.stats()
-        code = stats.get("return_status", "unknown")
-        status = IPOPT_STATUS.get(code, Status.SOLVER_ERROR)
-        iters += int(stats.get("iter_count", 0))
-        nfev += int(stats.get("n_call_nlp_f", 0)) + int(stats.get("n_call_nlp_g", 0))
-        tried.append(f"{attempt['mu_strategy']}: {code}")
-        if status is Status.OPTIMAL:
+    feas_tol = float(opts["feas_tol"])
+    eps = nlp.start_point() if eps0 is None else np.clip(np.asarray(eps0, dtype=float), spec.lower, spec.upper)
+    f0 = nlp.cost(eps)
+    u = np.log(eps)
+    pfix = np.concatenate([spec.alpha, spec.k, [f0]] + ([nlp.Ps] if ms else []))
+
+    # initial cuts: those that were active at the end of the last solve on the same blocks (a
+    # sweep over R, p, the distribution or the cost re-solves the same poses), else every
+    # principal direction of the blocks that are near the worst at the start
+    cut_b = np.zeros(0, dtype=int)
+    cut_w = np.zeros((0, 3))
+    key = _cache_key(nlp)
+    cached = _CUT_CACHE.get(key)
+    if cached is not None:
+        cut_b, cut_w = cached
+    elif m:
+        vals, dirs = nlp.block_values(eps)
+        worst = vals[:, 0]
+        pick = np.argsort(-worst)[: min(m, 8)]
+        pick = pick[worst[pick] >= 0.5 * worst[pick[0]]]
+        cut_b = np.repeat(pick, 3)
+        cut_w = dirs[pick].transpose(0, 2, 1).reshape(-1, 3)
+
+    wall, iters, nfev, rounds = 0.0, 0, 0, 0
+    tried: list[str] = []
+    history: list[dict] = []
+    lam_g = np.zeros(0)
+    lam_x = np.zeros(n)
+    status, code = Status.ITERATION_LIMIT, f"exchange method: no convergence in {opts['max_rounds']} rounds"
+    max_viol = np.inf
+    t_start = time.perf_counter()
+    while rounds < int(opts["max_rounds"]):
+        rounds += 1
+        K = len(cut_b)
+        slots = _slots(max(K, 1)) if m else 0
+        C = np.zeros((slots, n))
+        if K:
+            C[:K] = _cut_rows(nlp, cut_b, cut_w)
+        pval = np.concatenate([C.ravel(order="F"), pfix])
+        lbg = np.concatenate([np.full(slots, -np.inf), nlp.p_sphere])
+        ubg = np.concatenate([np.ones(slots), np.full(ms, np.inf)])
+        for mu_strategy in ATTEMPTS:
+            solver = _solver(n, slots, float(opts["tol"]), float(opts["constr_viol_tol"]), int(opts["max_iter"]),
+                             mu_strategy, ms, nlp.sphere_nodes if ms else 0)
+            sol = solver(x0=u, p=pval, lbx=nlp.lu, ubx=nlp.uu, lbg=lbg, ubg=ubg)
+            stats = solver.stats()
+            code = stats.get("return_status", "unknown")
+            if code in ("NonIpopt_Exception_Thrown", "User_Requested_Stop"):
+                # Ctrl-C inside the solve: CasADi swallows the signal; never retry, re-raise it
+                raise KeyboardInterrupt
+            iters += int(stats.get("iter_count", 0))
+            nfev += int(stats.get("n_call_nlp_f", 0)) + int(stats.get("n_call_nlp_g", 0))
+            status = IPOPT_STATUS.get(code, Status.SOLVER_ERROR)
+            it = stats.get("iterations", {})
+            history += [
+                {"round": rounds, "iteration": i, "objective": float(o) * f0, "inf_pr": float(ip), "inf_du": float(idu)}
+                for i, (o, ip, idu) in enumerate(zip(it.get("obj", []), it.get("inf_pr", []), it.get("inf_du", [])))
+            ]
+            if status is Status.OPTIMAL:
+                break
+            tried.append(f"round {rounds} {mu_strategy}: {code}")
+        u = np.array(sol["x"]).ravel()
+        lam_g = np.array(sol["lam_g"]).ravel()
+        lam_x = np.array(sol["lam_x"]).ravel()
+        if status is not Status.OPTIMAL:
             break
-    code = "; ".join(tried) if len(tried) > 1 else code
-    x = np.array(sol["x"]).ravel()
-    lam_g = np.array(sol["lam_g"]).ravel()
-    lam_x = np.array(sol["lam_x"]).ravel()
-    Z = []
-    for b in range(m):
-        L = np.zeros((3, 3))
-        for e, (i, j) in enumerate(_TRIU):
-            v = lam_g[6 * b + e]
-            if i == j:
-                L[i, i] = v
-            else:
-                L[i, j] = L[j, i] = v / 2.0
-        Z.append(-L)  # CasADi's Lagrangian is f + lam^T g; the LMI form is f - tr(Z G)
+        if not m:
+            break
+        vals, dirs = nlp.block_values(np.exp(u))
+        over = vals - 1.0  # (m, 3)
+        max_viol = float(np.max(over[:, 0]))
+        if max_viol <= feas_tol:
+            break
+        # new cuts, for the most violated blocks: their near-active principal directions and,
+        # for every pair of those, the two bisecting directions (e_i +- e_j)/sqrt 2.  Where two
+        # principal sigma coincide at the optimum (the paper's case), cuts along e_i and e_j alone
+        # leave the off-diagonal term of V in their plane free, and the exchange crawls; the
+        # bisectors pin it (V_ii = V_jj = 1 and (V_ii + V_jj)/2 +- V_ij <= 1 give V_ij = 0).
+        order = np.argsort(-over[:, 0])
+        order = order[over[order, 0] > feas_tol][:MAX_NEW_CUTS]
+        new_b, new_w = [], []
+        for b in order:
+            near = np.nonzero(vals[b] >= NEAR_ACTIVE * vals[b, 0])[0]
+            E = dirs[b][:, near]
+            cols = [E[:, i] for i in range(E.shape[1])]
+            for i in range(E.shape[1]):
+                for j in range(i + 1, E.shape[1]):
+                    cols += [(E[:, i] + E[:, j]) / np.sqrt(2.0), (E[:, i] - E[:, j]) / np.sqrt(2.0)]
+            new_b += [b] * len(cols)
+            new_w += cols
+        # and the eigenvectors of each block's multiplier matrix Z_b = sum mu_k w_k w_k^T: at the
+        # optimum these (not V's, arbitrary in a degenerate eigenspace) are the cut directions
+        # that reproduce the LMI exactly (a strictly convex cut problem with them has the LMI's
+        # optimum as its own)
+        if AGGREGATE:
+            K = len(cut_b)
+            mu = np.maximum(lam_g[:K], 0.0)
+            mu = np.where(mu > 1e-6 * max(float(np.max(mu, initial=0.0)), 1e-300), mu, 0.0)
+            for b in np.unique(cut_b[mu > 0]):
+                sel = (cut_b == b) & (mu > 0)
+                Zb = (cut_w[sel].T * mu[sel]) @ cut_w[sel]
+                lz, vz = np.linalg.eigh(Zb)
+                for j in np.nonzero(lz > 1e-9 * lz[-1])[0]:
+                    new_b.append(b)
+                    new_w.append(vz[:, j])
+        if AGGREGATE:  # the aggregated cuts carry the information of the inactive ones: drop those
+            lam = np.maximum(lam_g[: len(cut_b)], 0.0)
+            keep = lam > 1e-6 * max(float(np.max(lam, initial=0.0)), 1e-300)
+            cut_b, cut_w = cut_b[keep], cut_w[keep]
+        cut_b = np.concatenate([cut_b, np.array(new_b, dtype=int)])
+        cut_w = np.concatenate([cut_w, np.array(new_w)])
+    else:
+        status = Status.ITERATION_LIMIT
+    wall = time.perf_counter() - t_start
+
+    eps = np.exp(u)
+    K = len(cut_b)
+    mu = np.maximum(lam_g[:K], 0.0) * f0 if K else np.zeros(0)
+    if status is Status.OPTIMAL and K:
+        act = mu > 1e-6 * float(np.max(mu, initial=0.0))
+        _remember(key, cut_b[act], cut_w[act])
+    Z = [np.zeros((3, 3)) for _ in range(m)]
+    for b, w, mk in zip(cut_b, cut_w, mu):
+        if mk > 0:
+            Z[b] += mk * np.outer(w, w)
     # P_b >= p_b active at its lower bound: CasADi's lam is <= 0 there; f - mu (P - p) with mu >= 0
-    mu_sphere = -lam_g[6 * m :]
-    it = stats.get("iterations", {})
-    history = [
-        {"iteration": i, "objective": float(o), "inf_pr": float(ip), "inf_du": float(idu)}
-        for i, (o, ip, idu) in enumerate(zip(it.get("obj", []), it.get("inf_pr", []), it.get("inf_du", [])))
-    ]
+    mu_sphere = -lam_g[len(lam_g) - ms :] * f0 if ms else np.zeros(0)
+    message = code if status is Status.OPTIMAL else "; ".join(tried) or code
+    message = f"{message}; {rounds} exchange round(s), {K} cut(s)"
+    if status is Status.OPTIMAL and m and max_viol > feas_tol:
+        status = Status.ITERATION_LIMIT
+        message += f"; largest sigma z/R - 1 = {max_viol:.2e} > {feas_tol:g}"
     return assemble(
         "ipopt",
         nlp,
-        np.exp(x[:n]),
+        eps,
         Z,
-        lam_x[:n],
+        lam_x * f0,
         status,
-        code,
+        message,
         iters,
         nfev,
         wall,
