@@ -59,7 +59,7 @@ IPOPT_STATUS = {
 }
 
 #: IPOPT's own tolerances, its iteration limit per cut NLP, and the exchange method's limits
-DEFAULT_OPTIONS = {"tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500, "feas_tol": 1e-9, "max_rounds": 60}
+DEFAULT_OPTIONS = {"tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500, "feas_tol": None, "max_rounds": 60}
 
 #: tried in turn on a cut NLP until one ends in Solve_Succeeded
 ATTEMPTS = ("adaptive", "monotone")
@@ -143,7 +143,8 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     """Solve with IPOPT by the exchange method from ``eps0`` (default: :meth:`ToleranceNLP.start_point`).
 
     Options: tol, constr_viol_tol, max_iter (IPOPT's own, per cut NLP), feas_tol (largest
-    ``sigma z / R - 1`` accepted over all blocks) and max_rounds (exchange rounds).
+    ``sigma z / R - 1`` accepted over all blocks; default ``min(1e-9, 10 tol)``) and max_rounds
+    (exchange rounds).
     """
     opts = {**DEFAULT_OPTIONS, **options}
     unknown = set(opts) - set(DEFAULT_OPTIONS)
@@ -153,7 +154,8 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         raise InputError("options", f"unknown IPOPT option(s) {sorted(unknown)}", ", ".join(DEFAULT_OPTIONS))
     spec = nlp.spec
     n, m, ms = spec.n, len(spec.blocks), len(spec.sphere_blocks)
-    feas_tol = float(opts["feas_tol"])
+    # default: as tight as IPOPT's own tolerance asks (1e-9 at the default tol)
+    feas_tol = min(1e-9, 10.0 * float(opts["tol"])) if opts["feas_tol"] is None else float(opts["feas_tol"])
     eps = nlp.start_point() if eps0 is None else np.clip(np.asarray(eps0, dtype=float), spec.lower, spec.upper)
     f0 = nlp.cost(eps)
     u = np.log(eps)
@@ -271,13 +273,22 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     eps = np.exp(u)
     K = len(cut_b)
     mu = np.maximum(lam_g[:K], 0.0) * f0 if K else np.zeros(0)
-    if status is Status.OPTIMAL and K:
-        act = mu > 1e-6 * float(np.max(mu, initial=0.0))
-        _remember(key, cut_b[act], cut_w[act])
     Z = [np.zeros((3, 3)) for _ in range(m)]
     for b, w, mk in zip(cut_b, cut_w, mu):
         if mk > 0:
             Z[b] += mk * np.outer(w, w)
+    if status is Status.OPTIMAL and K:
+        # remember each block's multiplier matrix by its eigenvectors: the fewest cuts that
+        # reproduce this optimum's Lagrangian
+        rb, rw = [], []
+        zmax = max(float(np.max(np.linalg.eigvalsh(Zb))) for Zb in Z)
+        for b in np.unique(cut_b):
+            lz, vz = np.linalg.eigh(Z[b])
+            for j in np.nonzero(lz > 1e-9 * zmax)[0]:
+                rb.append(b)
+                rw.append(vz[:, j])
+        if rb:
+            _remember(key, np.array(rb, dtype=int), np.array(rw))
     # P_b >= p_b active at its lower bound: CasADi's lam is <= 0 there; f - mu (P - p) with mu >= 0
     mu_sphere = -lam_g[len(lam_g) - ms :] * f0 if ms else np.zeros(0)
     message = code if status is Status.OPTIMAL else "; ".join(tried) or code
