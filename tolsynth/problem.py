@@ -43,6 +43,7 @@ import casadi as ca
 import numpy as np
 
 from .checks import HUGE, TINY, check_real, check_vector
+from .cost import CostSet, cost_set
 from .errors import InfeasibleSpecificationError, InputError, OutOfRangeError
 from .stats import check_positive, check_probability, chi3_cdf, covariance_graph, variance_divisor, z_of_p
 
@@ -117,6 +118,18 @@ class Specification:
     p_orientation: float | None = None
     criterion: str = "components"
     sphere_blocks: tuple[SphereBlock, ...] = ()
+    cost: CostSet | None = None  # per-parameter cost models (tolsynth.cost); None: k eps^-alpha
+
+    @property
+    def costs(self) -> CostSet:
+        """The cost model of every parameter (the paper's power law from ``k``, ``alpha`` unless
+        ``cost`` was given)."""
+        return self.cost if self.cost is not None else cost_set(None, self.names, k=self.k, alpha=self.alpha)
+
+    @property
+    def convex(self) -> bool:
+        """True if every cost is convex in eps^2 on its range (then the problem is convex)."""
+        return bool(np.all(self.costs.convex(self.lower, self.upper)))
 
     @property
     def n(self) -> int:
@@ -168,6 +181,7 @@ def make_specification(
     Phi: float | None = None,
     p_orientation: float | None = None,
     criterion: str = "components",
+    cost=None,
 ) -> Specification:
     """Validate the inputs of :func:`tolsynth.synthesize` and evaluate the sensitivities.
 
@@ -210,6 +224,8 @@ def make_specification(
             raise OutOfRangeError(f"bounds[{nm}].lower", f"got {a} {u}", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})")
         if not (math.isfinite(b) and a <= b <= HUGE):
             raise OutOfRangeError(f"bounds[{nm}]", f"lower {a}, upper {b} ({u})", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})")
+    costs = cost_set(cost, names, mechanism.index, k=k_v, alpha=alpha_v)
+    costs.check_ranges(names, lo, hi)
     z = z_of_p(p)
     if Phi is not None:
         Phi = check_positive(Phi, "Phi", "rad")
@@ -253,6 +269,7 @@ def make_specification(
         p_orientation=p_orientation,
         criterion=criterion,
         sphere_blocks=tuple(sphere),
+        cost=None if cost is None else costs,
     )
 
 
@@ -263,22 +280,23 @@ def make_specification(
 class NLPGraphs:
     n: int
     m: int  # number of 3x3 blocks
-    cost: ca.Function  # (u, alpha, k) -> f
+    cost: ca.Function  # (u, theta) -> f (tolsynth.cost: one model per parameter)
     lmi: ca.Function  # (u, P) -> G (3 x 3m, blocks side by side)
     params: int  # length of the parameter vector P
 
 
-@lru_cache(maxsize=None)
-def cost_graph(n: int) -> ca.Function:
-    """``cost(u, alpha, k) -> f = sum_i k_i exp(-alpha_i u_i)``: Eq. 11-12 in ``u = ln eps``."""
-    u = ca.SX.sym("u", n)
-    alpha = ca.SX.sym("alpha", n)
-    k = ca.SX.sym("k", n)
-    return ca.Function("cost", [u, alpha, k], [ca.sum1(k * ca.exp(-alpha * u))], ["u", "alpha", "k"], ["f"])
+def cost_graph(n: int, cost_signature: tuple | None = None) -> ca.Function:
+    """``cost(u, theta) -> f = sum_i c_i(u_i)`` in ``u = ln eps``, one model per parameter
+    (:mod:`tolsynth.cost`; ``cost_signature`` is :attr:`CostSet.signature`, default the paper's
+    ``k eps^-alpha``, Eq. 11-12, for every parameter); the models' numbers are the parameter ``theta``
+    (:attr:`ToleranceNLP.theta`)."""
+    from .cost import _cost_graph
+
+    return _cost_graph(cost_signature if cost_signature is not None else (("power", 2),) * n)
 
 
 @lru_cache(maxsize=None)
-def nlp_graphs(n: int, m: int) -> NLPGraphs:
+def nlp_graphs(n: int, m: int, cost_signature: tuple | None = None) -> NLPGraphs:
     """Cost and LMI graphs for n parameters and m accuracy blocks.
 
     Parameter vector ``P = [c, scale_1..scale_m, vec(A_1)..vec(A_m)]`` with ``A_b`` 3 x n.
@@ -286,7 +304,7 @@ def nlp_graphs(n: int, m: int) -> NLPGraphs:
     :mod:`tolsynth.stats`.
     """
     u = ca.SX.sym("u", n)
-    cost = cost_graph(n)
+    cost = cost_graph(n, cost_signature)
 
     P = ca.SX.sym("P", 1 + m + 3 * n * m)
     c = P[0]
@@ -346,6 +364,8 @@ class ToleranceNLP:
 
     def __init__(self, spec: Specification, sphere_nodes: int = SPHERE_NODES):
         self.spec = spec
+        self.costs = spec.costs
+        self.theta = self.costs.theta  # the cost models' numbers, parameter of cost_graph
         self.P = np.concatenate(
             [[spec.c], [b.scale for b in spec.blocks]] + [b.A.ravel(order="F") for b in spec.blocks]
         )
@@ -364,12 +384,12 @@ class ToleranceNLP:
     def graphs(self) -> "NLPGraphs":
         """Cost and LMI graphs of this problem's size (built on first use)."""
         if self._graphs is None:
-            self._graphs = nlp_graphs(self.spec.n, len(self.spec.blocks))
+            self._graphs = nlp_graphs(self.spec.n, len(self.spec.blocks), self.costs.signature)
         return self._graphs
 
     # -- evaluations (NumPy in, NumPy out) ----------------------------------------------------
     def cost(self, eps: np.ndarray) -> float:
-        return float(cost_graph(self.spec.n)(np.log(eps), self.spec.alpha, self.spec.k))
+        return float(cost_graph(self.spec.n, self.costs.signature)(np.log(eps), self.theta))
 
     def G(self, eps: np.ndarray) -> list[np.ndarray]:
         Gm = np.array(self.graphs.lmi(np.log(eps), self.P))
@@ -507,7 +527,7 @@ class ToleranceNLP:
         if not cols:
             return Z
         M = np.column_stack(cols)[free]
-        rhs = (spec.alpha * spec.k * eps ** (-spec.alpha))[free]
+        rhs = -self.costs.du(np.log(eps))[free]
         y, *_ = np.linalg.lstsq(M, rhs, rcond=None)
         Ys: dict[int, np.ndarray] = {}
         for value, (b, i, j, D) in zip(y, layout):
@@ -516,14 +536,9 @@ class ToleranceNLP:
             Z[b] = D @ Y @ D.T
         return Z
 
-    def dual_bound(self, Z: Sequence[np.ndarray]) -> float:
-        """Lagrangian lower bound on the optimal cost for LMI multipliers ``Z_b`` (3x3).
-
-        ``Z_b`` is projected onto the positive semi-definite cone first (any PSD Z gives a valid
-        bound), then ``min over the box of f(u) - sum_b tr(Z_b G_b(u))`` separates per parameter:
-        ``k e^{-alpha u} + w e^{2u}`` with ``w = sum_b scale_b^2 a_bi^T Z_b a_bi / c``, minimised in
-        closed form and clipped to the bounds (a convex function of one variable).
-        """
+    def dual_weights(self, Z: Sequence[np.ndarray]) -> tuple[np.ndarray, float]:
+        """``(w, tr)`` of the Lagrangian ``f(u) - sum_b tr(Z_b G_b(u)) = sum_i [c_i(u_i) + w_i e^{2u_i}]
+        - tr`` for LMI multipliers ``Z_b`` (each projected onto the PSD cone first)."""
         spec = self.spec
         w = np.zeros(spec.n)
         trace = 0.0
@@ -532,8 +547,17 @@ class ToleranceNLP:
             Zp = (vec * np.clip(lam, 0.0, None)) @ vec.T
             trace += float(np.trace(Zp))
             w += block.scale**2 * np.einsum("in,ij,jn->n", block.A, Zp, block.A) / spec.c
-        alpha, k = spec.alpha, spec.k
-        with np.errstate(divide="ignore"):
-            u_star = np.where(w > 0, np.log(alpha * k / (2 * np.where(w > 0, w, 1.0))) / (2 + alpha), self.uu)
-        u_star = np.minimum(np.maximum(u_star, self.lu), self.uu)
-        return float(np.sum(k * np.exp(-alpha * u_star) + w * np.exp(2 * u_star)) - trace)
+        return w, trace
+
+    def dual_bound(self, Z: Sequence[np.ndarray]) -> float:
+        """Lagrangian lower bound on the optimal cost for LMI multipliers ``Z_b`` (3x3).
+
+        ``Z_b`` is projected onto the positive semi-definite cone first (any PSD Z gives a valid
+        bound, weak duality), then ``min over the box of f(u) - sum_b tr(Z_b G_b(u))`` separates per
+        parameter: ``c_i(u) + w_i e^{2u}`` (:meth:`dual_weights`), minimised by
+        :meth:`tolsynth.cost.CostModel.dual_min` (closed form for the power law; exact where the cost
+        is convex in eps^2, a rigorous lower bound otherwise).
+        """
+        w, trace = self.dual_weights(Z)
+        vals, _ = self.costs.dual_min(w, self.lu, self.uu)
+        return float(np.sum(vals) - trace)

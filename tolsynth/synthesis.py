@@ -65,6 +65,8 @@ def synthesize(
     Phi: float | None = None,
     p_orientation: float | None = None,
     criterion: str = "components",
+    cost=None,
+    locks=None,
     x0=None,
     options: dict | None = None,
     validate: int | None = None,
@@ -107,6 +109,14 @@ def synthesize(
         a fixed quadrature inside the NLP, checked at the result against the error-controlled
         :func:`tolsynth.stats.p_ball` and refined (re-solved with more nodes) until they agree
         to 1e-9.
+    cost : CostModel, dict, list or dict name -> model, optional
+        Cost model per parameter (:mod:`tolsynth.cost`: power law, Chase, exponential, tabulated);
+        parameters without one keep ``k eps^-alpha``.  Where a cost is not convex in eps^2 the
+        result claims no certificate (its ``lower_bound`` stays valid; see ``result.message``).
+    locks : dict name -> tolerance, optional
+        Tolerances fixed at given values (e.g. by a supplier); the others are optimised around
+        them.  Raises :class:`InfeasibleSpecificationError` naming the locked parameters if they
+        alone break the specification.
     x0 : sequence, optional
         Starting tolerances (default: a strictly feasible interior point).
     options : dict, optional
@@ -138,10 +148,18 @@ def synthesize(
     options = check_options(options, _solver_defaults(solver))
     if validate is not None and validate is not False:
         validate = check_count(validate, "validate", lower=0)
+    if locks:
+        from .locks import apply_locks
+
+        bounds = apply_locks(mechanism, bounds, locks)
     spec = make_specification(
-        mechanism, R, p, distribution, alpha, k, bounds, pose, poses, Phi, p_orientation, criterion
+        mechanism, R, p, distribution, alpha, k, bounds, pose, poses, Phi, p_orientation, criterion, cost
     )
     nlp = ToleranceNLP(spec)
+    if locks:
+        from .locks import check_locks
+
+        check_locks(nlp)
     nlp.check_feasible()
     eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0), "x0", lower=TINY)
     result = SOLVERS[solver](nlp, eps0, dict(options or {}))

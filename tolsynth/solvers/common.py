@@ -45,6 +45,7 @@ def assemble(
     certified optimum of the per-component relaxation (same p), solved here by IPOPT.
     """
     spec = nlp.spec
+    eps = np.clip(eps, spec.lower, spec.upper)  # exp(ln eps) may round one ulp past a bound (a lock)
     blocks = []
     for block, (vals, dirs), Zb in zip(spec.blocks, nlp.constraint_values(eps), Z):
         mult = np.array([2.0 * float(dirs[:, j] @ Zb @ dirs[:, j]) for j in range(3)])
@@ -89,6 +90,13 @@ def assemble(
         # primal point by least squares on stationarity (sharper when the solver's are loose)
         lower = max(nlp.dual_bound(Z), nlp.dual_bound(nlp.kkt_multipliers(eps)))
     status, message = _verified(status, message, blocks, cost, lower, certified=not spec.sphere_blocks)
+    if not spec.sphere_blocks and not spec.convex:
+        # weak duality still holds (the dual bound's 1-D minima are global), so a closed gap still
+        # certifies; an open one may be a local optimum, and _verified has withheld "optimal"
+        bad = [nm for nm, ok in zip(spec.names, spec.costs.convex(spec.lower, spec.upper)) if not ok]
+        message = (f"{message}; the cost of {bad} is not convex in eps^2 on its range: "
+                   + ("certified only because the dual gap closed" if status is Status.OPTIMAL
+                      else "no certificate, possibly a local optimum (the lower bound is valid)"))
     return SynthesisResult(
         solver=solver,
         status=status,

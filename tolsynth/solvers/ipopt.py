@@ -77,18 +77,20 @@ NEAR_ACTIVE = 0.9
 
 @lru_cache(maxsize=64)
 def _solver(n: int, K: int, tol: float, constr_viol_tol: float, max_iter: int, mu_strategy: str,
-            m_sphere: int = 0, sphere_nodes: int = 0) -> ca.Function:
+            m_sphere: int = 0, sphere_nodes: int = 0, cost_signature: tuple | None = None) -> ca.Function:
     """The cut NLP for n parameters and K cut slots: ``min f(u)/f0  s.t.  C exp(2u) <= 1``."""
     n_ps = 1 + m_sphere + 3 * n * m_sphere if m_sphere else 0
+    cost = cost_graph(n, cost_signature)
+    nt = cost.size1_in(1)
     u = ca.SX.sym("u", n)
-    p = ca.SX.sym("p", K * n + 2 * n + 1 + n_ps)
+    p = ca.SX.sym("p", K * n + nt + 1 + n_ps)
     C = ca.reshape(p[: K * n], K, n)
-    alpha, k = p[K * n : K * n + n], p[K * n + n : K * n + 2 * n]
-    f0 = p[K * n + 2 * n]
+    theta = p[K * n : K * n + nt]
+    f0 = p[K * n + nt]
     g = [ca.mtimes(C, ca.exp(2 * u))]
     if m_sphere:  # P(|dr| <= R_b) >= p_b, bounds given through lbg
-        g.append(sphere_graph(n, m_sphere, sphere_nodes)(u, p[K * n + 2 * n + 1 :]))
-    nlp = {"x": u, "p": p, "f": cost_graph(n)(u, alpha, k) / f0, "g": ca.vertcat(*g)}
+        g.append(sphere_graph(n, m_sphere, sphere_nodes)(u, p[K * n + nt + 1 :]))
+    nlp = {"x": u, "p": p, "f": cost(u, theta) / f0, "g": ca.vertcat(*g)}
     opts = {
         "print_time": False,
         # a trial point may overflow (Inf) on the way; IPOPT backtracks from it by itself, so the
@@ -116,7 +118,7 @@ _CUT_CACHE_SIZE = 256
 def _cache_key(nlp: ToleranceNLP) -> tuple:
     spec = nlp.spec
     return (spec.n, len(spec.blocks), b"".join(np.ascontiguousarray(b.A).tobytes() for b in spec.blocks),
-            spec.alpha.tobytes(), spec.lower.tobytes(), spec.upper.tobytes())
+            repr(nlp.costs.signature), nlp.theta.tobytes(), spec.lower.tobytes(), spec.upper.tobytes())
 
 
 def _remember(key: tuple, cut_b: np.ndarray, cut_w: np.ndarray) -> None:
@@ -159,7 +161,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     eps = nlp.start_point() if eps0 is None else np.clip(np.asarray(eps0, dtype=float), spec.lower, spec.upper)
     f0 = nlp.cost(eps)
     u = np.log(eps)
-    pfix = np.concatenate([spec.alpha, spec.k, [f0]] + ([nlp.Ps] if ms else []))
+    pfix = np.concatenate([nlp.theta, [f0]] + ([nlp.Ps] if ms else []))
 
     # initial cuts: those that were active at the end of the last solve on the same blocks (a
     # sweep over R, p, the distribution or the cost re-solves the same poses), else every
@@ -198,7 +200,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         ubg = np.concatenate([np.ones(slots), np.full(ms, np.inf)])
         for mu_strategy in ATTEMPTS:
             solver = _solver(n, slots, float(opts["tol"]), float(opts["constr_viol_tol"]), int(opts["max_iter"]),
-                             mu_strategy, ms, nlp.sphere_nodes if ms else 0)
+                             mu_strategy, ms, nlp.sphere_nodes if ms else 0, nlp.costs.signature)
             sol = solver(x0=u, p=pval, lbx=nlp.lu, ubx=nlp.uu, lbg=lbg, ubg=ubg)
             stats = solver.stats()
             code = stats.get("return_status", "unknown")

@@ -51,16 +51,17 @@ DEFAULT_OPTIONS = {
 
 
 @lru_cache(maxsize=None)
-def penalty_graph(n: int, m: int, m_sphere: int = 0, sphere_nodes: int = 0) -> ca.Function:
-    """``penalty(u, P, alpha, k, lu, uu, r, w_acc, w_bnd, Ps, ps) -> (penalty, f)`` for n
+def penalty_graph(n: int, m: int, m_sphere: int = 0, sphere_nodes: int = 0,
+                  cost_signature: tuple | None = None) -> ca.Function:
+    """``penalty(u, P, theta, lu, uu, r, w_acc, w_bnd, Ps, ps) -> (penalty, f)`` for n
     parameters, m LMI blocks and m_sphere sphere blocks (``-ln(P_b - p_b)`` each)."""
-    g = nlp_graphs(n, m)
+    g = nlp_graphs(n, m, cost_signature)
     u = ca.SX.sym("u", n)
     P = ca.SX.sym("P", g.params)
-    alpha, k = ca.SX.sym("alpha", n), ca.SX.sym("k", n)
+    theta = ca.SX.sym("theta", g.cost.size1_in(1))
     lu, uu = ca.SX.sym("lu", n), ca.SX.sym("uu", n)
     r, w_acc, w_bnd = ca.SX.sym("r"), ca.SX.sym("w_acc"), ca.SX.sym("w_bnd")
-    f = g.cost(u, alpha, k)
+    f = g.cost(u, theta)
     G = g.lmi(u, P)
     inside = ca.logic_and(ca.mmin(u - lu) > 0, ca.mmin(uu - u) > 0)
     barrier_acc = 0
@@ -81,9 +82,9 @@ def penalty_graph(n: int, m: int, m_sphere: int = 0, sphere_nodes: int = 0) -> c
     value = ca.if_else(inside, f + r * (w_acc * barrier_acc + w_bnd * barrier_bnd), ca.inf)
     return ca.Function(
         "sumt_penalty",
-        [u, P, alpha, k, lu, uu, r, w_acc, w_bnd, Ps, ps],
+        [u, P, theta, lu, uu, r, w_acc, w_bnd, Ps, ps],
         [value, f],
-        ["u", "P", "alpha", "k", "lu", "uu", "r", "w_acc", "w_bnd", "Ps", "ps"],
+        ["u", "P", "theta", "lu", "uu", "r", "w_acc", "w_bnd", "Ps", "ps"],
         ["penalty", "f"],
     )
 
@@ -106,7 +107,7 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     if fixed:
         raise InputError("bounds", f"SUMT needs lower < upper (an interior), not for {fixed}", "lower < upper")
     n, m, ms = spec.n, len(spec.blocks), len(spec.sphere_blocks)
-    F = penalty_graph(n, m, ms, nlp.sphere_nodes if ms else 0)
+    F = penalty_graph(n, m, ms, nlp.sphere_nodes if ms else 0, nlp.costs.signature)
     eps0 = nlp.interior_start() if eps0 is None else np.asarray(eps0, dtype=float)
     u = np.log(eps0)
     nu = (3 * m + ms) * o["w_acc"] + 2 * n * o["w_bnd"]  # barrier parameter: gap <= r * nu
@@ -116,7 +117,7 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     us, rs = ca.SX.sym("u", n), ca.SX.sym("r")
     Fp = ca.Function(
         "sumt_penalty_fixed", [us, rs],
-        [F(us, nlp.P, spec.alpha, spec.k, nlp.lu, nlp.uu, rs, o["w_acc"], o["w_bnd"],
+        [F(us, nlp.P, nlp.theta, nlp.lu, nlp.uu, rs, o["w_acc"], o["w_bnd"],
            nlp.Ps if ms else ca.DM(0, 1), nlp.p_sphere)[0]],
     )
 
