@@ -5,6 +5,9 @@ the position sensitivity of parameter i, ``c`` = 3 uniform, 9 normal).  Along a 
 direction ``d_j`` the variance ``sigma_j^2 = d_j^T V d_j = sum_i eps_i^2 (a_i . d_j)^2 / c`` is a
 sum of one term per parameter, so each parameter's *share* of each principal variance is exact
 (the shares add up to 1), and so is its share of the total variance ``tr V``.
+Where principal variances coincide (at the paper's optimum two are active and equal) the principal
+directions within that eigenspace are arbitrary, and so is the split of the shares between them;
+their sum over the eigenspace is well defined.
 
 The sphere probability's loss ``1 - P(|dr| <= R)`` is not additive; its shares are the normalised
 elasticities ``d(1 - P)/d ln eps_i`` (first-order attribution: the share of the loss removed by
