@@ -93,3 +93,19 @@ def test_mechanism_input_table_and_plot(mech):
     with pytest.raises(tolsynth.OutOfRangeError, match="R"):
         tolsynth.contributions(mech, tol, R=-1.0)
     assert math.isclose(float(rep.shares[0, :, 2].sum()), 1.0)
+
+
+def test_cli_contributions_and_lock(capsys):
+    import json
+
+    from tolsynth.cli import main
+
+    assert main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--lock", "h3=0.2",
+                 "--contributions", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["tolerances"]["h3"] == 0.2 and out["inputs"]["locks"] == {"h3": 0.2}
+    rows = out["contributions"]["rows"]
+    assert len(rows) == 11 and abs(sum(r["share_sigma1"] for r in rows) - 1) < 1e-12
+    assert main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--lock", "h3=5"]) == 2
+    assert "locked tolerances ['h3']" in capsys.readouterr().err
+    assert main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--lock", "h3"]) == 2

@@ -29,6 +29,9 @@ from .pose_search import WorstPose, worst_pose
 from .workspace_map import ProbabilityMap, probability_map
 from .plot import plot_map
 from .contributions import Contributions, contributions  # issue 13
+from .process import Process, ProcessChoice, synthesize_processes
+from .budget import BudgetResult, best_accuracy
+from .pareto import ParetoFront, pareto_front
 from .synthesis import Comparison, WorkspaceSynthesis, compare, synthesize, synthesize_workspace
 
 __version__ = "0.1.0"
@@ -37,6 +40,13 @@ __all__ = [
     # issue 13: designer's cost
     "contributions",
     "Contributions",
+    "synthesize_processes",
+    "best_accuracy",
+    "BudgetResult",
+    "pareto_front",
+    "ParetoFront",
+    "Process",
+    "ProcessChoice",
     # issue 4: Monte Carlo, validation, worst pose, workspace map
     "monte_carlo",
     "MonteCarloResult",

@@ -147,19 +147,46 @@ def cmd_solve(args) -> int:
             print(side_by_side(c))
         ok = c.ipopt.success and c.sumt.success
     else:
+        if args.lock:
+            kw["locks"] = _parse_locks(mech, args.lock)
+            record["locks"] = kw["locks"]
         res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
+        rep = None
+        if args.contributions:
+            from ..contributions import contributions
+
+            rep = contributions(res)
         if args.json:
             out = res.to_dict()
+            if rep is not None:
+                out["contributions"] = rep.to_dict()
             out["inputs"] = inputs_record(args, mech, **record)
             emit_json(out)
         else:
             print(f"{head}, pose{'s' if len(poses) > 1 else ''} {where}")
             print(res.summary())
+            if rep is not None:
+                print("contributions (share of each principal variance, of tr V and of 1 - P(sphere)):")
+                print(rep.format())
         ok = res.success
     if not ok:
         print("tolsynth solve: the solver did not converge; the numbers above are not an optimum", file=sys.stderr)
         return 1
     return 0
+
+
+def _parse_locks(mech, items) -> dict:
+    """``--lock NAME=VALUE`` (repeatable): a tolerance fixed at VALUE (the parameter's unit)."""
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise InputError("--lock", f"got {item!r}", "NAME=VALUE, e.g. --lock h3=0.2")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise InputError(f"--lock {name}", f"not a number: {value!r}", "a tolerance in the parameter's unit") from None
+    return out
 
 
 def register(sub) -> None:
@@ -202,5 +229,9 @@ def register(sub) -> None:
                    help="with --everywhere: the pose the exchange method starts from: NAME, none (the search's "
                         "worst pose at mid-bound tolerances), or joint values in deg; default: the model's "
                         "reference pose (its 'worst' configuration if it has one, else none)")
+    p.add_argument("--lock", action="append", default=None, metavar="NAME=VALUE",
+                   help="fix a tolerance at VALUE (its tolerance unit); repeatable; the others are optimised around it")
+    p.add_argument("--contributions", action="store_true",
+                   help="also report each parameter's share of each principal variance and of 1 - P(sphere)")
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
     p.set_defaults(func=cmd_solve, task="the solve")
