@@ -516,6 +516,60 @@ def case_stats(draw):
     return run
 
 
+def _log_uniform(draw, lo, hi):
+    return float(10.0 ** draw(st.floats(math.log10(lo), math.log10(hi))))
+
+
+def case_valid_extremes(draw):
+    """Valid arguments across their whole allowed range (log-uniform: 1e-12 .. 1e9 tolerances,
+    radii, probabilities to 1e-12 of 0 and 1): finite numbers, probabilities in [0, 1], no warning."""
+    mech = _mech(draw(st.sampled_from(MODELS)))
+    fn = draw(st.sampled_from(["analyze", "monte_carlo", "worst_pose", "p_ball", "synthesize"]))
+    eps = np.array([_log_uniform(draw, 1e-12, 1e9) for _ in range(mech.n)])
+    eps[draw(st.integers(0, mech.n - 1))] = draw(st.sampled_from([0.0, 1e-12, 1e9]))
+    R = _log_uniform(draw, 1e-12, 1e9)
+    p = draw(st.sampled_from([1e-12, 1e-6, 0.5, 0.99, 1 - 1e-6, 1 - 1e-12]))
+    cfg = draw(st.sampled_from(sorted(mech.configurations)))
+    # the sphere criterion at extreme R and p refines its quadrature graph, and building the
+    # refined IPOPT solver alone takes 10-50 s (a cost, not a hang): only moderate R, p for it here
+    criterion = draw(st.sampled_from(["components", "sphere"]))
+    if criterion == "sphere":
+        R, p = _log_uniform(draw, 1e-2, 1e2), draw(st.sampled_from([0.5, 0.9, 0.99]))
+
+    def run():
+        if fn == "analyze":
+            a = mech.analyze(cfg, eps, R=R, Phi=_log_uniform(draw, 1e-12, 1e3), check_limits=False)
+            finite(a.covariance, a.principal_std, a.p_components, a.p_sphere, a.p_cone)
+            probability(a.p_components, a.p_sphere, a.p_cone, a.p_orientation_components)
+        elif fn == "monte_carlo":
+            r = tolsynth.monte_carlo(mech, cfg, eps, R=R, n=500, check_limits=False)
+            probability(r.p_components, r.p_sphere)
+        elif fn == "worst_pose":
+            # tolerances spanning all 21 decades make the sphere quadrature of every searched pose
+            # slow (about 12 s for puma560: many panels for variance ratios near 1e-15), not wrong;
+            # the search gets 9 decades here so that each case stays within its time bound
+            e = np.clip(eps, 1e-6, 1e3)
+            w = tolsynth.worst_pose(mech, e, criterion="probability", R=R, grid=3, starts=1, step_tol=1e-3,
+                                    max_grid_points=50, reference=None)
+            finite(w.q, w.value)
+        elif fn == "p_ball":
+            probability(tolsynth.p_ball(eps[:3] ** 2, R))
+        else:
+            bounds = (np.full(mech.n, 1e-12), np.full(mech.n, 1e9))
+            res = tolsynth.synthesize(mech, R, p, bounds=bounds, pose=cfg, criterion=criterion)
+            if criterion == "components":
+                _check_synthesis(mech, res, R, p, "uniform", [cfg])
+            elif res.success:  # the sphere probability reached, by the independent quadrature
+                from tolsynth.stats import p_ball
+
+                e = np.array([res.tolerances[n] for n in mech.error_parameters])
+                S = mech.sensitivity(cfg, check_limits=False)[:3]
+                lam = np.linalg.eigvalsh(S @ np.diag(e**2 / 3.0) @ S.T)
+                if p_ball(np.clip(lam, 0, None), R) < p - 1e-6:
+                    raise BadNumbers("sphere optimum below p")
+    return run
+
+
 API_CASES = {
     "synthesize": case_synthesize,
     "synthesize (valid specs)": case_synthesize_valid,
@@ -528,6 +582,7 @@ API_CASES = {
     "compare": case_compare,
     "Mechanism methods": case_mechanism,
     "stats": case_stats,
+    "valid extremes": case_valid_extremes,
 }
 
 

@@ -60,11 +60,11 @@ def variance_divisor(distribution: str) -> float:
 
 
 # the argument rules live in tolsynth.checks (one copy); re-exported here for older imports
-from .checks import HUGE, check_positive, check_probability, check_vector  # noqa: E402,F401
+from .checks import check_positive, check_probability, check_vector  # noqa: E402,F401
 
 
 def _array(x, field: str) -> np.ndarray:
-    """A float array of finite numbers of magnitude <= HUGE**2 (variances), or a typed error."""
+    """A float array of finite numbers, or a typed error."""
     from .errors import InputError
 
     if isinstance(x, (str, bytes)) or x is None:
@@ -73,8 +73,8 @@ def _array(x, field: str) -> np.ndarray:
         arr = np.asarray(x, dtype=float)
     except (TypeError, ValueError, OverflowError):
         raise InputError(field, f"expected numbers, got {x!r:.60}", "an array of finite numbers") from None
-    if not np.all(np.isfinite(arr) & (np.abs(arr) <= HUGE**2)):
-        raise OutOfRangeError(field, "a non-finite or huge value", f"finite numbers of magnitude <= {HUGE**2:g}")
+    if not np.all(np.isfinite(arr)):
+        raise OutOfRangeError(field, "a non-finite value", "finite numbers")
     return arr
 
 
@@ -252,8 +252,14 @@ def _chi_cdf_radial(n: int, x: np.ndarray) -> np.ndarray:
         return _erf(x / math.sqrt(2.0))
     if n == 2:
         return -np.expm1(-0.5 * x * x)
+    x = np.asarray(x, dtype=float)
     small = x <= 0.5
-    return np.where(small, _chi3_small(np.where(small, x, 0.0)), chi3_cdf(np.where(small, 1.0, x)))
+    if not small.any():
+        return chi3_cdf(x)
+    out = np.empty_like(x)
+    out[small] = _chi3_small(x[small])
+    out[~small] = chi3_cdf(x[~small])
+    return out
 
 
 @lru_cache(maxsize=None)
