@@ -85,8 +85,8 @@ __all__ = [
     "MODELS",
 ]
 
-#: bisection steps of the safeguarded 1-D minimisation (interval shrinks by 2^-100)
-_BISECT = 100
+#: bisection steps of the safeguarded 1-D minimisation (interval shrinks by 2^-64)
+_BISECT = 64
 #: grid points of the interval bound used where the cost is not convex in y
 _GRID = 4097
 
@@ -383,6 +383,7 @@ class Tabulated(CostModel):
     source = "shop data; PCHIP in log-log (Fritsch & Carlson 1980)"
     _x: np.ndarray = field(init=False, repr=False, compare=False)
     _coef: np.ndarray = field(init=False, repr=False, compare=False)
+    _convexity: dict = field(init=False, repr=False, compare=False, default_factory=dict)
 
     def __post_init__(self):
         try:
@@ -422,7 +423,8 @@ class Tabulated(CostModel):
         u = np.asarray(u, dtype=float)
         j = np.clip(np.searchsorted(self._x, u, side="right") - 1, 0, len(self._x) - 2)
         s = u - self._x[j]
-        a0, a1, a2, a3 = np.moveaxis(self._coef[j], -1, 0)
+        c = self._coef[j]
+        a0, a1, a2, a3 = c[..., 0], c[..., 1], c[..., 2], c[..., 3]
         if order == 0:
             return a0 + s * (a1 + s * (a2 + s * a3))
         if order == 1:
@@ -459,7 +461,12 @@ class Tabulated(CostModel):
 
     def _quartic_min(self, lo, hi, with_y: bool) -> float:
         """Exact minimum over ``[ln lo, ln hi]`` of ``g'' + g'^2 - 2 g'`` (``with_y``) or of
-        ``g'' + g'^2`` (convexity of ``c = e^g`` in y, resp. in u)."""
+        ``g'' + g'^2`` (convexity of ``c = e^g`` in y, resp. in u); memoised per range."""
+        key = (float(lo), float(hi), with_y)
+        if key in self._convexity:
+            return self._convexity[key]
+        from numpy.polynomial import polynomial as P
+
         lu, uu = math.log(lo), math.log(hi)
         best = math.inf
         for j in range(len(self._x) - 1):
@@ -467,11 +474,12 @@ class Tabulated(CostModel):
             if a > b:
                 continue
             _, a1, a2, a3 = self._coef[j]
-            g1 = np.polynomial.Polynomial([a1, 2 * a2, 3 * a3])
-            q = g1.deriv() + g1**2 - (2 * g1 if with_y else 0)
-            pts = [a - self._x[j], b - self._x[j]]
-            pts += [r.real for r in q.deriv().roots() if abs(r.imag) < 1e-12 and a - self._x[j] < r.real < b - self._x[j]]
-            best = min(best, float(np.min(q(np.array(pts)))))
+            g1 = np.array([a1, 2 * a2, 3 * a3])  # ascending powers of s = u - x_j
+            q = P.polyadd(P.polyadd(P.polyder(g1), P.polymul(g1, g1)), -2 * g1 if with_y else [0.0])
+            s0, s1 = a - self._x[j], b - self._x[j]
+            pts = [s0, s1] + [r.real for r in P.polyroots(P.polyder(q)) if abs(r.imag) < 1e-12 and s0 < r.real < s1]
+            best = min(best, float(np.min(P.polyval(np.array(pts), q))))
+        self._convexity[key] = best
         return best
 
     def convex_in_u(self, lo, hi):

@@ -149,6 +149,21 @@ class Mechanism:
         return np.array([p.k for p in self.parameters])
 
     @property
+    def cost_models(self) -> dict:
+        """Name -> cost model given in the model file (issue 13); the others use ``k eps^-alpha``."""
+        return {p.name: p.cost for p in self.parameters if p.cost is not None}
+
+    @property
+    def processes(self) -> dict:
+        """Name -> processes given in the model file (for :func:`tolsynth.synthesize_processes`)."""
+        return {p.name: list(p.processes) for p in self.parameters if p.processes}
+
+    @property
+    def locks(self) -> dict:
+        """Name -> locked tolerance given in the model file."""
+        return {p.name: p.lock for p in self.parameters if p.lock is not None}
+
+    @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Default tolerance bounds (Eq. 22) in tolerance units."""
         return np.array([p.lower for p in self.parameters]), np.array([p.upper for p in self.parameters])

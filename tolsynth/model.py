@@ -118,6 +118,9 @@ class ErrorParameter:
     label: str = ""
     alias: str | None = None
     kind: str = "length"
+    cost: Any = None  # tolsynth.cost.CostModel, or None: k eps^-alpha
+    processes: tuple = ()  # tolsynth.process.Process, ...
+    lock: float | None = None
 
 
 @dataclass(frozen=True)
@@ -248,6 +251,9 @@ FORMAT: dict[str, dict[str, bool]] = {
         "bounds": True,
         "label": False,
         "alias": False,
+        "cost": False,  # issue 13: a cost model, {model = "chase", A = .., B = .., k = ..} (tolsynth.cost)
+        "processes": False,  # issue 13: [{name, cost, lower, upper}, ...] (tolsynth.process)
+        "lock": False,  # issue 13: a tolerance fixed at this value (tolerance unit)
     },
     "tolerance_value": {"value": True, "unit": True},
     "reference_results": {
@@ -620,6 +626,7 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
         lo, hi = r.pair(r.get(raw, "bounds", where), f"{where}.bounds")
         if lo < TINY:
             raise r.fail(f"{where}.bounds", f"lower bound must be > 0 (cost eps**-alpha), at least {TINY:g}, got {lo}")
+        cost, procs, lock = _designer_fields(r, raw, where)
         eparams.append(
             ErrorParameter(
                 name=pname,
@@ -632,6 +639,9 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
                 label=label,
                 alias=alias,
                 kind=kind,
+                cost=cost,
+                processes=procs,
+                lock=lock,
             )
         )
     if not eparams:
@@ -717,3 +727,25 @@ def _unique(r: _Reader, names: list, where: str, what: str) -> None:
     dup = sorted({str(n) for n in names if names.count(n) > 1})
     if dup:
         raise r.fail(where, f"{what} {dup} declared more than once")
+
+
+def _designer_fields(r, raw: dict, where: str):
+    """The optional cost model, processes and lock of one error parameter (issue 13)."""
+    from .cost import cost_model
+    from .errors import InputError
+    from .process import Process
+
+    cost = procs = lock = None
+    try:
+        if "cost" in raw:
+            cost = cost_model(r.get(raw, "cost", where, dict))
+        if "processes" in raw:
+            items = r.get(raw, "processes", where, list)
+            if not items:
+                raise r.fail(f"{where}.processes", "empty list")
+            procs = tuple(Process.make(item) for item in items)
+        if "lock" in raw:
+            lock = r.positive(raw["lock"], f"{where}.lock")
+    except InputError as err:
+        raise r.fail(where, str(err)) from None
+    return cost, procs or (), lock

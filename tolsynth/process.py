@@ -196,7 +196,7 @@ class _Search:
         self.procs = procs
         self.names = list(procs)
         self.kwargs = dict(kwargs)
-        self.user_cost = self.kwargs.pop("cost", None) or {}
+        self.user_cost = self.kwargs.pop("cost", None) or dict(mechanism.cost_models)
         if isinstance(self.user_cost, (CostModel, list, tuple)) or (isinstance(self.user_cost, Mapping) and "model" in self.user_cost):
             raise InputError("cost", "with processes, give per-parameter costs as a dict name -> model",
                              "a dict for the parameters without processes")
@@ -228,12 +228,10 @@ class _Search:
         """Relaxation at a node: its certified bound, its tolerances (or None) and the result."""
         models, ranges = {}, {}
         for nm, S in zip(self.names, node):
-            plist = [self.procs[nm][j] for j in S]
-            if len(plist) == 1:
-                models[nm], ranges[nm] = plist[0].cost, (plist[0].lower, plist[0].upper)
-            else:
-                hull, lo, hi = _hull_model(plist)
-                models[nm], ranges[nm] = hull, (hull.eps[0], hull.eps[-1])
+            # every listed parameter as a hull table of the same size (a fixed process too): one
+            # compiled NLP serves every relaxation; the bound's validity does not depend on it
+            hull, _, _ = _hull_model([self.procs[nm][j] for j in S])
+            models[nm], ranges[nm] = hull, (hull.eps[0], hull.eps[-1])
         res = self._solve(models, ranges)
         if res is None:  # even the relaxation's range cannot meet it: no choice in the node can
             return math.inf, None, None
@@ -275,7 +273,7 @@ class _Search:
         return tuple(choice)
 
 
-def synthesize_processes(mechanism, R: float, p: float, processes, distribution: str = "uniform", *,
+def synthesize_processes(mechanism, R: float, p: float, processes=None, distribution: str = "uniform", *,
                          rel_gap: float = 1e-6, max_nodes: int = 10_000, **kwargs) -> ProcessChoice:
     """Cheapest process per parameter and tolerances within it, with a proven optimum.
 
@@ -315,6 +313,8 @@ def synthesize_processes(mechanism, R: float, p: float, processes, distribution:
     if not isinstance(mechanism, Mechanism):
         mechanism = load_model(mechanism)
     t0 = time.perf_counter()
+    if processes is None:
+        processes = mechanism.processes  # the model file's
     procs = _normalise(mechanism, processes)
     search = _Search(mechanism, R, p, distribution, procs, kwargs)
     names = search.names

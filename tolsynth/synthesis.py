@@ -148,6 +148,10 @@ def synthesize(
     options = check_options(options, _solver_defaults(solver))
     if validate is not None and validate is not False:
         validate = check_count(validate, "validate", lower=0)
+    if cost is None and mechanism.cost_models:
+        cost = mechanism.cost_models  # the model file's (issue 13)
+    if locks is None and mechanism.locks:
+        locks = mechanism.locks
     if locks:
         from .locks import apply_locks
 
