@@ -71,7 +71,8 @@ def _outcome(fn, box) -> str:
         raise Hang()
 
     previous = signal.signal(signal.SIGALRM, alarm)
-    signal.setitimer(signal.ITIMER_REAL, CASE_SECONDS)
+    # repeating: an alarm that lands where an exception is swallowed (a gc callback) fires again
+    signal.setitimer(signal.ITIMER_REAL, CASE_SECONDS, 1.0)
     try:
         with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
             warnings.filterwarnings("error", module=r"tolsynth")

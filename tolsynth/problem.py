@@ -269,7 +269,7 @@ def make_specification(
         p_orientation=p_orientation,
         criterion=criterion,
         sphere_blocks=tuple(sphere),
-        cost=None if cost is None else costs,
+        cost=costs,  # built once here (the power law from k, alpha when no cost was given)
     )
 
 
@@ -401,7 +401,7 @@ class ToleranceNLP:
         :func:`tolsynth.stats.covariance_graph` on the whole stack of blocks at once (one einsum;
         the tests check it against that graph)."""
         w = np.asarray(eps, dtype=float) ** 2 / self.spec.c
-        return np.einsum("bin,n,bjn->bij", self.As, w, self.As, optimize=True)
+        return (self.As * w) @ self.As.transpose(0, 2, 1)  # tiny matrices: matmul beats einsum's path search
 
     def block_values(self, eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``sigma_j z / R`` (or ``/ Phi``) of every block, descending, shape (m, 3), and the

@@ -337,7 +337,10 @@ def _ball_rows(lam: np.ndarray, R: float, tol: float, max_nodes: int, out: np.nd
             if prev is not None:
                 delta = np.abs(val - prev)
                 done = delta <= tol
-                out[group[done]], err[group[done]] = val[done], delta[done]
+                # a quadrature of a CDF can overshoot [0, 1] by rounding (1 + 2e-15 seen): a
+                # probability is reported inside [0, 1], the error estimate keeps the overshoot
+                out[group[done]] = np.clip(val[done], 0.0, 1.0)
+                err[group[done]] = np.maximum(delta[done], np.abs(val[done] - out[group[done]]))
                 if not np.all(done) and nodes >= max_nodes:
                     raise RuntimeError(
                         f"p_ball: no convergence to {tol} with {max_nodes} nodes per panel "
@@ -370,8 +373,8 @@ def p_ball_batch(variances, R: float, tol: float = 1e-12, max_nodes: int = 512, 
     """
     R = check_positive(R, "R")
     lam = np.sort(np.atleast_2d(_array(variances, "variances")), axis=1)[:, ::-1]
-    if lam.ndim != 2 or lam.shape[1] > 3:
-        raise OutOfRangeError("variances", f"shape {np.shape(variances)}", "(N, k) with k <= 3")
+    if lam.ndim != 2 or not 1 <= lam.shape[1] <= 3:
+        raise OutOfRangeError("variances", f"shape {np.shape(variances)}", "(N, k) with 1 <= k <= 3")
     top = np.maximum(lam[:, :1], 0.0)
     if np.any(lam < -1e-12 * top) or not np.all(np.isfinite(lam)):
         raise OutOfRangeError("variances", "negative or non-finite variance", "finite variances >= 0")

@@ -318,6 +318,10 @@ def synthesize_workspace(
     tol = check_positive(tol, "tol", "relative", upper=1.0)
     max_rounds = check_count(max_rounds, "max_rounds", lower=1, upper=1000)
     search = check_mapping(search, "search", "keyword arguments of tolsynth.worst_pose")
+    allowed = ("grid", "reference", "fixed", "starts", "step_tol", "max_grid_points", "seed")
+    for key in search or {}:  # the search's own arguments; the others are set here
+        if key not in allowed:
+            raise InputError("search", f"unknown key {key!r}", ", ".join(allowed))
     sphere = kwargs.get("criterion", "components") == "sphere"
     if pose is None:  # no starting pose: the worst pose found at tolerances in the middle of the bounds
         lo, hi = mechanism.bounds
