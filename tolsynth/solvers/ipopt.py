@@ -104,8 +104,11 @@ def _solver(n: int, K: int, tol: float, constr_viol_tol: float, max_iter: int, m
         # never stop at the "acceptable" level silently: only Solve_Succeeded is success
         "ipopt.acceptable_iter": 0,
         "ipopt.hessian_approximation": "exact",
-        "ipopt.mu_strategy": mu_strategy,
+        "ipopt.mu_strategy": "monotone" if mu_strategy == "warm" else mu_strategy,
     }
+    if mu_strategy == "warm":  # from the remembered optimum of the same blocks, with its multipliers
+        opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
+                     "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9})
     return ca.nlpsol("tolerance_cuts", "ipopt", nlp, opts)
 
 
@@ -121,8 +124,10 @@ def _cache_key(nlp: ToleranceNLP) -> tuple:
             repr(nlp.costs.signature), nlp.theta.tobytes(), spec.lower.tobytes(), spec.upper.tobytes())
 
 
-def _remember(key: tuple, cut_b: np.ndarray, cut_w: np.ndarray) -> None:
-    _CUT_CACHE[key] = (cut_b.copy(), cut_w.copy())
+def _remember(key: tuple, cut_b: np.ndarray, cut_w: np.ndarray, warm: tuple | None = None) -> None:
+    """Remember a solve's active cuts and, for a warm start, ``(eps, cut multipliers, bound
+    multipliers in u)`` with the multipliers in cost units (not divided by that solve's f0)."""
+    _CUT_CACHE[key] = (cut_b.copy(), cut_w.copy(), warm)
     _CUT_CACHE.move_to_end(key)
     while len(_CUT_CACHE) > _CUT_CACHE_SIZE:
         _CUT_CACHE.popitem(last=False)
@@ -170,8 +175,9 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     cut_w = np.zeros((0, 3))
     key = _cache_key(nlp)
     cached = _CUT_CACHE.get(key)
+    warm = None
     if cached is not None:
-        cut_b, cut_w = cached
+        cut_b, cut_w, warm = cached
     elif m:
         vals, dirs = nlp.block_values(eps)
         worst = vals[:, 0]
@@ -198,10 +204,23 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         pval = np.concatenate([C.ravel(order="F"), pfix])
         lbg = np.concatenate([np.full(slots, -np.inf), nlp.p_sphere])
         ubg = np.concatenate([np.ones(slots), np.full(ms, np.inf)])
-        for mu_strategy in ATTEMPTS:
+        # the first round of a problem whose blocks were solved before starts from that optimum
+        # (rescaled onto this specification's constraint) with its multipliers; if that does not
+        # end in Solve_Succeeded the cold attempts follow from the usual start
+        attempts = ATTEMPTS
+        if rounds == 1 and warm is not None and eps0 is None and not ms and K == len(warm[1]):
+            attempts = ("warm",) + ATTEMPTS
+        for mu_strategy in attempts:
             solver = _solver(n, slots, float(opts["tol"]), float(opts["constr_viol_tol"]), int(opts["max_iter"]),
                              mu_strategy, ms, nlp.sphere_nodes if ms else 0, nlp.costs.signature)
-            sol = solver(x0=u, p=pval, lbx=nlp.lu, ubx=nlp.uu, lbg=lbg, ubg=ubg)
+            if mu_strategy == "warm":
+                eps_w = warm[0] / max(float(np.max(nlp.block_values(warm[0])[0][:, 0])), 1e-300)
+                lam0 = np.zeros(slots)
+                lam0[:K] = warm[1] / f0
+                sol = solver(x0=np.log(np.clip(eps_w, spec.lower, spec.upper)), p=pval, lbx=nlp.lu, ubx=nlp.uu,
+                             lbg=lbg, ubg=ubg, lam_g0=lam0, lam_x0=warm[2] / f0)
+            else:
+                sol = solver(x0=u, p=pval, lbx=nlp.lu, ubx=nlp.uu, lbg=lbg, ubg=ubg)
             stats = solver.stats()
             code = stats.get("return_status", "unknown")
             if code in ("NonIpopt_Exception_Thrown", "User_Requested_Stop"):
@@ -282,15 +301,16 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     if status is Status.OPTIMAL and K:
         # remember each block's multiplier matrix by its eigenvectors: the fewest cuts that
         # reproduce this optimum's Lagrangian
-        rb, rw = [], []
+        rb, rw, rl = [], [], []
         zmax = max(float(np.max(np.linalg.eigvalsh(Zb))) for Zb in Z)
         for b in np.unique(cut_b):
             lz, vz = np.linalg.eigh(Z[b])
             for j in np.nonzero(lz > 1e-9 * zmax)[0]:
                 rb.append(b)
                 rw.append(vz[:, j])
+                rl.append(lz[j])  # the multiplier of the cut along an eigenvector of Z_b
         if rb:
-            _remember(key, np.array(rb, dtype=int), np.array(rw))
+            _remember(key, np.array(rb, dtype=int), np.array(rw), (eps.copy(), np.array(rl), lam_x * f0))
     # P_b >= p_b active at its lower bound: CasADi's lam is <= 0 there; f - mu (P - p) with mu >= 0
     mu_sphere = -lam_g[len(lam_g) - ms :] * f0 if ms else np.zeros(0)
     message = code if status is Status.OPTIMAL else "; ".join(tried) or code
