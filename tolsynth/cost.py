@@ -609,6 +609,12 @@ class CostSet:
         return {nm: f"{m.kind}: {m.describe()}" for nm, m in zip(names, self.models)}
 
 
+@lru_cache(maxsize=256)
+def _power_set(k: tuple, alpha: tuple) -> CostSet:
+    """The paper's power law per parameter (memoised: a sweep re-solves with the same k, alpha)."""
+    return CostSet(tuple(PowerLaw(a, b) for a, b in zip(k, alpha)))
+
+
 def cost_set(cost, names: Sequence[str], index=None, k=None, alpha=None) -> CostSet:
     """The per-parameter models from a user's ``cost`` argument.
 
@@ -623,6 +629,9 @@ def cost_set(cost, names: Sequence[str], index=None, k=None, alpha=None) -> Cost
             raise InputError("cost", f"no cost model for parameter {names[i]!r}", "a model for every parameter")
         return PowerLaw(float(np.broadcast_to(k, (n,))[i]), float(np.broadcast_to(alpha, (n,))[i]))
 
+    if cost is None and k is not None and alpha is not None:
+        kk, aa = (np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in (k, alpha))
+        return _power_set(tuple(kk.tolist()), tuple(aa.tolist()))
     if cost is None:
         return CostSet(tuple(default(i) for i in range(n)))
     if isinstance(cost, (CostModel, Mapping)) and not (isinstance(cost, Mapping) and "model" not in cost):
