@@ -15,6 +15,7 @@ from .errors import (
     LoopClosureError,
     ModelFileError,
     OutOfRangeError,
+    MissingDependencyError,
     SolverError,
     TolsynthError,
     UnknownNameError,
@@ -33,6 +34,7 @@ from .process import Process, ProcessChoice, synthesize_processes
 from .budget import BudgetResult, best_accuracy
 from .pareto import ParetoFront, pareto_front
 from .synthesis import Comparison, WorkspaceSynthesis, compare, synthesize, synthesize_workspace
+from .tables import read_table  # issue 9: tables
 
 __version__ = "0.1.0"
 
@@ -80,4 +82,6 @@ __all__ = [
     "LoopClosureError",
     "InfeasibleSpecificationError",
     "SolverError",
+    "MissingDependencyError",
+    "read_table",
 ]

@@ -17,6 +17,7 @@ __all__ = [
     "LoopClosureError",
     "InfeasibleSpecificationError",
     "SolverError",
+    "MissingDependencyError",
 ]
 
 
@@ -88,3 +89,21 @@ class InfeasibleSpecificationError(TolsynthError):
 class SolverError(TolsynthError):
     """A solver failed in a way that leaves no result to report (not used for non-convergence,
     which is reported as ``success == False`` on the result)."""
+
+
+class MissingDependencyError(TolsynthError, ImportError):
+    """An optional package that a feature needs is not installed (pandas for tables, Dask for a
+    cluster sweep...).
+
+    Attributes
+    ----------
+    package : str
+        The missing package.
+    install : str
+        The command that installs it.
+    """
+
+    def __init__(self, package: str, what: str, install: str):
+        self.package = package
+        self.install = install
+        super().__init__(f"{what} needs {package}, which is not installed (install it with: {install})")

@@ -43,6 +43,7 @@ from .checks import check_count, check_seed
 from .errors import LoopClosureError
 from .numpy_eval import NumpyEvaluator
 from .progress import Progress, make_bar  # noqa: F401  (make_bar: re-exported for older imports)
+from .tables import Tabular
 from .stats import check_positive, check_probability, principal, variance_divisor
 
 __all__ = [
@@ -151,7 +152,7 @@ class _Sampler:
 # result types
 # =============================================================================================
 @dataclass(frozen=True)
-class MonteCarloResult:
+class MonteCarloResult(Tabular):
     """Monte Carlo error statistics at one pose, next to the analytic (linear, Gaussian) ones.
 
     Every probability has a two-sided confidence interval (``ci_method``, level ``confidence``);

@@ -27,6 +27,7 @@ from .checks import check_count, check_mapping, check_positive, check_real, chec
 from .errors import InputError, OutOfRangeError, UnknownNameError
 from .joint_space import MODEL_REFERENCE, _feasible, _limits, _reference
 from .stats import p_ball, variance_divisor
+from .tables import Tabular
 
 __all__ = ["WorstPose", "worst_pose"]
 
@@ -51,7 +52,7 @@ def _invariant_joints(mech, eps, distribution, rng) -> list[int]:
 
 
 @dataclass(frozen=True)
-class WorstPose:
+class WorstPose(Tabular):
     """The configuration of worst accuracy found, next to a reference configuration.
 
     Attributes

@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from .tables import Tabular
+
 __all__ = ["Status", "ConstraintBlock", "SynthesisResult"]
 
 
@@ -51,7 +53,7 @@ class ConstraintBlock:
 
 
 @dataclass(frozen=True)
-class SynthesisResult:
+class SynthesisResult(Tabular):
     """Optimal tolerances from :func:`tolsynth.synthesize` (any solver).
 
     Attributes
@@ -81,6 +83,9 @@ class SynthesisResult:
     history : list of dict
         Per iteration (IPOPT: objective and infeasibility; SUMT: outer iterations with their
         inner Powell histories).
+    inputs : dict or None
+        What :func:`tolsynth.synthesize` was given beyond the specification (model, solver
+        options, locks, start); :meth:`to_frame` and the writers record it with ``spec``'s values.
     """
 
     solver: str
@@ -101,6 +106,7 @@ class SynthesisResult:
     spec: Any = field(repr=False)
     history: list = field(default_factory=list, repr=False)
     validation: Any = field(default=None, repr=False)
+    inputs: dict | None = field(default=None, repr=False)
 
     @property
     def x(self) -> np.ndarray:

@@ -18,6 +18,7 @@ from .errors import InputError
 from .problem import SPHERE_NODES, ToleranceNLP, make_specification
 from .result import Status, SynthesisResult
 from .stats import z_of_p
+from .tables import Tabular
 
 __all__ = ["synthesize", "compare", "Comparison", "SOLVERS", "synthesize_workspace", "WorkspaceSynthesis"]
 
@@ -182,9 +183,10 @@ def synthesize(
             break
         nlp = ToleranceNLP(spec, sphere_nodes=2 * nlp.sphere_nodes)
         result = SOLVERS[solver](nlp, result.x, dict(options or {}))
-    if validate:
-        from dataclasses import replace
+    from dataclasses import replace
 
+    result = replace(result, inputs=_run_inputs(mechanism, solver, options, locks, x0, validate, seed))
+    if validate:
         from .montecarlo import validate as mc_validate
 
         report = mc_validate(
@@ -195,8 +197,17 @@ def synthesize(
     return result
 
 
+def _run_inputs(mechanism, solver, options, locks, x0, validate, seed) -> dict:
+    """What a result records beyond its specification (see :mod:`tolsynth.tables`)."""
+    path = getattr(mechanism.spec, "path", None)
+    return {"model": {"name": mechanism.name, "title": mechanism.title, "file": str(path) if path else None},
+            "solver": solver, "options": dict(options or {}), "locks": dict(locks) if locks else None,
+            "x0": None if x0 is None else np.asarray(mechanism.tolerances(x0), dtype=float).tolist(),
+            "validate": validate or None, "seed": seed if validate else None}
+
+
 @dataclass(frozen=True)
-class Comparison:
+class Comparison(Tabular):
     """IPOPT and SUMT on the same specification, side by side."""
 
     ipopt: SynthesisResult
@@ -260,7 +271,7 @@ def compare(mechanism, R: float, p: float, distribution: str = "uniform", alpha=
 
 
 @dataclass(frozen=True)
-class WorkspaceSynthesis:
+class WorkspaceSynthesis(Tabular):
     """Result of :func:`synthesize_workspace`: the constraint imposed over the whole workspace.
 
     Attributes

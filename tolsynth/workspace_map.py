@@ -22,13 +22,14 @@ from .errors import InputError, OutOfRangeError, UnknownNameError
 from .ik import PLANES, _GridIK, _ik_evaluator
 from .joint_space import MODEL_REFERENCE, _limits, _reference
 from .progress import make_bar
+from .tables import Tabular
 from .stats import check_positive, p_ball_batch, variance_divisor
 
 __all__ = ["ProbabilityMap", "probability_map", "PLANES"]
 
 
 @dataclass(frozen=True)
-class ProbabilityMap:
+class ProbabilityMap(Tabular):
     """``P(|dr| <= R)`` over the reachable part of a plane, for a fixed hand orientation.
 
     Attributes

@@ -1,0 +1,128 @@
+"""Results as tables (issue 9 point 1): every result type written as CSV, JSON and Parquet and read
+back with plain pandas; the numbers must equal the result object's own attributes, and the file
+must hold every input and the package version."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+import pytest
+
+import tolsynth
+from tolsynth.errors import InputError, MissingDependencyError
+
+pd = pytest.importorskip("pandas")
+pytest.importorskip("pyarrow")
+
+FORMATS = ["csv", "json", "parquet"]
+
+
+def _read_plain(path):
+    """Read back with pandas alone (the documented way), and the metadata by hand."""
+    if path.suffix == ".csv":
+        lines = path.read_text().splitlines()
+        assert lines[0].startswith("# tolsynth " + tolsynth.__version__)
+        meta = json.loads(lines[1][2:])
+        return pd.read_csv(path, skiprows=2), meta
+    if path.suffix == ".json":
+        meta = json.loads(path.read_text())["tolsynth"]
+        assert meta["tolsynth_version"] == tolsynth.__version__
+        return pd.read_json(path, orient="table", precise_float=True), meta
+    frame = pd.read_parquet(path)
+    assert frame.attrs["tolsynth_version"] == tolsynth.__version__
+    return frame, frame.attrs
+
+
+@pytest.fixture(scope="module")
+def solved(xz):
+    return tolsynth.synthesize(xz, R=0.5, p=0.99, distribution="normal",
+                               alpha={n: 0.5 if n == "h3" else 0.7 for n in xz.error_parameters},
+                               k={"a": 2.0}, bounds={"h2": (0.05, 1.0)}, options={"tol": 1e-10})
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_synthesis_round_trip(solved, tmp_path, fmt):
+    path = tmp_path / f"res.{fmt}"
+    assert solved.save(path) == str(path)
+    frame, meta = _read_plain(path)
+    assert list(frame["parameter"]) == list(solved.tolerances)
+    np.testing.assert_array_equal(frame["tolerance"].to_numpy(), solved.x)  # exact, every format
+    np.testing.assert_array_equal(frame["lower"].to_numpy(), solved.spec.lower)
+    assert frame.set_index("parameter").loc["h2", "bound_active"] == solved.bounds_active.get("h2", "") or \
+        (pd.isna(frame.set_index("parameter").loc["h2", "bound_active"]) and "h2" not in solved.bounds_active)
+    # the per-parameter cost column sums to the result's cost (an independent sum of k eps^-alpha)
+    k = np.array([2.0 if n == "a" else k0 for n, k0 in zip(solved.tolerances, solved.spec.k)])
+    alpha = np.array([0.5 if n == "h3" else 0.7 for n in solved.tolerances])
+    assert np.sum(k * solved.x ** -alpha) == pytest.approx(solved.cost, rel=1e-12)
+    assert frame["cost"].sum() == pytest.approx(solved.cost, rel=1e-12)
+    inputs, summary = meta["inputs"], meta["summary"]
+    assert inputs["model"]["name"] == "xu_zhang_1988"
+    assert (inputs["R_mm"], inputs["p"], inputs["distribution"], inputs["criterion"]) == (0.5, 0.99, "normal", "components")
+    assert inputs["alpha"]["h3"] == 0.5 and inputs["alpha"]["h2"] == 0.7 and inputs["k"]["a"] == 2.0
+    assert inputs["bounds"]["h2"] == [0.05, 1.0]
+    assert inputs["solver"] == "ipopt" and inputs["options"] == {"tol": 1e-10}
+    np.testing.assert_allclose(inputs["poses_rad"]["worst"], solved.spec.poses["worst"], rtol=0, atol=0)
+    assert summary["cost"] == solved.cost and summary["gap"] == solved.gap and summary["status"] == "optimal"
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_montecarlo_round_trip(xz, solved, tmp_path, fmt):
+    r = tolsynth.monte_carlo(xz, "worst", solved.x, "normal", R=0.5, n=4000, seed=3)
+    path = tmp_path / f"mc.{fmt}"
+    getattr(r, f"to_{fmt}")(path)
+    frame, meta = _read_plain(path)
+    rows = frame.set_index("quantity")
+    np.testing.assert_array_equal(rows.loc[[f"p_component_{j}" for j in (1, 2, 3)], "monte_carlo"], r.p_components)
+    assert rows.loc["p_sphere", "monte_carlo"] == r.p_sphere
+    np.testing.assert_array_equal(rows.loc["p_sphere", ["ci_low", "ci_high"]].to_numpy(dtype=float), r.p_sphere_ci)
+    assert rows.loc["p_sphere", "analytic"] == r.p_sphere_analytic
+    assert meta["inputs"]["n"] == 4000 and meta["inputs"]["seed"] == 3 and meta["inputs"]["R_mm"] == 0.5
+    assert meta["inputs"]["tolerances"] == pytest.approx(r.tolerances, rel=0, abs=0)
+
+
+@pytest.fixture(scope="module")
+def compared_and_mapped(xz):
+    return tolsynth.compare(xz, R=0.5, p=0.99), tolsynth.probability_map(xz, "figure3", R=0.2, n=6)
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_comparison_and_map_round_trip(compared_and_mapped, tmp_path, fmt):
+    c, pm = compared_and_mapped
+    frame, meta = _read_plain(_saved(c, tmp_path / f"cmp.{fmt}"))
+    np.testing.assert_array_equal(frame["ipopt"].to_numpy(), c.ipopt.x)
+    np.testing.assert_array_equal(frame["sumt"].to_numpy(), c.sumt.x)
+    assert meta["summary"]["sumt"]["cost"] == c.sumt.cost and meta["inputs"]["R_mm"] == 0.5
+    frame, meta = _read_plain(_saved(pm, tmp_path / f"map.{fmt}"))
+    np.testing.assert_array_equal(frame["P"].to_numpy(), pm.P.ravel())  # NaN where unreachable, both
+    np.testing.assert_array_equal(frame["u"].to_numpy().reshape(pm.P.shape)[0], pm.u)
+    assert meta["inputs"]["R_mm"] == 0.2 and meta["inputs"]["plane"] == "xz"
+
+
+def _saved(result, path):
+    result.save(path)
+    return path
+
+
+def test_workspace_and_worst_pose_frames(xz, solved):
+    w = tolsynth.synthesize_workspace(xz, 0.5, 0.99, max_rounds=2)
+    f = w.to_frame()
+    assert list(f["cost"]) == [r["cost"] for r in w.rounds]
+    assert f.attrs["summary"]["converged"] == w.converged
+    wp = tolsynth.worst_pose(xz, solved.x, grid=4)
+    f = wp.to_frame()
+    assert f.loc[0, "value"] == wp.value and f.loc[0, "x"] == wp.position[0]
+
+
+def test_bad_paths_and_missing_pandas(solved, tmp_path, monkeypatch):
+    with pytest.raises(InputError, match="unknown table format .xlsx"):
+        solved.save(tmp_path / "r.xlsx")
+    with pytest.raises(InputError, match="does not end in .csv"):
+        solved.to_csv(tmp_path / "r.json")
+    with pytest.raises(InputError, match="does not exist"):
+        solved.save(tmp_path / "missing" / "r.csv")
+    monkeypatch.setitem(sys.modules, "pandas", None)  # import pandas now raises ImportError
+    with pytest.raises(MissingDependencyError, match=r'pip install "tolsynth\[tables\]"') as info:
+        solved.to_frame()
+    assert isinstance(info.value, ImportError) and info.value.package == "pandas"
