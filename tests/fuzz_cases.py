@@ -571,6 +571,38 @@ def case_valid_extremes(draw):
     return run
 
 
+def case_sweep(draw):
+    """tolsynth.sweep with bad grids (typed errors before any solve), in this process."""
+    mech = _mech("planar_2r")
+    args = _args(draw, {"R": [0.5, 0.3], "p": 0.99, "alpha": 0.7, "distribution": "uniform",
+                        "criterion": "components", "solver": "ipopt"},
+                 {"R": [[], [0.5, -1.0], [0.3, math.nan], ["0.5"], [[0.5]], np.array([0.2, 0.4]), {"a": 1}],
+                  "p": [[0.9, 1.0], [0.5, 0.99], [math.inf], (0.9,)],
+                  "alpha": [[0.7, 0.0], [{"x": 1}], [0.5, 11.0], {"h1": 0.5}],
+                  "distribution": [["uniform", "normal"], ["cauchy"], [], "Normal"],
+                  "criterion": [["components", "sphere"], "box", [None]],
+                  "solver": [["ipopt", "snopt"], "powell", [1]]})
+    client = draw(st.sampled_from(["serial", "serial", "threads", 3, "", "tcp", b"serial"]))
+    workers = draw(st.sampled_from([None, None, 0, -1, 2.5, "2", 1e300]))
+
+    def run():
+        df = tolsynth.sweep(mech, client=client, workers=workers, pose="elbow90", progress=False, **args)
+        accepted(**args)
+        typed = {c.__name__ for c in vars(tolsynth.errors).values() if isinstance(c, type)
+                 and issubclass(c, tolsynth.TolsynthError)}
+        for err in df.loc[df["status"] == "error", "error"]:  # a row's exception must be typed too
+            if err.split(":")[0] not in typed:
+                raise Silent(f"untyped error inside a sweep row: {err}")
+        ok = df[df["success"]]
+        finite(ok["cost"].to_numpy(), ok[[c for c in df.columns if c.startswith("eps_")]].to_numpy())
+        for _, row in ok.iterrows():
+            if row["criterion"] == "components":
+                res = type("R", (), {"success": True, "cost": row["cost"],
+                                     "tolerances": {n: row["eps_" + n] for n in mech.error_parameters}})
+                _check_synthesis(mech, res, row["R"], row["p"], row["distribution"], ["elbow90"])
+    return run
+
+
 API_CASES = {
     "synthesize": case_synthesize,
     "synthesize (valid specs)": case_synthesize_valid,
@@ -584,6 +616,7 @@ API_CASES = {
     "Mechanism methods": case_mechanism,
     "stats": case_stats,
     "valid extremes": case_valid_extremes,
+    "sweep": case_sweep,
 }
 
 
@@ -605,7 +638,10 @@ CLI_COMMANDS = {
     "worst-pose": (["--model", "planar_2r", "--tolerances", "coarse", "--grid", "5"],
                    ["--tolerances", "--R", "--grid", "--reference", "--criterion"]),
     "map": (["--model", "planar_2r", "--tolerances", "coarse", "--plane", "xy", "--n", "6", "--quiet"],
-            ["--R", "--n", "--plane", "--offset", "--hand-axis", "--extent", "--reference", "--out"]),
+            ["--R", "--n", "--plane", "--offset", "--hand-axis", "--extent", "--reference", "--out", "--data"]),
+    "sweep": (["--model", "planar_2r", "--pose", "elbow90", "--R", "0.5,0.3", "--p", "0.99", "--workers", "1", "--quiet"],
+              ["--R", "--p", "--alpha", "--dist", "--criterion", "--solver", "--workers", "--out", "--grid", "--k",
+               "--bounds"]),
 }
 
 

@@ -34,7 +34,8 @@ from .process import Process, ProcessChoice, synthesize_processes
 from .budget import BudgetResult, best_accuracy
 from .pareto import ParetoFront, pareto_front
 from .synthesis import Comparison, WorkspaceSynthesis, compare, synthesize, synthesize_workspace
-from .tables import read_table  # issue 9: tables
+from .tables import read_table, write_table  # issue 9: tables
+from .sweep import sweep
 
 __version__ = "0.1.0"
 
@@ -84,4 +85,6 @@ __all__ = [
     "SolverError",
     "MissingDependencyError",
     "read_table",
+    "write_table",
+    "sweep",
 ]

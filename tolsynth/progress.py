@@ -70,7 +70,7 @@ def make_bar(total: int, desc: str, unit: str, delay: float):
 class Progress:
     """tqdm (or plain lines) on stderr if wanted; a callable ``progress(done, total)`` also works."""
 
-    def __init__(self, progress, total: int, desc: str):
+    def __init__(self, progress, total: int, desc: str, unit: str = "sample"):
         self.bar = None
         self.callback = None
         self.total = total
@@ -79,7 +79,7 @@ class Progress:
             return
         show = progress if progress is not None else sys.stderr.isatty()
         if show:  # auto (None): only runs longer than ~2 s show the bar
-            self.bar = make_bar(total, desc, "sample", 0.0 if progress else AUTO_PROGRESS_DELAY)
+            self.bar = make_bar(total, desc, unit, 0.0 if progress else AUTO_PROGRESS_DELAY)
 
     def update(self, done: int, step: int) -> None:
         if self.bar is not None:

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import InputError, UnknownNameError
 from ..mechanism import Mechanism
+from ..tables import jsonable
 from ..units import ANGLE_UNITS, LENGTH_UNITS, to_base, unit_kind
 
 __all__ = [
@@ -39,6 +40,9 @@ __all__ = [
     "add_pose_arguments",
     "emit_json",
     "fmt_vec",
+    "add_table_out_argument",
+    "check_table_out",
+    "write_out",
 ]
 
 #: unit suffixes accepted after a number (the model files' units, less the spaced "1e-2 rad")
@@ -417,25 +421,8 @@ def check_figure_path(path: str | None, field: str = "--out") -> None:
 # ---------------------------------------------------------------------------------------------
 # output
 # ---------------------------------------------------------------------------------------------
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, (np.floating, float)):
-        v = float(obj)
-        return v if math.isfinite(v) else str(v)
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, (np.bool_,)):
-        return bool(obj)
-    return obj
-
-
 def emit_json(obj) -> None:
-    print(json.dumps(_jsonable(obj), indent=2))
+    print(json.dumps(jsonable(obj), indent=2))
 
 
 def inputs_record(args, mech: Mechanism | None = None, **resolved) -> dict:
@@ -450,7 +437,36 @@ def inputs_record(args, mech: Mechanism | None = None, **resolved) -> dict:
         rec["error_parameters"] = list(mech.error_parameters)
         rec["tolerance_units"] = dict(zip(mech.error_parameters, mech.units))
     rec.update(resolved)
-    return _jsonable(rec)
+    return jsonable(rec)
+
+
+def add_table_out_argument(p: argparse.ArgumentParser, what: str, option: str = "--out") -> None:
+    """``--out FILE.csv|.json|.parquet``: the result as a table, inputs recorded."""
+    p.add_argument(option, default=None, metavar="FILE",
+                   help=f"write {what} to FILE: .csv, .json or .parquet, with every input and the package "
+                        "version recorded (needs pandas, Parquet pyarrow: pip install \"tolsynth[tables]\"); "
+                        "default: none")
+
+
+def check_table_out(args, option: str = "--out") -> None:
+    """Before any work: the table file's suffix is known, pandas (pyarrow) installed, the folder writable."""
+    path = getattr(args, option.lstrip("-").replace("-", "_"))
+    if path is not None:
+        from ..tables import check_table_path
+
+        check_table_path(path, option)
+
+
+def write_out(frame, args, mech: Mechanism | None = None, option: str = "--out", **resolved) -> None:
+    """Write ``frame`` to the file of ``option``, with the command line's inputs beside the library's."""
+    from ..tables import write_table
+
+    path = getattr(args, option.lstrip("-").replace("-", "_"))
+    if path is None:
+        return
+    frame.attrs.setdefault("inputs", {})
+    frame.attrs["inputs"] = dict(frame.attrs["inputs"], command_line=inputs_record(args, mech, **resolved))
+    write_table(frame, path, option)
 
 
 def fmt_vec(v, fmt="{:.6g}") -> str:

@@ -4,23 +4,39 @@ from __future__ import annotations
 
 from ..mechanism import load_model
 from ..montecarlo import DEFAULT_BATCH, monte_carlo
-from .args import add_pose_arguments, default_pose, emit_json, inputs_record, number, parse_pose, parse_tolerances, pose_label
+from .args import (
+    add_pose_arguments,
+    add_table_out_argument,
+    check_table_out,
+    default_pose,
+    emit_json,
+    inputs_record,
+    number,
+    parse_pose,
+    parse_tolerances,
+    pose_label,
+    write_out,
+)
 
 __all__ = ["register"]
 
 
 def _cmd_montecarlo(args) -> int:
+    check_table_out(args)  # before any work
     mech = load_model(args.model)
     q = parse_pose(mech, args.pose) if args.pose is not None else default_pose(mech)
     eps = parse_tolerances(mech, args.tolerances)
     progress = False if args.quiet else None  # None: progress on stderr for long runs on a terminal
     r = monte_carlo(mech, q, eps, args.dist, R=args.R, n=args.n, seed=args.seed, batch=args.batch,
                     Phi=args.Phi, progress=progress, confidence=args.confidence)
+    record = dict(pose=pose_label(q), tolerances=r.tolerances, distribution=args.dist, R_mm=args.R, Phi_rad=args.Phi,
+                  n=args.n, seed=args.seed)
+    if args.out:
+        write_out(r.to_frame(), args, mech, **record)
     if args.json:
         out = r.to_dict()
         out["pose"] = pose_label(q) if isinstance(q, str) else args.pose
-        out["inputs"] = inputs_record(args, mech, pose=pose_label(q), tolerances=r.tolerances, distribution=args.dist,
-                                      R_mm=args.R, Phi_rad=args.Phi, n=args.n, seed=args.seed)
+        out["inputs"] = inputs_record(args, mech, **record)
         emit_json(out)
     else:
         print(r.report())
@@ -42,5 +58,6 @@ def register(sub) -> None:
     p.add_argument("--confidence", type=number("--confidence", "0 < confidence < 1"),
                    default=0.95, help="level of the confidence intervals")
     p.add_argument("--quiet", action="store_true", help="no progress report on stderr")
+    add_table_out_argument(p, "the probabilities with their intervals and the analytic values")
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
     p.set_defaults(func=_cmd_montecarlo, task="the Monte Carlo run")

@@ -13,6 +13,8 @@ from .args import (
     add_dist_argument,
     add_model_argument,
     angle_rad,
+    add_table_out_argument,
+    check_table_out,
     emit_json,
     inputs_record,
     length_mm,
@@ -22,6 +24,7 @@ from .args import (
     parse_poses,
     parse_reference,
     pose_label,
+    write_out,
 )
 
 __all__ = ["register", "side_by_side"]
@@ -91,6 +94,7 @@ def _spec_kwargs(mech, args) -> tuple:
 def cmd_solve(args) -> int:
     from ..synthesis import compare, synthesize
 
+    check_table_out(args)  # before any work
     mech = load_model(args.model)
     alpha, kw = _spec_kwargs(mech, args)
     head = (f"{mech.name}: R={args.R:g} mm, p={args.p:g}, alpha={args.alpha or 0.7}, {args.dist} errors"
@@ -112,6 +116,11 @@ def cmd_solve(args) -> int:
             name, q = _reference(mech, parse_reference(mech, args.reference))
             start = name if (name is not None and name != "given") else q  # None: the search's worst pose
         w = synthesize_workspace(mech, args.R, args.p, args.dist, alpha, solver=args.solver, pose=start, **kw)
+        if args.out:  # the tolerance table; the exchange's rounds beside the summary
+            frame = w.result.to_frame()
+            frame.attrs["summary"].update(converged=w.converged, rounds=w.to_frame().to_dict(orient="records"))
+            write_out(frame, args, mech, start_pose=pose_label(start) if start is not None else None,
+                      everywhere=True, **record)
         if args.json:
             out = w.result.to_dict()
             out.update(converged=w.converged, rounds=w.rounds, poses=w.poses)
@@ -138,6 +147,8 @@ def cmd_solve(args) -> int:
                       for q in poses)
     if args.solver == "both":
         c = compare(mech, args.R, args.p, args.dist, alpha, **kw)
+        if args.out:
+            write_out(c.to_frame(), args, mech, **record)
         if args.json:
             out = c.to_dict()
             out["inputs"] = inputs_record(args, mech, **record)
@@ -156,6 +167,8 @@ def cmd_solve(args) -> int:
             from ..contributions import contributions
 
             rep = contributions(res)
+        if args.out:
+            write_out(res.to_frame(), args, mech, **record)
         if args.json:
             out = res.to_dict()
             if rep is not None:
@@ -233,5 +246,6 @@ def register(sub) -> None:
                    help="fix a tolerance at VALUE (its tolerance unit); repeatable; the others are optimised around it")
     p.add_argument("--contributions", action="store_true",
                    help="also report each parameter's share of each principal variance and of 1 - P(sphere)")
+    add_table_out_argument(p, "the tolerance table (with --solver both: side by side)")
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
     p.set_defaults(func=cmd_solve, task="the solve")

@@ -14,7 +14,9 @@ from .args import (
     TOLERANCES_HELP,
     add_dist_argument,
     add_model_argument,
+    add_table_out_argument,
     check_figure_path,
+    check_table_out,
     emit_json,
     inputs_record,
     length_mm,
@@ -23,6 +25,7 @@ from .args import (
     parse_tolerances,
     quantity,
     split_items,
+    write_out,
 )
 
 __all__ = ["register"]
@@ -56,6 +59,7 @@ def _extent(text: str | None):
 
 def _cmd_map(args) -> int:
     check_figure_path(args.out)  # before any work: matplotlib, the format, the folder
+    check_table_out(args, "--data")
     mech = load_model(args.model)
     eps = parse_tolerances(mech, args.tolerances)
     label = args.tolerances
@@ -73,12 +77,14 @@ def _cmd_map(args) -> int:
         from ..plot import plot_map
 
         plot_map(pm, path=args.out)
+    record = dict(tolerances=pm.tolerances, distribution=args.dist, R_mm=args.R, plane=args.plane,
+                  offset_mm=args.offset, hand_axis=axis, extent_mm=extent, reference=pm.reference, n=args.n)
+    if args.data:
+        write_out(pm.to_frame(), args, mech, "--data", **record)
     if args.json:
         out = {k: v for k, v in pm.to_dict().items() if k not in ("Q", "sigma")}
         out["out"] = args.out
-        out["inputs"] = inputs_record(args, mech, tolerances=pm.tolerances, distribution=args.dist, R_mm=args.R,
-                                      plane=args.plane, offset_mm=args.offset, hand_axis=axis, extent_mm=extent,
-                                      reference=pm.reference, n=args.n)
+        out["inputs"] = inputs_record(args, mech, **record)
         emit_json(out)
     else:
         rch = pm.reachable
@@ -93,18 +99,24 @@ def _cmd_map(args) -> int:
         print(f"time         {pm.elapsed_s:.2f} s")
         if args.out:
             print(f"figure       {args.out}")
+        if args.data:
+            print(f"data         {args.data}")
     return 0
 
 
 def _cmd_worst(args) -> int:
+    check_table_out(args)  # before any work
     mech = load_model(args.model)
     eps = parse_tolerances(mech, args.tolerances)
     w = worst_pose(mech, eps, criterion=args.criterion, R=args.R, distribution=args.dist, grid=args.grid,
                    reference=parse_reference(mech, args.reference))
+    record = dict(tolerances=w.tolerances, distribution=args.dist, R_mm=args.R, criterion=args.criterion,
+                  reference=w.reference)
+    if args.out:
+        write_out(w.to_frame(), args, mech, **record)
     if args.json:
         out = w.to_dict()
-        out["inputs"] = inputs_record(args, mech, tolerances=w.tolerances, distribution=args.dist, R_mm=args.R,
-                                      criterion=args.criterion, reference=w.reference)
+        out["inputs"] = inputs_record(args, mech, **record)
         emit_json(out)
     else:
         print(w.report(mech.joint_names))
@@ -135,6 +147,7 @@ def register(sub) -> None:
                    help="figure file (.png, .pdf, .svg, ...; needs matplotlib: pip install \"tolsynth[plot]\"); default: none")
     p.add_argument("--quiet", action="store_true", help="no progress report on stderr")
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
+    add_table_out_argument(p, "the map's points (u, v, P, sigma, joints)", "--data")
     p.set_defaults(func=_cmd_map, task="the workspace map")
 
     p = sub.add_parser("worst-pose", help="search the joint space for the pose of worst accuracy",
@@ -150,5 +163,6 @@ def register(sub) -> None:
     p.add_argument("--grid", type=number("--grid", "an integer >= 2", integer=True), default=None,
                    help="grid points per searched joint; default: as many as keep the grid under 20000 points")
     p.add_argument("--reference", default=None, help=REFERENCE_HELP + "; reported beside the result")
+    add_table_out_argument(p, "the worst and the reference pose")
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
     p.set_defaults(func=_cmd_worst, task="the worst-pose search")

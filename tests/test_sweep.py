@@ -1,0 +1,100 @@
+"""tolsynth.sweep (issue 9 point 2): rows checked against individual synthesize calls, on every
+engine (this process, local processes, a dask.distributed.LocalCluster started here); a failed
+solve is a row; bad grids are typed errors before any work."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tolsynth
+from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
+
+pd = pytest.importorskip("pandas")
+
+GRID = dict(R=[0.3, 0.5, 1e-7], p=[0.9, 0.99], alpha=[0.7], distribution=["uniform", "normal"])
+
+
+def _check_against_synthesize(df, mech):
+    assert list(df["row"]) == list(range(len(df)))
+    for _, row in df.iterrows():
+        if row["R"] == 1e-7:  # no tolerances inside the bounds meet 0.1 um: an error row, the others kept
+            assert row["status"] == "error" and not row["success"]
+            assert row["error"].startswith("InfeasibleSpecificationError")
+            assert np.isnan(row["cost"])
+            continue
+        ref = tolsynth.synthesize(mech, R=row["R"], p=row["p"], distribution=row["distribution"],
+                                  alpha=row["alpha"], criterion=row["criterion"], solver=row["solver"])
+        assert row["status"] == str(ref.status) == "optimal" and row["success"] and row["error"] == ""
+        assert row["cost"] == pytest.approx(ref.cost, rel=1e-8)
+        if row["criterion"] == "components":  # certified; the sphere's bound is its relaxation's
+            assert row["gap"] <= 1e-6 * row["cost"]
+        got = row[["eps_" + n for n in mech.error_parameters]].to_numpy(dtype=float)
+        # the sphere optimum is flat in some directions (equal cost to 1e-8 with tolerances 2e-5 apart,
+        # depending on the solver's warm-start state in that process)
+        np.testing.assert_allclose(got, ref.x, rtol=1e-6 if row["criterion"] == "components" else 1e-3)
+
+
+def test_sweep_serial_matches_synthesize(xz, tmp_path):
+    df = tolsynth.sweep(xz, **GRID, client="serial")
+    assert len(df) == 12 and df["success"].sum() == 8
+    _check_against_synthesize(df, xz)
+    assert df.attrs["inputs"]["grid"]["R"] == [1e-7, 0.3, 0.5]
+    assert df.attrs["summary"]["failed"] == 4
+    # written and read back with its inputs
+    path = tolsynth.write_table(df, tmp_path / "sweep.csv")
+    back = pd.read_csv(path, skiprows=2)
+    np.testing.assert_array_equal(back["cost"].to_numpy(), df["cost"].to_numpy())
+    assert tolsynth.read_table(path).attrs["inputs"]["model"]["name"] == "xu_zhang_1988"
+
+
+def test_sweep_local_processes(xz):
+    df = tolsynth.sweep(xz, R=[0.4, 1e-7], p=0.99, criterion=["components", "sphere"], client="processes", workers=2)
+    assert df.attrs["summary"]["engine"].startswith("processes")
+    _check_against_synthesize(df, xz)
+
+
+def test_sweep_on_dask_local_cluster(xz):
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        df = tolsynth.sweep(xz, **GRID, client=client)
+        assert df.attrs["summary"]["engine"].startswith("dask")
+        _check_against_synthesize(df, xz)
+        # the scheduler's address works the same (the client is opened and closed by sweep)
+        df2 = tolsynth.sweep(xz, R=0.5, p=[0.9, 0.99], client=cluster.scheduler_address)
+        _check_against_synthesize(df2, xz)
+
+
+@pytest.mark.slow
+def test_sweep_on_dask_worker_processes(xz):
+    """Two worker processes (the model is scattered to each), both solvers."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        df = tolsynth.sweep(xz, R=[0.5, 1e-7], p=[0.9, 0.99], solver=["ipopt", "sumt"], client=client)
+        _check_against_synthesize(df, xz)
+
+
+@pytest.mark.parametrize("kwargs, error, match", [
+    (dict(R=[]), InputError, "R: empty list"),
+    (dict(R=[0.5, -1.0]), OutOfRangeError, "R"),
+    (dict(p=[0.9, 1.5]), OutOfRangeError, "p"),
+    (dict(alpha=[0.7, 0.0]), OutOfRangeError, "alpha"),
+    (dict(alpha=[{"h2": 0.5}]), InputError, "alpha"),
+    (dict(distribution=["uniform", "cauchy"]), InputError, "distribution"),
+    (dict(criterion="box"), InputError, "criterion"),
+    (dict(solver=["ipopt", "snopt"]), InputError, "solver"),
+    (dict(client="threads"), InputError, "client"),
+    (dict(client=3), InputError, "client"),
+    (dict(workers=0), OutOfRangeError, "workers"),
+    (dict(validate=100), InputError, "validate"),
+    (dict(tolerance=0.1), InputError, "tolerance"),
+    (dict(k={"nope": 1.0}), UnknownNameError, "nope"),
+    (dict(R=[0.1] * 1001, p=[0.9] * 1000), OutOfRangeError, "grid"),
+])
+def test_sweep_bad_grids(xz, kwargs, error, match):
+    args = dict(R=0.5, p=0.99)
+    args.update(kwargs)
+    with pytest.raises(error, match=match):
+        tolsynth.sweep(xz, **{"client": "serial", **args})
