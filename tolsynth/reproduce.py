@@ -99,8 +99,8 @@ def reproduce(model: str | Mechanism = "xu_zhang_1988", sumt: bool = True, progr
     ----------
     model : name, path or Mechanism
     sumt : bool
-        Also solve with SUMT + Powell in the printed-unit reading (some 30 ms a column with a C
-        compiler, :mod:`tolsynth.solvers.cpowell`; some 3 s without).
+        Also solve with SUMT + Powell in the printed-unit reading (some 15 ms a column with a C
+        compiler, :mod:`tolsynth.solvers.cpowell`; some 0.5 s without).
     progress : bool
         Show a progress bar on stderr (if the optional tqdm is installed).
     degree_reading : bool

@@ -35,10 +35,11 @@ import numpy as np
 __all__ = ["CompiledPowell", "compile_powell", "backend_status", "cache_dir"]
 
 CFLAGS = ["-O2", "-fPIC", "-shared", "-ffp-contract=off"]
-#: graphs larger than this stay on the Python path: their compilation takes seconds (the sphere
-#: criterion's quadrature, 39,000 instructions: 5 s with -O2) and CasADi's per-call overhead is
-#: then a small part of an evaluation anyway
-MAX_INSTRUCTIONS = 12_000
+#: graphs larger than this stay on the Python path: their first compilation takes longer than a
+#: Python solve (about 0.2 ms per instruction with gcc -O2: 0.7 s for 10 poses, 3,440 instructions;
+#: 2.1 s for 30 poses; 5 s for the sphere criterion's quadrature, 39,000), and CasADi's per-call
+#: overhead is then a smaller part of an evaluation
+MAX_INSTRUCTIONS = 5_000
 
 # The C port of tolsynth.solvers.powell (keep the two in step).  TS_F / TS_F_WORK are the
 # CasADi-generated function and its work-size query; argument 0 of TS_F is the point.

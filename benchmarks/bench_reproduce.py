@@ -1,0 +1,117 @@
+"""The main job, ``tolsynth reproduce`` (18 columns of Tables 1-3, IPOPT and SUMT + Powell).
+
+Prints, in one run:
+
+* wall time of ``tolsynth reproduce`` as a subprocess (what a user waits for: import, graphs,
+  36 IPOPT solves, 18 SUMT solves, the report), median of --repeat runs with the compiled-library
+  cache warm, and one run with an empty cache (the first run after installing: it compiles);
+* the same in-process (``tolsynth.reproduce.reproduce()``), median of --repeat after one warm-up,
+  with the time split into its IPOPT and SUMT solves;
+* SUMT + Powell per column: the compiled Powell (:mod:`tolsynth.solvers.cpowell`, the default
+  where a C compiler is found) against the Python Powell on the same graph (the path every run
+  took before; ``TOLSYNTH_NO_COMPILE=1``), on --python-columns columns (it is slow), with the
+  ratio, the evaluations and the IPOPT agreement.
+
+Usage: python benchmarks/bench_reproduce.py [--repeat 5] [--python-columns 3]
+"""
+
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import tolsynth
+from tolsynth import synthesize
+from tolsynth.reproduce import reproduce
+from tolsynth.solvers import cpowell
+
+
+def command():
+    exe = shutil.which("tolsynth", path=os.path.dirname(sys.executable))
+    return [exe, "reproduce"] if exe else [sys.executable, "-m", "tolsynth", "reproduce"]
+
+
+def run_subprocess(env=None):
+    t0 = time.perf_counter()
+    proc = subprocess.run(command(), capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0 or "all solves converged: True" not in proc.stdout:
+        raise SystemExit(f"tolsynth reproduce failed:\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}")
+    return wall
+
+
+def sumt_column(mech, ref):
+    t0 = time.perf_counter()
+    su = synthesize(mech, ref.R, ref.p, ref.distribution, ref.alpha, solver="sumt")
+    return time.perf_counter() - t0, su
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--python-columns", type=int, default=3)
+    a = ap.parse_args()
+    print(f"cores: {os.cpu_count()}, SUMT backend: ", end="")
+    mech = tolsynth.load_model("xu_zhang_1988")
+    refs = mech.spec.reference_results
+    sumt_column(mech, refs[0])
+    st = cpowell.backend_status()
+    print(st["backend"], f"({st['reason']})" if st["reason"] else f"(cache: {cpowell.cache_dir()})")
+
+    # -- subprocess ---------------------------------------------------------------------------
+    with tempfile.TemporaryDirectory() as empty:
+        cold = run_subprocess({**os.environ, "TOLSYNTH_CACHE_DIR": empty})
+    warm = [run_subprocess() for _ in range(a.repeat)]
+    print(f"\n`tolsynth reproduce` as a subprocess: median {statistics.median(warm):.2f} s "
+          f"(min {min(warm):.2f}, max {max(warm):.2f}, {a.repeat} runs, compiled library cached); "
+          f"first run, empty cache: {cold:.2f} s")
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", "import tolsynth.cli, tolsynth.reproduce"], check=True)
+    print(f"  of which starting Python and importing tolsynth: {time.perf_counter() - t0:.2f} s")
+
+    # -- in-process ---------------------------------------------------------------------------
+    reproduce()  # warm-up
+    walls, ip_t, su_t = [], [], []
+    for _ in range(a.repeat):
+        t0 = time.perf_counter()
+        reps = reproduce()
+        walls.append(time.perf_counter() - t0)
+        ip_t.append(sum(r.ipopt.wall_time for rep in reps for r in rep.readings.values()))
+        su_t.append(sum(rep.printed_unit.sumt.wall_time for rep in reps))
+    worst = max(rep.agreement()["cost_rel_diff"] for rep in reps)
+    print(f"\nreproduce() in-process: median {statistics.median(walls):.3f} s over {a.repeat} runs; inside "
+          f"the solvers (their own wall_time): IPOPT 36 solves {statistics.median(ip_t):.3f} s, "
+          f"SUMT 18 solves {statistics.median(su_t):.3f} s; largest IPOPT-SUMT cost difference {worst:.1e}")
+
+    # -- SUMT per column: compiled vs Python Powell ------------------------------------------
+    print(f"\nSUMT + Powell per column (synthesize end to end), compiled vs Python Powell on the same graph")
+    print(f"  {'column':<52} {'compiled ms':>11} {'evals':>7} {'python ms':>10} {'evals':>7} {'ratio':>6} {'|SUMT-IPOPT|/IPOPT':>19}")
+    ratios = []
+    for i, ref in enumerate(refs):
+        label = f"{ref.table}: R={ref.R:g} mm, p={ref.p:g}, alpha={ref.alpha:g}, {ref.distribution}"
+        tc = statistics.median(sumt_column(mech, ref)[0] for _ in range(a.repeat))
+        _, su = sumt_column(mech, ref)
+        ip = synthesize(mech, ref.R, ref.p, ref.distribution, ref.alpha, solver="ipopt")
+        row = f"  {label:<52} {tc * 1e3:>11.1f} {su.function_evaluations:>7}"
+        if i < a.python_columns:
+            os.environ["TOLSYNTH_NO_COMPILE"] = "1"
+            try:
+                tp, sp = sumt_column(mech, ref)
+            finally:
+                del os.environ["TOLSYNTH_NO_COMPILE"]
+            ratios.append(tp / tc)
+            row += f" {tp * 1e3:>10.0f} {sp.function_evaluations:>7} {tp / tc:>6.0f}"
+        else:
+            row += f" {'':>10} {'':>7} {'':>6}"
+        lines = row + f" {abs(su.cost - ip.cost) / ip.cost:>19.1e}"
+        print(lines)
+    if ratios:
+        print(f"  compiled / Python speed-up, median over {len(ratios)} columns: {statistics.median(ratios):.0f}x")
+
+
+if __name__ == "__main__":
+    main()
