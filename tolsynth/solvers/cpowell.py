@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import math
 import os
 import shutil
-import subprocess
 import tempfile
 import threading
 from pathlib import Path
@@ -176,6 +176,29 @@ static double ts_linemin(ts_ctx *cx, double *x, double *fx, const double *d, dou
   return 0.0;
 }
 
+/* out = [F's first output, F's second output] at x (one evaluation, for the caller's checks) */
+CASADI_SYMBOL_EXPORT int tolsynth_eval(const casadi_real **params, const double *x, double *out) {
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  const casadi_real **arg;
+  casadi_real **res, *w;
+  casadi_int *iw;
+  int i, flag = 4;
+  TS_F_WORK(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  arg = (const casadi_real **)calloc(sz_arg > TS_N_IN ? sz_arg : TS_N_IN, sizeof(casadi_real *));
+  res = (casadi_real **)calloc(sz_res > 2 ? sz_res : 2, sizeof(casadi_real *));
+  iw = (casadi_int *)calloc(sz_iw + 1, sizeof(casadi_int));
+  w = (casadi_real *)calloc(sz_w + 1, sizeof(casadi_real));
+  if (arg && res && iw && w) {
+    for (i = 1; i < TS_N_IN; i++) arg[i] = params[i];
+    arg[0] = x;
+    res[0] = out;
+    res[1] = out + 1;
+    flag = TS_F(arg, res, iw, w, 0);
+  }
+  free(arg); free(res); free(iw); free(w);
+  return flag;
+}
+
 /* info: [fx, nit, nfev, status] with status 0 converged, 1 maxfev, 2 maxiter, 3 start outside
    the domain, 4 out of memory; history[0..nit] = f at the start and after each iteration */
 CASADI_SYMBOL_EXPORT int tolsynth_powell(const casadi_real **params, double *x, double *D, int n,
@@ -187,7 +210,7 @@ CASADI_SYMBOL_EXPORT int tolsynth_powell(const casadi_real **params, double *x, 
   long it, k;
   int i, ibig, status = 2;
   TS_F_WORK(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  if (sz_arg < 1) sz_arg = 1;
+  if (sz_arg < TS_N_IN) sz_arg = TS_N_IN;
   if (sz_res < 2) sz_res = 2;
   cx.arg = (const casadi_real **)calloc(sz_arg, sizeof(casadi_real *));
   cx.res = (casadi_real **)calloc(sz_res, sizeof(casadi_real *));
@@ -200,7 +223,7 @@ CASADI_SYMBOL_EXPORT int tolsynth_powell(const casadi_real **params, double *x, 
     return 4;
   }
   xs = steps + n + 1; dnew = xs + n; dn = dnew + n; base = dn + n; xt = base + n;
-  for (i = 0; i < TS_N_IN; i++) cx.arg[i] = params[i];
+  for (i = 1; i < TS_N_IN; i++) cx.arg[i] = params[i];
   cx.nfev = 0; cx.n = n; cx.xt = xt;
   fx = ts_f(&cx, x);
   history[0] = fx;
@@ -294,21 +317,45 @@ def _writable_dir() -> Path:
 
 
 class CompiledPowell:
-    """Powell's method on a compiled CasADi function ``F(x, p1, p2, ...) -> (f, ...)``.
+    """Powell's method on a compiled CasADi function ``F(x, p1, p2, ...) -> (f, g, ...)``.
 
-    :meth:`minimize` takes the values of ``p1, p2, ...`` (NumPy arrays, dense) and runs the
-    whole minimisation in C; its result has the fields of :class:`tolsynth.solvers.powell.PowellResult`.
+    :meth:`minimize` takes the values of ``p1, p2, ...`` (NumPy arrays, dense; they are read at
+    each call, so an array changed in place between calls is seen) and runs the whole
+    minimisation of F's first output in C; its result has the fields of
+    :class:`tolsynth.solvers.powell.PowellResult`.  :meth:`evaluate` returns F's first two outputs
+    at one point.
     """
 
     def __init__(self, lib: ctypes.CDLL, n_in: int, path: Path):
         self.path = path
         self.n_in = n_in
+        dp = ctypes.POINTER(ctypes.c_double)
         self._fn = lib.tolsynth_powell
         self._fn.restype = ctypes.c_int
-        dp = ctypes.POINTER(ctypes.c_double)
         self._fn.argtypes = [ctypes.c_void_p, dp, dp, ctypes.c_int, ctypes.c_double, ctypes.c_double,
                              ctypes.c_double, ctypes.c_long, ctypes.c_long, dp, dp]
+        self._eval = lib.tolsynth_eval
+        self._eval.restype = ctypes.c_int
+        self._eval.argtypes = [ctypes.c_void_p, dp, dp]
         self._lib = lib  # keep it loaded
+
+    def _pointers(self, params):
+        keep = [np.ascontiguousarray(p, dtype=float).ravel() for p in params]
+        if len(keep) != self.n_in - 1:
+            raise ValueError(f"expected {self.n_in - 1} parameter arrays, got {len(keep)}")
+        ptrs = (ctypes.c_void_p * self.n_in)()
+        for i, p in enumerate(keep, start=1):
+            ptrs[i] = p.ctypes.data if p.size else None
+        return ptrs, keep
+
+    def evaluate(self, params, x) -> tuple[float, float]:
+        ptrs, _keep = self._pointers(params)
+        x = np.ascontiguousarray(x, dtype=float)
+        out = np.zeros(2)
+        dp = ctypes.POINTER(ctypes.c_double)
+        if self._eval(ptrs, x.ctypes.data_as(dp), out.ctypes.data_as(dp)) != 0:
+            return math.nan, math.nan
+        return float(out[0]), float(out[1])
 
     def minimize(self, params, x0, *, directions=None, step=0.1, ftol=1e-13, line_rtol=1e-9,
                  maxiter=5000, maxfev=2_000_000):
@@ -317,10 +364,7 @@ class CompiledPowell:
         x = np.array(x0, dtype=float)  # a fresh contiguous copy: the C code writes into it
         n = x.size
         D = np.eye(n) if directions is None else np.array(directions, dtype=float, order="C")
-        keep = [np.ascontiguousarray(p, dtype=float).ravel() for p in params]
-        ptrs = (ctypes.c_void_p * self.n_in)()
-        for i, p in enumerate(keep, start=1):
-            ptrs[i] = p.ctypes.data if p.size else None
+        ptrs, _keep = self._pointers(params)
         info = np.zeros(4)
         history = np.zeros(int(maxiter) + 1)
         dp = ctypes.POINTER(ctypes.c_double)
@@ -364,7 +408,7 @@ def compile_powell(F: ca.Function) -> CompiledPowell | None:
             lib_path = _build(source, key, cc)
             lib = ctypes.CDLL(str(lib_path))
             out = CompiledPowell(lib, F.n_in(), lib_path)
-        except (OSError, subprocess.SubprocessError) as err:
+        except (OSError, RuntimeError) as err:
             _status.update(backend="python", reason=f"compilation failed: {err}")
             return None
         _loaded[key] = out
@@ -384,12 +428,16 @@ def _build(source: str, key: str, cc: str) -> Path:
     with os.fdopen(fd, "w") as fh:
         fh.write(source)
     tmp_so = c_path[:-2] + ".so"
+    import subprocess
+
     try:
         proc = subprocess.run([cc, *CFLAGS, "-o", tmp_so, c_path, "-lm"], capture_output=True, text=True,
                               timeout=300)
         if proc.returncode != 0:
-            raise subprocess.SubprocessError(proc.stderr.strip()[-2000:] or f"{cc} exited {proc.returncode}")
+            raise RuntimeError(proc.stderr.strip()[-2000:] or f"{cc} exited {proc.returncode}")
         os.replace(tmp_so, target)
+    except subprocess.SubprocessError as err:  # a timeout
+        raise RuntimeError(str(err)) from None
     finally:
         for p in (c_path, tmp_so):
             try:

@@ -154,7 +154,7 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     def penalty(r):
         r_box[0] = r
         if compiled is not None:
-            return lambda z: float(F(z, *values)[0])
+            return lambda z: compiled.evaluate(values, z)[0]
         return lambda z: float(F_fixed(z, r))
 
     def minimize(r, u, directions, ftol):
@@ -183,7 +183,7 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         nfev += res.nfev
         u, directions = res.x, res.directions
         trajectory.append((r, u))
-        f = nlp.cost(np.exp(u))
+        f = compiled.evaluate(values, u)[1] if compiled is not None else nlp.cost(np.exp(u))  # same graph
         gmax = max(float(v[0]) for v in nlp.all_values(np.exp(u)))
         history.append(
             {"outer": outer, "r": r, "penalty": res.fun, "cost": f, "max_constraint": gmax,
