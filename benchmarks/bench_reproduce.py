@@ -8,9 +8,11 @@ Prints, in one run:
 * the same in-process (``tolsynth.reproduce.reproduce()``), median of --repeat after one warm-up,
   with the time split into its IPOPT and SUMT solves;
 * SUMT + Powell per column: the compiled Powell (:mod:`tolsynth.solvers.cpowell`, the default
-  where a C compiler is found) against the Python Powell on the same graph (the path every run
-  took before; ``TOLSYNTH_NO_COMPILE=1``), on --python-columns columns (it is slow), with the
-  ratio, the evaluations and the IPOPT agreement.
+  where a C compiler is found); the Python Powell on the same graph with the same options (the
+  fallback without a compiler; ``TOLSYNTH_NO_COMPILE=1``); and "before": the Python Powell with
+  the options of the earlier release (``line_rtol=1e-9``, no extrapolation: the path every run
+  took before this benchmark was written), on --python-columns columns (they are slow); the
+  ratios, the evaluations and the IPOPT agreement.
 
 Usage: python benchmarks/bench_reproduce.py [--repeat 5] [--python-columns 3]
 """
@@ -87,30 +89,37 @@ def main():
           f"the solvers (their own wall_time): IPOPT 36 solves {statistics.median(ip_t):.3f} s, "
           f"SUMT 18 solves {statistics.median(su_t):.3f} s; largest IPOPT-SUMT cost difference {worst:.1e}")
 
-    # -- SUMT per column: compiled vs Python Powell ------------------------------------------
-    print(f"\nSUMT + Powell per column (synthesize end to end), compiled vs Python Powell on the same graph")
-    print(f"  {'column':<52} {'compiled ms':>11} {'evals':>7} {'python ms':>10} {'evals':>7} {'ratio':>6} {'|SUMT-IPOPT|/IPOPT':>19}")
-    ratios = []
+    # -- SUMT per column: compiled vs Python Powell vs before --------------------------------
+    print("\nSUMT + Powell per column (synthesize end to end): compiled; Python Powell, same options; "
+          "before (Python, line_rtol 1e-9, no extrapolation)")
+    print(f"  {'column':<52} {'compiled ms':>11} {'evals':>6} {'python ms':>9} {'before ms':>9} {'evals':>7} "
+          f"{'py/comp':>7} {'before/comp':>11} {'|SUMT-IPOPT|/IPOPT':>18}")
+    r_py, r_before = [], []
     for i, ref in enumerate(refs):
         label = f"{ref.table}: R={ref.R:g} mm, p={ref.p:g}, alpha={ref.alpha:g}, {ref.distribution}"
         tc = statistics.median(sumt_column(mech, ref)[0] for _ in range(a.repeat))
         _, su = sumt_column(mech, ref)
         ip = synthesize(mech, ref.R, ref.p, ref.distribution, ref.alpha, solver="ipopt")
-        row = f"  {label:<52} {tc * 1e3:>11.1f} {su.function_evaluations:>7}"
+        row = f"  {label:<52} {tc * 1e3:>11.1f} {su.function_evaluations:>6}"
         if i < a.python_columns:
             os.environ["TOLSYNTH_NO_COMPILE"] = "1"
             try:
-                tp, sp = sumt_column(mech, ref)
+                tp, _ = sumt_column(mech, ref)
+                t0 = time.perf_counter()
+                sb = synthesize(mech, ref.R, ref.p, ref.distribution, ref.alpha, solver="sumt",
+                                options={"line_rtol": 1e-9, "extrapolate": False})
+                tb = time.perf_counter() - t0
             finally:
                 del os.environ["TOLSYNTH_NO_COMPILE"]
-            ratios.append(tp / tc)
-            row += f" {tp * 1e3:>10.0f} {sp.function_evaluations:>7} {tp / tc:>6.0f}"
+            r_py.append(tp / tc)
+            r_before.append(tb / tc)
+            row += f" {tp * 1e3:>9.0f} {tb * 1e3:>9.0f} {sb.function_evaluations:>7} {tp / tc:>7.0f} {tb / tc:>11.0f}"
         else:
-            row += f" {'':>10} {'':>7} {'':>6}"
-        lines = row + f" {abs(su.cost - ip.cost) / ip.cost:>19.1e}"
-        print(lines)
-    if ratios:
-        print(f"  compiled / Python speed-up, median over {len(ratios)} columns: {statistics.median(ratios):.0f}x")
+            row += f" {'':>9} {'':>9} {'':>7} {'':>7} {'':>11}"
+        print(row + f" {abs(su.cost - ip.cost) / ip.cost:>18.1e}")
+    if r_py:
+        print(f"  speed-up over {len(r_py)} columns (median): {statistics.median(r_py):.0f}x over the Python Powell, "
+              f"{statistics.median(r_before):.0f}x over before")
 
 
 if __name__ == "__main__":
