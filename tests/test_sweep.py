@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import tolsynth
+import tolsynth.sweeps as sweeps
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
 
 pd = pytest.importorskip("pandas")
@@ -54,6 +55,17 @@ def test_sweep_local_processes(xz):
     _check_against_synthesize(df, xz)
 
 
+def test_sweep_auto_engine(xz, monkeypatch):
+    """client=None: a small grid stays in this process; one that would take long goes to processes."""
+    df = tolsynth.sweep(xz, R=[0.4, 0.5], p=[0.9, 0.99, 0.995])
+    assert df.attrs["summary"]["engine"].startswith("auto (4 solves here") and len(df) == 6
+    assert df.attrs["summary"]["engine"].endswith("then serial (this process)")
+    monkeypatch.setattr(sweeps, "AUTO_PROCESSES_S", 0.0)
+    df = tolsynth.sweep(xz, R=[0.4, 0.5, 1e-7], p=[0.9, 0.99], workers=2)
+    assert "then processes (2 on this machine)" in df.attrs["summary"]["engine"]
+    _check_against_synthesize(df, xz)
+
+
 def test_sweep_on_dask_local_cluster(xz):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
@@ -66,7 +78,6 @@ def test_sweep_on_dask_local_cluster(xz):
         _check_against_synthesize(df2, xz)
 
 
-@pytest.mark.slow
 def test_sweep_on_dask_worker_processes(xz):
     """Two worker processes (the model is scattered to each), both solvers."""
     distributed = pytest.importorskip("distributed")

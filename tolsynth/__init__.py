@@ -35,7 +35,7 @@ from .budget import BudgetResult, best_accuracy
 from .pareto import ParetoFront, pareto_front
 from .synthesis import Comparison, WorkspaceSynthesis, compare, synthesize, synthesize_workspace
 from .tables import read_table, write_table  # issue 9: tables
-from .sweep import sweep
+from .sweeps import sweep
 
 __version__ = "0.1.0"
 

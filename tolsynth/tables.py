@@ -17,6 +17,18 @@ Every frame carries ``frame.attrs``:
 ``units``
     the unit of each column that has one.
 
+The rows of each type's frame:
+
+- ``SynthesisResult``: one per parameter: ``parameter, unit, tolerance, lower, upper, k, alpha,
+  cost`` (that parameter's share of the cost), ``bound_active`` ("lower" / "upper" / ""),
+  ``bound_multiplier``; the constraint blocks in ``attrs["summary"]["constraints"]``;
+- ``Comparison``: one per parameter: ``ipopt, sumt, rel_diff, ipopt_bound, sumt_bound``;
+- ``WorkspaceSynthesis``: one per exchange round (cost, worst value, worst pose and hand point);
+- ``MonteCarloResult``: one per probability (``monte_carlo, ci_low, ci_high, analytic, diff,
+  analytic_in_ci``), then the principal standard deviations and the mean error;
+- ``ProbabilityMap``: one per grid point (``u, v, P, reachable, sigma1..3, limit_margin, q_<joint>``);
+- ``WorstPose``: the worst pose and the reference pose.
+
 The files keep them: CSV in two leading comment lines (``# tolsynth VERSION KIND`` and
 ``# {JSON}``; read with ``pandas.read_csv(path, skiprows=2)``), JSON as pandas' table orientation
 with a ``"tolsynth"`` key (``pandas.read_json(path, orient="table", precise_float=True)``), Parquet in the file's

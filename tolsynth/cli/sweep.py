@@ -79,7 +79,7 @@ def _numbers(text: str, field: str, parse) -> list:
 
 
 def cmd_sweep(args) -> int:
-    from ..sweep import sweep
+    from ..sweeps import sweep
 
     check_table_out(args)  # before any work: the suffix, pandas / pyarrow, the folder
     grid = read_grid_file(args.grid) if args.grid else {}
@@ -112,12 +112,12 @@ def cmd_sweep(args) -> int:
         kw["Phi"] = args.Phi
     if args.scheduler is not None:
         client = args.scheduler
-    elif args.workers == 1:
-        client = "serial"
+    elif args.workers is None:
+        client = None  # auto: processes only where the grid pays for starting them
     else:
-        client = "processes"
+        client = "serial" if args.workers == 1 else "processes"
     axes = {a: grid[a] for a in ("R", "p", "alpha", "distribution", "criterion", "solver") if a in grid}
-    df = sweep(mech, client=client, workers=args.workers if client == "processes" else None,
+    df = sweep(mech, client=client, workers=args.workers if client in (None, "processes") else None,
                progress=False if args.quiet else None, **axes, **kw)
     record = dict(grid=axes, poses=[pose_label(q) for q in kw.get("poses", [])] or None,
                   k=kw.get("k", mech.k), bounds=kw.get("bounds", mech.bounds), Phi_rad=args.Phi, engine=client)
@@ -129,6 +129,8 @@ def cmd_sweep(args) -> int:
     else:
         cols = ["R", "p", "alpha", "distribution", "criterion", "solver", "status", "cost", "gap", "time_s"]
         print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.6g}"))
+        for _, row in df[df["error"] != ""].iterrows():
+            print(f"row {row['row']}: {row['error']}")
         s = df.attrs["summary"]
         print(f"{s['rows']} solves, {s['succeeded']} succeeded, {s['failed']} failed; {s['engine']}; "
               f"{s['elapsed_s']:.2f} s ({s['rows_per_s']:.1f} rows/s)" + (f"; written to {args.out}" if args.out else ""))
@@ -173,7 +175,8 @@ def register(sub) -> None:
                    help="run on a Dask cluster: the scheduler's address, e.g. tcp://host:8786 (the workers need "
                         "tolsynth installed); default: processes on this machine")
     p.add_argument("--workers", type=number("--workers", "an integer >= 1", lambda v: v >= 1, integer=True), default=None,
-                   help="worker processes on this machine (1: in this process); default: one per CPU")
+                   help="worker processes on this machine (1: in this process); default: one per CPU, used only when "
+                        "the grid is large enough to pay for starting them (the first solves are timed here)")
     p.add_argument("--quiet", action="store_true", help="no progress report on stderr")
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded, every row) instead of the table")
     p.set_defaults(func=cmd_sweep, task="the sweep")

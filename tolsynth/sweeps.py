@@ -6,7 +6,9 @@ row, never a lost grid).  The engine is chosen by ``client``:
 
 ``None`` (default)
     processes on this machine (:class:`concurrent.futures.ProcessPoolExecutor`, one worker per
-    CPU, no set-up) when there is more than one solve and more than one CPU, else in this process;
+    CPU, no set-up) when the grid is large enough to pay for starting them: the first
+    :data:`AUTO_PROBE` solves run in this process, timed, and the rest go to processes only if
+    they would take more than :data:`AUTO_PROCESSES_S` here, otherwise they stay here;
 ``"processes"`` / ``"serial"``
     force one or the other;
 a :class:`dask.distributed.Client`, or a scheduler address such as ``"tcp://10.0.0.5:8786"``
@@ -45,6 +47,10 @@ ENGINES = ("serial", "processes")
 #: largest grid accepted (rows)
 MAX_ROWS = 1_000_000
 SWEEP_INSTALL = 'pip install "tolsynth[sweep]"'
+#: client=None: solves timed in this process first, and processes used only if the rest would
+#: take longer than this serially (starting worker processes costs about 1 s here)
+AUTO_PROBE = 4
+AUTO_PROCESSES_S = 2.0
 
 #: the grid's axes, in the order of the columns
 AXES = ("R", "p", "alpha", "distribution", "criterion", "solver")
@@ -142,19 +148,22 @@ def _solve_chunk(token: str, mechanism, points: list, kwargs: dict) -> list[dict
 # ---------------------------------------------------------------------------------------------
 # engines
 # ---------------------------------------------------------------------------------------------
+class _Lazy:
+    """A task of the serial engine, run when its result is asked for (so the bar advances)."""
+
+    def __init__(self, fn, args):
+        self.fn, self.args = fn, args
+
+    def result(self):
+        return self.fn(*self.args)
+
+
 class _Serial:
     name = "serial (this process)"
     workers = 1
 
     def submit(self, fn, *args):
-        from concurrent.futures import Future
-
-        f = Future()
-        try:
-            f.set_result(fn(*args))
-        except Exception as exc:  # noqa: BLE001
-            f.set_exception(exc)
-        return f
+        return _Lazy(fn, args)
 
     def as_completed(self, futures):
         return iter(futures)
@@ -162,7 +171,7 @@ class _Serial:
     def model(self, mech):
         return mech
 
-    def close(self):
+    def close(self, cancel: bool = False):
         pass
 
 
@@ -226,8 +235,6 @@ class _Dask:
 
 
 def _engine(client, workers, n_rows: int):
-    if client is None:
-        client = "processes" if n_rows > 1 and (os.cpu_count() or 1) > 1 else "serial"
     if isinstance(client, str) and client in ENGINES:
         if client == "serial":
             return _Serial()
@@ -261,7 +268,7 @@ def sweep(mechanism, R, p, alpha=0.7, distribution="uniform", *, criterion="comp
         (R mm; 0 < p < 1; alpha a number > 0 or a dict name -> number; distribution "uniform" /
         "normal"; criterion "components" / "sphere"; solver "ipopt" / "sumt").
     client : None, "serial", "processes", dask.distributed.Client or str
-        Where the solves run (see :mod:`tolsynth.sweep`); a string with ``://`` is a Dask
+        Where the solves run (see :mod:`tolsynth.sweeps`); a string with ``://`` is a Dask
         scheduler address.
     workers : int, optional
         Worker processes for ``"processes"`` (default: the CPUs).
@@ -313,40 +320,61 @@ def sweep(mechanism, R, p, alpha=0.7, distribution="uniform", *, criterion="comp
         make_specification(mechanism, first["R"], first["p"], first["distribution"], a)
 
     n = len(points)
-    engine = _engine(client, workers, n)
+    indexed = list(enumerate(points))
+    token = uuid.uuid4().hex
     t0 = time.perf_counter()
     rows: list[dict] = []
+    bar = Progress(progress, n, "sweep", unit="solve")
+    engine = None
     try:
-        size = chunk or max(1, min(64, math.ceil(n / (4 * engine.workers))))
-        chunks = [list(enumerate(points))[i:i + size] for i in range(0, n, size)]
-        token = uuid.uuid4().hex
-        model = engine.model(mechanism)
-        futures = {}
-        for c in chunks:
-            futures[engine.submit(_solve_chunk, token, model, c, kwargs)] = c
-        bar = Progress(progress, n, "sweep", unit="solve")
-        done = 0
-        try:
-            for f in engine.as_completed(list(futures)):
-                c = futures[f]
-                try:
-                    got = f.result()
-                except Exception as exc:  # noqa: BLE001 - a lost worker loses its chunk's rows only
-                    got = [dict(_error_row(exc), row=i) for i, _ in c]
-                rows.extend(got)
-                done += len(c)
-                bar.update(done, len(c))
-        finally:
-            bar.close()
+        label = ""
+        rest = indexed
+        if client is None:  # auto: time a few solves here, then go to processes only if it pays
+            probe = indexed[:AUTO_PROBE]
+            rows = _solve_chunk(token, mechanism, probe, kwargs)
+            bar.update(len(rows), len(rows))
+            per_row = (time.perf_counter() - t0) / len(probe)
+            rest = indexed[len(probe):]
+            big = per_row * len(rest) > AUTO_PROCESSES_S and (os.cpu_count() or 1) > 1
+            client = "processes" if big else "serial"
+            label = (f"auto ({len(probe)} solves here, {per_row * 1e3:.1f} ms each), then " if rest
+                     else f"auto (all {len(probe)} solves in this process)")
+        if rest:
+            engine = _engine(client, workers, len(rest))
+            label += engine.name
+            rows += _run(engine, token, mechanism, rest, kwargs, chunk, bar, len(rows))
     except BaseException:
-        if hasattr(engine, "pool"):
+        if engine is not None:
             engine.close(cancel=True)
-        else:
-            engine.close()
         raise
-    engine.close()
+    finally:
+        bar.close()
+    if engine is not None:
+        engine.close()
     elapsed = time.perf_counter() - t0
-    return _frame(pd, mechanism, points, rows, engine.name, elapsed, kwargs)
+    return _frame(pd, mechanism, points, rows, label or "serial (this process)", elapsed, kwargs)
+
+
+def _run(engine, token, mechanism, indexed, kwargs, chunk, bar, done) -> list[dict]:
+    """Dispatch ``indexed`` grid points to ``engine`` in chunks; collect the rows as they finish."""
+    n = len(indexed)
+    size = chunk or max(1, min(64, math.ceil(n / (4 * engine.workers))))
+    model = engine.model(mechanism)
+    futures = {}
+    for i in range(0, n, size):
+        c = indexed[i:i + size]
+        futures[engine.submit(_solve_chunk, token, model, c, kwargs)] = c
+    rows = []
+    for f in engine.as_completed(list(futures)):
+        c = futures[f]
+        try:
+            got = f.result()
+        except Exception as exc:  # noqa: BLE001 - a lost worker loses its chunk's rows only
+            got = [dict(_error_row(exc), row=i) for i, _ in c]
+        rows.extend(got)
+        done += len(c)
+        bar.update(done, len(c))
+    return rows
 
 
 def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dict):
