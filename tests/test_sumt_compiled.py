@@ -8,6 +8,10 @@ of the same penalty, and the on-disk cache is used.
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -67,6 +71,8 @@ def test_library_is_cached_on_disk(tmp_path, monkeypatch):
     mech = tolsynth.load_model("planar_2r")
     first = synthesize(mech, 0.1, 0.9, solver="sumt")
     assert cpowell.backend_status()["backend"] == "compiled"
+    ipopt = synthesize(mech, 0.1, 0.9, solver="ipopt")
+    assert abs(first.cost - ipopt.cost) <= 1e-6 * ipopt.cost
     files = list(tmp_path.iterdir())
     assert len(files) == 1 and files[0].suffix == ".so"  # no temporaries left
     stamp = files[0].stat().st_mtime_ns
@@ -75,3 +81,23 @@ def test_library_is_cached_on_disk(tmp_path, monkeypatch):
     again = synthesize(mech, 0.1, 0.9, solver="sumt")
     assert list(tmp_path.iterdir()) == files and files[0].stat().st_mtime_ns == stamp
     assert again.cost == first.cost
+    # a damaged file in the cache is built again (in a new process: this one has the library
+    # loaded, and dlopen hands back the loaded one by its path)
+    (tmp_path / "damaged").write_bytes(b"not a library")
+    (tmp_path / "damaged").replace(files[0])  # a new file: the loaded one stays mapped
+    code = ("import tolsynth; from tolsynth.solvers import cpowell; "
+            "r = tolsynth.synthesize('planar_2r', 0.1, 0.9, solver='sumt'); "
+            "print(cpowell.backend_status()['backend'], repr(r.cost))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**os.environ, "TOLSYNTH_CACHE_DIR": str(tmp_path)}).stdout.split()
+    assert out[0] == "compiled" and float(out[1]) == pytest.approx(first.cost, rel=1e-12)
+    assert files[0].stat().st_size > 1000
+
+
+def test_huge_iteration_limit_is_accepted():
+    """maxiter may be as large as the options allow (1e9): the history buffer is bounded."""
+    mech = tolsynth.load_model("planar_2r")
+    ref = synthesize(mech, 0.1, 0.9, solver="ipopt")
+    su = synthesize(mech, 0.1, 0.9, solver="sumt", options={"maxiter": 10**9, "maxfev": 10**9})
+    assert su.success and abs(su.cost - ref.cost) <= 1e-6 * ref.cost
+    assert all(len(h["inner_history"]) == h["inner_iterations"] + 1 for h in su.history)

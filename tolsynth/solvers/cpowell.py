@@ -40,6 +40,8 @@ CFLAGS = ["-O2", "-fPIC", "-shared", "-ffp-contract=off"]
 #: 2.1 s for 30 poses; 5 s for the sphere criterion's quadrature, 39,000), and CasADi's per-call
 #: overhead is then a smaller part of an evaluation
 MAX_INSTRUCTIONS = 5_000
+#: Powell's per-iteration history keeps the first this many iterations (maxiter may be 1e9)
+HISTORY_MAX = 100_000
 
 # The C port of tolsynth.solvers.powell (keep the two in step).  TS_F / TS_F_WORK are the
 # CasADi-generated function and its work-size query; argument 0 of TS_F is the point.
@@ -200,10 +202,12 @@ CASADI_SYMBOL_EXPORT int tolsynth_eval(const casadi_real **params, const double 
 }
 
 /* info: [fx, nit, nfev, status] with status 0 converged, 1 maxfev, 2 maxiter, 3 start outside
-   the domain, 4 out of memory; history[0..nit] = f at the start and after each iteration */
+   the domain, 4 out of memory; history[0..min(nit, hist_len - 1)] = f at the start and after
+   each iteration (the first hist_len values) */
 CASADI_SYMBOL_EXPORT int tolsynth_powell(const casadi_real **params, double *x, double *D, int n,
                                          double step, double ftol, double line_rtol, long maxiter,
-                                         long maxfev, double *info, double *history) {
+                                         long maxfev, double *info, double *history,
+                                         long hist_len) {
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   ts_ctx cx;
   double *steps, *xs, *dnew, *dn, *base, *xt, fx, f_start, f_prev, big, fe, tt, t, nrm;
@@ -243,7 +247,7 @@ CASADI_SYMBOL_EXPORT int tolsynth_powell(const casadi_real **params, double *x, 
       if (t != 0.0) steps[i] = fabs(t) > 1e-8 ? fabs(t) : 1e-8;
       if (f_prev - fx > big) { big = f_prev - fx; ibig = i; }
     }
-    history[it] = fx;
+    if (it < hist_len) history[it] = fx;
     if (2.0 * (f_start - fx) <= ftol * (fabs(f_start) + fabs(fx)) + 1e-300) { status = 0; goto done; }
     if (cx.nfev >= maxfev) { status = 1; goto done; }
     for (i = 0; i < n; i++) { dnew[i] = x[i] - xs[i]; xt[i] = x[i] + dnew[i]; }
@@ -333,7 +337,7 @@ class CompiledPowell:
         self._fn = lib.tolsynth_powell
         self._fn.restype = ctypes.c_int
         self._fn.argtypes = [ctypes.c_void_p, dp, dp, ctypes.c_int, ctypes.c_double, ctypes.c_double,
-                             ctypes.c_double, ctypes.c_long, ctypes.c_long, dp, dp]
+                             ctypes.c_double, ctypes.c_long, ctypes.c_long, dp, dp, ctypes.c_long]
         self._eval = lib.tolsynth_eval
         self._eval.restype = ctypes.c_int
         self._eval.argtypes = [ctypes.c_void_p, dp, dp]
@@ -366,13 +370,13 @@ class CompiledPowell:
         D = np.eye(n) if directions is None else np.array(directions, dtype=float, order="C")
         ptrs, _keep = self._pointers(params)
         info = np.zeros(4)
-        history = np.zeros(int(maxiter) + 1)
+        history = np.zeros(min(int(maxiter), HISTORY_MAX) + 1)  # maxiter may be huge
         dp = ctypes.POINTER(ctypes.c_double)
         self._fn(ptrs, x.ctypes.data_as(dp), D.ctypes.data_as(dp), n, float(step), float(ftol),
-                 float(line_rtol), int(maxiter), int(maxfev), info.ctypes.data_as(dp), history.ctypes.data_as(dp))
+                 float(line_rtol), int(maxiter), int(maxfev), info.ctypes.data_as(dp), history.ctypes.data_as(dp), history.size)
         fx, nit, nfev, status = float(info[0]), int(info[1]), int(info[2]), int(info[3])
         message = _MESSAGES[status].format(nfev=nfev, nit=nit)
-        hist = history[: nit + 1].tolist() if status != 3 else [fx]
+        hist = history[: min(nit, history.size - 1) + 1].tolist() if status != 3 else [fx]
         return PowellResult(x, fx, nit, nfev, status == 0, message, D, hist)
 
 
@@ -405,10 +409,14 @@ def compile_powell(F: ca.Function) -> CompiledPowell | None:
             _status.update(backend="compiled", reason="")
             return _loaded[key]
         try:
-            lib_path = _build(source, key, cc)
-            lib = ctypes.CDLL(str(lib_path))
-            out = CompiledPowell(lib, F.n_in(), lib_path)
-        except (OSError, RuntimeError) as err:
+            try:
+                lib_path = _build(source, key, cc)
+                out = CompiledPowell(ctypes.CDLL(str(lib_path)), F.n_in(), lib_path)
+            except (OSError, AttributeError):  # a damaged file in the cache: build it again, once
+                lib_path.unlink(missing_ok=True)
+                lib_path = _build(source, key, cc)
+                out = CompiledPowell(ctypes.CDLL(str(lib_path)), F.n_in(), lib_path)
+        except (OSError, AttributeError, RuntimeError) as err:
             _status.update(backend="python", reason=f"compilation failed: {err}")
             return None
         _loaded[key] = out
