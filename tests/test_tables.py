@@ -105,6 +105,17 @@ def _saved(result, path):
     return path
 
 
+def test_validation_frame(xz, tmp_path):
+    res = tolsynth.synthesize(xz, R=0.5, p=0.99, validate=3000, seed=2)
+    v = res.validation
+    frame, meta = _read_plain(_saved(v, tmp_path / "v.csv"))
+    rows = frame.set_index("quantity")
+    np.testing.assert_array_equal(rows.loc[[f"p_component_{j}" for j in (1, 2, 3)], "monte_carlo"], v.p_components)
+    assert list(rows.loc[[f"p_component_{j}" for j in (1, 2, 3)], "met"]) == list(v.components_met)
+    assert meta["inputs"]["p"] == 0.99 and meta["inputs"]["seed"] == 2 and meta["summary"]["met"] == v.met
+    assert res.to_frame().attrs["summary"]["validation"]["n"] == 3000
+
+
 def test_workspace_and_worst_pose_frames(xz, solved):
     w = tolsynth.synthesize_workspace(xz, 0.5, 0.99, max_rounds=2)
     f = w.to_frame()
@@ -126,3 +137,11 @@ def test_bad_paths_and_missing_pandas(solved, tmp_path, monkeypatch):
     with pytest.raises(MissingDependencyError, match=r'pip install "tolsynth\[tables\]"') as info:
         solved.to_frame()
     assert isinstance(info.value, ImportError) and info.value.package == "pandas"
+
+
+def test_core_import_needs_no_pandas_or_dask():
+    import subprocess
+
+    code = "import sys, tolsynth, tolsynth.cli; bad = [m for m in ('pandas', 'pyarrow', 'dask', 'distributed') if m in sys.modules]; print(bad)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "[]"

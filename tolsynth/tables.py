@@ -27,7 +27,8 @@ The rows of each type's frame:
 - ``MonteCarloResult``: one per probability (``monte_carlo, ci_low, ci_high, analytic, diff,
   analytic_in_ci``), then the principal standard deviations and the mean error;
 - ``ProbabilityMap``: one per grid point (``u, v, P, reachable, sigma1..3, limit_margin, q_<joint>``);
-- ``WorstPose``: the worst pose and the reference pose.
+- ``WorstPose``: the worst pose and the reference pose;
+- ``ValidationResult``: the Monte Carlo rows plus ``p_asked``, ``met``, ``short`` per component.
 
 The files keep them: CSV in two leading comment lines (``# tolsynth VERSION KIND`` and
 ``# {JSON}``; read with ``pandas.read_csv(path, skiprows=2)``), JSON as pandas' table orientation
@@ -316,6 +317,8 @@ def _synthesis_frame(res):
                     "multipliers": b.multipliers} for b in res.constraints]
     summary = synthesis_summary(res)
     summary["constraints"] = constraints
+    if res.validation is not None:  # synthesize(validate=N): the Monte Carlo check at the optimum
+        summary["validation"] = res.validation.to_dict()
     return make_frame(rows, "SynthesisResult", _synthesis_inputs(res), summary,
                       {"tolerance": "unit column", "lower": "unit column", "upper": "unit column",
                        "cost": "the paper's cost units", "bound_multiplier": "cost units per tolerance unit"})
@@ -429,7 +432,22 @@ def _worst_frame(w):
                       {"value": "mm (sigma) or probability", "x": "mm", "y": "mm", "z": "mm", "q": "rad"})
 
 
+def _validation_frame(v):
+    frame = _montecarlo_frame(v.montecarlo)
+    comp = frame["quantity"].str.startswith("p_component_")
+    frame["p_asked"] = np.where(comp, v.p, np.nan)
+    frame["met"] = None
+    frame["short"] = None
+    frame.loc[comp, "met"] = list(np.asarray(v.components_met, dtype=bool))
+    frame.loc[comp, "short"] = list(np.asarray(v.components_short, dtype=bool))
+    frame.attrs["kind"] = "ValidationResult"
+    frame.attrs["inputs"] = dict(frame.attrs["inputs"], p=v.p, pose=jsonable(v.pose))
+    frame.attrs["summary"] = dict(frame.attrs["summary"], met=v.met, sphere_met=bool(v.sphere_met))
+    return frame
+
+
 _BUILDERS = {
+    "ValidationResult": _validation_frame,
     "SynthesisResult": _synthesis_frame,
     "Comparison": _comparison_frame,
     "WorkspaceSynthesis": _workspace_frame,

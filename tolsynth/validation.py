@@ -15,12 +15,13 @@ import numpy as np
 from .errors import InputError
 from .montecarlo import DEFAULT_BATCH, MonteCarloResult, monte_carlo
 from .stats import check_probability
+from .tables import Tabular
 
 __all__ = ["ValidationResult", "validate"]
 
 
 @dataclass(frozen=True)
-class ValidationResult:
+class ValidationResult(Tabular):
     """Probabilities achieved at a set of tolerances, by Monte Carlo, against the ``p`` asked for.
 
     Attributes
