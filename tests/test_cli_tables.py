@@ -37,12 +37,13 @@ def test_solve_out_matches_api(tmp_path, capsys):
     ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.9"],
 ])
 def test_unknown_suffix_refused_before_work(argv, capsys, tmp_path, monkeypatch):
-    import tolsynth.mechanism as mechanism
+    import importlib
 
     def boom(*a, **k):  # loading the model is the first piece of work: it must not happen
         raise AssertionError("work started before the --out check")
 
-    monkeypatch.setattr(mechanism, "load_model", boom)
+    for name in ("solve", "montecarlo", "workspace", "sweep"):  # each command's own reference
+        monkeypatch.setattr(importlib.import_module(f"tolsynth.cli.{name}"), "load_model", boom)
     assert main(argv + ["--out", str(tmp_path / "t.xlsx")]) == 2
     err = capsys.readouterr().err
     assert "--out" in err and ".xlsx" in err and ".parquet" in err and "Traceback" not in err

@@ -4,6 +4,8 @@ solve is a row; bad grids are typed errors before any work."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -109,3 +111,17 @@ def test_sweep_bad_grids(xz, kwargs, error, match):
     args.update(kwargs)
     with pytest.raises(error, match=match):
         tolsynth.sweep(xz, **{"client": "serial", **args})
+
+
+@pytest.mark.parametrize("fmt", ["csv", "json", "parquet"])
+def test_sweep_with_per_parameter_alpha_writes_every_format(tmp_path, fmt):
+    pytest.importorskip("pyarrow")
+    m = tolsynth.load_model("planar_2r")
+    alpha = {"l1": 0.5, "l2": 0.7, "o1": 0.7, "o2": 0.9}
+    df = tolsynth.sweep(m, R=[0.5, 1e-9], p=0.9, alpha=[0.7, alpha], client="serial", pose="elbow90")
+    ref = tolsynth.synthesize(m, 0.5, 0.9, alpha=alpha, pose="elbow90")
+    assert df.loc[1, "cost"] == pytest.approx(ref.cost, rel=1e-8)
+    back = tolsynth.read_table(tolsynth.write_table(df, tmp_path / f"s.{fmt}"))
+    assert list(back["status"]) == ["optimal", "optimal", "error", "error"]
+    np.testing.assert_array_equal(back["cost"].to_numpy(), df["cost"].to_numpy())  # NaN in the error rows
+    assert json.loads(back.loc[1, "alpha"]) == alpha and back.attrs["summary"]["failed"] == 2

@@ -382,13 +382,15 @@ def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dic
     eps_cols = ["eps_" + n for n in mechanism.error_parameters]
     result_cols = ["status", "success", "cost", "lower_bound", "gap", "max_constraint", "iterations",
                    "function_evaluations", "wall_time_s", "time_s", "message", "error"]
+    # a per-parameter alpha (dict) anywhere: the whole column as JSON text, one type per column
+    as_text = {a for a in AXES if any(isinstance(pt[a], dict) for pt in points)}
     records = []
     for i, point in enumerate(points):
         r = by_index.get(i, {"status": "error", "success": False, "error": "no result returned"})
         rec = {"row": i}
         for a in AXES:
             v = point[a]
-            rec[a] = json_text(v) if isinstance(v, dict) else v
+            rec[a] = json_text(v) if a in as_text else v
         for c in result_cols + eps_cols:
             rec[c] = r.get(c)
         rec["error"] = rec["error"] or ""
