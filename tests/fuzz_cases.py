@@ -272,6 +272,19 @@ def _mech(name):
     return tolsynth.load_model(name)
 
 
+def _divisors(mech, distribution):
+    """eps^2 / variance per parameter, from the shapes' textbook variances (uniform on +-eps: eps^2/3;
+    normal with 3 sigma = eps: eps^2/9; triangular: eps^2/6). ``None`` is the model's own shapes;
+    names are case-blind; a mapping names parameters, with ``"*"`` for the rest."""
+    table = {"uniform": 3.0, "normal": 9.0, "triangular": 6.0}
+    if distribution is None:
+        distribution = getattr(mech, "distribution", "uniform")
+    if isinstance(distribution, str):
+        return table[distribution.lower()]
+    default = distribution.get("*", "uniform")
+    return np.array([table[distribution.get(n, default).lower()] for n in mech.error_parameters])
+
+
 def _check_synthesis(mech, res, R, p, distribution, poses):
     """Independent check of a converged optimum: covariance rebuilt with NumPy from the
     sensitivities; its eigenvalues must not exceed (R / z)^2 (components criterion)."""
@@ -285,7 +298,7 @@ def _check_synthesis(mech, res, R, p, distribution, poses):
     finite(eps, res.cost)
     if not np.all(eps > 0):
         raise BadNumbers("a tolerance <= 0")
-    c = {"uniform": 3.0, "normal": 9.0}[distribution]
+    c = _divisors(mech, distribution)
     z = NormalDist().inv_cdf(0.5 + 0.5 * p)
     for q in poses:
         S = mech.sensitivity(q, check_limits=False)[:3]

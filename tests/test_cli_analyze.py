@@ -154,7 +154,7 @@ def test_bad_input_exits_2_naming_the_field(capsys, changes, fragments):
 
 
 @pytest.mark.parametrize("args, fragment", [
-    (_with({"--dist": "triangular"}), "--dist"),
+    (_with({"--dist": "lognormal"}), "--dist"),
     ([a for a in ARGS if a not in ("--R", "0.2")], "--R"),
     (_with({"--R": "small"}), "--R"),
 ])

@@ -129,7 +129,7 @@ def test_negative_variance(xz):
 
 def test_unknown_distribution(xz):
     with _raises(OutOfRangeError, "distribution", "uniform", "normal"):
-        xz.analyze("worst", "figure3", distribution="triangular", R=0.2)
+        xz.analyze("worst", "figure3", distribution="lognormal", R=0.2)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -240,3 +240,15 @@ def test_unmodified_copies_load(tmp_path):
         q = next(iter(m.configurations.values()))
         ref = planar_fk(q) if name == "planar_2r" else xu_fk(q)
         assert np.max(np.abs(m.fk(q) - ref)) < 1e-9
+
+
+def test_poses_may_mix_names_and_joint_vectors(xz):
+    """A list mixing a configuration name and a joint vector is valid (it raised numpy's ValueError):
+    the optimum equals the one with both poses as joint vectors."""
+    import tolsynth
+
+    a = tolsynth.synthesize(xz, R=0.5, p=0.9, poses=["worst", xz.joints("home")])
+    b = tolsynth.synthesize(xz, R=0.5, p=0.9, poses=[xz.joints("worst"), xz.joints("home")])
+    assert a.success and b.success and abs(a.cost - b.cost) <= 1e-7 * b.cost
+    with _raises(InputError, "poses"):
+        tolsynth.synthesize(xz, R=0.5, p=0.9, poses={"worst": 1})

@@ -269,9 +269,10 @@ def test_xu_worst_pose_by_numpy():
 
 
 def test_puma_zero_pose_by_hand():
-    """qz of the Puma 560: hand at (a2 + a3, -d3, d1 + d4) = (452.1, -150.05, 1103.8) mm."""
+    """qz of the Puma 560: hand at (a2 + a3, -d3, d1 + d4) = (452.1, -150.05, 1103.63) mm,
+    with d1 = 26.45 inch = 671.83 mm (Robotics Toolbox Puma560.py)."""
     T = puma_fk(np.zeros(6))
-    assert np.allclose(T[:3, 3], [452.1, -150.05, 1103.8], atol=1e-9)
+    assert np.allclose(T[:3, 3], [452.1, -150.05, 26.45 * 25.4 + 431.8], atol=1e-9)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -110,7 +110,7 @@ def test_defect_names_field(tmp_path, model, edit, field, fragment):
     assert str(tmp_path / "m.toml") in str(info.value)
 
 
-@pytest.mark.parametrize("model", ["planar_2r", "puma560", "xu_zhang_1988"])
+@pytest.mark.parametrize("model", tolsynth.bundled_models())
 def test_round_trip_loads(tmp_path, model):
     """The writer of these tests loses nothing: an unmodified model written by it loads, with the
     same numbers as the bundled file."""

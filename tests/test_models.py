@@ -1,4 +1,4 @@
-"""The three bundled model files against the numbers their sources state.
+"""The bundled model files against the numbers their sources state.
 
 The paper's robot (``xu_zhang_1988``): the worst-error pose puts the hand at (925, 0, 1225) mm
 (DIGEST.md section 5), and the position rows of the sensitivity match the table of
@@ -34,8 +34,9 @@ def _half_ulp(text: str) -> float:
     return 0.5 * 10.0**-decimals
 
 
-def test_bundled_models_are_the_three_of_the_issue():
-    assert {"xu_zhang_1988", "puma560", "planar_2r"} <= set(tolsynth.bundled_models())
+def test_bundled_models_are_those_of_the_issues():
+    """The three of issue 2 and the two real arms of issue 12."""
+    assert {"xu_zhang_1988", "puma560", "planar_2r", "ur5", "panda"} <= set(tolsynth.bundled_models())
 
 
 def test_xu_worst_pose_hand_point(xz):
@@ -112,10 +113,10 @@ def test_puma_parameters_and_poses():
     m = tolsynth.load_model("puma560")
     assert set(m.error_parameters) == {f"{k}{i}" for i in range(1, 7) for k in ("a", "d", "alpha", "o")}
     # qz: arm along X0, (a2 + a3, -d3, d1 + d4)
-    assert np.allclose(m.fk("qz")[:3, 3], [431.8 + 20.3, -150.05, 672.0 + 431.8], atol=1e-9)
+    assert np.allclose(m.fk("qz")[:3, 3], [431.8 + 20.3, -150.05, 26.45 * 25.4 + 431.8], atol=1e-9)
     # qr (q2 = 90, q3 = -90): link 2's x axis points up, so a2 rises; q3 = -90 turns link 3's x
     # back to +x0, so a3 runs along +x0, and d4 (along link 4's z, alpha3 = -90) rises again.
-    assert np.allclose(m.fk("qr")[:3, 3], [20.3, -150.05, 672.0 + 431.8 + 431.8], atol=1e-9)
+    assert np.allclose(m.fk("qr")[:3, 3], [20.3, -150.05, 26.45 * 25.4 + 431.8 + 431.8], atol=1e-9)
 
 
 def test_planar_2r_poses():

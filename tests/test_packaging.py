@@ -20,10 +20,12 @@ from pathlib import Path
 
 import pytest
 
+import tolsynth
+
 from test_kinematics import planar_fk, puma_fk, xu_fk
 
 ROOT = Path(__file__).resolve().parent.parent
-MODELS = ("xu_zhang_1988", "puma560", "planar_2r")
+MODELS = tuple(tolsynth.bundled_models())
 
 pytestmark = pytest.mark.slow
 
@@ -112,7 +114,7 @@ def test_installed_console_script(fresh_venv, tmp_path):
     run = _run([exe, "analyze", "--model", "puma560", "--pose", "qz", "--tolerances", "fine", "--R", "0.1",
                 "--json"], cwd=tmp_path)
     out = json.loads(run.stdout)
-    assert abs(out["position"][0] - 452.1) < 1e-9 and abs(out["position"][2] - 1103.8) < 1e-9
+    assert abs(out["position"][0] - 452.1) < 1e-9 and abs(out["position"][2] - (26.45 * 25.4 + 431.8)) < 1e-9
 
 
 def test_wheel_contains_the_model_files(source_copy, tmp_path):

@@ -247,7 +247,10 @@ def test_unknown_parameter_in_alpha(xz):
 
 @pytest.mark.parametrize("solver,options", [("ipopt", {"max_iter": 2}), ("sumt", {"maxfev": 50})])
 def test_non_convergence_is_not_success(xz, solver, options):
-    res = synthesize(xz, 0.5, 0.99, solver=solver, options=options)
+    # from a given start: a warm re-solve of a column solved earlier in the session (the cut
+    # cache) converges in one IPOPT iteration, which is a success, not what is tested here
+    x0 = xz.tolerances("figure3") if solver == "ipopt" else None
+    res = synthesize(xz, 0.5, 0.99, solver=solver, options=options, x0=x0)
     assert not res.success
     assert res.status is Status.ITERATION_LIMIT
     assert res.message

@@ -216,3 +216,70 @@ def test_full_resolution_map(xz):
             q, margin = closed_form_ik(pm.u[i], pm.v[j])
             if abs(margin) > 0.005:
                 assert np.isfinite(pm.P[j, i]) == (margin > 0)
+
+
+# ---------------------------------------------------------------------------------------------
+# synthesize_workspace (issue 8 point 3): rounds, certificate and the largest value found
+# afterwards, checked through a hand-written NumPy chain (central differences) at its own worst
+# pose and at independently sampled poses
+# ---------------------------------------------------------------------------------------------
+def _chain_value(fk, mech, eps, q, R, p):
+    """Largest sigma z / R at q from the hand-written NumPy kinematics (central differences)."""
+    from test_kinematics import fd_sensitivity, fd_steps
+
+    from tolsynth.stats import z_of_p
+
+    S = fd_sensitivity(fk, q, mech.error_parameters, fd_steps(mech))[:3]
+    V = (S * (np.asarray(eps) ** 2 / 3.0)) @ S.T  # uniform: eps^2 / 3
+    return math.sqrt(np.linalg.eigvalsh(V).max()) * z_of_p(p) / R
+
+
+def _check_workspace_result(w, mech, fk, name, n_samples, R=0.5, p=0.99):
+    from test_kinematics import random_q
+
+    assert w.success and len(w.rounds) >= 2
+    # the certificate: a lower bound below the cost with a small gap (the last solve's)
+    assert w.lower_bound <= w.result.cost and w.gap == pytest.approx(w.result.cost - w.lower_bound, abs=1e-12)
+    assert 0.0 <= w.gap <= 1e-6 * w.result.cost
+    # the reported worst value is what the NumPy chain gives at the reported worst pose ...
+    q_worst = np.asarray(w.rounds[-1]["worst_q"], dtype=float)
+    assert _chain_value(fk, mech, w.result.x, q_worst, R, p) == pytest.approx(w.worst_value, rel=1e-6)
+    # ... no independently sampled pose is worse, and the violation is within the exchange's tol
+    rng = np.random.default_rng(8)
+    sampled = max(_chain_value(fk, mech, w.result.x, random_q(name, rng), R, p) for _ in range(n_samples))
+    assert sampled <= w.worst_value * (1 + 1e-6)
+    assert w.max_violation == pytest.approx(max(0.0, w.worst_value - 1.0)) and w.max_violation <= 1e-3
+    # every round's cost at least the first (poses are only added) and the summary reports it all
+    assert all(r["cost"] >= w.rounds[0]["cost"] * (1 - 1e-9) for r in w.rounds)
+    text = w.summary()
+    assert f"{len(w.rounds)} round(s)" in text and "lower bound" in text and f"{w.gap:.2e}" in text
+    assert f"{w.worst_value:.6f}" in text
+
+
+def test_synthesize_workspace_reports_rounds_certificate_and_violation(xz, capsys):
+    from test_kinematics import xu_fk
+
+    w = tolsynth.synthesize_workspace(xz, 0.5, 0.99, "uniform", 0.7)
+    _check_workspace_result(w, xz, xu_fk, "xu_zhang_1988", 400)
+    # the command line prints the certificate and the largest value found afterwards
+    from tolsynth.cli import main
+
+    rc = main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--dist", "uniform",
+               "--everywhere", "--json"])
+    assert rc == 0
+    data = json.loads(capsys.readouterr().out)
+    # (a re-solve: the same optimum to the solver's tolerance, not bit for bit)
+    assert data["worst_value"] == pytest.approx(w.worst_value, rel=1e-7)
+    assert data["lower_bound"] == pytest.approx(w.lower_bound, rel=1e-7) and data["gap"] <= 1e-6 * data["cost"]
+    rc = main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--dist", "uniform", "--everywhere"])
+    out = capsys.readouterr().out
+    assert rc == 0 and "certificate: lower bound" in out and "largest value found anywhere" in out
+
+
+@pytest.mark.slow
+def test_synthesize_workspace_on_puma560():
+    from test_kinematics import puma_fk
+
+    puma = tolsynth.load_model("puma560")
+    w = tolsynth.synthesize_workspace(puma, 0.5, 0.99, "uniform", 0.7, pose="qn")
+    _check_workspace_result(w, puma, puma_fk, "puma560", 300)

@@ -19,6 +19,7 @@ from .errors import (
     SolverError,
     TolsynthError,
     UnknownNameError,
+    UnsupportedJointError,
 )
 from .mechanism import Analysis, Mechanism, load_model
 from .model import bundled_models
@@ -36,10 +37,23 @@ from .pareto import ParetoFront, pareto_front
 from .synthesis import Comparison, WorkspaceSynthesis, compare, synthesize, synthesize_workspace
 from .tables import read_table, write_table  # issue 9: tables
 from .sweeps import sweep
+from .joint_errors import JointError  # issue 11 point 5
+from .reports import DesignReport, report  # issue 9 point 3
+# issue 11 points 1-4: error shapes, exact probabilities, the closed loop
+from .exact import ExactProbabilityError, ball_probability, cone_probability, direction_probability, worst_direction
+from .verify import Verification
+from .urdf import load_urdf  # issue 12 point 1 (yourdfpy imported on use)
 
 __version__ = "0.1.0"
 
 __all__ = [
+    # issue 11: exact probabilities of the linear error model, verify=
+    "direction_probability",
+    "ball_probability",
+    "cone_probability",
+    "worst_direction",
+    "ExactProbabilityError",
+    "Verification",
     # issue 13: designer's cost
     "contributions",
     "Contributions",
@@ -87,4 +101,9 @@ __all__ = [
     "read_table",
     "write_table",
     "sweep",
+    "JointError",
+    "report",
+    "DesignReport",
+    "load_urdf",
+    "UnsupportedJointError",
 ]

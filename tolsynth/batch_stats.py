@@ -38,7 +38,7 @@ def _evaluator(mech, name: str) -> NumpyEvaluator:
     return c[name]
 
 
-def principal_std_batch(mechanism, Q: np.ndarray, tolerances, distribution: str = "uniform") -> np.ndarray:
+def principal_std_batch(mechanism, Q: np.ndarray, tolerances, distribution=None) -> np.ndarray:
     """Principal standard deviations (mm, descending) of the linearised position error at many poses.
 
     Parameters
@@ -48,15 +48,19 @@ def principal_std_batch(mechanism, Q: np.ndarray, tolerances, distribution: str 
         Joint values (rad), one pose per column.  Not checked against the limits.
     tolerances : str, dict or array
         Tolerance set name or half-widths in tolerance units.
-    distribution : {"uniform", "normal"}
+    distribution : str or dict, optional
+        As :func:`tolsynth.synthesize` (default: the model file's, else uniform).
 
     Returns
     -------
     ndarray, shape (N, 3)
         The same numbers as ``mechanism.analyze(q, ...).principal_std`` for each column.
     """
+    from .distributions import resolve
+
     eps = mechanism.tolerances(tolerances)
-    c = variance_divisor(distribution)
+    distribution = resolve(distribution, mechanism)  # None: the model's own shapes (was an error)
+    c = np.broadcast_to(np.asarray(variance_divisor(distribution, mechanism), dtype=float), (mechanism.n,))
     Q = np.atleast_2d(np.asarray(Q, dtype=float))
     sens = _evaluator(mechanism, "sensitivity")
     cov = _evaluator(mechanism, "covariance")
@@ -66,7 +70,7 @@ def principal_std_batch(mechanism, Q: np.ndarray, tolerances, distribution: str 
         Qc = Q[:, a : a + chunk]
         S = sens.dense(0, sens([Qc, np.zeros(mechanism.n)])[0])  # (6, n, N)
         S = S.transpose(1, 0, 2).reshape(6 * mechanism.n, -1)  # column-major vec of each S
-        V = cov.dense(0, cov([S, eps, np.array([c])])[0]).transpose(2, 0, 1)  # (N, 3, 3) mm^2
+        V = cov.dense(0, cov([S, eps, c])[0]).transpose(2, 0, 1)  # (N, 3, 3) mm^2
         lam = np.linalg.eigvalsh(0.5 * (V + V.transpose(0, 2, 1)))[:, ::-1]
         floor = 1e-15 * np.maximum(lam[:, :1], 0.0)
         lam = np.where(lam <= floor, 0.0, lam)
@@ -74,10 +78,11 @@ def principal_std_batch(mechanism, Q: np.ndarray, tolerances, distribution: str 
     return out
 
 
-def _criterion_batch(mech, Q, eps, distribution, criterion, R):
-    """Values to be *maximised* (sigma_1, or -P), plus sigma (N,3) and P (N,) for the report."""
+def _criterion_batch(mech, Q, eps, distribution, criterion, R, tol: float = 1e-12):
+    """Values to be *maximised* (sigma_1, or -P), plus sigma (N,3) and P (N,) for the report.
+    ``tol``: the error allowed in P (p_ball_batch's; a search may screen with a looser one)."""
     sig = principal_std_batch(mech, Q, eps, distribution)
     if criterion == "sigma":
         return sig[:, 0], sig, None
-    P = p_ball_batch(sig**2, R)
+    P = p_ball_batch(sig**2, R, tol=tol)
     return -P, sig, P

@@ -58,7 +58,7 @@ class BudgetResult:
 
 
 def best_accuracy(mechanism, budget: float, *, p: float | None = None, R: float | None = None,
-                  distribution: str = "uniform", rtol: float = 1e-4, max_solves: int = 80,
+                  distribution=None, rtol: float = 1e-4, max_solves: int = 80,
                   **kwargs) -> BudgetResult:
     """The smallest R at a given p (give ``p``), or the largest p at a given R (give ``R``), that
     tolerances costing at most ``budget`` achieve.

@@ -107,6 +107,7 @@ class Contributions:
         return [self.names[i] for i in np.argsort(-self.shares[pose, :, 0], kind="stable")]
 
     def format(self) -> str:
+        """Readable table per pose: principal sigma, then each parameter's shares in %, largest first."""
         lines = []
         for b, pose in enumerate(self.poses):
             s = ", ".join(f"{v:.4g}" for v in self.sigma[b])
@@ -145,6 +146,7 @@ class Contributions:
         return ax
 
     def to_dict(self) -> dict:
+        """Plain dict (R, poses, sigma, :meth:`rows`) for JSON."""
         return {"R": self.R, "poses": list(self.poses), "sigma": self.sigma.tolist(), "rows": self.rows()}
 
 
@@ -154,7 +156,8 @@ def _position_rows(spec) -> list[tuple[str, np.ndarray]]:
     for block in tuple(getattr(spec, "blocks", ())) + tuple(getattr(spec, "sphere_blocks", ())):
         if getattr(block, "kind", "position") in ("position", "sphere") and block.pose not in seen:
             seen.add(block.pose)
-            out.append((block.pose, np.asarray(block.A, dtype=float)))
+            # the blocks hold A scaled for a per-parameter distribution (Specification.col_scale)
+            out.append((block.pose, np.asarray(block.A, dtype=float) / getattr(spec, "col_scale", 1.0)))
     return out
 
 
@@ -173,7 +176,8 @@ def contributions(source, tolerances=None, *, pose="worst", poses=None, distribu
     pose, poses : optional
         For a mechanism: the pose(s) (default the model's ``worst``); for a result, ``mechanism``
         with ``poses`` overrides the result's poses.
-    distribution : {"uniform", "normal"}, optional
+    distribution : str or dict, optional
+        As :func:`tolsynth.synthesize`.
         Default: the result's, or ``"uniform"``.
     R : float, optional
         mm; adds the sphere loss shares (default: the result's R).
@@ -209,11 +213,16 @@ def contributions(source, tolerances=None, *, pose="worst", poses=None, distribu
             raise InputError("tolerances", "missing", "the tolerances to analyse (name -> value, or a list)")
         eps = mech.tolerances(tolerances)
         names, units = tuple(mech.error_parameters), tuple(mech.units)
-        distribution = distribution or "uniform"
+        from .distributions import resolve
+
+        distribution = resolve(distribution, mech)
         plist = list(poses) if poses is not None else [pose]
         mats = [(q if isinstance(q, str) else f"#{i}", mech.sensitivity(mech.joints(q), check_limits=False)[:3])
                 for i, q in enumerate(plist)]
-    c = variance_divisor(distribution)
+    c = variance_divisor(distribution, names)
+    if np.ndim(c):  # per-parameter divisors: scale the columns to one divisor (3)
+        mats = [(lbl, A * np.sqrt(3.0 / c)) for lbl, A in mats]
+        c = 3.0
     if R is not None:
         R = check_positive(R, "R")
     y = np.asarray(eps, dtype=float) ** 2 / c

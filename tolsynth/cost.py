@@ -65,7 +65,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import Mapping, Sequence
 
 import casadi as ca
@@ -79,6 +79,7 @@ __all__ = [
     "Chase",
     "Exponential",
     "Tabulated",
+    "Given",
     "CostSet",
     "cost_model",
     "cost_set",
@@ -495,12 +496,48 @@ class Tabulated(CostModel):
         return f"table of {len(self.eps)} points on [{self.eps[0]:g}, {self.eps[-1]:g}]"
 
 
+@dataclass(frozen=True)
+class Given(CostModel):
+    """No cost: a tolerance that is *given*, not bought (a fixed joint error, see
+    :mod:`tolsynth.joint_errors`: an encoder's resolution, a bearing's clearance).  Its parameter
+    is locked (``lower = upper``), so it never moves; it adds exactly 0 to the objective, so the
+    cost reported (and a budget) is that of the tolerances being chosen."""
+
+    kind = "given"
+    source = "a given error, not a design variable"
+
+    def theta(self):
+        return np.zeros(0)
+
+    @staticmethod
+    def _expr(u, th, lib):
+        return 0.0 * u
+
+    def du(self, u):
+        return np.zeros_like(np.asarray(u, dtype=float))
+
+    def d2u(self, u):
+        return np.zeros_like(np.asarray(u, dtype=float))
+
+    def dual_min(self, w, lu, uu):
+        w = np.asarray(w, dtype=float)
+        u = np.full(w.shape, float(lu))
+        return w * np.exp(2.0 * u), u
+
+    def to_dict(self):
+        return {"model": "given"}
+
+    def describe(self):
+        return "given (no cost)"
+
+
 #: model name (as in model files and ``cost_model``) -> class and its fields
 MODELS = {
     "power": (PowerLaw, ("k", "alpha")),
     "chase": (Chase, ("A", "B", "k")),
     "exponential": (Exponential, ("A", "B")),
     "tabulated": (Tabulated, ("eps", "costs")),
+    "given": (Given, ()),
 }
 
 
@@ -554,13 +591,16 @@ class CostSet:
     def n(self) -> int:
         return len(self.models)
 
-    @property
+    # computed once per set (the models are frozen): every solve asks for them several times
+    @cached_property
     def signature(self) -> tuple:
         return tuple(m.signature for m in self.models)
 
-    @property
+    @cached_property
     def theta(self) -> np.ndarray:
-        return np.concatenate([m.theta() for m in self.models]) if self.models else np.zeros(0)
+        th = np.concatenate([m.theta() for m in self.models]) if self.models else np.zeros(0)
+        th.setflags(write=False)
+        return th
 
     @property
     def graph(self) -> ca.Function:

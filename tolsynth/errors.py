@@ -18,6 +18,7 @@ __all__ = [
     "InfeasibleSpecificationError",
     "SolverError",
     "MissingDependencyError",
+    "UnsupportedJointError",
 ]
 
 
@@ -107,3 +108,20 @@ class MissingDependencyError(TolsynthError, ImportError):
         self.package = package
         self.install = install
         super().__init__(f"{what} needs {package}, which is not installed (install it with: {install})")
+
+
+class UnsupportedJointError(ModelFileError):
+    """A URDF joint on the chain whose type tolsynth cannot model (floating, planar, a mimic joint).
+
+    Attributes
+    ----------
+    joint : str
+        The joint's name in the URDF.
+    joint_type : str
+        Its type.
+    """
+
+    def __init__(self, path: str, joint: str, joint_type: str, message: str):
+        self.joint = joint
+        self.joint_type = joint_type
+        super().__init__(path, f"joint {joint!r}", message)

@@ -16,6 +16,10 @@ built once per mechanism:
 ``q`` are the actuated joints (rad) in the order of the model's ``[[joints]]``; ``delta`` the
 deviations of the error parameters, each in its own tolerance unit.  Nothing here uses finite
 differences.
+
+Joint errors (:mod:`tolsynth.joint_errors`) are error parameters too: a servo error is added to its
+actuated joint's variable before the loops are solved; a clearance is the transform
+``Tx Ty Tz Rx Ry`` of its components applied just before its joint's rotation ``Rz(theta)``.
 """
 
 from __future__ import annotations
@@ -26,7 +30,10 @@ import casadi as ca
 
 from .model import CONVENTIONS, MechanismSpec
 
-__all__ = ["Graphs", "build_graphs", "four_bar_output", "elementary"]
+__all__ = ["Graphs", "build_graphs", "four_bar_output", "elementary", "JOINT_OPS"]
+
+#: the transforms of a joint clearance, in the order applied (tolsynth.joint_errors)
+JOINT_OPS = ("Tx", "Ty", "Tz", "Rx", "Ry")
 
 
 def elementary(op: str, v) -> ca.SX:
@@ -65,6 +72,25 @@ def four_bar_output(ground, crank, coupler, lever, gamma, branch: int):
     return psi, c
 
 
+def _urdf_link(link, value, q, clearance) -> ca.SX:
+    """One URDF joint: ``origin . A . C . J(q) . A^T`` with ``origin`` the joint's elementary
+    transforms (Tx Ty Tz Rz Ry Rx: URDF's ``Trans(xyz) . Rz(yaw) . Ry(pitch) . Rx(roll)``), ``A``
+    the rotation that turns z onto the (possibly tilted) joint axis, ``C`` a joint clearance
+    (tolsynth.joint_errors) and ``J`` = Rz(q) (revolute) or Tz(q) (prismatic)."""
+    T = ca.SX.eye(4)
+    for op, sym in link.origin:
+        T = ca.mtimes(T, elementary(op, value[sym]))
+    A = ca.SX.eye(4)
+    for op, sym in link.axis:
+        A = ca.mtimes(A, elementary(op, value[sym]))
+    M = ca.SX.eye(4)
+    for op, err in sorted(clearance, key=lambda e: JOINT_OPS.index(e[0])):
+        M = ca.mtimes(M, elementary(op, err))
+    M = ca.mtimes(M, elementary("Rz" if link.motion == "revolute" else "Tz", q))
+    # A is a pure rotation: its inverse is its transpose
+    return ca.mtimes([T, A, M, A.T])
+
+
 @dataclass(frozen=True)
 class Graphs:
     fk: ca.Function
@@ -81,11 +107,19 @@ def build_graphs(spec: MechanismSpec) -> Graphs:
     delta = ca.SX.sym("delta", ne)
 
     value = {s: ca.SX(v) for s, v in spec.symbols.items()}
+    servo: dict[str, ca.SX] = {}  # joint -> its servo error (rad)
+    at_joint: dict[str, list] = {}  # joint -> [(op, error)] of its clearance
     for i, par in enumerate(spec.error_parameters):
         for sym in par.perturbs:
             value[sym] = value[sym] + par.scale * delta[i]
+        if par.at_joint is not None:  # a joint error (tolsynth.joint_errors)
+            jn, op = par.at_joint
+            if op == "q":
+                servo[jn] = servo.get(jn, 0) + par.scale * delta[i]
+            else:
+                at_joint.setdefault(jn, []).append((op, par.scale * delta[i]))
 
-    joint = {j.name: q[i] for i, j in enumerate(spec.joints)}
+    joint = {j.name: q[i] + servo.get(j.name, 0) for i, j in enumerate(spec.joints)}
     margins = []
     for loop in spec.loops:
         gamma = joint[loop.crank_angle] - joint[loop.ground_angle]
@@ -98,13 +132,19 @@ def build_graphs(spec: MechanismSpec) -> Graphs:
     T = ca.SX.eye(4)
     for op, sym in spec.base:
         T = ca.mtimes(T, elementary(op, value[sym]))
-    fields, _ = CONVENTIONS[spec.convention]
+    fields, _ = CONVENTIONS.get(spec.convention, ((), ""))
     ops = {"h": "Tx", "a": "Tx", "s": "Tz", "d": "Tz", "alpha": "Rx", "theta": "Rz"}
     for link in spec.links:
+        if spec.convention == "urdf":  # tolsynth.urdf: origin, then the motion about/along the axis
+            T = ca.mtimes(T, _urdf_link(link, value, joint[link.theta], at_joint.get(link.theta, ())))
+            continue
         theta = joint[link.theta]
         if link.theta_offset is not None:
             theta = theta + value[link.theta_offset]
         for fname in fields:
+            if fname == "theta":  # a clearance acts in the joint frame, before the joint turns
+                for op, err in sorted(at_joint.get(link.theta, ()), key=lambda e: JOINT_OPS.index(e[0])):
+                    T = ca.mtimes(T, elementary(op, err))
             v = theta if fname == "theta" else value[link.dims[fname]]
             T = ca.mtimes(T, elementary(ops[fname], v))
     for op, sym in spec.tool:

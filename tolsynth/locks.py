@@ -58,20 +58,27 @@ def apply_locks(mechanism, bounds, locks) -> dict:
     return out
 
 
-def check_locks(nlp) -> None:
+def check_locks(nlp, joint_errors=()) -> None:
     """Raise :class:`InfeasibleSpecificationError` naming the locked parameters (those with
     ``lower == upper``) if they alone (every other tolerance at zero) violate a constraint of the
-    problem ``nlp``."""
+    problem ``nlp``.  ``joint_errors`` names the parameters that are joint errors
+    (:mod:`tolsynth.joint_errors`): the message calls those the fixed joint errors."""
     spec = nlp.spec
     locked = [nm for nm, a, b in zip(spec.names, spec.lower, spec.upper) if a == b]
     eps = np.where(np.isin(np.array(spec.names), locked), spec.lower, _ZERO)
     labels = [b.label for b in spec.blocks] + [b.label for b in spec.sphere_blocks]
+    joint = [nm for nm in locked if nm in tuple(joint_errors)]
+    what = f"the locked tolerances {locked}"
+    if joint and len(joint) == len(locked):
+        what = f"the fixed joint errors {joint}"
+    elif joint:
+        what += f" (fixed joint errors: {joint})"
     for label, vals in zip(labels, nlp.all_values(eps)):
         if vals[0] > 1.0:
             raise InfeasibleSpecificationError(
                 label, float(vals[0]),
-                f"infeasible specification: the locked tolerances {locked} alone break the {label} "
+                f"infeasible specification: {what} alone break the {label} "
                 f"(constraint value {vals[0]:.6g} > 1 with every other tolerance at zero).  Loosen R/Phi "
-                f"or p, or tighten the locked tolerances.",
+                f"or p, or tighten the locked tolerances (or the fixed joint errors).",
             )
 

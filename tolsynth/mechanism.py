@@ -56,6 +56,10 @@ def load_model(name_or_path: str | os.PathLike) -> "Mechanism":
     return Mechanism(read_model_file(path))
 
 
+#: sensitivities remembered per Mechanism (poses x error vectors)
+SENSITIVITY_CACHE = 4096
+
+
 @dataclass(frozen=True)
 class Analysis:
     """Linearised, Gaussian error analysis of one pose for one set of tolerances.
@@ -86,6 +90,7 @@ class Analysis:
     p_cone: float | None = None
 
     def to_dict(self) -> dict:
+        """Plain dict (arrays as lists) for JSON."""
         out = {}
         for key, value in self.__dict__.items():
             out[key] = value.tolist() if isinstance(value, np.ndarray) else value
@@ -125,10 +130,25 @@ class Mechanism:
         self._index.update({p.alias: i for i, p in enumerate(spec.error_parameters) if p.alias})
         self._check_loops_close()
 
+    @classmethod
+    def from_dh(cls, links, convention: str = "standard", **kwargs) -> "Mechanism":
+        """A mechanism from a D-H table given in Python, without a model file: see
+        :func:`tolsynth.dh.from_dh` for the arguments (links, convention, units, base/tool,
+        error-parameter selection with k and bounds, named configurations)."""
+        from .dh import from_dh
+
+        return from_dh(links, convention, **kwargs)
+
     def __repr__(self) -> str:
         return f"<Mechanism {self.name!r}: {len(self.joint_names)} joints, {len(self.error_parameters)} error parameters>"
 
     # ------------------------------------------------------------------ graphs
+    def __getstate__(self):
+        # pickled for worker processes (tolsynth.sweep): without the remembered sensitivities
+        state = self.__dict__.copy()
+        state.pop("_sensitivity_cache", None)
+        return state
+
     @cached_property
     def graphs(self) -> Graphs:
         """The named CasADi Functions ``fk``, ``sensitivity``, ``closure``, ``position``."""
@@ -136,6 +156,7 @@ class Mechanism:
 
     @property
     def n(self) -> int:
+        """Number of error parameters."""
         return len(self.error_parameters)
 
     @property
@@ -147,6 +168,16 @@ class Mechanism:
     def k(self) -> np.ndarray:
         """Cost factors (the paper's k_i)."""
         return np.array([p.k for p in self.parameters])
+
+    @property
+    def distribution(self):
+        """The error shapes the model file declares: ``"uniform"`` (the paper's single-piece
+        production) when it declares none, else a mapping name -> shape for every parameter
+        (undeclared ones uniform).  Used wherever ``distribution=None`` (the default) is passed."""
+        declared = {p.name: p.distribution for p in self.parameters if p.distribution is not None}
+        if not declared:
+            return "uniform"
+        return {p.name: p.distribution or "uniform" for p in self.parameters}
 
     @property
     def cost_models(self) -> dict:
@@ -162,6 +193,35 @@ class Mechanism:
     def locks(self) -> dict:
         """Name -> locked tolerance given in the model file."""
         return {p.name: p.lock for p in self.parameters if p.lock is not None}
+
+    @property
+    def joint_error_parameters(self) -> tuple[str, ...]:
+        """Names of the error parameters that are joint errors (:mod:`tolsynth.joint_errors`)."""
+        return tuple(p.name for p in self.parameters if p.at_joint is not None)
+
+    @property
+    def fixed_joint_errors(self) -> dict:
+        """Name -> locked tolerance of the fixed joint errors (always locked by synthesize)."""
+        return {p.name: p.lock for p in self.parameters if p.at_joint is not None and p.lock is not None}
+
+    def with_joint_errors(self, joint_errors) -> "Mechanism":
+        """The same mechanism with joint errors as further error parameters (appended after its
+        own, in the same CasADi graphs).
+
+        ``joint_errors`` is a list of :class:`tolsynth.JointError`: a servo error of an actuated
+        joint or the clearance of a revolute joint, fixed (``value``: locked, so the link
+        tolerances share what is left of the budget) or designable (``bounds``, with its own cost).
+        See :mod:`tolsynth.joint_errors` for the model.  Tolerance sets get the fixed errors'
+        values; the published reference results (link errors alone) are dropped.
+
+        Raises
+        ------
+        InputError, UnknownNameError, OutOfRangeError
+            Naming the field (``joint_errors[i].joint``, ``.value``, ``.unit``, ...).
+        """
+        from .joint_errors import add_joint_errors
+
+        return Mechanism(add_joint_errors(self.spec, joint_errors))
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -198,7 +258,8 @@ class Mechanism:
                                       "a unit of " + par.kind)
             f = par.scale / to_base(unit)  # old unit -> new unit
             factors[i] = f
-            params[i] = replace(par, unit=unit, scale=to_base(unit), lower=par.lower * f, upper=par.upper * f)
+            params[i] = replace(par, unit=unit, scale=to_base(unit), lower=par.lower * f, upper=par.upper * f,
+                                lock=None if par.lock is None else par.lock * f)
         sets = {k: {n: v * factors[self.index(n)] for n, v in s.items()} for k, s in self.spec.tolerance_sets.items()}
         return Mechanism(replace(self.spec, error_parameters=tuple(params), tolerance_sets=sets, reference_results=()))
 
@@ -321,8 +382,18 @@ class Mechanism:
         """
         qv = self.joints(q, check_limits)
         dv = self.deltas(deltas)
-        self._check_closure(qv, dv)
-        return np.array(self.graphs.sensitivity(qv, dv))
+        # a re-solve at the same poses (a sweep, a warm solve) asks again: remembered per
+        # (joints, errors); the graphs of a Mechanism never change
+        key = (qv.tobytes(), dv.tobytes())
+        cache = self.__dict__.setdefault("_sensitivity_cache", {})
+        S = cache.get(key)
+        if S is None:
+            self._check_closure(qv, dv)
+            S = np.array(self.graphs.sensitivity(qv, dv))
+            if len(cache) >= SENSITIVITY_CACHE:
+                cache.pop(next(iter(cache)))
+            cache[key] = S
+        return S.copy()
 
     def _check_loops_close(self) -> None:
         """A model whose loops do not close at its named configurations is malformed."""
@@ -345,7 +416,7 @@ class Mechanism:
         self,
         q: JointInput,
         tolerances: ToleranceInput,
-        distribution: str = "uniform",
+        distribution=None,
         R: float | None = None,
         Phi: float | None = None,
         check_limits: bool = True,
@@ -355,7 +426,10 @@ class Mechanism:
         ``R`` (mm) adds the per-component and sphere probabilities; ``Phi`` (rad) the
         orientation-component and cone probabilities for the hand's z axis.
         """
-        variance_divisor(distribution)
+        from .distributions import resolve
+
+        distribution = resolve(distribution, self)
+        c = np.broadcast_to(np.asarray(variance_divisor(distribution, self), dtype=float), (self.n,)).copy()
         if R is not None:
             R = check_positive(R, "R")
         if Phi is not None:
@@ -364,7 +438,7 @@ class Mechanism:
         qv = self.joints(q, check_limits)
         T = self.fk(qv, check_limits=False)
         S = self.sensitivity(qv, check_limits=False)
-        Vp, Vo = covariance(S, eps, distribution)
+        Vp, Vo = covariance(S, eps, c)
         sig, vec = principal(Vp)
         lam_cubic = np.array(principal_cubic_function()(Vp)).ravel()
         sig_o, _ = principal(Vo)

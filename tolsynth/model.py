@@ -60,6 +60,12 @@ class Link:
     dims: dict[str, str]  # field -> symbol name (h/alpha/s or d/a/alpha)
     theta: str  # joint name (actuated or passive)
     theta_offset: str | None  # symbol name, or None
+    #: convention "urdf" only (tolsynth.urdf): the joint origin as elementary transforms
+    #: ((op, symbol), ...), the rotations that turn z onto the joint axis (with the axis-tilt
+    #: symbols), and the joint type ("revolute" turns about the axis, "prismatic" slides along it)
+    origin: tuple[tuple[str, str], ...] = ()
+    axis: tuple[tuple[str, str], ...] = ()
+    motion: str = "revolute"
 
 
 @dataclass(frozen=True)
@@ -121,6 +127,11 @@ class ErrorParameter:
     cost: Any = None  # tolsynth.cost.CostModel, or None: k eps^-alpha
     processes: tuple = ()  # tolsynth.process.Process, ...
     lock: float | None = None
+    #: a joint error (tolsynth.joint_errors): (joint name, "q" for the joint variable or the
+    #: elementary transform Tx/Ty/Tz/Rx/Ry applied at the joint); ``perturbs`` is then empty
+    at_joint: tuple[str, str] | None = None
+    #: the error's shape inside its band (tolsynth.distributions); None: whatever ``distribution=`` says
+    distribution: str | None = None
 
 
 @dataclass(frozen=True)
@@ -224,6 +235,7 @@ FORMAT: dict[str, dict[str, bool]] = {
         "error_parameters": True,
         "tolerance_sets": False,
         "reference_results": False,
+        "joint_errors": False,
     },
     "model": {"name": True, "title": False, "source": True, "assumptions": True, "notes": False},
     "units": {"length": True, "angle": True},
@@ -254,8 +266,22 @@ FORMAT: dict[str, dict[str, bool]] = {
         "cost": False,  # issue 13: a cost model, {model = "chase", A = .., B = .., k = ..} (tolsynth.cost)
         "processes": False,  # issue 13: [{name, cost, lower, upper}, ...] (tolsynth.process)
         "lock": False,  # issue 13: a tolerance fixed at this value (tolerance unit)
+        "distribution": False,  # issue 11: this error's shape (tolsynth.distributions), default uniform
     },
     "tolerance_value": {"value": True, "unit": True},
+    # issue 11 point 5: joint errors (tolsynth.joint_errors); value (fixed) or bounds (designable)
+    "joint_errors": {
+        "joint": True,
+        "kind": True,
+        "value": False,
+        "bounds": False,
+        "unit": False,
+        "axial": False,
+        "length": False,
+        "k": False,
+        "cost": False,
+        "note": False,
+    },
     "reference_results": {
         "table": True,
         "R": True,
@@ -412,6 +438,10 @@ def read_model_file(path: str | os.PathLike) -> MechanismSpec:
 
 
 def _parse(data: dict, r: _Reader) -> MechanismSpec:
+    if isinstance(data, dict) and isinstance(data.get("chain"), dict) and "urdf" in data["chain"]:
+        from .urdf import _parse_urdf_model  # a chain read from a URDF file (issue 12)
+
+        return _parse_urdf_model(data, r)
     r.table(data, "", "")
     meta = r.table(data["model"], "model", "model")
     name = r.get(meta, "name", "model", str)
@@ -627,6 +657,17 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
         if lo < TINY:
             raise r.fail(f"{where}.bounds", f"lower bound must be > 0 (cost eps**-alpha), at least {TINY:g}, got {lo}")
         cost, procs, lock = _designer_fields(r, raw, where)
+        dist = r.get(raw, "distribution", where, default=None)
+        if dist is not None:
+            if not isinstance(dist, str):
+                raise r.fail(f"{where}.distribution", f"expected a string, got {_type_name(dist)}")
+            from .distributions import shape
+            from .errors import OutOfRangeError as _OOR
+
+            try:
+                dist = shape(dist).name
+            except _OOR as exc:
+                raise r.fail(f"{where}.distribution", f"got {dist!r}; allowed: {exc.allowed}") from None
         eparams.append(
             ErrorParameter(
                 name=pname,
@@ -642,16 +683,70 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
                 cost=cost,
                 processes=procs,
                 lock=lock,
+                distribution=dist,
             )
         )
     if not eparams:
         raise r.fail("error_parameters", "at least one error parameter is needed")
-    by_name = {p.name: p for p in eparams}
-    by_name.update({p.alias: p for p in eparams if p.alias})
 
     # ---- tolerance sets ---------------------------------------------------------------------
+    tolerance_sets = _tolerance_sets(r, data.get("tolerance_sets", {}), eparams)
+
+    # ---- reference results ------------------------------------------------------------------
+    refs = []
+    for i, raw in enumerate(r.tables(data.get("reference_results", []), "reference_results", "reference_results")):
+        where = f"reference_results[{i}]"
+        tol = r.get(raw, "tolerances", where, list)
+        if len(tol) != len(eparams):
+            raise r.fail(f"{where}.tolerances", f"expected {len(eparams)} values, got {len(tol)}")
+        tolerances = tuple(r.positive(t, f"{where}.tolerances[{j}]") for j, t in enumerate(tol))
+        dist = r.get(raw, "distribution", where, str)
+        if dist not in ("uniform", "normal"):
+            raise r.fail(f"{where}.distribution", f"expected 'uniform' or 'normal', got {dist!r}")
+        refs.append(
+            ReferenceResult(
+                table=r.get(raw, "table", where, str),
+                R=r.positive(raw["R"], f"{where}.R"),
+                p=r.number(raw["p"], f"{where}.p", P_MIN, P_MAX),
+                alpha=r.positive(raw["alpha"], f"{where}.alpha"),
+                distribution=dist,
+                tolerances=tolerances,
+            )
+        )
+
+    spec = MechanismSpec(
+        name=name,
+        title=title,
+        source=source,
+        assumptions=tuple(assumptions),
+        path=r.path,
+        convention=convention,
+        base=base,
+        tool=tool,
+        links=tuple(links),
+        symbols=symbols,
+        symbol_kinds=symbol_kinds,
+        joints=tuple(joints),
+        loops=tuple(loops),
+        joint_constraints=tuple(jcons),
+        configurations=configurations,
+        error_parameters=tuple(eparams),
+        tolerance_sets=tolerance_sets,
+        reference_results=tuple(refs),
+        notes=notes,
+    )
+    if "joint_errors" in data:
+        spec = _joint_errors(r, data["joint_errors"], spec)
+    return spec
+
+
+
+def _tolerance_sets(r, raw_sets, eparams) -> dict[str, dict[str, float]]:
+    """The ``[tolerance_sets]`` of a file: name -> {error parameter: tolerance in its unit}."""
     tolerance_sets = {}
-    for sname, raw in r.table(data.get("tolerance_sets", {}), "tolerance_sets").items():
+    by_name = {p.name: p for p in eparams}
+    by_name.update({p.alias: p for p in eparams if p.alias})
+    for sname, raw in r.table(raw_sets, "tolerance_sets").items():
         where = f"tolerance_sets.{sname}"
         r.table(raw, where)
         values = {}
@@ -676,50 +771,22 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
         if missing:
             raise r.fail(where, f"missing tolerance(s) for {missing}")
         tolerance_sets[sname] = values
+    return tolerance_sets
 
-    # ---- reference results ------------------------------------------------------------------
-    refs = []
-    for i, raw in enumerate(r.tables(data.get("reference_results", []), "reference_results", "reference_results")):
-        where = f"reference_results[{i}]"
-        tol = r.get(raw, "tolerances", where, list)
-        if len(tol) != len(eparams):
-            raise r.fail(f"{where}.tolerances", f"expected {len(eparams)} values, got {len(tol)}")
-        tolerances = tuple(r.positive(t, f"{where}.tolerances[{j}]") for j, t in enumerate(tol))
-        dist = r.get(raw, "distribution", where, str)
-        if dist not in ("uniform", "normal"):
-            raise r.fail(f"{where}.distribution", f"expected 'uniform' or 'normal', got {dist!r}")
-        refs.append(
-            ReferenceResult(
-                table=r.get(raw, "table", where, str),
-                R=r.positive(raw["R"], f"{where}.R"),
-                p=r.number(raw["p"], f"{where}.p", P_MIN, P_MAX),
-                alpha=r.positive(raw["alpha"], f"{where}.alpha"),
-                distribution=dist,
-                tolerances=tolerances,
-            )
-        )
 
-    return MechanismSpec(
-        name=name,
-        title=title,
-        source=source,
-        assumptions=tuple(assumptions),
-        path=r.path,
-        convention=convention,
-        base=base,
-        tool=tool,
-        links=tuple(links),
-        symbols=symbols,
-        symbol_kinds=symbol_kinds,
-        joints=tuple(joints),
-        loops=tuple(loops),
-        joint_constraints=tuple(jcons),
-        configurations=configurations,
-        error_parameters=tuple(eparams),
-        tolerance_sets=tolerance_sets,
-        reference_results=tuple(refs),
-        notes=notes,
-    )
+def _joint_errors(r, raw, spec):
+    """Append the ``[[joint_errors]]`` of a file as error parameters (tolsynth.joint_errors).
+
+    The file's tolerance sets name the link parameters only and get each fixed joint error's
+    value; its reference results (for the link errors alone) are dropped."""
+    from .errors import InputError
+    from .joint_errors import _parse_file_entries, add_joint_errors
+
+    entries = _parse_file_entries(r, r.tables(raw, "joint_errors", "joint_errors"), spec)
+    try:
+        return add_joint_errors(spec, entries)
+    except InputError as err:
+        raise r.fail(err.field, str(err)) from None
 
 
 def _unique(r: _Reader, names: list, where: str, what: str) -> None:

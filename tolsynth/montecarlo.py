@@ -40,7 +40,7 @@ import casadi as ca
 import numpy as np
 
 from .checks import check_count, check_seed
-from .errors import LoopClosureError
+from .errors import InputError, LoopClosureError, OutOfRangeError
 from .numpy_eval import NumpyEvaluator
 from .progress import Progress, make_bar  # noqa: F401  (make_bar: re-exported for older imports)
 from .tables import Tabular
@@ -98,6 +98,12 @@ def _check_n(n, field: str = "n") -> int:
 _check_seed = check_seed
 
 
+
+def _dist_text(distribution) -> str:
+    from .distributions import describe, label
+
+    return describe(distribution) if isinstance(distribution, str) else label(distribution)
+
 # =============================================================================================
 # the sampler
 # =============================================================================================
@@ -128,19 +134,33 @@ class _Sampler:
         nominal = self.evaluator([q, np.zeros(mechanism.n)])
         self.p0 = nominal[0]
         self.R0 = nominal[2].reshape(3, 3, order="F") if orientation else None
-        self.scale = eps[self.active] if distribution == "uniform" else eps[self.active] / 3.0
+        from .distributions import shapes_of
+
+        shapes = shapes_of(distribution, mechanism.error_parameters, mechanism.index)
+        act = [shapes[i] for i in self.active]
+        # rows of the same shape are drawn together; the paper's two shapes keep their fast paths
+        self.groups = {}
+        for j, s in enumerate(act):
+            self.groups.setdefault(s, []).append(j)
+        self.groups = {s: np.array(ix) for s, ix in self.groups.items()}
+        self.scale = eps[self.active].astype(float)
         self._rows = None
 
     def draw(self, rng: np.random.Generator, batch: int) -> np.ndarray:
         if self._rows is None or self._rows.shape[1] != batch:
             self._rows = np.empty((self.active.size, batch))
         rows = self._rows
-        if self.distribution == "uniform":
-            rng.random(out=rows)  # [0, 1)
-            rows *= 2.0
-            rows -= 1.0
+        if len(self.groups) == 1 and next(iter(self.groups)).kind in ("uniform", "normal"):
+            if next(iter(self.groups)).kind == "uniform":
+                rng.random(out=rows)  # [0, 1)
+                rows *= 2.0
+                rows -= 1.0
+            else:
+                rng.standard_normal(out=rows)
+                rows *= 1.0 / 3.0  # 3 sigma = eps
         else:
-            rng.standard_normal(out=rows)
+            for s, ix in self.groups.items():
+                rows[ix] = s.sample(rng, (ix.size, batch))
         rows *= self.scale[:, None]
         return rows
 
@@ -245,6 +265,10 @@ class MonteCarloResult(Tabular):
     p_cone: float | None = None
     p_cone_ci: np.ndarray | None = None
     p_cone_analytic: float | None = None
+    #: with ``directions=``: the unit directions (columns) and ``P(|u^T dr| <= R)`` along each, with intervals
+    directions: np.ndarray | None = None
+    p_directions: np.ndarray | None = None
+    p_directions_ci: np.ndarray | None = None
     units: dict = field(default_factory=lambda: {
         "position": "mm", "mean": "mm", "covariance": "mm^2", "principal_std": "mm", "R": "mm",
         "q": "rad", "Phi": "rad", "tolerances": "each parameter's tolerance unit",
@@ -261,7 +285,7 @@ class MonteCarloResult(Tabular):
             f"model        {self.model}",
             f"pose         q = ({', '.join(f'{math.degrees(v):.4f}' for v in self.q)}) deg; "
             f"hand ({', '.join(f'{v:.3f}' for v in self.position)}) mm",
-            f"errors       {self.distribution}" + (" within +-eps" if self.distribution == "uniform" else ", 3 sigma = eps"),
+            f"errors       {_dist_text(self.distribution)}",
             f"samples      n = {self.n}, seed = {self.seed}, batch = {self.batch}; "
             f"{self.samples_per_s / 1e6:.2f} M samples/s; loop failures {self.n_loop_failures}",
             f"intervals    {pct}% {self.ci_method}",
@@ -313,7 +337,7 @@ def monte_carlo(
     mechanism,
     q,
     tolerances,
-    distribution: str = "uniform",
+    distribution=None,
     *,
     R: float,
     n: int = 1_000_000,
@@ -323,6 +347,7 @@ def monte_carlo(
     progress: bool | Callable[[int, int], None] | None = None,
     confidence: float = 0.95,
     check_limits: bool = True,
+    directions=None,
 ) -> MonteCarloResult:
     """Monte Carlo of the hand position error through the full nonlinear kinematics.
 
@@ -334,9 +359,9 @@ def monte_carlo(
         Configuration name or joint values (rad).
     tolerances : str, dict or array
         Tolerance set name, or half-widths in each parameter's tolerance unit.
-    distribution : {"uniform", "normal"}
-        Uniform within ``+-eps``, or normal with ``3 sigma = eps`` (not truncated, so that its
-        variance is the analytic ``eps^2 / 9``).
+    distribution : str or dict, optional
+        As :func:`tolsynth.synthesize`; each error is drawn from its own shape ("normal": 3 sigma =
+        eps, not truncated, so that its variance is the analytic ``eps^2 / 9``).
     R : float
         Radius of the accuracy sphere and half-width of each component's zone (mm), > 0.
     n : int
@@ -377,7 +402,9 @@ def monte_carlo(
     >>> r.n, r.seed, r.n_loop_failures
     (100000, 7, 0)
     """
-    variance_divisor(distribution)
+    from .distributions import resolve
+
+    distribution = resolve(distribution, mechanism)
     R = check_positive(R, "R")
     n = _check_n(n)
     seed = _check_seed(seed)
@@ -387,6 +414,19 @@ def monte_carlo(
         Phi = check_positive(Phi, "Phi", "rad")
     eps = mechanism.tolerances(tolerances)
     qv = mechanism.joints(q, check_limits)
+    Ud = None
+    if directions is not None:  # extra unit directions (columns): P(|u . dr| <= R) along each
+        from .checks import check_vector
+
+        raw = np.asarray(directions, dtype=float) if not isinstance(directions, str) else np.array([])
+        if raw.size == 0 or raw.shape[0] != 3 or raw.ndim > 2:
+            raise InputError("directions", f"shape {raw.shape}", "a 3-vector or a 3 x d array of directions (columns)")
+        Ud = check_vector(raw.ravel(order="F"), "directions").reshape(3, -1, order="F")
+        norms = np.linalg.norm(Ud, axis=0)
+        if np.any(norms < 1e-12):
+            raise OutOfRangeError("directions", "a zero direction", "non-zero 3-vectors (columns)")
+        Ud = Ud / norms
+    inside_dir = np.zeros(0 if Ud is None else Ud.shape[1], dtype=np.int64)
     ana = mechanism.analyze(qv, eps, distribution, R=R, Phi=Phi, check_limits=False)
     U = ana.principal_directions
     sampler = _Sampler(mechanism, qv, eps, distribution, orientation=Phi is not None)
@@ -433,6 +473,8 @@ def monte_carlo(
             inside_sphere += int(np.count_nonzero(d2 <= R2))
             w = U.T @ dr  # (3, b) components along the analytic principal directions
             inside_comp += np.count_nonzero(np.abs(w) <= R, axis=1)
+            if Ud is not None:
+                inside_dir += np.count_nonzero(np.abs(Ud.T @ dr) <= R, axis=1)
             # moments about a shift (the first batch's mean) for numerical safety
             if dr.shape[1]:
                 if shift is None:
@@ -492,8 +534,11 @@ def monte_carlo(
     p_sph_ci = wilson_interval(inside_sphere, n, confidence)
     pa = np.asarray(ana.p_components)
     extra = {}
+    if Ud is not None:
+        extra.update(directions=Ud, p_directions=inside_dir / n,
+                     p_directions_ci=wilson_interval(inside_dir, n, confidence))
     if Phi is not None:
-        extra = dict(
+        extra.update(
             Phi=Phi,
             p_orientation_components=inside_ocomp / n,
             p_orientation_components_ci=wilson_interval(inside_ocomp, n, confidence),

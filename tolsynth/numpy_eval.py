@@ -13,6 +13,8 @@ Used by the Monte Carlo (:mod:`tolsynth.montecarlo`), the batched analytic stati
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from typing import Any, Sequence
 
 import casadi as ca
@@ -21,6 +23,9 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["NumpyEvaluator"]
+
+#: bound programs remembered per evaluator (varying pattern + fixed values)
+BOUND_CACHE = 16
 
 
 def _if_else_zero(c, x, out=None):
@@ -175,7 +180,25 @@ class NumpyEvaluator:
             holding the varying entries in input order; returns one ``(nnz_out[i], batch)`` array
             per output (a batch-invariant output entry is broadcast).
         """
-        return _BoundProgram(self, fixed, varying)
+        # a bound program depends on the varying pattern and on the fixed values only: the same
+        # binding asked again (the pose search's and the map's batches at the same tolerances, the
+        # Levenberg-Marquardt steps of the IK) is reused instead of re-running the scalar pass
+        varying = [np.asarray(v, dtype=bool).reshape(-1) for v in varying]
+        fixed = [np.asarray(v, dtype=float).reshape(-1) for v in fixed]
+        try:
+            key = (b"".join(v.tobytes() for v in varying),
+                   b"".join(np.where(vv, 0.0, fv).tobytes() for fv, vv in zip(fixed, varying)))
+        except ValueError:  # shapes wrong: _BoundProgram names the input
+            return _BoundProgram(self, fixed, varying)
+        cache = self.__dict__.setdefault("_bound", OrderedDict())
+        prog = cache.get(key)
+        if prog is None:
+            prog = cache[key] = _BoundProgram(self, fixed, varying)
+            while len(cache) > BOUND_CACHE:
+                cache.popitem(last=False)
+        else:
+            cache.move_to_end(key)
+        return prog
 
     def __call__(self, args: Sequence[np.ndarray]) -> list[np.ndarray]:
         """Evaluate on inputs of shape ``(nnz,)`` or ``(nnz, batch)`` (see the class docstring)."""
@@ -249,13 +272,14 @@ class _BoundProgram:
                         scal[outs[0]] = np.float64(fn(*[scal[s] for s in srcs]))
                         is_vec[outs[0]] = False
         self._steps = steps
-        self._buffers: dict[int, np.ndarray] = {}
 
     def _work(self, batch: int) -> np.ndarray:
-        buf = self._buffers.get(batch)
-        if buf is None:
-            self._buffers.clear()  # keep one batch size only: memory stays bounded
-            buf = self._buffers[batch] = np.empty((self.ev.n_work, batch))
+        # one work array per evaluator and thread (programs are cached and may be shared by
+        # threads; the outputs are copied out of it), of the last batch size: memory stays bounded
+        store = self.ev.__dict__.setdefault("_work_store", threading.local())
+        buf = getattr(store, "buf", None)
+        if buf is None or buf.shape[1] != batch:
+            buf = store.buf = np.empty((self.ev.n_work, batch))
         return buf
 
     @property

@@ -71,7 +71,7 @@ class ParetoFront:
         return ax
 
 
-def pareto_front(mechanism, *, R=None, p=None, distribution: str = "uniform", alpha=0.7, processes=None,
+def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, processes=None,
                  **kwargs) -> ParetoFront:
     """Sweep one of R (mm) or p (give a sequence) with the other fixed (a number).
 
@@ -119,7 +119,9 @@ def pareto_front(mechanism, *, R=None, p=None, distribution: str = "uniform", al
             rows.append({"R": Rv, "p": pv, "cost": float("inf"), "lower_bound": float("inf"), "success": False})
     reference = []
     for ref in getattr(mechanism.spec, "reference_results", ()) or ():
-        same = ref.distribution == distribution and np.isscalar(alpha) and abs(ref.alpha - float(alpha)) < 1e-12
+        from .distributions import resolve
+
+        same = ref.distribution == resolve(distribution, mechanism) and np.isscalar(alpha) and abs(ref.alpha - float(alpha)) < 1e-12
         fixed_ok = abs(ref.p - p) < 1e-12 if R_seq else abs(ref.R - R) < 1e-12
         swept = ref.R if R_seq else ref.p
         if same and fixed_ok and values[0] <= swept <= values[-1] and processes is None and not kwargs:

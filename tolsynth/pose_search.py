@@ -107,9 +107,11 @@ class WorstPose(Tabular):
     method: str
 
     def to_dict(self) -> dict:
+        """Plain dict (arrays as lists) for JSON."""
         return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
 
     def report(self, joint_names: Sequence[str] | None = None) -> str:
+        """Readable table: the worst pose found beside the reference (joints in deg, hand in mm)."""
         unit = "mm (largest principal sigma)" if self.criterion == "sigma" else f"(P(|dr|<={self.R:g} mm))"
         names = joint_names or [f"q{i + 1}" for i in range(len(self.q))]
         lines = [f"worst pose   criterion {self.criterion} {unit}, {self.distribution} errors; {self.method}"]
@@ -159,12 +161,18 @@ def _tangent_directions(mech, free: list[int], scale: np.ndarray) -> np.ndarray:
     return np.array(D)
 
 
+#: error allowed in P(|dr| <= R) (criterion "probability") on the coarse grid, which only picks the
+#: starts, and in the pattern search's polls; the value reported is evaluated to 1e-12
+GRID_P_TOL = 1e-7
+SEARCH_P_TOL = 1e-10
+
+
 def worst_pose(
     mechanism,
     tolerances,
     criterion: str = "sigma",
     R: float | None = None,
-    distribution: str = "uniform",
+    distribution=None,
     grid: int | None = None,
     reference=MODEL_REFERENCE,
     fixed: Mapping[str, float] | None = None,
@@ -196,7 +204,8 @@ def worst_pose(
         Maximise the largest principal sigma (mm), or minimise ``P(|dr| <= R)`` (needs ``R``).
     R : float, optional
         Radius (mm), > 0; required for ``"probability"``, reported otherwise if given.
-    distribution : {"uniform", "normal"}
+    distribution : str or dict, optional
+        As :func:`tolsynth.synthesize` (default: the model file's, else uniform).
     grid : int, optional
         Grid points per searched joint (default: as many as keep the grid under
         ``max_grid_points``).
@@ -228,7 +237,9 @@ def worst_pose(
     t0 = time.perf_counter()
     if criterion not in ("sigma", "probability"):
         raise OutOfRangeError("criterion", f"got {criterion!r}", "'sigma' or 'probability'")
-    variance_divisor(distribution)
+    from .distributions import resolve
+
+    distribution = resolve(distribution, mechanism)
     if R is not None:
         R = check_positive(R, "R")
     elif criterion == "probability":
@@ -270,13 +281,13 @@ def worst_pose(
             Q[j] = np.where(U[i] >= 1.0, hi[j], lo[j] + (hi[j] - lo[j]) * U[i])  # the limit itself at 1
         return Q
 
-    def evaluate(U: np.ndarray) -> np.ndarray:
+    def evaluate(U: np.ndarray, tol: float = SEARCH_P_TOL) -> np.ndarray:
         nonlocal n_eval
         Q = full(U)
         ok = _feasible(mechanism, Q) & np.all((U >= 0) & (U <= 1), axis=0)
         val = np.full(U.shape[1], -np.inf)
         if np.any(ok):
-            val[ok] = _criterion_batch(mechanism, Q[:, ok], eps, distribution, criterion, R)[0]
+            val[ok] = _criterion_batch(mechanism, Q[:, ok], eps, distribution, criterion, R, tol)[0]
             n_eval += int(np.count_nonzero(ok))
         return val
 
@@ -294,7 +305,7 @@ def worst_pose(
                                   f"at most {MAX_GRID_POINTS} points (grid <= {int(MAX_GRID_POINTS ** (1 / k))})")
         axes = [np.linspace(0.0, 1.0, g)] * k
         U = np.array([a.ravel() for a in np.meshgrid(*axes, indexing="ij")])
-        vals = evaluate(U)
+        vals = evaluate(U, GRID_P_TOL)  # the grid only ranks the starts
     feasible = np.isfinite(vals)
     if not np.any(feasible):
         raise OutOfRangeError("joint limits", "no grid point satisfies every joint limit and constraint",

@@ -119,6 +119,12 @@ class Specification:
     criterion: str = "components"
     sphere_blocks: tuple[SphereBlock, ...] = ()
     cost: CostSet | None = None  # per-parameter cost models (tolsynth.cost); None: k eps^-alpha
+    #: one error shape per parameter (tolsynth.distributions); () means every one is `distribution`
+    shapes: tuple = ()
+    #: the blocks hold ``A * col_scale`` with ``col_scale = sqrt(c / c_i)`` (c_i the parameter's own
+    #: variance divisor), so ``A diag(eps^2 / c) A^T`` is the covariance for mixed shapes too; 1.0
+    #: when every parameter has the same shape
+    col_scale: np.ndarray | float = 1.0
 
     @property
     def costs(self) -> CostSet:
@@ -172,7 +178,7 @@ def make_specification(
     mechanism,
     R: float,
     p: float,
-    distribution: str = "uniform",
+    distribution=None,
     alpha=0.7,
     k=None,
     bounds=None,
@@ -190,7 +196,17 @@ def make_specification(
     """
     R = check_positive(R, "R")
     p = check_probability(p, "p")
-    c = variance_divisor(distribution)
+    from .distributions import shapes_of
+
+    from .distributions import resolve
+
+    distribution = resolve(distribution, mechanism)
+    shapes = shapes_of(distribution, mechanism.error_parameters, mechanism.index)
+    cvec = np.array([s.divisor for s in shapes])
+    if np.all(cvec == cvec[0]):
+        c, col_scale = float(cvec[0]), 1.0
+    else:  # mixed shapes: one divisor (3) for the graphs, the columns scaled to it
+        c, col_scale = 3.0, np.sqrt(3.0 / cvec)
     if criterion not in CRITERIA:
         raise InputError("criterion", f"unknown criterion {criterion!r}", " or ".join(repr(c) for c in CRITERIA))
     names = mechanism.error_parameters
@@ -234,7 +250,8 @@ def make_specification(
     elif p_orientation is not None:
         raise InputError("p_orientation", "given without Phi", "give Phi (rad) with it")
 
-    if poses is not None and (isinstance(poses, (str, bytes)) or np.ndim(poses) == 0):
+    # a list may mix configuration names and joint vectors (np.ndim of such a list raises)
+    if poses is not None and not (isinstance(poses, (list, tuple)) or (isinstance(poses, np.ndarray) and poses.ndim >= 1)):
         raise InputError("poses", f"got {poses!r}", "a list of configuration names or joint vectors (rad)")
     pose_list = list(poses) if poses is not None else [pose]
     if not pose_list:
@@ -243,7 +260,7 @@ def make_specification(
     for i, ps in enumerate(pose_list):
         label = ps if isinstance(ps, str) else f"#{i}"
         q = mechanism.joints(ps)
-        S = mechanism.sensitivity(q, check_limits=False)
+        S = mechanism.sensitivity(q, check_limits=False) * col_scale
         qs[label] = q
         if criterion == "sphere":
             sphere.append(SphereBlock(label, R, p, S[:3].copy()))
@@ -270,6 +287,8 @@ def make_specification(
         criterion=criterion,
         sphere_blocks=tuple(sphere),
         cost=costs,  # built once here (the power law from k, alpha when no cost was given)
+        shapes=shapes,
+        col_scale=col_scale,
     )
 
 

@@ -66,6 +66,7 @@ class Process:
 
     @classmethod
     def make(cls, spec) -> "Process":
+        """A :class:`Process` from itself or a dict ``{name, cost, lower, upper}`` (typed errors otherwise)."""
         if isinstance(spec, Process):
             return spec
         if isinstance(spec, Mapping):
@@ -117,9 +118,11 @@ class ProcessChoice:
 
     @property
     def tolerances(self) -> dict:
+        """The chosen tolerances, name -> value in tolerance units (those of :attr:`result`)."""
         return self.result.tolerances
 
     def summary(self) -> str:
+        """Readable summary: cost, bound, whether proven, and the process and tolerance per parameter."""
         lines = [f"process choice: cost {self.cost:.8g} (lower bound {self.lower_bound:.8g}, "
                  f"{'proven' if self.proven else 'NOT proven'}); {self.nodes} solves for "
                  f"{self.combinations} combinations"]
@@ -130,6 +133,7 @@ class ProcessChoice:
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
+        """Plain dict for JSON (processes, cost, bound, gap, proof, search size, tolerances, time)."""
         return {"processes": self.processes, "cost": self.cost, "lower_bound": self.lower_bound,
                 "gap": self.gap, "proven": self.proven, "nodes": self.nodes,
                 "combinations": self.combinations, "rounded": self.rounded,
@@ -273,7 +277,7 @@ class _Search:
         return tuple(choice)
 
 
-def synthesize_processes(mechanism, R: float, p: float, processes=None, distribution: str = "uniform", *,
+def synthesize_processes(mechanism, R: float, p: float, processes=None, distribution=None, *,
                          rel_gap: float = 1e-6, max_nodes: int = 10_000, **kwargs) -> ProcessChoice:
     """Cheapest process per parameter and tolerances within it, with a proven optimum.
 
@@ -403,7 +407,7 @@ def synthesize_processes(mechanism, R: float, p: float, processes=None, distribu
     )
 
 
-def enumerate_processes(mechanism, R: float, p: float, processes, distribution: str = "uniform", **kwargs):
+def enumerate_processes(mechanism, R: float, p: float, processes, distribution=None, **kwargs):
     """Brute force: the continuous optimum of every process combination (for checks and figures).
 
     Returns a list of ``(choice dict, SynthesisResult or None if infeasible)``.

@@ -107,6 +107,8 @@ class SynthesisResult(Tabular):
     history: list = field(default_factory=list, repr=False)
     validation: Any = field(default=None, repr=False)
     inputs: dict | None = field(default=None, repr=False)
+    #: ``synthesize(..., verify=...)``: the closed loop's :class:`tolsynth.verify.Verification`
+    verification: Any = field(default=None, repr=False)
 
     @property
     def x(self) -> np.ndarray:
@@ -119,22 +121,33 @@ class SynthesisResult(Tabular):
         return float(max(b.values[0] for b in self.constraints))
 
     def summary(self) -> str:
+        """Readable summary: status, cost, bound and gap, tolerances with units and bound markers, constraint values and multipliers."""
         lines = [
             f"{self.solver}: {self.status} ({self.message})",
             f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})",
             f"iterations {self.iterations}, evaluations {self.function_evaluations}, {self.wall_time * 1e3:.1f} ms",
         ]
+        spec = self.spec
+        fixed = {n for n, a, b in zip(getattr(spec, "names", ()), getattr(spec, "lower", ()), getattr(spec, "upper", ()))
+                 if a == b}  # locked (tolsynth.locks) or a fixed joint error
         for name, value in self.tolerances.items():
             flag = f"  [{self.bounds_active[name]} bound]" if name in self.bounds_active else ""
+            flag = "  [fixed]" if name in fixed else flag
             lines.append(f"  {name:>8} = {value:.6g} {self.units[name]}{flag}")
         for b in self.constraints:
             vals = ", ".join(f"{v:.6f}" for v in b.values)
             mult = ", ".join(f"{m:.4g}" for m in b.multipliers)
+            if b.kind.endswith("(exact)"):  # tolsynth.exact_synthesis: exact P, worst direction first
+                what = ("exact (1-P)/(1-p) in the sphere" if b.kind.startswith("sphere")
+                        else "exact (1-P)/(1-p) along the worst direction, then the principal axes")
+                lines.append(f"  {b.label}: {what} = ({vals})")
+                continue
             what = "(1-P)/(1-p)" if b.kind == "sphere" else "sigma z/limit"
             lines.append(f"  {b.label}: {what} = ({vals}); multipliers ({mult})")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
+        """Plain dict for JSON (tolerances, units, cost, bound, gap, constraints, bounds, counts, time)."""
         return {
             "solver": self.solver,
             "status": str(self.status),

@@ -45,18 +45,17 @@ __all__ = [
     "p_cone",
 ]
 
-#: V(delta) = eps**2 / divisor
-VARIANCE_DIVISOR = {"uniform": 3.0, "normal": 9.0}
+#: V(delta) = eps**2 / divisor (the paper's two; tolsynth.distributions has all the shapes)
+VARIANCE_DIVISOR = {"uniform": 3.0, "normal": 9.0, "triangular": 6.0}
 
 
-def variance_divisor(distribution: str) -> float:
-    """3 for uniform errors, 9 for normal errors with 3 sigma = eps."""
-    try:
-        return VARIANCE_DIVISOR[distribution]
-    except (KeyError, TypeError):
-        raise OutOfRangeError(
-            "distribution", f"unknown distribution {distribution!r}", "'uniform' or 'normal'"
-        ) from None
+def variance_divisor(distribution, mechanism=None):
+    """3 for uniform errors, 9 for normal errors with 3 sigma = eps, 6 triangular, ... (see
+    :mod:`tolsynth.distributions`); one value per error parameter of ``mechanism`` for a
+    per-parameter distribution (a mapping ``name -> shape``)."""
+    from .distributions import divisor_of
+
+    return divisor_of(distribution, mechanism)
 
 
 # the argument rules live in tolsynth.checks (one copy); re-exported here for older imports
@@ -92,21 +91,23 @@ def covariance_graph(n: int) -> ca.Function:
     """``covariance(S, eps, c) -> (Vp, Vo)``: position (mm^2) and orientation (rad^2) covariances.
 
     ``S`` is the 6 x n sensitivity (per tolerance unit), ``eps`` the n half-widths in tolerance
-    units and ``c`` the variance divisor (3 uniform, 9 normal).  Used by the analysis, by IPOPT and
-    by SUMT alike.
+    units and ``c`` the n variance divisors (3 uniform, 9 normal, ...; a scalar is broadcast).
+    Used by the analysis, by IPOPT and by SUMT alike.
     """
     S = ca.SX.sym("S", 6, n)
     eps = ca.SX.sym("eps", n)
-    c = ca.SX.sym("c")
+    c = ca.SX.sym("c", n)
     D = ca.diag(eps**2 / c)
     V = ca.mtimes([S, D, S.T])
     return ca.Function("covariance", [S, eps, c], [V[:3, :3], V[3:, 3:]], ["S", "eps", "c"], ["Vp", "Vo"])
 
 
-def covariance(S: np.ndarray, eps: np.ndarray, distribution: str) -> tuple[np.ndarray, np.ndarray]:
-    """Position and orientation covariance (mm^2, rad^2) of the hand error."""
+def covariance(S: np.ndarray, eps: np.ndarray, distribution) -> tuple[np.ndarray, np.ndarray]:
+    """Position and orientation covariance (mm^2, rad^2) of the hand error.  ``distribution``: a
+    shape name, or the variance divisors, one per column of ``S``."""
     S = np.asarray(S, dtype=float)
-    Vp, Vo = covariance_graph(S.shape[1])(S, np.asarray(eps, dtype=float), variance_divisor(distribution))
+    c = distribution if isinstance(distribution, np.ndarray) else variance_divisor(distribution)
+    Vp, Vo = covariance_graph(S.shape[1])(S, np.asarray(eps, dtype=float), c)
     return np.array(Vp), np.array(Vo)
 
 

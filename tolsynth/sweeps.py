@@ -84,21 +84,30 @@ def _check_alpha(a) -> object:
     return check_positive(a, "alpha", "", upper=ALPHA_MAX)
 
 
+def _check_shape(d):
+    """A shape name (tolsynth.distributions) or a per-parameter mapping, checked later."""
+    from collections.abc import Mapping
+
+    from .distributions import shape
+
+    if isinstance(d, Mapping):
+        return d
+    shape(d)  # typed error naming distribution
+    return d
+
+
 def _grid(mechanism, R, p, alpha, distribution, criterion, solver) -> list[dict]:
     from .problem import CRITERIA
-    from .stats import variance_divisor
     from .synthesis import SOLVERS
 
     axes = {
         "R": [check_positive(r, "R") for r in _axis(R, "R")],
         "p": [check_probability(q, "p") for q in _axis(p, "p")],
         "alpha": [_check_alpha(a) for a in _axis(alpha, "alpha")],
-        "distribution": [_check_choice(d, "distribution", ("uniform", "normal")) for d in _axis(distribution, "distribution")],
+        "distribution": [_check_shape(d) for d in _axis(distribution, "distribution")],
         "criterion": [_check_choice(c, "criterion", CRITERIA) for c in _axis(criterion, "criterion")],
         "solver": [_check_choice(s, "solver", tuple(SOLVERS)) for s in _axis(solver, "solver")],
     }
-    for d in axes["distribution"]:
-        variance_divisor(d)
     n = math.prod(len(v) for v in axes.values())
     if n > MAX_ROWS:
         raise OutOfRangeError("grid", f"{n} solves", f"at most {MAX_ROWS} rows per sweep")

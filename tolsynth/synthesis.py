@@ -47,6 +47,9 @@ def _solver_defaults(solver: str) -> dict:
 #: largest allowed difference between the NLP's fixed sphere quadrature and stats.p_ball
 SPHERE_QUADRATURE_TOL = 1e-9
 
+#: final step of the worst-pose searches that only pick the next pose of synthesize_workspace
+COARSE_STEP_TOL = 1e-4
+
 #: solver name -> private entry point (each solver lives in its own module)
 SOLVERS = {"ipopt": _ipopt, "sumt": _sumt}
 
@@ -55,7 +58,7 @@ def synthesize(
     mechanism,
     R: float,
     p: float,
-    distribution: str = "uniform",
+    distribution=None,
     alpha=0.7,
     solver: str = "ipopt",
     *,
@@ -72,6 +75,8 @@ def synthesize(
     options: dict | None = None,
     validate: int | None = None,
     seed: int = 0,
+    probability: str = "gaussian",
+    verify=None,
 ) -> SynthesisResult:
     """Cheapest tolerances meeting the accuracy specification (the paper's Eq. 23).
 
@@ -88,8 +93,11 @@ def synthesize(
         Radius of the position accuracy specification, mm (R1 = R2 = R3 = R).
     p : float
         Probability per principal component, 0 < p < 1.
-    distribution : {"uniform", "normal"}
-        Distribution of each error inside its band (eps^2/3 or eps^2/9 variance).
+    distribution : str or dict, optional
+        Distribution of each error inside its band: one shape for every error -- "uniform" (variance
+        eps^2/3), "normal" (3 sigma = eps, eps^2/9), "triangular" (eps^2/6), "truncnormal" or
+        "truncnormal(beta)" (sigma = eps/beta, cut at +-eps) -- or a dict name -> shape ("*" the
+        default; :mod:`tolsynth.distributions`); default: the model file's, else uniform.
     alpha : float, sequence or dict
         Cost exponent(s) alpha_i > 0.
     solver : {"ipopt", "sumt"}
@@ -127,6 +135,15 @@ def synthesize(
         attach the achieved probabilities as ``result.validation``.
     seed : int
         Seed of that Monte Carlo run.
+    probability : {"gaussian", "exact"}
+        ``"gaussian"`` (default, the paper's: the principal components read as normal) or
+        ``"exact"``: the exact probabilities of the linear error model as the constraints, along
+        every direction (per component) or in the sphere (:mod:`tolsynth.exact_synthesis`).
+    verify : int or True, optional
+        Close the loop (:mod:`tolsynth.verify`): the nonlinear Monte Carlo at the optimum (this many
+        samples per pose; True: chosen from p), and while its 99 % lower bound is below ``p``,
+        a tighter target and a new solve; ``result.verification`` reports the achieved
+        probability with its interval.
 
     Returns
     -------
@@ -146,13 +163,26 @@ def synthesize(
         mechanism = load_model(mechanism)
     if not isinstance(solver, str) or solver not in SOLVERS:
         raise InputError("solver", f"unknown solver {solver!r}", " or ".join(repr(s) for s in SOLVERS))
-    options = check_options(options, _solver_defaults(solver))
+    from .exact_synthesis import PROBABILITIES
+
+    again = dict(k=k, bounds=bounds, pose=pose, poses=poses, Phi=Phi, p_orientation=p_orientation,
+                 criterion=criterion, cost=cost, locks=locks, options=options, probability=probability)
+
+    if not isinstance(probability, str) or probability not in PROBABILITIES:
+        raise InputError("probability", f"got {probability!r}", " or ".join(repr(s) for s in PROBABILITIES))
+    options = check_options(options, _solver_defaults(solver)) if probability == "gaussian" else options
     if validate is not None and validate is not False:
         validate = check_count(validate, "validate", lower=0)
     if cost is None and mechanism.cost_models:
         cost = mechanism.cost_models  # the model file's (issue 13)
+    if mechanism.fixed_joint_errors:  # given, not bought: no cost, whatever cost= says for the others
+        from .joint_errors import with_given_costs
+
+        cost = with_given_costs(mechanism, cost)
     if locks is None and mechanism.locks:
         locks = mechanism.locks
+    elif mechanism.fixed_joint_errors:  # fixed joint errors stay locked whatever else is locked
+        locks = {**mechanism.fixed_joint_errors, **check_mapping(locks, "locks", "a dict parameter name -> tolerance")}
     if locks:
         from .locks import apply_locks
 
@@ -164,11 +194,16 @@ def synthesize(
     if locks:
         from .locks import check_locks
 
-        check_locks(nlp)
+        check_locks(nlp, mechanism.joint_error_parameters)
     nlp.check_feasible()
     eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0), "x0", lower=TINY)
-    result = SOLVERS[solver](nlp, eps0, dict(options or {}))
-    while spec.sphere_blocks and result.success:
+    if probability == "exact":
+        from .exact_synthesis import solve_exact
+
+        result = solve_exact(nlp, spec.shapes, solver, eps0, options)
+    else:
+        result = SOLVERS[solver](nlp, eps0, dict(options or {}))
+    while probability == "gaussian" and spec.sphere_blocks and result.success:
         # the NLP's sphere probability is a fixed quadrature: check it where it matters
         exact = np.array([P for _, _, P in nlp.sphere_values(result.x)])
         if np.max(np.abs(nlp.sphere_quadrature(result.x) - exact)) <= SPHERE_QUADRATURE_TOL:
@@ -194,6 +229,14 @@ def synthesize(
             pose=pose if poses is None else list(poses)[0], n=int(validate), seed=seed,
         )
         result = replace(result, validation=report)
+    if verify is not None and verify is not False:
+        from .verify import closed_loop
+
+        def solve(p_target):
+            return synthesize(mechanism, R, p_target, distribution, alpha, solver, x0=result.x, **again)
+
+        result = closed_loop(solve, mechanism, result, p=p, R=R, distribution=distribution,
+                             n=None if verify is True else verify, seed=seed)
     return result
 
 
@@ -203,7 +246,16 @@ def _run_inputs(mechanism, solver, options, locks, x0, validate, seed) -> dict:
     return {"model": {"name": mechanism.name, "title": mechanism.title, "file": str(path) if path else None},
             "solver": solver, "options": dict(options or {}), "locks": dict(locks) if locks else None,
             "x0": None if x0 is None else np.asarray(mechanism.tolerances(x0), dtype=float).tolist(),
-            "validate": validate or None, "seed": seed if validate else None}
+            "validate": validate or None, "seed": seed if validate else None,
+            "joint_errors": _joint_error_inputs(mechanism)}
+
+
+def _joint_error_inputs(mechanism) -> dict | None:
+    """Name -> joint, transform ("q": the joint variable), unit and fixed value of each joint
+    error (:mod:`tolsynth.joint_errors`; a model file does not show those added in memory)."""
+    out = {p.name: {"joint": p.at_joint[0], "transform": p.at_joint[1], "unit": p.unit, "fixed": p.lock}
+           for p in mechanism.parameters if p.at_joint is not None}
+    return out or None
 
 
 @dataclass(frozen=True)
@@ -215,10 +267,12 @@ class Comparison(Tabular):
 
     @property
     def cost_rel_diff(self) -> float:
+        """``|cost_SUMT - cost_IPOPT| / |cost_IPOPT|``."""
         return abs(self.sumt.cost - self.ipopt.cost) / abs(self.ipopt.cost)
 
     @property
     def tolerance_rel_diff(self) -> dict[str, float]:
+        """Name -> ``|eps_SUMT - eps_IPOPT| / |eps_IPOPT|``."""
         return {
             k: abs(self.sumt.tolerances[k] - v) / abs(v) for k, v in self.ipopt.tolerances.items()
         }
@@ -229,6 +283,7 @@ class Comparison(Tabular):
         return self.sumt.wall_time / self.ipopt.wall_time
 
     def table(self) -> str:
+        """Short readable table: status, cost and tolerances of both solvers with relative differences."""
         i, s = self.ipopt, self.sumt
         rows = [
             f"{'':>10} {'IPOPT':>14} {'SUMT+Powell':>14} {'rel.diff':>10}",
@@ -245,6 +300,7 @@ class Comparison(Tabular):
         return "\n".join(rows)
 
     def to_dict(self) -> dict:
+        """Plain dict for JSON: both results and their relative differences."""
         return {
             "ipopt": self.ipopt.to_dict(),
             "sumt": self.sumt.to_dict(),
@@ -254,7 +310,7 @@ class Comparison(Tabular):
         }
 
 
-def compare(mechanism, R: float, p: float, distribution: str = "uniform", alpha=0.7, **kwargs) -> Comparison:
+def compare(mechanism, R: float, p: float, distribution=None, alpha=0.7, **kwargs) -> Comparison:
     """Solve the same specification with IPOPT and with SUMT + Powell; see :class:`Comparison`.
 
     Keyword arguments are those of :func:`synthesize` (``options`` may be a dict with keys
@@ -294,11 +350,52 @@ class WorkspaceSynthesis(Tabular):
 
     @property
     def success(self) -> bool:
+        """The exchange converged and its last solve is optimal."""
         return self.converged and self.result.success
+
+    @property
+    def lower_bound(self) -> float:
+        """Certified lower bound on the cost of *any* tolerances meeting the specification at every
+        pose: the dual bound of the last solve, whose poses are a subset of the workspace (a
+        relaxation), so it bounds the semi-infinite problem too."""
+        return self.result.lower_bound
+
+    @property
+    def gap(self) -> float:
+        """``cost - lower_bound`` of the last solve."""
+        return self.result.gap
+
+    @property
+    def worst_value(self) -> float:
+        """Largest ``sigma z / R`` (sphere: ``(1 - P)/(1 - p)``) found anywhere in the workspace by the
+        search run *after* the last solve, at its tolerances (NaN if that solve failed)."""
+        return float(self.rounds[-1]["worst_value"]) if self.rounds else float("nan")
+
+    @property
+    def max_violation(self) -> float:
+        """``max(0, worst_value - 1)``: how far the returned tolerances miss the specification at the
+        worst pose the search found (0 where they meet it everywhere it looked)."""
+        return max(0.0, self.worst_value - 1.0) if self.rounds else float("nan")
+
+    def summary(self) -> str:
+        """Readable summary: the exchange's rounds, the certificate, the largest value found after
+        the last solve, and the last solve's own summary."""
+        lines = [f"workspace exchange: {'converged' if self.converged else 'NOT converged'} after "
+                 f"{len(self.rounds)} round(s), {len(self.poses)} pose(s) imposed"]
+        for k, r in enumerate(self.rounds):
+            pos = ", ".join(f"{v:.1f}" for v in np.asarray(r["worst_position"], dtype=float))
+            lines.append(f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.8g}, worst over the "
+                         f"workspace {r['worst_value']:.6f} at hand ({pos}) mm")
+        lines.append(f"certificate: cost {self.result.cost:.8g}, lower bound {self.lower_bound:.8g} "
+                     f"(valid at every pose), gap {self.gap:.2e}")
+        lines.append(f"afterwards: largest value found anywhere {self.worst_value:.6f} "
+                     f"(violation {self.max_violation:.2e})")
+        lines.append(self.result.summary())
+        return "\n".join(lines)
 
 
 def synthesize_workspace(
-    mechanism, R: float, p: float, distribution: str = "uniform", alpha=0.7, *, pose="worst",
+    mechanism, R: float, p: float, distribution=None, alpha=0.7, *, pose="worst",
     tol: float = 1e-3, max_rounds: int = 12, search: dict | None = None, **kwargs
 ) -> WorkspaceSynthesis:
     """Optimal tolerances with Eq. 20 imposed at *every* reachable pose, not one.
@@ -311,6 +408,11 @@ def synthesize_workspace(
     found meets ``sigma z / R <= 1 + tol``.  Each round's optimum is certified (convex problem);
     the worst-pose search is a grid plus local search, so "everywhere" means "everywhere that
     search looks" (its grid is in ``search``, keyword arguments of ``worst_pose``).
+
+    With ``probability="exact"`` each round's optimum has the exact probabilities at its poses
+    (:mod:`tolsynth.exact_synthesis`); the search still ranks poses by the linear model (largest
+    sigma, or lowest Gaussian sphere probability), and the pose it finds is judged by its exact
+    probability, ``worst_value = (1 - P) / (1 - p)``.
 
     For the paper's robot at R = 0.5 mm, p = 0.99, uniform, alpha = 0.7 this takes 5 rounds and
     costs 5 % more than the optimum at the paper's pose, which violates the specification
@@ -334,6 +436,7 @@ def synthesize_workspace(
         if key not in allowed:
             raise InputError("search", f"unknown key {key!r}", ", ".join(allowed))
     sphere = kwargs.get("criterion", "components") == "sphere"
+    exact = kwargs.get("probability", "gaussian") == "exact"
     if pose is None:  # no starting pose: the worst pose found at tolerances in the middle of the bounds
         lo, hi = mechanism.bounds
         pose = worst_pose(mechanism, np.sqrt(lo * hi), criterion="sigma", distribution=distribution,
@@ -342,16 +445,32 @@ def synthesize_workspace(
     rounds = []
     converged = False
     res = None
+
+    def search_at(eps, opts):
+        if sphere:  # the worst pose is the one of lowest P(|dr| <= R)
+            w = worst_pose(mechanism, eps, criterion="probability", R=R, distribution=distribution, **opts)
+            g = (1.0 - w.value) / (1.0 - p)
+        else:
+            w = worst_pose(mechanism, eps, criterion="sigma", distribution=distribution, **opts)
+            g = w.value * z / R
+        if exact:  # the search ranks poses by the linear model; the pose it finds is judged exactly
+            from .exact_synthesis import exact_margin
+
+            g = exact_margin(mechanism, w.q, eps, distribution, R, p, "sphere" if sphere else "components")
+        return w, g
+
+    # a pose to add needs no more than a coarse local search (final step 1e-4 of each joint's
+    # range); the search that decides convergence is the full one (puma560: most of the time was
+    # the pattern search's last halvings, round after round)
+    full = dict(search or {})
+    coarse = full if "step_tol" in full else {**full, "step_tol": COARSE_STEP_TOL}
     for _ in range(max_rounds):
         res = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
         if not res.success:
             break
-        if sphere:  # the worst pose is the one of lowest P(|dr| <= R)
-            w = worst_pose(mechanism, res.x, criterion="probability", R=R, distribution=distribution, **(search or {}))
-            g = (1.0 - w.value) / (1.0 - p)
-        else:
-            w = worst_pose(mechanism, res.x, criterion="sigma", distribution=distribution, **(search or {}))
-            g = w.value * z / R
+        w, g = search_at(res.x, coarse)
+        if g <= 1 + tol and coarse is not full:
+            w, g = search_at(res.x, full)
         rounds.append({"n_poses": len(poses), "cost": res.cost, "worst_value": g, "worst_q": w.q,
                        "worst_position": w.position})
         if g <= 1 + tol:

@@ -351,7 +351,9 @@ def _workspace_frame(w):
             row[f"worst_{axis}"] = x
         rows.append(row)
     summary = synthesis_summary(res)
-    summary.update(converged=w.converged, tolerances=res.tolerances, poses_rad=w.poses)
+    summary.update(converged=w.converged, tolerances=res.tolerances, poses_rad=w.poses,
+                   worst_value=w.worst_value if w.rounds else None,
+                   max_violation=w.max_violation if w.rounds else None)
     inputs = _synthesis_inputs(res)
     inputs.update(getattr(w, "inputs", None) or {})
     return make_frame(rows, "WorkspaceSynthesis", inputs, summary,

@@ -66,12 +66,14 @@ class ValidationResult(Tabular):
         return bool(np.all(self.components_met))
 
     def to_dict(self) -> dict:
+        """Plain dict (arrays as lists) for JSON, with :attr:`met`."""
         out = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items() if k != "montecarlo"}
         out["pose"] = self.pose if isinstance(self.pose, str) else np.asarray(self.pose).tolist()
         out["met"] = self.met
         return out
 
     def report(self) -> str:
+        """Readable table: achieved probabilities with intervals against ``p`` and the analytic values."""
         pct = int(round(100 * self.montecarlo.confidence))
         lines = [f"validation   p = {self.p:g} asked, R = {self.R:g} mm, {self.distribution}, n = {self.n}, seed = {self.seed}"]
         for j in range(3):
@@ -104,6 +106,7 @@ def validate(
     batch: int = DEFAULT_BATCH,
     confidence: float = 0.95,
     progress=None,
+    Phi: float | None = None,
 ) -> ValidationResult:
     """Monte Carlo check of an optimum: the probability achieved against the ``p`` asked for.
 
@@ -116,12 +119,15 @@ def validate(
         Radius (mm).  If None, taken from ``result.R`` or ``result.spec.R`` when present.
     p : float
         Probability asked for, 0 < p < 1 (same fallback).
-    distribution : {"uniform", "normal"}
+    distribution : str or dict, optional
         Same fallback; default "uniform".
     pose : str or array
         Where to check (the paper's pose of largest error by default).
     n, seed, batch, confidence, progress
         As for :func:`monte_carlo`.
+    Phi : float, optional
+        Orientation half-angle (rad): the run then also samples the orientation probabilities
+        (``montecarlo.p_orientation_components``, ``montecarlo.p_cone``).
 
     Returns
     -------
@@ -148,7 +154,7 @@ def validate(
     p = check_probability(p, "p")
     distribution = distribution or "uniform"
     mc = monte_carlo(mechanism, pose, tol, distribution, R=R, n=n, seed=seed, batch=batch,
-                     confidence=confidence, progress=progress)
+                     confidence=confidence, progress=progress, Phi=Phi)
     return ValidationResult(
         p=p,
         R=mc.R,

@@ -94,9 +94,11 @@ class ProbabilityMap(Tabular):
 
     @property
     def reachable(self) -> np.ndarray:
+        """Boolean mask of the reachable grid points (where ``P`` is finite)."""
         return np.isfinite(self.P)
 
     def to_dict(self) -> dict:
+        """Plain dict (arrays as lists) for JSON."""
         return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
 
     def plot(self, path=None, ax=None):
@@ -129,7 +131,7 @@ def probability_map(
     mechanism,
     tolerances="figure3",
     R: float = 0.2,
-    distribution: str = "uniform",
+    distribution=None,
     n: int = 100,
     plane: str = "xz",
     offset: float = 0.0,
@@ -165,7 +167,8 @@ def probability_map(
         Default: the ``figure3`` set of the paper's Figure 3.
     R : float
         Radius (mm), > 0.
-    distribution : {"uniform", "normal"}
+    distribution : str or dict, optional
+        As :func:`tolsynth.synthesize` (default: the model file's, else uniform).
     n : int
         Grid points per axis (n x n), >= 5.
     plane : {"xz", "xy", "yz"}
@@ -194,7 +197,9 @@ def probability_map(
     """
     t0 = time.perf_counter()
     R = check_positive(R, "R")
-    variance_divisor(distribution)
+    from .distributions import resolve
+
+    distribution = resolve(distribution, mechanism)
     n = check_count(n, "n", 5, 2000)  # grid points per axis
     offset = check_real(offset, "offset", "mm")
     seeds = check_count(seeds, "seeds", 1, 1000)

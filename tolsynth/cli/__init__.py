@@ -1,11 +1,11 @@
-"""Command line: tolsynth analyze | solve | sweep | reproduce | montecarlo | map | worst-pose.
+"""Command line: tolsynth analyze | solve | report | sweep | reproduce | montecarlo | map | worst-pose.
 
 Every sub-command prints a readable report, or one JSON object with --json (its inputs and the
 package version recorded).  Exit status: 0 done; 1 a solver did not converge (the numbers are not
 an optimum); 2 bad input or nothing to do (a one-line message naming the option and the allowed
 range); 130 interrupted (Ctrl-C); 141 the output pipe was closed.
 
-Layout: one module per command family (``analyze``, ``solve``, ``sweep``, ``reproduce``, ``montecarlo``,
+Layout: one module per command family (``analyze``, ``solve``, ``report``, ``sweep``, ``reproduce``, ``montecarlo``,
 ``workspace``: map and worst-pose), each with ``register(subparsers)``; the argument helpers in
 :mod:`tolsynth.cli.args`.  A new sub-command is a new module here, added to :data:`COMMANDS`.
 The library never imports this package.
@@ -18,13 +18,13 @@ import os
 import sys
 
 from ..errors import TolsynthError
-from . import analyze, montecarlo, reproduce, solve, sweep, workspace
+from . import analyze, montecarlo, report, reproduce, solve, sweep, workspace
 from .args import HelpFormatter, add_pose_arguments, emit_json, parse_pose, parse_tolerances, version
 
 __all__ = ["main", "build_parser", "add_pose_arguments", "parse_pose", "parse_tolerances", "emit_json"]
 
 #: the modules that register sub-commands, in the order of the help text
-COMMANDS = [analyze, solve, sweep, reproduce, montecarlo, workspace]
+COMMANDS = [analyze, solve, report, sweep, reproduce, montecarlo, workspace]
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_INPUT, EXIT_INTERRUPTED, EXIT_PIPE = 0, 1, 2, 130, 141
 

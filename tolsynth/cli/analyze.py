@@ -5,13 +5,15 @@ from __future__ import annotations
 import numpy as np
 
 from ..mechanism import load_model
-from .args import add_pose_arguments, default_pose, emit_json, fmt_vec as _fmt_vec, inputs_record, parse_pose, parse_tolerances, pose_label
+from .args import dist_for, add_pose_arguments, default_pose, emit_json, fmt_vec as _fmt_vec, inputs_record, parse_pose, parse_tolerances, pose_label
 
 __all__ = ["register"]
 
 
 def cmd_analyze(args) -> int:
     mech = load_model(args.model)
+    if hasattr(args, "dist"):
+        args.dist = dist_for(args, mech)
     q = parse_pose(mech, args.pose) if args.pose is not None else default_pose(mech)
     eps = parse_tolerances(mech, args.tolerances)
     a = mech.analyze(q, eps, args.dist, R=args.R, Phi=args.Phi)
@@ -46,7 +48,9 @@ def cmd_analyze(args) -> int:
         return 0
     print(f"model        {mech.name}: {mech.title}")
     print(f"pose         {pose_name}  q = {_fmt_vec(np.degrees(a.q), '{:.4f}')} deg")
-    print(f"errors       {args.dist} ({'eps^2/3' if args.dist == 'uniform' else 'eps^2/9, 3 sigma = eps'})")
+    from ..distributions import describe
+
+    print(f"errors       {describe(args.dist)}")
     print("tolerances   " + ", ".join(f"{n}={v:g} {u}" for (n, v), u in zip(a.tolerances.items(), mech.units)))
     print(f"hand         {_fmt_vec(a.position, '{:.4f}')} mm")
     print("covariance   (mm^2)")

@@ -25,6 +25,9 @@ from ..tables import jsonable
 from ..units import ANGLE_UNITS, LENGTH_UNITS, to_base, unit_kind
 
 __all__ = [
+    "dist_for",
+    "dist_label",
+    "parse_distribution",
     "HelpFormatter",
     "version",
     "quantity",
@@ -477,9 +480,46 @@ def add_model_argument(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", required=True, help="bundled model name (see tolsynth.bundled_models()) or path to a .toml model file")
 
 
+def parse_distribution(text: str):
+    """``--dist``: one shape for every error (``uniform``, ``normal``, ``triangular``, ``truncnormal``,
+    ``truncnormal(3)``), or per parameter: ``*=uniform,h2=normal``."""
+    from ..distributions import shape
+
+    text = text.strip()
+    if "=" not in text:
+        shape(text)
+        return text
+    out = {}
+    for part in text.split(","):
+        if "=" not in part:
+            raise InputError("--dist", f"{part!r} in a per-parameter list", "name=shape pairs, e.g. *=uniform,h2=normal")
+        k, v = (s.strip() for s in part.split("=", 1))
+        try:
+            shape(v)
+        except InputError as exc:
+            raise InputError("--dist", f"{k}={v}: {exc}", "uniform, normal, triangular, truncnormal, truncnormal(beta)") from None
+        out[k] = v
+    return out
+
+
+def dist_for(args, mech):
+    """``--dist`` resolved against the model (not given: the model file's own shapes, else uniform)."""
+    from ..distributions import resolve
+
+    return resolve(args.dist, mech)
+
+
+def dist_label(distribution) -> str:
+    from ..distributions import label
+
+    return label(distribution)
+
+
 def add_dist_argument(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dist", choices=["uniform", "normal"], default="uniform",
-                   help="distribution of each error in its band: uniform (variance eps^2/3) or normal (3 sigma = eps)")
+    p.add_argument("--dist", type=_arg_type(parse_distribution, "distribution"), default=None,
+                   help="distribution of each error in its band: uniform (variance eps^2/3), normal (3 sigma = eps), "
+                        "triangular (eps^2/6), truncnormal or truncnormal(beta) (sigma = eps/beta cut at +-eps); "
+                        "or per parameter, e.g. '*=uniform,h2=normal'; default: the model file's, else uniform")
 
 
 TOLERANCES_HELP = ("SET | VALUE | name=VALUE,... | SET,name=VALUE,...; patterns such as *=0.02 or h*=0.01; "

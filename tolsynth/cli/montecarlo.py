@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from ..mechanism import load_model
 from ..montecarlo import DEFAULT_BATCH, monte_carlo
-from .args import (
+from .args import (  # noqa: I001
+    dist_for,
     add_pose_arguments,
     add_table_out_argument,
     check_table_out,
@@ -24,6 +25,8 @@ __all__ = ["register"]
 def _cmd_montecarlo(args) -> int:
     check_table_out(args)  # before any work
     mech = load_model(args.model)
+    if hasattr(args, "dist"):
+        args.dist = dist_for(args, mech)
     q = parse_pose(mech, args.pose) if args.pose is not None else default_pose(mech)
     eps = parse_tolerances(mech, args.tolerances)
     progress = False if args.quiet else None  # None: progress on stderr for long runs on a terminal

@@ -8,7 +8,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..mechanism import load_model
-from .args import (
+from .args import (  # noqa: I001
+    dist_for,
+    dist_label,
     POSE_HELP,
     add_dist_argument,
     add_model_argument,
@@ -77,6 +79,9 @@ def side_by_side(c, width: int = 22) -> str:
 
 def _spec_kwargs(mech, args) -> tuple:
     kw = dict(Phi=args.Phi, criterion=args.criterion)
+    probability = getattr(args, "probability", "gaussian")  # `report` has no --probability
+    if probability != "gaussian":
+        kw["probability"] = probability
     if args.p_orientation is not None:
         if args.Phi is None:
             raise InputError("--p-orientation", "given without --Phi", "--Phi ANGLE together with --p-orientation P")
@@ -96,12 +101,15 @@ def cmd_solve(args) -> int:
 
     check_table_out(args)  # before any work
     mech = load_model(args.model)
+    if hasattr(args, "dist"):
+        args.dist = dist_for(args, mech)
     alpha, kw = _spec_kwargs(mech, args)
-    head = (f"{mech.name}: R={args.R:g} mm, p={args.p:g}, alpha={args.alpha or 0.7}, {args.dist} errors"
+    head = (f"{mech.name}: R={args.R:g} mm, p={args.p:g}, alpha={args.alpha or 0.7}, {dist_label(args.dist)} errors"
             + (f", Phi={args.Phi:g} rad" if args.Phi is not None else ""))
     record = dict(R_mm=args.R, p=args.p, distribution=args.dist, alpha=alpha, criterion=args.criterion,
                   Phi_rad=args.Phi, p_orientation=kw.get("p_orientation"), solver=args.solver,
-                  k=kw.get("k", mech.k), bounds=kw.get("bounds", mech.bounds))
+                  k=kw.get("k", mech.k), bounds=kw.get("bounds", mech.bounds), probability=args.probability,
+                  verify=args.verify)
     if args.everywhere:
         from ..joint_space import _reference
         from ..synthesis import synthesize_workspace
@@ -123,7 +131,8 @@ def cmd_solve(args) -> int:
                       everywhere=True, **record)
         if args.json:
             out = w.result.to_dict()
-            out.update(converged=w.converged, rounds=w.rounds, poses=w.poses)
+            out.update(converged=w.converged, rounds=w.rounds, poses=w.poses, worst_value=w.worst_value,
+                       max_violation=w.max_violation)
             out["inputs"] = inputs_record(args, mech, start_pose=pose_label(start) if start is not None else None,
                                           everywhere=True, **record)
             emit_json(out)
@@ -132,6 +141,9 @@ def cmd_solve(args) -> int:
             for k, r in enumerate(w.rounds):
                 print(f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.6g}, worst sigma z/R over the "
                       f"workspace {r['worst_value']:.5f} at hand {_fmt(r['worst_position'])} mm")
+            print(f"  certificate: lower bound {w.lower_bound:.8g} (valid at every pose), gap {w.gap:.2e}; "
+                  f"afterwards the largest value found anywhere is {w.worst_value:.6f} "
+                  f"(violation {w.max_violation:.2e})")
             print(w.result.summary())
         if not w.success:
             print("tolsynth solve: no convergence over the workspace; the numbers above are not an optimum", file=sys.stderr)
@@ -161,6 +173,8 @@ def cmd_solve(args) -> int:
         if args.lock:
             kw["locks"] = _parse_locks(mech, args.lock)
             record["locks"] = kw["locks"]
+        if args.verify is not None:
+            kw["verify"] = True if args.verify == "auto" else int(args.verify)
         res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
         rep = None
         if args.contributions:
@@ -173,11 +187,15 @@ def cmd_solve(args) -> int:
             out = res.to_dict()
             if rep is not None:
                 out["contributions"] = rep.to_dict()
+            if res.verification is not None:
+                out["verification"] = res.verification.to_dict()
             out["inputs"] = inputs_record(args, mech, **record)
             emit_json(out)
         else:
             print(f"{head}, pose{'s' if len(poses) > 1 else ''} {where}")
             print(res.summary())
+            if res.verification is not None:
+                print(res.verification.report())
             if rep is not None:
                 print("contributions (share of each principal variance, of tr V and of 1 - P(sphere)):")
                 print(rep.format())
@@ -186,6 +204,21 @@ def cmd_solve(args) -> int:
         print("tolsynth solve: the solver did not converge; the numbers above are not an optimum", file=sys.stderr)
         return 1
     return 0
+
+
+def _verify_arg(text: str):
+    """``--verify``: ``auto`` or a sample count >= 1000."""
+    import argparse
+
+    if text.strip() == "auto":
+        return "auto"
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected auto or a whole number of samples >= 1000") from None
+    if n < 1000:
+        raise argparse.ArgumentTypeError(f"{n}: expected auto or a whole number of samples >= 1000")
+    return n
 
 
 def _parse_locks(mech, items) -> dict:
@@ -236,6 +269,12 @@ def register(sub) -> None:
                    help="probability of the orientation specification, 0 < p < 1; default: --p")
     p.add_argument("--criterion", choices=["components", "sphere"], default="components",
                    help="per principal component (the paper's Eq. 20) or the sphere P(|dr| <= R) >= p")
+    p.add_argument("--probability", choices=["gaussian", "exact"], default="gaussian",
+                   help="gaussian (the paper's: each principal component read as normal) or exact (the exact "
+                        "probabilities of the linear error model, along every direction or in the sphere); default: gaussian")
+    p.add_argument("--verify", default=None, type=_verify_arg, metavar="N|auto",
+                   help="close the loop: nonlinear Monte Carlo at the optimum with N samples per pose (auto: from p), "
+                        "and a tighter target until its 99%% lower bound reaches p; default: off")
     p.add_argument("--everywhere", action="store_true",
                    help="impose the constraint at every reachable pose (exchange method with the worst-pose search)")
     p.add_argument("--reference", default=None,

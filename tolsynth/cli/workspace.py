@@ -10,7 +10,8 @@ from ..errors import InputError
 from ..mechanism import load_model
 from ..pose_search import worst_pose
 from ..workspace_map import PLANES, ProbabilityMap, probability_map
-from .args import (
+from .args import (  # noqa: I001
+    dist_for,
     TOLERANCES_HELP,
     add_dist_argument,
     add_model_argument,
@@ -61,6 +62,8 @@ def _cmd_map(args) -> int:
     check_figure_path(args.out)  # before any work: matplotlib, the format, the folder
     check_table_out(args, "--data")
     mech = load_model(args.model)
+    if hasattr(args, "dist"):
+        args.dist = dist_for(args, mech)
     eps = parse_tolerances(mech, args.tolerances)
     label = args.tolerances
     extent = _extent(args.extent)
@@ -107,6 +110,8 @@ def _cmd_map(args) -> int:
 def _cmd_worst(args) -> int:
     check_table_out(args)  # before any work
     mech = load_model(args.model)
+    if hasattr(args, "dist"):
+        args.dist = dist_for(args, mech)
     eps = parse_tolerances(mech, args.tolerances)
     w = worst_pose(mech, eps, criterion=args.criterion, R=args.R, distribution=args.dist, grid=args.grid,
                    reference=parse_reference(mech, args.reference))

@@ -14,6 +14,9 @@ at the paper's constraint boundary ``g_j = 0``, but stays smooth where principal
 paper, the accuracy constraints carry the larger weight (``w_acc`` = 1 against ``w_bnd`` = 0.01).
 Outside the interior (a leading minor of some G_b <= 0, or a bound crossed) P is +inf.  For the
 sphere criterion each sphere block adds ``-w_acc ln(P_b(u) - p_b)`` from the shared sphere graph.
+A locked tolerance (``lower = upper``: :mod:`tolsynth.locks`, a fixed joint error) has no
+interior; SUMT gives it a box of relative half-width ``FIXED_WIDTH`` (1e-9) around its value, in
+which the bound barrier holds it at the centre, and returns it exactly at its value.
 
 The outer loop lowers ``r`` by ``reduction`` from ``r0`` until the barrier's duality-gap bound
 ``r * (3 m w_acc + 2 n w_bnd)`` is below ``gap_tol * f``; each minimisation starts with the
@@ -45,6 +48,9 @@ from .cpowell import compile_powell
 from .powell import powell
 
 __all__ = ["solve_sumt", "DEFAULT_OPTIONS", "penalty_graph"]
+
+#: half-width in u = ln eps of the box SUMT gives a locked tolerance (see solve_sumt)
+FIXED_WIDTH = 1e-9
 
 DEFAULT_OPTIONS = {
     "r0": None,  # default: 0.1 * f(start) / (barrier parameter)
@@ -131,9 +137,13 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     if not 0 < o["line_rtol"] < 1:
         raise InputError("options.line_rtol", f"got {o['line_rtol']}", "0 < line_rtol < 1")
     spec = nlp.spec
-    fixed = [nm for nm, a, b in zip(spec.names, spec.lower, spec.upper) if not a < b]
-    if fixed:
-        raise InputError("bounds", f"SUMT needs lower < upper (an interior), not for {fixed}", "lower < upper")
+    # a locked tolerance (lower = upper: tolsynth.locks, a fixed joint error) gets a box of
+    # relative width 2 * FIXED_WIDTH around its value: the barrier keeps it at the centre (the
+    # penalty has no interior otherwise); it is put back exactly at its value at the end
+    fixed = np.array([not a < b for a, b in zip(spec.lower, spec.upper)], dtype=bool)
+    lu, uu = nlp.lu.copy(), nlp.uu.copy()
+    lu[fixed] -= FIXED_WIDTH
+    uu[fixed] += FIXED_WIDTH
     n, m, ms = spec.n, len(spec.blocks), len(spec.sphere_blocks)
     F = penalty_graph(n, m, ms, nlp.sphere_nodes if ms else 0, nlp.costs.signature)
     eps0 = nlp.interior_start() if eps0 is None else np.asarray(eps0, dtype=float)
@@ -142,7 +152,7 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
 
     # the penalty graph's numbers for this problem (r, the barrier parameter, changes in place)
     r_box = np.zeros(1)
-    values = [nlp.P, nlp.theta, nlp.lu, nlp.uu, r_box, np.array([o["w_acc"]]), np.array([o["w_bnd"]]),
+    values = [nlp.P, nlp.theta, lu, uu, r_box, np.array([o["w_acc"]]), np.array([o["w_bnd"]]),
               nlp.Ps if ms else np.zeros(0), nlp.p_sphere]
     # the whole Powell minimisation in C on the code-generated graph (one call per outer
     # iteration), or, without a C compiler, the Python Powell on the graph with the numbers fixed
@@ -200,10 +210,20 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             break
         r *= o["reduction"]
     wall = time.perf_counter() - t0
+    u = np.where(fixed, nlp.lu, u)
     eps = np.exp(u)
     # multipliers implied by the barrier: Z_b = r w_acc G_b^-1; bounds r w_bnd / distance
     Z = [r * o["w_acc"] * np.linalg.inv(Gb) for Gb in nlp.G(eps)]
-    bound_mult = r * o["w_bnd"] * (1.0 / (nlp.uu - u) - 1.0 / (u - nlp.lu))
+    bound_mult = r * o["w_bnd"] * (1.0 / (uu - u) - 1.0 / (u - lu))
+    if fixed.any():
+        # a locked tolerance's multiplier closes stationarity, -(dc/du + d(Z . G)/du), with the LMI
+        # multipliers recomputed from the point (nlp.kkt_multipliers: the barrier's Z at the last r
+        # is a few % off where principal sigma coincide)
+        pull = np.zeros(n)
+        for block, Zb in zip(spec.blocks, nlp.kkt_multipliers(eps)):
+            a = block.A
+            pull += 2 * eps**2 * block.scale**2 * np.einsum("ji,jk,ki->i", a, Zb, a) / spec.c
+        bound_mult = np.where(fixed, -(nlp.costs.du(u) + pull), bound_mult)
     mu_sphere = r * o["w_acc"] / (nlp.sphere_quadrature(eps) - nlp.p_sphere) if ms else None
     return assemble("sumt", nlp, eps, Z, bound_mult, status, message, nit, nfev, wall, history,
                     mu_sphere=mu_sphere)

@@ -1,0 +1,1 @@
+../../notebooks/02_sensitivity_studies.py

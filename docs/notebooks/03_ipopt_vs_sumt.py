@@ -1,0 +1,1 @@
+../../notebooks/03_ipopt_vs_sumt.py

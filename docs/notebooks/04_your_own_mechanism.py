@@ -1,0 +1,1 @@
+../../notebooks/04_your_own_mechanism.py

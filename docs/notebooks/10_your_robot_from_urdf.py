@@ -1,0 +1,1 @@
+../../notebooks/10_your_robot_from_urdf.py

@@ -1,0 +1,1 @@
+../../notebooks/11_exact_probability.py

@@ -1,0 +1,193 @@
+"""Exact probabilities of the linear error model (tolsynth.exact) and the error shapes
+(tolsynth.distributions), against closed forms, direct quadrature and Monte Carlo intervals."""
+
+import math
+from math import comb, factorial
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from tolsynth import stats
+from tolsynth.distributions import divisors, shape, shapes_of
+from tolsynth.errors import InputError, OutOfRangeError
+from tolsynth.exact import (ExactProbabilityError, ball_probability, components_probability, cone_probability,
+                            direction_probability, worst_direction)
+
+ALL = ["uniform", "normal", "triangular", "truncnormal", "truncnormal(3)", "truncnormal(0.5)"]
+
+
+def _mc_interval(hits, n, z=3.29):
+    """A 99.9 % Wilson interval for a binomial proportion."""
+    p = hits / n
+    d = 1 + z * z / n
+    c = (p + z * z / (2 * n)) / d
+    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
+    return c - h, c + h
+
+
+# ------------------------------------------------------------------------------------------ shapes
+@pytest.mark.parametrize("name", ALL)
+def test_shape_variance_and_cf_match_samples(name):
+    """Var(Y) and E cos(sY) of each shape against 400k samples (sampling error ~ 1/sqrt(n))."""
+    sh = shape(name)
+    rng = np.random.default_rng(7)
+    y = sh.sample(rng, 400_000)
+    assert np.all(np.abs(y) <= 1.0) or not sh.bounded
+    assert abs(np.var(y) - sh.variance) < 5 * np.std(y**2) / math.sqrt(y.size)
+    s = np.array([0.3, 1.0, 2.5, 6.0, 15.0])
+    emp = np.cos(np.outer(s, y)).mean(axis=1)
+    assert np.max(np.abs(emp - sh.cf(s))) < 6 / math.sqrt(y.size)
+    # the envelope bounds |cf| everywhere on a fine grid
+    t = np.linspace(0.0, 400.0, 40_001)
+    assert np.all(np.abs(sh.cf(t)) <= sh.envelope(t) + 1e-12)
+
+
+@pytest.mark.parametrize("beta", [0.5, 2.0, 5.0])
+def test_truncnormal_cf_against_direct_quadrature(beta):
+    """The closed form of the truncated normal's characteristic function (48-node rule in a
+    boundary-layer variable) against a direct 200001-point Simpson quadrature of the density."""
+    sh = shape(f"truncnormal({beta})")
+    x = np.linspace(-1.0, 1.0, 200001)
+    f = np.exp(-0.5 * (beta * x) ** 2)
+    h = x[1] - x[0]
+    wts = np.ones_like(x)
+    wts[1:-1:2], wts[2:-1:2] = 4, 2
+    f /= np.sum(wts * f) * h / 3
+    s = np.array([0.0, 0.5, 3.0, 10.0, 60.0, 300.0, 2000.0])
+    ref = np.array([np.sum(wts * f * np.cos(si * x)) * h / 3 for si in s])
+    assert np.max(np.abs(sh.cf(s) - ref)) < 1e-8
+    # the same formula as a CasADi expression
+    S = ca.SX.sym("s")
+    F = ca.Function("f", [S], [sh.cf(S, lib=ca)])
+    assert np.max(np.abs(np.array([float(F(v)) for v in s]) - sh.cf(s))) < 1e-13
+
+
+def test_variances_closed_forms_and_mixing():
+    assert shape("uniform").divisor == pytest.approx(3.0)
+    assert shape("normal").divisor == pytest.approx(9.0)
+    assert shape("triangular").divisor == pytest.approx(6.0)
+    # truncated at 3 sigma: nearly the normal's 9; at 2 sigma: 1/(4 * 0.7737...) (variance 0.7737 sigma^2)
+    assert shape("truncnormal(3)").divisor == pytest.approx(9 / 0.97333, rel=1e-4)
+    assert shape("truncnormal").divisor == pytest.approx(4 / 0.77377, rel=1e-4)
+    names = ["a", "b", "c"]
+    np.testing.assert_allclose(divisors({"*": "normal", "b": "triangular"}, names), [9, 6, 9])
+    np.testing.assert_allclose(divisors("uniform", names), [3, 3, 3])
+    with pytest.raises(OutOfRangeError, match="distribution"):
+        shape("cauchy")
+    with pytest.raises(OutOfRangeError, match="beta"):
+        shape("truncnormal(20)")
+    with pytest.raises(InputError, match=r"distribution\[d\]"):
+        shapes_of({"d": "normal"}, names)
+    with pytest.raises(OutOfRangeError, match=r"distribution\[b\]"):
+        shapes_of({"b": "lognormal"}, names)
+
+
+# ------------------------------------------------------------------------------ along a direction
+def test_one_uniform_and_a_trapezoid():
+    P, err = direction_probability([1.0], ["uniform"], 0.5, tol=1e-6, return_error=True)
+    assert abs(P - 0.5) <= 1e-6 and err <= 1e-6
+    # two uniforms of half-widths 1 and 0.5: a trapezoid; P(|w| <= 0.8) = 1 - (1.5 - 0.8)^2 / 2
+    P = direction_probability([1.0, 0.5], ["uniform"] * 2, 0.8, tol=1e-7)
+    assert abs(P - (1 - 0.7**2 / 2)) <= 1e-7
+    # inside the flat part: R / b1
+    assert abs(direction_probability([1.0, 0.5], ["uniform"] * 2, 0.3, tol=1e-7) - 0.3) <= 1e-7
+
+
+@pytest.mark.parametrize("n,R", [(3, 0.4), (6, 1.3), (12, 2.0)])
+def test_irwin_hall(n, R):
+    """n equal uniforms on [-1, 1]: S = 2 IH_n - n, P(|S| <= R) from the Irwin-Hall CDF."""
+    def F(x):
+        return sum((-1) ** k * comb(n, k) * (x - k) ** n for k in range(int(math.floor(x)) + 1)) / factorial(n)
+
+    ref = F((n + R) / 2) - F((n - R) / 2)
+    P, err = direction_probability(np.ones(n), ["uniform"] * n, R, return_error=True)
+    assert err <= 1e-9
+    assert abs(P - ref) <= 1e-9
+
+
+def test_normals_give_the_gaussian_values():
+    b = np.array([1.0, 2.0, 0.5])
+    s = math.sqrt(np.sum((b / 3) ** 2))
+    assert abs(direction_probability(b, ["normal"] * 3, 1.0) - math.erf(1 / (s * math.sqrt(2)))) <= 1e-12
+
+
+def test_mixed_direction_against_monte_carlo(rng):
+    names = ["uniform", "normal", "triangular", "truncnormal", "uniform", "truncnormal(3)"]
+    b = np.array([0.8, 0.5, 0.6, 0.4, 0.2, 0.3])
+    R = 0.9
+    P = direction_probability(b, names, R)
+    n = 2_000_000
+    Y = np.column_stack([shape(s).sample(rng, n) for s in names])
+    lo, hi = _mc_interval(np.count_nonzero(np.abs(Y @ b) <= R), n)
+    assert lo <= P <= hi
+
+
+def test_a_dominating_uniform_direction_reports_its_bound():
+    """One uniform alone along a direction has a jump in its density: the series needs ~1/tol
+    terms; beyond kmax the error is raised, or reported with return_error."""
+    with pytest.raises(ExactProbabilityError):
+        direction_probability([1.0], ["uniform"], 0.3, tol=1e-9, kmax=1024)
+    P, err = direction_probability([1.0], ["uniform"], 0.3, tol=1e-9, kmax=1024, return_error=True)
+    assert err > 1e-9 and abs(P - 0.3) <= err
+
+
+def test_components_and_worst_direction(rng):
+    A = rng.normal(size=(3, 8))
+    eps = rng.uniform(0.5, 1.0, 8)
+    sh = ["uniform"] * 8
+    P, E = components_probability(A, eps, sh, 1.0)
+    # each principal component's probability against a direct Monte Carlo along it
+    n = 1_000_000
+    Y = rng.uniform(-1, 1, (n, 8)) * eps
+    W = (Y @ A.T) @ E
+    for j in range(3):
+        lo, hi = _mc_interval(np.count_nonzero(np.abs(W[:, j]) <= 1.0), n)
+        assert lo <= P[j] <= hi
+    u, pu = worst_direction(A, eps, sh, 1.0)
+    assert pu <= P.min() + 1e-12
+    # no direction among 2000 random ones is worse
+    D = rng.normal(size=(2000, 3))
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    assert pu <= direction_probability(D @ A * eps, sh, 1.0).min() + 1e-9
+
+
+# ---------------------------------------------------------------------------------- sphere, cone
+def test_ball_all_normal_equals_the_gaussian_formula(rng):
+    A = rng.normal(size=(3, 8))
+    eps = rng.uniform(0.5, 1.0, 8)
+    lam = np.linalg.eigvalsh((A * eps**2 / 9) @ A.T)
+    P, err = ball_probability(A, eps, ["normal"] * 8, 1.0, return_error=True)
+    assert err <= 1e-7
+    assert abs(P - stats.p_ball(lam, 1.0)) <= 1e-7
+
+
+def test_ball_and_cone_uniform_against_monte_carlo(rng):
+    A = rng.normal(size=(3, 8))
+    eps = rng.uniform(0.5, 1.0, 8)
+    P = ball_probability(A, eps, ["uniform"] * 8, 1.6, tol=1e-6)
+    n = 2_000_000
+    Y = rng.uniform(-1, 1, (n, 8)) * eps
+    d = Y @ A.T
+    lo, hi = _mc_interval(np.count_nonzero(np.linalg.norm(d, axis=1) <= 1.6), n)
+    assert lo <= P <= hi
+    gauss = stats.p_ball(np.linalg.eigvalsh((A * eps**2 / 3) @ A.T), 1.6)
+    assert gauss - P > 5 * (hi - lo)  # the Gaussian reading is off here (0.673 vs 0.653)
+    C = A[:2]
+    Pc = cone_probability(C, eps, ["uniform"] * 8, 1.5, tol=1e-6)
+    lo, hi = _mc_interval(np.count_nonzero(np.linalg.norm(d[:, :2], axis=1) <= 1.5), n)
+    assert lo <= Pc <= hi
+    # the all-normal cone is the 2-D Gaussian value
+    Pn = cone_probability(C, eps, ["normal"] * 8, 1.0)
+    assert abs(Pn - stats.p_ball(np.linalg.eigvalsh((C * eps**2 / 9) @ C.T), 1.0)) <= 1e-7
+
+
+def test_bad_input_is_typed():
+    with pytest.raises(OutOfRangeError, match="R"):
+        direction_probability([1.0], ["uniform"], -1.0)
+    with pytest.raises(OutOfRangeError, match="shapes"):
+        direction_probability([1.0, 2.0], ["uniform"], 1.0)
+    with pytest.raises(OutOfRangeError, match="A"):
+        ball_probability(np.ones((2, 3)), np.ones(3), ["uniform"] * 3, 1.0)
+    with pytest.raises(OutOfRangeError, match="Phi"):
+        cone_probability(np.ones((2, 3)), np.ones(3), ["uniform"] * 3, 0.0)

@@ -1,0 +1,237 @@
+"""The design-review report (issue 9 point 3): well-formed, escaped HTML that holds the result's
+numbers as printed, checked against independent recomputations (the cost from the printed table and
+the model's k, alpha; the Wilson interval from the printed estimate and n by its closed form), and a
+command line that writes the file and answers bad input with a typed message, never a traceback."""
+
+from __future__ import annotations
+
+import math
+import re
+import subprocess
+import sys
+from html.parser import HTMLParser
+from statistics import NormalDist
+
+import numpy as np
+import pytest
+
+import tolsynth
+from tolsynth.cli import main
+
+pytest.importorskip("matplotlib")
+
+VOID = {"meta", "img", "br", "hr", "link", "input", "col", "area", "base", "source", "wbr"}
+N_MC = 4000
+
+
+class _Checker(HTMLParser):
+    """Balanced tags (void elements excepted), and the text of every table cell in order."""
+
+    def __init__(self):
+        super().__init__(convert_charrefs=True)
+        self.stack, self.errors, self.tables, self.text = [], [], [], []
+        self._cell = None
+
+    def handle_starttag(self, tag, attrs):
+        if tag in VOID:
+            return
+        self.stack.append(tag)
+        if tag == "table":
+            self.tables.append([])
+        elif tag == "tr":
+            self.tables[-1].append([])
+        elif tag in ("td", "th"):
+            self._cell = []
+
+    def handle_endtag(self, tag):
+        if tag in VOID:
+            return
+        if not self.stack or self.stack[-1] != tag:
+            self.errors.append(f"</{tag}> closes <{self.stack[-1] if self.stack else None}>")
+            return
+        self.stack.pop()
+        if tag in ("td", "th"):
+            self.tables[-1][-1].append("".join(self._cell).strip())
+            self._cell = None
+
+    def handle_data(self, data):
+        self.text.append(data)
+        if self._cell is not None:
+            self._cell.append(data)
+
+
+def _parse(text: str) -> _Checker:
+    c = _Checker()
+    c.feed(text)
+    c.close()
+    assert not c.errors, c.errors[:5]
+    assert c.stack == [], f"unclosed tags {c.stack}"
+    return c
+
+
+@pytest.fixture(scope="module")
+def xu_report(tmp_path_factory):
+    m = tolsynth.load_model("xu_zhang_1988")
+    path = tmp_path_factory.mktemp("rep") / "report.html"
+    rep = tolsynth.report(m, R=0.5, p=0.99, mc_samples=N_MC, seed=1, map_n=12, worst_grid=6, path=path)
+    return m, rep, path.read_text(encoding="utf-8")
+
+
+def _table_with(checker: _Checker, header: str) -> list[list[str]]:
+    for t in checker.tables:
+        if t and t[0] and t[0][0] == header:
+            return t
+    raise AssertionError(f"no table headed {header!r}")
+
+
+def test_html_is_well_formed_and_self_contained(xu_report):
+    _, rep, text = xu_report
+    assert text.startswith("<!DOCTYPE html>")
+    c = _parse(text)
+    # every figure embedded, none linked
+    imgs = re.findall(r'<img src="([^"]+)"', text)
+    assert len(imgs) == 2 and all(s.startswith("data:image/png;base64,") for s in imgs)
+    import base64
+
+    assert all(base64.b64decode(s.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n" for s in imgs)
+    body = "".join(c.text)
+    for section in ("1. Specification", "2. Model", "3. Optimal tolerances", "4. Certificate", "5. Contributions",
+                    "6. Monte Carlo validation", "7. Workspace", "Worst pose"):
+        assert section in body
+    assert rep.mechanism.source.split()[0] in body and rep.mechanism.assumptions[0][:40] in body
+
+
+def test_report_holds_the_numbers_of_the_result(xu_report):
+    m, rep, text = xu_report
+    res = rep.result
+    body = "".join(_parse(text).text)
+    assert f"{res.cost:.8g}" in body and f"{res.lower_bound:.8g}" in body and f"{res.gap:.2e}" in body
+    c = _parse(text)
+    table = _table_with(c, "parameter")
+    rows = {r[0]: r for r in table[1:]}
+    assert set(rows) == set(res.tolerances)
+    for name, eps in res.tolerances.items():
+        assert rows[name][1] == f"{eps:.6g}" and rows[name][2] == res.units[name]
+    # independent: the cost recomputed from the printed tolerances and the model's k (alpha 0.7)
+    printed = np.array([float(rows[n][1]) for n in m.error_parameters])
+    cost = float(np.sum(np.asarray(m.k) * printed ** -0.7))
+    assert cost == pytest.approx(res.cost, rel=5e-6)
+
+
+def _wilson(phat: float, n: int, conf: float) -> tuple[float, float]:
+    z = NormalDist().inv_cdf(0.5 + conf / 2)
+    centre = (phat + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(phat * (1 - phat) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def test_monte_carlo_interval_as_printed_and_by_closed_form(xu_report):
+    _, rep, text = xu_report
+    c = _parse(text)
+    table = _table_with(c, "probability")
+    (label, v), = rep.validations
+    assert label == "worst" and v.n == N_MC
+    for j in range(3):
+        row = table[1 + j]
+        lo, hi = v.p_components_ci[j]
+        assert row[2] == f"{v.p_components[j]:.5f}" and row[3] == f"[{lo:.5f}, {hi:.5f}]"
+        # the printed estimate is k / 4000, exact to 5 decimals: the Wilson score interval by hand
+        wlo, whi = _wilson(float(row[2]), N_MC, 0.95)
+        plo, phi = (float(x) for x in row[3].strip("[]").split(","))
+        assert plo == pytest.approx(wlo, abs=6e-6) and phi == pytest.approx(whi, abs=6e-6)
+    assert table[4][2] == f"{v.p_sphere:.5f}"
+
+
+def test_orientation_rows_with_phi():
+    """With an orientation specification the Monte Carlo section has its rows (validate(Phi=...))."""
+    rep = tolsynth.report("xu_zhang_1988", R=0.5, p=0.99, Phi=0.002, mc_samples=2000, map_n=0, worst_grid=0)
+    (_, v), = rep.validations
+    mc = v.montecarlo
+    assert mc.Phi == 0.002 and mc.p_orientation_components.shape == (3,)
+    table = _table_with(_parse(rep.to_html()), "probability")
+    rows = {r[0]: r for r in table[1:]}
+    for j in range(3):
+        row = rows[f"P(|phi{j + 1}| <= Phi)"]
+        assert row[1] == "0.99" and row[2] == f"{mc.p_orientation_components[j]:.5f}"
+        wlo, whi = _wilson(float(row[2]), 2000, 0.95)
+        plo, phi = (float(x) for x in row[3].strip("[]").split(","))
+        assert plo == pytest.approx(wlo, abs=6e-6) and phi == pytest.approx(whi, abs=6e-6)
+    assert rows["P(z axis tilt <= Phi)"][2] == f"{mc.p_cone:.5f}"
+
+
+def test_text_is_escaped_and_markdown_writes_figures(tmp_path):
+    from tolsynth.mechanism import load_model
+
+    text = open(load_model("planar_2r").spec.path, encoding="utf-8").read()
+    evil = 'Planar <b>2R</b> & "x" <script>alert(1)</script>'
+    text = re.sub(r"^title = .*$", lambda _: 'title = "Planar <b>2R</b> & \\"x\\" <script>alert(1)</script>"', text,
+                  count=1, flags=re.M)
+    model = tmp_path / "evil.toml"
+    model.write_text(text, encoding="utf-8")
+    m = load_model(model)
+    assert m.title == evil, m.title
+    rep = tolsynth.report(m, R=0.5, p=0.99, mc_samples=500, map_n=0, worst_grid=0)
+    html_text = rep.to_html()
+    _parse(html_text)
+    assert "<script>" not in html_text and "<b>2R" not in html_text
+    assert "&lt;script&gt;alert(1)&lt;/script&gt;" in html_text
+    assert "switched off (map_n = 0)" in html_text and "switched off (worst_grid = 0)" in html_text
+    files = rep.write(tmp_path / "r.md")
+    md = (tmp_path / "r.md").read_text(encoding="utf-8")
+    assert files[0].endswith("r.md") and len(files) == 2 and files[1].endswith("r_files/contributions_0.png")
+    assert "](r_files/contributions_0.png)" in md and f"{rep.result.cost:.8g}" in md
+    assert (tmp_path / "r_files" / "contributions_0.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_report_api_rejects_bad_input():
+    with pytest.raises(tolsynth.InputError, match="map_n"):
+        tolsynth.report("planar_2r", R=0.5, p=0.99, map_n=3)
+    with pytest.raises(tolsynth.InputError, match="mc_samples"):
+        tolsynth.report("planar_2r", R=0.5, p=0.99, mc_samples=-1)
+    with pytest.raises(tolsynth.InputError, match="R"):
+        tolsynth.report("planar_2r", p=0.99)
+    res = tolsynth.synthesize("planar_2r", 0.5, 0.99)
+    with pytest.raises(tolsynth.InputError, match="source"):
+        tolsynth.report(res, R=0.5, p=0.99)
+    rep = tolsynth.report(res, mc_samples=0, map_n=0, worst_grid=0)  # the model recorded in the result
+    assert rep.result is res and rep.mechanism.name == "planar_2r"
+
+
+def test_cli_writes_the_report(tmp_path, capsys):
+    out = tmp_path / "rep.html"
+    rc = main(["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--mc-samples", "1000",
+               "--map-n", "0", "--worst-grid", "0", "--out", str(out)])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    res = tolsynth.synthesize("planar_2r", 0.5, 0.99)  # the same solve, through the API
+    text = out.read_text(encoding="utf-8")
+    _parse(text)
+    assert f"{res.cost:.8g}" in text and f"{res.cost:.8g}" in cap.out
+    assert str(out) in cap.out
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["--p", "1.5"], "--p"),
+    (["--p", "0.99", "--mc-samples", "-5"], "--mc-samples"),
+    (["--p", "0.99", "--map-n", "3"], "--map-n"),
+    (["--p", "0.99", "--out", "/nonexistent/dir/r.html"], "does not exist"),
+    (["--p", "0.99", "--format", "pdf"], "--format"),
+    (["--p", "0.99", "--pose", "nowhere"], "nowhere"),
+    (["--p", "0.99", "--hand-axis", "1,2"], "--hand-axis"),
+])
+def test_cli_bad_input_exits_2_without_traceback(tmp_path, argv, fragment):
+    args = ["report", "--model", "planar_2r", "--R", "0.5"] + argv
+    if "--out" not in argv:
+        args += ["--out", str(tmp_path / "r.html")]
+    run = subprocess.run([sys.executable, "-m", "tolsynth"] + args, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2, run.stderr
+    assert "Traceback" not in run.stderr and fragment in run.stderr, run.stderr
+    assert not (tmp_path / "r.html").exists()
+
+
+def test_cli_without_matplotlib_says_how_to_install(tmp_path, capsys, monkeypatch):
+    """Checked before any work (the solve would be wasted)."""
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib now raises ImportError
+    rc = main(["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--out", str(tmp_path / "r.html")])
+    err = capsys.readouterr().err
+    assert rc == 2 and 'pip install "tolsynth[plot]"' in err, err
