@@ -47,7 +47,7 @@ def main() -> None:
               f"{Pg:24.5f} {mcg.p_directions[0]:8.5f} | {te:9.1f}")
     if args.sphere:
         print("\nsphere criterion P(|dr| <= R) >= p")
-        for p in (0.9, 0.99):
+        for p in (0.7, 0.8, 0.9, 0.99):
             g = tolsynth.synthesize(m, R=R, p=p, criterion="sphere")
             t0 = time.perf_counter()
             e = tolsynth.synthesize(m, R=R, p=p, criterion="sphere", probability="exact")

@@ -105,6 +105,31 @@ def test_solve_rejects_p_orientation_without_phi(capsys):
     assert "--p-orientation" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("extra, fragment", [
+    (["--everywhere"], "given with --everywhere"),
+    (["--solver", "both"], "given with --solver both"),
+])
+def test_solve_rejects_verify_where_it_would_be_ignored(capsys, extra, fragment):
+    """--verify closes the loop of one solve; with --everywhere or both solvers it would silently do
+    nothing, so it is a typed error naming the option."""
+    assert main(["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.9", "--verify", "auto"] + extra) == 2
+    err = capsys.readouterr().err
+    assert "--verify" in err and fragment in err and "Traceback" not in err
+
+
+def test_solve_and_report_share_the_specification_options():
+    """One definition of the specification's options: solve and report offer the same ones."""
+    import argparse
+
+    from tolsynth.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    opts = {name: {o for a in sub.choices[name]._actions for o in a.option_strings} for name in ("solve", "report")}
+    shared = {"--model", "--R", "--p", "--dist", "--alpha", "--k", "--bounds", "--solver", "--pose", "--Phi",
+              "--p-orientation", "--criterion", "--probability", "--verify", "--lock"}
+    assert shared <= opts["solve"] and shared <= opts["report"]
+
+
 def test_version_and_help(capsys):
     with pytest.raises(SystemExit) as info:
         main(["--version"])

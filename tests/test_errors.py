@@ -252,3 +252,17 @@ def test_poses_may_mix_names_and_joint_vectors(xz):
     assert a.success and b.success and abs(a.cost - b.cost) <= 1e-7 * b.cost
     with _raises(InputError, "poses"):
         tolsynth.synthesize(xz, R=0.5, p=0.9, poses={"worst": 1})
+
+
+def test_every_entry_point_takes_a_model_name_and_types_anything_else():
+    """A bundled model's name works wherever a Mechanism does (monte_carlo raised AttributeError on
+    one); anything else is an InputError naming the argument."""
+    mc = tolsynth.monte_carlo("planar_2r", "elbow90", "coarse", R=0.5, n=20_000, seed=1)
+    assert 0.0 <= mc.p_sphere <= 1.0 and mc.n == 20_000
+    for fn, args, kw in [
+        (tolsynth.monte_carlo, (5, "elbow90", {"*": 0.01}), dict(R=0.5, n=1000)),
+        (tolsynth.synthesize, (3.0, 0.5, 0.9), {}),
+        (tolsynth.validate, (object(), {"*": 0.01}), dict(R=0.5, p=0.9, n=1000)),
+    ]:
+        with pytest.raises(InputError, match="mechanism"):
+            fn(*args, **kw)

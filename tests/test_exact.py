@@ -124,12 +124,44 @@ def test_mixed_direction_against_monte_carlo(rng):
 
 
 def test_a_dominating_uniform_direction_reports_its_bound():
-    """One uniform alone along a direction has a jump in its density: the series needs ~1/tol
-    terms; beyond kmax the error is raised, or reported with return_error."""
+    """One uniform dominating a direction (a second term 1e-5 of it) makes a near-jump in the
+    density: the series needs ~1/tol terms; beyond kmax the error is raised, or reported with
+    return_error."""
+    b = [1.0, 1e-5]
     with pytest.raises(ExactProbabilityError):
-        direction_probability([1.0], ["uniform"], 0.3, tol=1e-9, kmax=1024)
-    P, err = direction_probability([1.0], ["uniform"], 0.3, tol=1e-9, kmax=1024, return_error=True)
-    assert err > 1e-9 and abs(P - 0.3) <= err
+        direction_probability(b, ["uniform"] * 2, 0.3, tol=1e-9, kmax=1024)
+    P, err = direction_probability(b, ["uniform"] * 2, 0.3, tol=1e-9, kmax=1024, return_error=True)
+    assert err > 1e-9 and abs(P - 0.3) <= err  # exact: 0.3 (the flat part of a trapezoid)
+
+
+@pytest.mark.parametrize("name", ["uniform", "normal", "triangular", "truncnormal", "truncnormal(3)"])
+def test_a_single_term_or_none_is_its_own_cdf(rng, name):
+    """A direction with one error alone (a planar arm's normal has none): no series, the shape's
+    CDF, against Monte Carlo; no term at all is probability 1; a bounded term 1e-15 of the largest
+    is dropped with its rigorous effect in the bound."""
+    b, R = np.array([0.0, 0.7, 0.0]), 0.45
+    P, err = direction_probability(b, ["uniform", name, "normal"], R, return_error=True)
+    n = 1_000_000
+    lo, hi = _mc_interval(np.count_nonzero(np.abs(0.7 * shape(name).sample(rng, n)) <= R), n)
+    assert err == 0.0 and lo <= P <= hi
+    assert direction_probability(np.zeros(3), [name] * 3, R, return_error=True) == (1.0, 0.0)
+    P2, err2 = direction_probability([0.7, 0.7e-15], [name, "uniform"], R, return_error=True)
+    assert abs(P2 - P) <= err2 <= 1e-14
+
+
+def test_planar_arm_exact_design_has_a_certain_normal_direction():
+    """planar_2r: the hand never leaves its plane (z row of the sensitivity 0), so along z the
+    exact probability is 1; the exact design meets p by Monte Carlo in the plane."""
+    import tolsynth
+
+    r = tolsynth.synthesize("planar_2r", 0.5, 0.9, probability="exact")
+    assert r.success and r.inputs["probability"] == "exact"
+    g = tolsynth.synthesize("planar_2r", 0.5, 0.9)
+    assert abs(r.cost / g.cost - 1) < 0.1  # the same design problem, another reading of p
+    mc = tolsynth.monte_carlo("planar_2r", list(r.spec.poses.values())[0], r.x, R=0.5, n=200_000, seed=3,
+                              directions=r.constraints[0].directions[:, :1], check_limits=False)
+    lo, hi = mc.p_directions_ci[0]
+    assert lo <= 0.9 + 1e-3 and hi >= 0.9 - 1e-3, (lo, hi)
 
 
 def test_components_and_worst_direction(rng):

@@ -216,6 +216,7 @@ def test_cli_writes_the_report(tmp_path, capsys):
     (["--p", "0.99", "--map-n", "3"], "--map-n"),
     (["--p", "0.99", "--out", "/nonexistent/dir/r.html"], "does not exist"),
     (["--p", "0.99", "--format", "pdf"], "--format"),
+    (["--p", "0.99", "--format", "md"], "named as html"),  # Markdown into a file named .html
     (["--p", "0.99", "--pose", "nowhere"], "nowhere"),
     (["--p", "0.99", "--hand-axis", "1,2"], "--hand-axis"),
 ])
@@ -235,3 +236,40 @@ def test_cli_without_matplotlib_says_how_to_install(tmp_path, capsys, monkeypatc
     rc = main(["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--out", str(tmp_path / "r.html")])
     err = capsys.readouterr().err
     assert rc == 2 and 'pip install "tolsynth[plot]"' in err, err
+
+
+def test_exact_and_verified_design_says_so(tmp_path):
+    """probability="exact" with verify=: the report names the probability model, says there is no
+    convexity certificate, and shows the closed loop's Monte Carlo, whose printed interval is the
+    Wilson interval of its printed estimate and n (closed form, recomputed here)."""
+    path = tmp_path / "exact.html"
+    rep = tolsynth.report("planar_2r", R=0.5, p=0.9, probability="exact", verify=4000, mc_samples=1000, seed=2,
+                          map_n=0, worst_grid=0, path=path)
+    res = rep.result
+    assert res.inputs["probability"] == "exact" and res.inputs["verify"] == 4000
+    text = path.read_text(encoding="utf-8")
+    c = _parse(text)
+    body = "".join(c.text)
+    assert "exact (the linear error model" in body and "no certificate of global optimality" in body
+    ver = res.verification
+    m = re.search(r"achieved ([0-9.]+) \[([0-9.]+), ([0-9.]+)\] against p = 0\.9", body)
+    assert m, body[-3000:]
+    est = float(m.group(1))
+    assert abs(est - ver.achieved) <= 5e-6
+    lo, hi = _wilson(est, ver.n, 0.99)
+    assert abs(float(m.group(2)) - lo) <= 2e-5 and abs(float(m.group(3)) - hi) <= 2e-5
+    assert ver.verified == (lo >= 0.9 - 1e-12) and ver.verified
+    assert "0.9 asked (the design's target after the closed loop" in body
+    assert all(v.p == 0.9 for _, v in rep.validations)  # the Monte Carlo section judges against p as asked
+    rounds = _table_with(c, "round")
+    assert len(rounds) - 1 == len(ver.rounds) >= 1
+
+
+def test_cli_report_takes_probability_and_verify(tmp_path, capsys):
+    out = tmp_path / "r.md"
+    rc = main(["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.9", "--probability", "exact",
+               "--mc-samples", "1000", "--map-n", "0", "--worst-grid", "0", "--out", str(out)])
+    assert rc == 0, capsys.readouterr().err
+    text = out.read_text(encoding="utf-8")
+    exact = tolsynth.synthesize("planar_2r", 0.5, 0.9, probability="exact")
+    assert "| probability model | exact" in text and f"{exact.cost:.8g}" in text

@@ -74,11 +74,10 @@ def best_accuracy(mechanism, budget: float, *, p: float | None = None, R: float 
     True
     """
     from .checks import check_positive, check_probability
-    from .mechanism import Mechanism, load_model
+    from .mechanism import as_mechanism
     from .synthesis import synthesize
 
-    if not isinstance(mechanism, Mechanism):
-        mechanism = load_model(mechanism)
+    mechanism = as_mechanism(mechanism)
     budget = check_positive(budget, "budget")
     if (p is None) == (R is None):
         raise InputError("p/R", "give exactly one of them", "p (then the smallest R is found) or R (the largest p)")

@@ -138,6 +138,49 @@ def _interval_weight(k, L):
     return 2.0 / (np.pi * k)
 
 
+#: a bounded term below this fraction of its row's largest is dropped, its effect added to the bound
+NEGLIGIBLE = 1e-13
+
+
+def _negligible_dropped(b: np.ndarray, sh) -> tuple[np.ndarray, np.ndarray]:
+    """``b`` with bounded terms below ``NEGLIGIBLE`` of the row's largest set to 0 (they would make a
+    near-jump the series cannot resolve), and per row the rigorous bound on what that changes:
+    shifting ``w`` by at most ``delta = sum of the dropped |b_i|`` moves ``P(|w| <= R)`` by at most
+    ``2 delta`` times the density's maximum, which is at most ``peak_j / |b_j|`` for any one term j
+    (a convolution never raises the maximum), the largest term's here."""
+    bounded = np.array([s.bounded for s in sh])
+    peak = np.array([s.peak for s in sh])
+    big = b.max(axis=1, keepdims=True)
+    small = bounded[None, :] & (b > 0) & (b <= NEGLIGIBLE * big)
+    if not small.any():
+        return b, np.zeros(b.shape[0])
+    jmax = np.argmax(b, axis=1)
+    delta = np.where(small, b, 0.0).sum(axis=1)
+    bound = np.where(delta > 0, 2.0 * delta * peak[jmax] / np.maximum(big[:, 0], 1e-300), 0.0)
+    return np.where(small, 0.0, b), bound
+
+
+def _one_term(row: np.ndarray, sh, R: float) -> float:
+    """``P(|b Y| <= R)`` for a row with at most one non-zero term: the shape's own CDF (closed
+    forms: uniform ``x``, triangular ``1 - (1 - x)^2``, normal ``erf(3 x / sqrt 2)``, normal
+    truncated at 1 with sigma ``1/beta``: ``erf(beta x / sqrt 2) / erf(beta / sqrt 2)``, with
+    ``x = R / |b|``); 1 for no term."""
+    nz = np.flatnonzero(row)
+    if nz.size == 0:
+        return 1.0
+    s = sh[nz[0]]
+    x = R / abs(row[nz[0]])
+    if s.kind == "normal":
+        return math.erf(3.0 * x / math.sqrt(2.0))
+    if x >= 1.0:
+        return 1.0
+    if s.kind == "uniform":
+        return x
+    if s.kind == "triangular":
+        return 1.0 - (1.0 - x) ** 2
+    return math.erf(s.beta * x / math.sqrt(2.0)) / math.erf(s.beta / math.sqrt(2.0))
+
+
 def direction_probability(b, shapes, R: float, tol: float = DEFAULT_TOL, kmax: int = KMAX,
                           return_error: bool = False):
     """``P(|sum_i b_i Y_i| <= R)`` for rows of coefficients ``b`` (mm; shape (n,) or (M, n)),
@@ -156,20 +199,30 @@ def direction_probability(b, shapes, R: float, tol: float = DEFAULT_TOL, kmax: i
     if not np.all(np.isfinite(b)):
         raise OutOfRangeError("b", "a non-finite coefficient", "finite numbers")
     sh = _shapes(shapes, b.shape[1])
-    L = half_period(b, sh, R)
-    K, bound = _needed_terms(b, sh, L, tol, _interval_weight, kmax)
-    if not return_error and np.any(bound > tol):
-        raise ExactProbabilityError(
-            f"exact probability: the series tail bound {bound.max():.2e} exceeds tol {tol:g} after {K} terms "
-            "(one error dominates this direction: its density has a jump)")
+    b, dropped = _negligible_dropped(b, sh)
     P = np.empty(b.shape[0])
-    k = np.arange(1, K + 1, dtype=float)
-    chunk = max(1, 4_000_000 // max(1, K * b.shape[1]))
-    for a in range(0, b.shape[0], chunk):
-        rows = slice(a, a + chunk)
-        terms = series_terms(b[rows], sh, L[rows], K)
-        coef = 2.0 / (np.pi * k)[None, :] * np.sin(np.pi * k[None, :] * R / L[rows, None])
-        P[rows] = R / L[rows] + np.sum(coef * terms, axis=1)
+    bound = dropped.copy()
+    single = np.count_nonzero(b, axis=1) <= 1  # no term, or one: its own CDF (a jump defeats the series)
+    if np.any(single):
+        P[single] = [_one_term(row, sh, R) for row in b[single]]
+    rest = np.flatnonzero(~single)
+    K = 0
+    if rest.size:
+        br = b[rest]
+        L = half_period(br, sh, R)
+        K, tail = _needed_terms(br, sh, L, tol, _interval_weight, kmax)
+        bound[rest] += tail
+        if not return_error and np.any(bound > tol):
+            raise ExactProbabilityError(
+                f"exact probability: the series tail bound {bound.max():.2e} exceeds tol {tol:g} after {K} terms "
+                "(one error dominates this direction: its density has a jump)")
+        k = np.arange(1, K + 1, dtype=float)
+        chunk = max(1, 4_000_000 // max(1, K * b.shape[1]))
+        for a in range(0, rest.size, chunk):
+            rows = slice(a, a + chunk)
+            terms = series_terms(br[rows], sh, L[rows], K)
+            coef = 2.0 / (np.pi * k)[None, :] * np.sin(np.pi * k[None, :] * R / L[rows, None])
+            P[rest[rows]] = R / L[rows] + np.sum(coef * terms, axis=1)
     P = np.clip(P, 0.0, 1.0)
     if one:
         return (float(P[0]), float(bound[0])) if return_error else float(P[0])

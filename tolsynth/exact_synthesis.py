@@ -43,7 +43,6 @@ import casadi as ca
 import numpy as np
 
 from . import exact as ex
-from .distributions import Shape
 from .problem import ToleranceNLP, cost_graph
 from .result import ConstraintBlock, Status, SynthesisResult
 

@@ -86,7 +86,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any, Mapping, Sequence
 
-from .checks import HUGE, TINY, check_positive, check_real
+from .checks import HUGE, check_positive, check_real
 from .errors import InputError, OutOfRangeError, UnknownNameError
 
 __all__ = ["JointError", "KINDS", "joint_parameters", "add_joint_errors", "with_given_costs"]

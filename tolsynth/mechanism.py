@@ -56,6 +56,17 @@ def load_model(name_or_path: str | os.PathLike) -> "Mechanism":
     return Mechanism(read_model_file(path))
 
 
+def as_mechanism(mechanism, field: str = "mechanism") -> "Mechanism":
+    """``mechanism`` itself if it is a :class:`Mechanism`, else :func:`load_model` of a bundled
+    model name or a model file path; anything else is an :class:`InputError` naming ``field``."""
+    if isinstance(mechanism, Mechanism):
+        return mechanism
+    if isinstance(mechanism, (str, os.PathLike)):
+        return load_model(mechanism)
+    raise InputError(field, f"got {type(mechanism).__name__}",
+                     "a Mechanism, a bundled model name or a model file path")
+
+
 #: sensitivities remembered per Mechanism (poses x error vectors)
 SENSITIVITY_CACHE = 4096
 

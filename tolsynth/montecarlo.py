@@ -44,7 +44,7 @@ from .errors import InputError, LoopClosureError, OutOfRangeError
 from .numpy_eval import NumpyEvaluator
 from .progress import Progress, make_bar  # noqa: F401  (make_bar: re-exported for older imports)
 from .tables import Tabular
-from .stats import check_positive, check_probability, principal, variance_divisor
+from .stats import check_positive, check_probability, principal
 
 __all__ = [
     "NumpyEvaluator",
@@ -403,7 +403,9 @@ def monte_carlo(
     (100000, 7, 0)
     """
     from .distributions import resolve
+    from .mechanism import as_mechanism
 
+    mechanism = as_mechanism(mechanism)
     distribution = resolve(distribution, mechanism)
     R = check_positive(R, "R")
     n = _check_n(n)

@@ -84,12 +84,11 @@ def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, pro
     >>> front = tolsynth.pareto_front("xu_zhang_1988", R=[0.5, 1.0, 2.0], p=0.99)
     >>> [round(r["cost"], 1) for r in front.rows]  # doctest: +SKIP
     """
-    from .mechanism import Mechanism, load_model
+    from .mechanism import as_mechanism
     from .problem import ToleranceNLP, make_specification
     from .synthesis import synthesize
 
-    if not isinstance(mechanism, Mechanism):
-        mechanism = load_model(mechanism)
+    mechanism = as_mechanism(mechanism)
     R_seq, p_seq = np.ndim(R) == 1, np.ndim(p) == 1
     if R_seq == p_seq or R is None or p is None:
         raise InputError("R/p", "give one as a sequence (the sweep) and the other as a number",

@@ -164,7 +164,6 @@ def _hull_model(procs: list[Process]) -> tuple[Tabulated, float, float]:
     hy, hc = y[hull], c[hull]
     stop = int(np.argmin(hc)) + 1  # beyond the cheapest point a looser tolerance only costs more
     hy, hc = hy[:stop], hc[:stop]
-    lo = min(pr.lower for pr in procs)
     if len(hy) < 2:  # one point: a flat table on a tiny range
         hy = np.array([hy[0], hy[0] * (1 + 1e-9)])
         hc = np.array([hc[0], hc[0]])
@@ -312,10 +311,9 @@ def synthesize_processes(mechanism, R: float, p: float, processes=None, distribu
     >>> best.processes["h3"], best.proven  # doctest: +SKIP
     ('turning', True)
     """
-    from .mechanism import Mechanism, load_model
+    from .mechanism import as_mechanism
 
-    if not isinstance(mechanism, Mechanism):
-        mechanism = load_model(mechanism)
+    mechanism = as_mechanism(mechanism)
     t0 = time.perf_counter()
     if processes is None:
         processes = mechanism.processes  # the model file's
@@ -412,10 +410,9 @@ def enumerate_processes(mechanism, R: float, p: float, processes, distribution=N
 
     Returns a list of ``(choice dict, SynthesisResult or None if infeasible)``.
     """
-    from .mechanism import Mechanism, load_model
+    from .mechanism import as_mechanism
 
-    if not isinstance(mechanism, Mechanism):
-        mechanism = load_model(mechanism)
+    mechanism = as_mechanism(mechanism)
     procs = _normalise(mechanism, processes)
     search = _Search(mechanism, R, p, distribution, procs, kwargs)
     out = []

@@ -164,10 +164,15 @@ def check_report_path(path, format: str | None = None, field: str = "path") -> s
     """The report's format (from ``format`` or the suffix) after checking that the file can be
     written and matplotlib is installed; raises :class:`InputError` / :class:`MissingDependencyError`."""
     path = os.fspath(path)
+    suffix = os.path.splitext(path)[1].lower()
+    implied = "md" if suffix in (".md", ".markdown") else "html" if suffix in (".html", ".htm") else None
     if format is None:
-        format = "md" if os.path.splitext(path)[1].lower() in (".md", ".markdown") else "html"
+        format = implied or "html"
     if format not in FORMATS:
         raise InputError("format", f"{format!r}", " or ".join(repr(f) for f in FORMATS))
+    if implied is not None and implied != format:  # a Markdown file named .html (or the reverse) misleads
+        raise InputError(field, f"{path!r} is named as {implied} but the format asked is {format}",
+                         f"a file ending in .{'md' if format == 'md' else 'html'} for format {format!r}")
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise InputError(field, f"{path!r}: the folder {folder} does not exist", "a path in an existing folder")
@@ -183,6 +188,20 @@ def check_report_path(path, format: str | None = None, field: str = "path") -> s
 # ---------------------------------------------------------------------------------------------
 # gathering
 # ---------------------------------------------------------------------------------------------
+def _is_exact(res) -> bool:
+    """Whether ``res`` was designed with ``probability="exact"``."""
+    return (getattr(res, "inputs", None) or {}).get("probability") == "exact" or \
+        any(b.kind.endswith("(exact)") for b in res.constraints)
+
+
+def _asked_p(res, spec) -> str:
+    """p as asked; after a closed loop (verify) the design's tighter target beside it."""
+    ver = getattr(res, "verification", None)
+    if ver is None or abs(ver.p - spec.p) <= 1e-15:
+        return f"{spec.p:g}"
+    return f"{ver.p:g} asked (the design's target after the closed loop: {spec.p:.6g})"
+
+
 def report(
     source,
     R: float | None = None,
@@ -257,7 +276,7 @@ def report(
     (True, 1)
     """
     from .checks import check_count
-    from .mechanism import Mechanism, load_model
+    from .mechanism import as_mechanism
     from .process import ProcessChoice
     from .result import SynthesisResult
 
@@ -288,7 +307,7 @@ def report(
     else:
         if mechanism is not None:
             raise InputError("mechanism", "given with a model as source", "a result as source, or no mechanism")
-        mech = source if isinstance(source, Mechanism) else load_model(source)
+        mech = as_mechanism(source, "source")
         if R is None or p is None:
             raise InputError("R" if R is None else "p", "missing", "R (mm) and p (0 < p < 1) to solve for")
         if processes is not None and processes is not False:
@@ -322,8 +341,9 @@ def report(
         from .validation import validate
 
         for label, q in spec.poses.items():
-            v = validate(mech, result, pose=np.asarray(q, dtype=float), n=mc_samples, seed=seed,
-                         confidence=confidence, progress=False, Phi=spec.Phi)
+            asked = result.verification.p if getattr(result, "verification", None) is not None else None
+            v = validate(mech, result, p=asked, pose=np.asarray(q, dtype=float), n=mc_samples, seed=seed,
+                         confidence=confidence, progress=False, Phi=spec.Phi)  # p: as asked, not the loop's target
             validations.append((label, v))
     pmap = None
     if map_n == 0:
@@ -413,9 +433,11 @@ def _layout(rep: DesignReport) -> list[tuple]:
         ", ".join(f"{n} {a:g}" for n, a in zip(spec.names, alpha))
     kv = [("model", f"{mech.name}: {mech.title}"),
           ("position accuracy R", f"{spec.R:g} mm"),
-          ("probability p", f"{spec.p:g}" + (" per principal component (the paper's Eq. 20)" if spec.criterion == "components"
-                                             else " of the sphere P(|dr| <= R)")),
+          ("probability p", _asked_p(res, spec) + (" per principal component (the paper's Eq. 20)"
+                                                   if spec.criterion == "components" else " of the sphere P(|dr| <= R)")),
           ("criterion", spec.criterion),
+          ("probability model", "exact (the linear error model's own probabilities, no Gaussian reading)"
+           if _is_exact(res) else "gaussian (the paper's: each principal component read as normal)"),
           ("z(p)", f"{spec.z:.6g}"),
           ("error distribution", f"{label(spec.distribution)}: {describe(spec.distribution)}"),
           ("cost exponent alpha", alpha_txt)]
@@ -472,8 +494,13 @@ def _layout(rep: DesignReport) -> list[tuple]:
     rel = res.gap / abs(res.cost) if res.cost else float("nan")
     B.append(("kv", [("cost", f"{res.cost:.8g}"), ("dual lower bound", f"{res.lower_bound:.8g}"),
                      ("gap (cost - bound)", f"{res.gap:.2e}"), ("relative gap", f"{rel:.2e}"),
-                     ("largest sigma z / limit", f"{res.max_constraint:.6f} (<= 1 meets the specification)")]))
-    if spec.criterion == "sphere":
+                     ("largest (1-P)/(1-p)" if _is_exact(res) else "largest sigma z / limit",
+                      f"{res.max_constraint:.6f} (<= 1 meets the specification)")]))
+    if _is_exact(res):
+        B.append(("note", "Exact probabilities: the problem is not known to be convex, so there is no certificate of "
+                          "global optimality; the dual lower bound is the loose peak-density bound. Every pose's exact "
+                          "probability at the optimum was checked independently (see the solver's message)."))
+    elif spec.criterion == "sphere":
         B.append(("p", "The sphere criterion is not known to be convex: the bound is the optimum of the per-component "
                        "relaxation, valid but not tight."))
     elif not spec.convex:
@@ -484,7 +511,7 @@ def _layout(rep: DesignReport) -> list[tuple]:
                         "bounds meet the specification at a lower cost (to that margin)."))
     crow = []
     for b in res.constraints:
-        what = "(1-P)/(1-p)" if b.kind == "sphere" else "sigma z / limit"
+        what = "(1-P)/(1-p)" if b.kind.startswith("sphere") or _is_exact(res) else "sigma z / limit"
         for j, val in enumerate(b.values):
             crow.append([b.label, f"{j + 1}", what, f"{val:.6f}", "yes" if b.active[j] else "", f"{b.multipliers[j]:.4g}"])
     B.append(("table", ["constraint block", "#", "quantity", "value", "active", "multiplier"], crow,
@@ -558,6 +585,20 @@ def _layout(rep: DesignReport) -> list[tuple]:
         B.append(("table", ["component", "direction (base frame)", "sigma sampled, mm", "sigma linear, mm",
                             "excess kurtosis"], srows, [False, False, True, True, True],
                   f"Excess kurtosis 0 for a Gaussian (standard error {mc.kurtosis_se:.3f})."))
+
+    ver = getattr(res, "verification", None)
+    if ver is not None:  # synthesize(..., verify=...): the closed loop's own Monte Carlo
+        lo, hi = ver.ci
+        B.append(("h", 3, "Closed loop (verify)"))
+        B.append(("ok" if ver.verified else "note",
+                  f"Nonlinear Monte Carlo at the design, n = {ver.n} per pose, {round(100 * ver.confidence)} % Wilson "
+                  f"interval: achieved {ver.achieved:.5f} [{lo:.5f}, {hi:.5f}] against p = {ver.p:g} asked; "
+                  + ("verified (the lower end reaches p)" if ver.verified else "NOT verified (the lower end is below p)")
+                  + f"; design target p = {ver.p_target:.6g} after {len(ver.rounds)} round(s)."))
+        B.append(("table", ["round", "target p", "cost", "Monte Carlo P", "interval", "pose"],
+                  [[f"{r['round']}", f"{r['p_target']:.6g}", f"{r['cost']:.6g}", f"{r['estimate']:.5f}",
+                    f"[{r['ci'][0]:.5f}, {r['ci'][1]:.5f}]", str(r["pose"])] for r in ver.rounds],
+                  [True, True, True, True, False, False], None))
 
     # 7. workspace
     B.append(("h", 2, "7. Workspace"))

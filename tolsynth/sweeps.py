@@ -37,7 +37,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from .checks import check_count, check_positive, check_probability
-from .errors import InputError, MissingDependencyError, OutOfRangeError, TolsynthError
+from .errors import InputError, MissingDependencyError, OutOfRangeError
 from .tables import jsonable, make_frame, require_pandas, synthesis_row
 
 __all__ = ["sweep", "ENGINES", "MAX_ROWS"]
@@ -307,13 +307,12 @@ def sweep(mechanism, R, p, alpha=0.7, distribution="uniform", *, criterion="comp
     MissingDependencyError
         Without pandas (or without Dask for a cluster).
     """
-    from .mechanism import Mechanism, load_model
+    from .mechanism import as_mechanism
     from .problem import make_specification
     from .progress import Progress
 
     pd = require_pandas("tolsynth.sweep")
-    if not isinstance(mechanism, Mechanism):
-        mechanism = load_model(mechanism)
+    mechanism = as_mechanism(mechanism)
     _check_kwargs(kwargs)
     points = _grid(mechanism, R, p, alpha, distribution, criterion, solver)
     if workers is not None:

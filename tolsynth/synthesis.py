@@ -157,10 +157,9 @@ def synthesize(
     OutOfRangeError, InputError, UnknownNameError
         For bad inputs, naming the field.
     """
-    from .mechanism import Mechanism, load_model
+    from .mechanism import as_mechanism
 
-    if not isinstance(mechanism, Mechanism):
-        mechanism = load_model(mechanism)
+    mechanism = as_mechanism(mechanism)
     if not isinstance(solver, str) or solver not in SOLVERS:
         raise InputError("solver", f"unknown solver {solver!r}", " or ".join(repr(s) for s in SOLVERS))
     from .exact_synthesis import PROBABILITIES
@@ -220,7 +219,8 @@ def synthesize(
         result = SOLVERS[solver](nlp, result.x, dict(options or {}))
     from dataclasses import replace
 
-    result = replace(result, inputs=_run_inputs(mechanism, solver, options, locks, x0, validate, seed))
+    result = replace(result, inputs=_run_inputs(mechanism, solver, options, locks, x0, validate, seed, probability,
+                                                verify))
     if validate:
         from .montecarlo import validate as mc_validate
 
@@ -237,14 +237,16 @@ def synthesize(
 
         result = closed_loop(solve, mechanism, result, p=p, R=R, distribution=distribution,
                              n=None if verify is True else verify, seed=seed)
+        result = replace(result, inputs={**(result.inputs or {}), "verify": verify})  # the re-solves' record it not
     return result
 
 
-def _run_inputs(mechanism, solver, options, locks, x0, validate, seed) -> dict:
+def _run_inputs(mechanism, solver, options, locks, x0, validate, seed, probability="gaussian", verify=None) -> dict:
     """What a result records beyond its specification (see :mod:`tolsynth.tables`)."""
     path = getattr(mechanism.spec, "path", None)
     return {"model": {"name": mechanism.name, "title": mechanism.title, "file": str(path) if path else None},
             "solver": solver, "options": dict(options or {}), "locks": dict(locks) if locks else None,
+            "probability": probability, "verify": None if verify is None or verify is False else verify,
             "x0": None if x0 is None else np.asarray(mechanism.tolerances(x0), dtype=float).tolist(),
             "validate": validate or None, "seed": seed if validate else None,
             "joint_errors": _joint_error_inputs(mechanism)}
@@ -422,11 +424,10 @@ def synthesize_workspace(
     from the worst pose the search finds at tolerances in the middle of the bounds, so that a model
     without a ``worst`` configuration works too.
     """
-    from .mechanism import Mechanism, load_model
+    from .mechanism import as_mechanism
     from .workspace import worst_pose
 
-    if not isinstance(mechanism, Mechanism):
-        mechanism = load_model(mechanism)
+    mechanism = as_mechanism(mechanism)
     z = z_of_p(p)
     tol = check_positive(tol, "tol", "relative", upper=1.0)
     max_rounds = check_count(max_rounds, "max_rounds", lower=1, upper=1000)

@@ -152,13 +152,13 @@ def validate(
     if p is None:
         raise InputError("p", "no probability given", "0 < p < 1")
     p = check_probability(p, "p")
-    distribution = distribution or "uniform"
+    # distribution None: the model's own shapes, as everywhere
     mc = monte_carlo(mechanism, pose, tol, distribution, R=R, n=n, seed=seed, batch=batch,
                      confidence=confidence, progress=progress, Phi=Phi)
     return ValidationResult(
         p=p,
         R=mc.R,
-        distribution=distribution,
+        distribution=mc.distribution,
         pose=pose,
         tolerances=mc.tolerances,
         p_components=mc.p_components,

@@ -522,6 +522,61 @@ def add_dist_argument(p: argparse.ArgumentParser) -> None:
                         "or per parameter, e.g. '*=uniform,h2=normal'; default: the model file's, else uniform")
 
 
+def _verify_arg(text: str):
+    """``--verify``: ``auto`` or a sample count >= 1000."""
+    if text.strip() == "auto":
+        return "auto"
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected auto or a whole number of samples >= 1000") from None
+    if n < 1000:
+        raise argparse.ArgumentTypeError(f"{n}: expected auto or a whole number of samples >= 1000")
+    return n
+
+
+def add_specification_arguments(p: argparse.ArgumentParser, solvers=("ipopt", "sumt")) -> None:
+    """The arguments of one tolerance specification, shared by ``solve`` and ``report``: model, R, p,
+    distribution, cost (alpha, k, bounds), solver, poses, orientation, criterion, probability,
+    verification and locked tolerances.  ``solvers``: the ``--solver`` choices."""
+    add_model_argument(p)
+    p.add_argument("--R", type=length_mm("--R"), required=True,
+                   help="position accuracy radius, mm (or with a suffix: 500um)")
+    p.add_argument("--p", type=number("--p", "0 < p < 1"), required=True,
+                   help="probability per principal component (or of the sphere), 0 < p < 1")
+    add_dist_argument(p)
+    p.add_argument("--alpha", default=None,
+                   help="cost exponent: VALUE for every parameter, name=VALUE or pattern=VALUE overrides "
+                        "(e.g. 0.7,alpha*=0.5); default: 0.7")
+    p.add_argument("--k", default=None,
+                   help="cost factors k in sum k eps^-alpha: VALUE, name=VALUE, pattern=VALUE; default: the model's")
+    p.add_argument("--bounds", default=None,
+                   help="tolerance bounds LOW:HIGH (either side may be empty: the model's), for every parameter "
+                        "or as name=LOW:HIGH / pattern=LOW:HIGH; in each parameter's tolerance unit or with a "
+                        "suffix (h*=5um:0.2mm); default: the model's")
+    both = ", or both side by side" if "both" in solvers else ""
+    p.add_argument("--solver", choices=list(solvers), default="ipopt",
+                   help=f"IPOPT (exact derivatives), the paper's SUMT + Powell{both}")
+    p.add_argument("--pose", action="append", default=None,
+                   help=POSE_HELP + "; repeat the option for several poses (the constraints hold at each); "
+                        "default: the model's reference pose")
+    p.add_argument("--Phi", type=angle_rad("--Phi"), default=None,
+                   help="orientation accuracy half-angle, rad (or with a suffix: 2mrad, 0.1deg); default: none")
+    p.add_argument("--p-orientation", dest="p_orientation",
+                   type=number("--p-orientation", "0 < p < 1"), default=None,
+                   help="probability of the orientation specification, 0 < p < 1; default: --p")
+    p.add_argument("--criterion", choices=["components", "sphere"], default="components",
+                   help="per principal component (the paper's Eq. 20) or the sphere P(|dr| <= R) >= p")
+    p.add_argument("--probability", choices=["gaussian", "exact"], default="gaussian",
+                   help="gaussian (the paper's: each principal component read as normal) or exact (the exact "
+                        "probabilities of the linear error model, along every direction or in the sphere); default: gaussian")
+    p.add_argument("--verify", default=None, type=_verify_arg, metavar="N|auto",
+                   help="close the loop: nonlinear Monte Carlo at the optimum with N samples per pose (auto: from p), "
+                        "and a tighter target until its 99%% lower bound reaches p; default: off")
+    p.add_argument("--lock", action="append", default=None, metavar="NAME=VALUE",
+                   help="fix a tolerance at VALUE (its tolerance unit); repeatable; the others are optimised around it")
+
+
 TOLERANCES_HELP = ("SET | VALUE | name=VALUE,... | SET,name=VALUE,...; patterns such as *=0.02 or h*=0.01; "
                    "bare numbers in each parameter's tolerance unit, or with a unit suffix (0.1mm, 5um, 2mrad, 0.01deg)")
 POSE_HELP = "configuration name, or joint values in deg, comma-separated (a suffix such as 1.2rad allowed)"

@@ -7,14 +7,10 @@ import sys
 from ..errors import InputError
 from ..mechanism import load_model
 from .args import (  # noqa: I001
+    add_specification_arguments,
     dist_for,
-    POSE_HELP,
-    add_dist_argument,
-    add_model_argument,
-    angle_rad,
     emit_json,
     inputs_record,
-    length_mm,
     number,
     parse_poses,
 )
@@ -68,31 +64,7 @@ def register(sub) -> None:
                     "active bounds, process or cost model), the certificate (dual bound, gap), each parameter's "
                     "contribution, a Monte Carlo check with confidence intervals, the workspace map of "
                     "P(|dr| <= R) and the worst pose.  Needs matplotlib (pip install \"tolsynth[plot]\").")
-    add_model_argument(p)
-    p.add_argument("--R", type=length_mm("--R"), required=True,
-                   help="position accuracy radius, mm (or with a suffix: 500um)")
-    p.add_argument("--p", type=number("--p", "0 < p < 1"), required=True,
-                   help="probability per principal component (or of the sphere), 0 < p < 1")
-    add_dist_argument(p)
-    p.add_argument("--alpha", default=None,
-                   help="cost exponent: VALUE for every parameter, name=VALUE or pattern=VALUE overrides; default: 0.7")
-    p.add_argument("--k", default=None,
-                   help="cost factors k in sum k eps^-alpha: VALUE, name=VALUE, pattern=VALUE; default: the model's")
-    p.add_argument("--bounds", default=None,
-                   help="tolerance bounds LOW:HIGH for every parameter or name=LOW:HIGH, in each parameter's "
-                        "tolerance unit or with a suffix; default: the model's")
-    p.add_argument("--solver", choices=["ipopt", "sumt"], default="ipopt",
-                   help="IPOPT (exact derivatives) or the paper's SUMT + Powell")
-    p.add_argument("--pose", action="append", default=None,
-                   help=POSE_HELP + "; repeat for several poses; default: the model's reference pose")
-    p.add_argument("--Phi", type=angle_rad("--Phi"), default=None,
-                   help="orientation accuracy half-angle, rad (or with a suffix: 2mrad); default: none")
-    p.add_argument("--p-orientation", dest="p_orientation", type=number("--p-orientation", "0 < p < 1"),
-                   default=None, help="probability of the orientation specification; default: --p")
-    p.add_argument("--criterion", choices=["components", "sphere"], default="components",
-                   help="per principal component (the paper's Eq. 20) or the sphere P(|dr| <= R) >= p")
-    p.add_argument("--lock", action="append", default=None, metavar="NAME=VALUE",
-                   help="fix a tolerance at VALUE (its tolerance unit); repeatable")
+    add_specification_arguments(p)
     p.add_argument("--processes", action="store_true",
                    help="choose a process per parameter among the model file's processes (branch and bound)")
     p.add_argument("--mc-samples", dest="mc_samples", type=number("--mc-samples", "an integer >= 0", lambda v: v >= 0, integer=True),

@@ -9,18 +9,13 @@ import numpy as np
 from ..errors import InputError
 from ..mechanism import load_model
 from .args import (  # noqa: I001
+    add_specification_arguments,
     dist_for,
     dist_label,
-    POSE_HELP,
-    add_dist_argument,
-    add_model_argument,
-    angle_rad,
     add_table_out_argument,
     check_table_out,
     emit_json,
     inputs_record,
-    length_mm,
-    number,
     parse_bounds,
     parse_per_parameter,
     parse_poses,
@@ -79,9 +74,14 @@ def side_by_side(c, width: int = 22) -> str:
 
 def _spec_kwargs(mech, args) -> tuple:
     kw = dict(Phi=args.Phi, criterion=args.criterion)
-    probability = getattr(args, "probability", "gaussian")  # `report` has no --probability
+    probability = args.probability
     if probability != "gaussian":
         kw["probability"] = probability
+    if args.verify is not None:
+        if args.solver == "both" or getattr(args, "everywhere", False):
+            raise InputError("--verify", "given with " + ("--solver both" if args.solver == "both" else "--everywhere"),
+                             "one solve at given poses (verify an everywhere design with tolsynth montecarlo)")
+        kw["verify"] = True if args.verify == "auto" else int(args.verify)
     if args.p_orientation is not None:
         if args.Phi is None:
             raise InputError("--p-orientation", "given without --Phi", "--Phi ANGLE together with --p-orientation P")
@@ -173,8 +173,6 @@ def cmd_solve(args) -> int:
         if args.lock:
             kw["locks"] = _parse_locks(mech, args.lock)
             record["locks"] = kw["locks"]
-        if args.verify is not None:
-            kw["verify"] = True if args.verify == "auto" else int(args.verify)
         res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
         rep = None
         if args.contributions:
@@ -206,21 +204,6 @@ def cmd_solve(args) -> int:
     return 0
 
 
-def _verify_arg(text: str):
-    """``--verify``: ``auto`` or a sample count >= 1000."""
-    import argparse
-
-    if text.strip() == "auto":
-        return "auto"
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected auto or a whole number of samples >= 1000") from None
-    if n < 1000:
-        raise argparse.ArgumentTypeError(f"{n}: expected auto or a whole number of samples >= 1000")
-    return n
-
-
 def _parse_locks(mech, items) -> dict:
     """``--lock NAME=VALUE`` (repeatable): a tolerance fixed at VALUE (the parameter's unit)."""
     out = {}
@@ -242,47 +225,13 @@ def register(sub) -> None:
         description="Cheapest tolerances such that each principal component of the hand position error "
                     "stays within R with probability p (the paper's Eq. 20), or the sphere P(|dr| <= R) >= p; "
                     "at one or more poses, or at every reachable pose (--everywhere).")
-    add_model_argument(p)
-    p.add_argument("--R", type=length_mm("--R"), required=True,
-                   help="position accuracy radius, mm (or with a suffix: 500um)")
-    p.add_argument("--p", type=number("--p", "0 < p < 1"), required=True,
-                   help="probability per principal component (or of the sphere), 0 < p < 1")
-    add_dist_argument(p)
-    p.add_argument("--alpha", default=None,
-                   help="cost exponent: VALUE for every parameter, name=VALUE or pattern=VALUE overrides "
-                        "(e.g. 0.7,alpha*=0.5); default: 0.7")
-    p.add_argument("--k", default=None,
-                   help="cost factors k in sum k eps^-alpha: VALUE, name=VALUE, pattern=VALUE; default: the model's")
-    p.add_argument("--bounds", default=None,
-                   help="tolerance bounds LOW:HIGH (either side may be empty: the model's), for every parameter "
-                        "or as name=LOW:HIGH / pattern=LOW:HIGH; in each parameter's tolerance unit or with a "
-                        "suffix (h*=5um:0.2mm); default: the model's")
-    p.add_argument("--solver", choices=["ipopt", "sumt", "both"], default="ipopt",
-                   help="IPOPT (exact derivatives), the paper's SUMT + Powell, or both side by side")
-    p.add_argument("--pose", action="append", default=None,
-                   help=POSE_HELP + "; repeat the option for several poses (the constraints hold at each); "
-                        "default: the model's reference pose")
-    p.add_argument("--Phi", type=angle_rad("--Phi"), default=None,
-                   help="orientation accuracy half-angle, rad (or with a suffix: 2mrad, 0.1deg); default: none")
-    p.add_argument("--p-orientation", dest="p_orientation",
-                   type=number("--p-orientation", "0 < p < 1"), default=None,
-                   help="probability of the orientation specification, 0 < p < 1; default: --p")
-    p.add_argument("--criterion", choices=["components", "sphere"], default="components",
-                   help="per principal component (the paper's Eq. 20) or the sphere P(|dr| <= R) >= p")
-    p.add_argument("--probability", choices=["gaussian", "exact"], default="gaussian",
-                   help="gaussian (the paper's: each principal component read as normal) or exact (the exact "
-                        "probabilities of the linear error model, along every direction or in the sphere); default: gaussian")
-    p.add_argument("--verify", default=None, type=_verify_arg, metavar="N|auto",
-                   help="close the loop: nonlinear Monte Carlo at the optimum with N samples per pose (auto: from p), "
-                        "and a tighter target until its 99%% lower bound reaches p; default: off")
+    add_specification_arguments(p, ("ipopt", "sumt", "both"))
     p.add_argument("--everywhere", action="store_true",
                    help="impose the constraint at every reachable pose (exchange method with the worst-pose search)")
     p.add_argument("--reference", default=None,
                    help="with --everywhere: the pose the exchange method starts from: NAME, none (the search's "
                         "worst pose at mid-bound tolerances), or joint values in deg; default: the model's "
                         "reference pose (its 'worst' configuration if it has one, else none)")
-    p.add_argument("--lock", action="append", default=None, metavar="NAME=VALUE",
-                   help="fix a tolerance at VALUE (its tolerance unit); repeatable; the others are optimised around it")
     p.add_argument("--contributions", action="store_true",
                    help="also report each parameter's share of each principal variance and of 1 - P(sphere)")
     add_table_out_argument(p, "the tolerance table (with --solver both: side by side)")
