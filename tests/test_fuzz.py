@@ -4,7 +4,7 @@ extreme arguments of every public function, and command lines.
 The invariant (``fuzz_cases.outcome``): a case either succeeds with finite, independently checked
 numbers (every converged ``synthesize`` is checked against a covariance rebuilt with NumPy), or
 raises a ``TolsynthError`` naming the field.  Never an untyped exception, a hang (each case runs
-under a 20 s alarm), a numerical warning from inside the package (turned into an error), a
+under a 60 s alarm), a numerical warning from inside the package (turned into an error), a
 traceback on the command line, or a silent acceptance of a defect that must be rejected.
 
 Profiles: the default run is derandomized with a few examples per category (seconds); the
