@@ -37,7 +37,7 @@ from tolsynth.stats import (
 # ---------------------------------------------------------------------------------------------
 # references
 # ---------------------------------------------------------------------------------------------
-def ball_probability_scipy(variances, R):
+def ball_probability_scipy(variances, R, epsabs=1e-14):
     """P(w1^2 + w2^2 + w3^2 <= R^2), w_j ~ N(0, lam_j) independent, as a SciPy double integral.
 
     Cartesian slicing: P = int phi(z1) int phi(z2) [2 Phi(r(z1, z2)/sig3) - 1] dz2 dz1 over the
@@ -60,7 +60,7 @@ def ball_probability_scipy(variances, R):
                 * math.exp(-0.5 * (b * math.sin(u)) ** 2) * b * math.cos(u) / math.sqrt(2 * math.pi)
                 * special.erf(R * math.cos(t) * math.cos(u) / math.sqrt(2 * l3)))
 
-    value, _ = integrate.dblquad(f, -math.pi / 2, math.pi / 2, -math.pi / 2, math.pi / 2, epsabs=1e-14, epsrel=1e-13)
+    value, _ = integrate.dblquad(f, -math.pi / 2, math.pi / 2, -math.pi / 2, math.pi / 2, epsabs=epsabs, epsrel=1e-13)
     return value
 
 
@@ -325,6 +325,30 @@ def test_p_ball_thin_third_variance_vs_perturbation_series(l3):
     R = 0.5
     series = 1 - math.exp(-R * R / 2) - l3 * 0.5 * math.exp(-R * R / 2)
     assert abs(p_ball((1.0, 1.0, l3), R) - series) <= 1e-12 + 10 * l3**2
+
+
+@pytest.mark.parametrize("lam, R", [
+    ((1.0, 0.5, 0.1), 1e-3),  # R far inside every sigma: P ~ R^3 (the series of the kernel)
+    ((1.0, 1.0, 1.0), 1e-4),
+    ((1.0, 1e-2, 1e-6), 1e-2),  # a flat ellipsoid: R beyond sigma3, far inside sigma1, sigma2
+    ((4.0, 1.0, 1e-8), 1e-3),
+    ((1.0, 0.3, 0.29), 0.05),
+])
+def test_p_ball_small_probabilities_keep_relative_accuracy(lam, R):
+    """Probabilities of 1e-13 .. 5e-4: relative agreement with a SciPy dblquad run with a purely
+    relative tolerance (the 1-D kernel is evaluated without cancellation)."""
+    ref = ball_probability_scipy(lam, R, epsabs=0.0)
+    assert abs(p_ball(lam, R) - ref) <= 1e-10 * ref, (lam, R, ref)
+
+
+def test_p_ball_batch_random_rows_vs_scipy_integral():
+    """Random variances over 4 decades and radii over 3: the batch against SciPy's dblquad."""
+    rng = np.random.default_rng(20261123)
+    lam = np.exp(rng.uniform(-8, 1, (8, 3)))
+    for R in (5e-3, 0.2, 3.0):
+        got = tolsynth.stats.p_ball_batch(lam, R)
+        for row, P in zip(lam, got):
+            assert abs(P - ball_probability_scipy(row, R)) <= 1e-10, (row, R, P)
 
 
 def test_p_ball_batch_rows_vs_scipy_integral(rng):

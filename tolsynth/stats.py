@@ -230,37 +230,16 @@ def chi3_cdf(x, erf=None, exp=np.exp):
 CHI_SATURATION = 40.0
 
 
-def _chi3_small(x: np.ndarray) -> np.ndarray:
-    """chi3_cdf for x <= 0.5 by its Taylor series ``sqrt(2/pi) sum (-1)^k x^(2k+3) / (2^k k! (2k+3))``
-    (the closed form cancels there: at x = 1e-12 it gives -8e-28 instead of 3e-37); 12 terms
-    reach double precision for x <= 0.5."""
-    x2 = -0.5 * x * x
-    term = np.ones_like(x)
-    total = term / 3.0
-    for k in range(1, 12):
-        term = term * x2 / k
-        total = total + term / (2 * k + 3)
-    return math.sqrt(2.0 / math.pi) * x**3 * total
-
-
 def _chi_cdf_radial(n: int, x: np.ndarray) -> np.ndarray:
-    """P(|Z| <= x) for Z standard normal in n = 1, 2, 3 dimensions (chi distribution CDF).
+    """P(|Z| <= x) for Z standard normal in n = 1, 2 dimensions (chi distribution CDF).
 
     Arguments beyond CHI_SATURATION are evaluated there (where the CDF is 1 to double precision),
-    so that ``x * x`` cannot overflow; small arguments in 3-D by the series."""
+    so that ``x * x`` cannot overflow.  (3-D: :func:`chi3_cdf`; the sphere quadrature uses
+    :func:`_ball3_kernel`.)"""
     x = np.minimum(x, CHI_SATURATION)
     if n == 1:
         return _erf(x / math.sqrt(2.0))
-    if n == 2:
-        return -np.expm1(-0.5 * x * x)
-    x = np.asarray(x, dtype=float)
-    small = x <= 0.5
-    if not small.any():
-        return chi3_cdf(x)
-    out = np.empty_like(x)
-    out[small] = _chi3_small(x[small])
-    out[~small] = chi3_cdf(x[~small])
-    return out
+    return -np.expm1(-0.5 * x * x)
 
 
 @lru_cache(maxsize=None)
@@ -285,13 +264,18 @@ def _graded_nodes(c: np.ndarray, n_panels: int, nodes: int) -> tuple[np.ndarray,
     return (a + (b - a) * x).reshape(c.size, -1), ((b - a) * w).reshape(c.size, -1)
 
 
-def _scales(lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Smallest feature scales (in (0, 1]) of the integrand along its two quadrature variables."""
-    if lam.shape[1] == 2:
-        c = np.minimum(1.0, 0.1 * np.sqrt(lam[:, 1] / lam[:, 0]))
-        return c, c
-    return (np.minimum(1.0, 0.1 * np.sqrt(lam[:, 2] / lam[:, 0])),
-            np.minimum(1.0, 0.1 * np.sqrt(lam[:, 2] / lam[:, 1])))
+def _scales(lam: np.ndarray, R: float) -> np.ndarray:
+    """Smallest feature scale (in (0, 1]) of the azimuthal integrand of each row.
+
+    The integrand changes where ``q = lam1 sin^2 + lam2 cos^2`` leaves ``lam2``, at
+    ``sqrt(lam2/lam1)``; in 3-D the factor ``erf(a sqrt(kappa))`` can turn a times faster there
+    (``a = R / sqrt(2 lam3)``; only where it matters, ``a`` below 6: beyond, ``e^(-a^2)`` hides it).
+    """
+    c = 0.1 * np.sqrt(lam[:, 1] / lam[:, 0])
+    if lam.shape[1] == 3:
+        a = R / np.sqrt(2.0 * lam[:, 2])
+        c = c / np.clip(a, 1.0, 6.0)
+    return np.minimum(1.0, c)
 
 
 def _n_panels(c: np.ndarray) -> np.ndarray:
@@ -299,41 +283,110 @@ def _n_panels(c: np.ndarray) -> np.ndarray:
     return np.where(c >= 0.01, 1, 1 + np.ceil(np.log10(0.01 / c)).astype(int))
 
 
-def _ball_quadrature(lam: np.ndarray, R: float, nodes: int, pz: int, pt: int) -> np.ndarray:
-    """One quadrature of P(|w| <= R) for rows of 2 or 3 positive, descending variances."""
-    cz, ct = _scales(lam)
+def _erfc(x: np.ndarray) -> np.ndarray:
+    """Vectorised complementary error function (SciPy's when installed, else ``math.erfc``)."""
+    x = np.asarray(x, dtype=float)
+    try:
+        from scipy.special import erfc
+    except ImportError:  # pragma: no cover - exercised where SciPy is absent
+        return _ERFC_UFUNC(x).astype(float)
+    return erfc(x)
+
+
+_ERFC_UFUNC = np.frompyfunc(math.erfc, 1, 1)
+
+
+def _series_coefficients(terms: int) -> np.ndarray:
+    """``C[N, n]`` (N = 1..terms, n = 0..N-1) of the small-``a`` series of :func:`_ball3_kernel`:
+    ``h = 2/sqrt(pi) sum_N (-1)^N a^(2N+1) sum_n C[N, n] kappa^n (1 - kappa)^(N - n)``, every
+    ``C`` negative (no cancellation inside the sum)."""
+    C = np.zeros((terms + 1, terms + 1))
+    for N in range(1, terms + 1):
+        for n in range(N):
+            C[N, n] = (2 * n - 2 * N) / ((2 * N + 1) * (2 * n + 1) * math.factorial(n) * math.factorial(N - n))
+    return C
+
+
+_SERIES_TERMS = 12
+_SERIES_C = _series_coefficients(_SERIES_TERMS)
+#: the kernel by its series below this a (the closed form cancels there: P ~ a^3)
+_SERIES_A = 0.25
+
+
+def _ball3_kernel(a: np.ndarray, kappa: np.ndarray, one_minus_kappa: np.ndarray) -> np.ndarray:
+    """``h(a, kappa) = erf(a) - e^(-a^2 (1 - kappa)) erf(a sqrt(kappa)) / sqrt(kappa)``, kappa in
+    [0, 1), without cancellation: by the series in ``a`` for small ``a``, and for ``kappa >= 1/2``
+    as ``(1 - 1/s) - erfc(a) + erfc(a s)/s - expm1(-c) erf(a s)/s`` (``s = sqrt(kappa)``,
+    ``c = a^2 (1 - kappa)``, ``1 - 1/s = -(1 - kappa) / (s (1 + s))``), which keeps the relative
+    accuracy of small probabilities of flat ellipsoids.  Arrays broadcast."""
+    a, kappa, omk = np.broadcast_arrays(a, kappa, one_minus_kappa)
+    out = np.empty(a.shape)
+    small = a < _SERIES_A
+    if np.any(small):
+        aa, kk, om = a[small], kappa[small], omk[small]
+        total = np.zeros(aa.shape)
+        a2 = aa * aa
+        apow = aa.copy()
+        for N in range(1, _SERIES_TERMS + 1):
+            apow = apow * a2
+            inner = np.zeros(aa.shape)
+            for n in range(N):
+                inner = inner + _SERIES_C[N, n] * kk**n * om ** (N - n)
+            total = total + (-1) ** N * apow * inner
+        out[small] = 2.0 / math.sqrt(math.pi) * total
+    big = ~small
+    if np.any(big):
+        aa, kk, om = a[big], kappa[big], omk[big]
+        s = np.sqrt(kk)
+        y = aa * s
+        c = aa * aa * om
+        # E = erf(y)/s = a erf(y)/y, by the series of erf(y)/y for small y (s may be 0)
+        tiny = y < 1e-3
+        ys = np.where(tiny, 1.0, y)
+        G = np.where(tiny, 2.0 / math.sqrt(math.pi) * (1.0 - y * y / 3.0 + y**4 / 10.0), _erf(ys) / ys)
+        E = aa * G
+        direct = _erf(aa) - np.exp(-c) * E
+        with np.errstate(divide="ignore", invalid="ignore"):
+            split = (-om / (s * (1.0 + s)) - _erfc(aa) + _erfc(y) / s) - np.expm1(-c) * E
+        out[big] = np.where(kk >= 0.5, split, direct)
+    return out
+
+
+def _ball_quadrature(lam: np.ndarray, R: float, nodes: int, pt: int) -> np.ndarray:
+    """One quadrature of P(|w| <= R) for rows of 2 or 3 positive, descending variances.
+
+    One azimuthal integral in both cases: ``psi`` turns in the plane of the two largest
+    variances, ``q = lam1 sin^2 psi + lam2 cos^2 psi`` (feature at ``sqrt(lam2/lam1)`` near 0),
+    ``t = psi / (pi/2)``.  2-D: ``P = mean over psi of 1 - e^(-R^2 / 2q)``.  3-D: condition on the
+    third (smallest) whitened component ``z``; the 2-D probability of the rest, in closed form
+    per direction, integrated over ``z`` in closed form too (a Gaussian integral, because
+    ``q >= lam3``) gives ``P = mean over psi of h(a, kappa)``, ``a = R / sqrt(2 lam3)``,
+    ``kappa = 1 - lam3 / q`` (:func:`_ball3_kernel`)."""
+    c = _scales(lam, R)
+    t, wt = _graded_nodes(c, pt, nodes)
+    psi = 0.5 * math.pi * t
+    s2, c2 = np.sin(psi) ** 2, np.cos(psi) ** 2
+    q = lam[:, :1] * s2 + lam[:, 1:2] * c2
     if lam.shape[1] == 2:
-        # psi = pi/2 - phi, t = psi / (pi/2): q = lam1 sin^2 + lam2 cos^2, feature at sqrt(lam2/lam1)
-        t, wt = _graded_nodes(ct, pt, nodes)
-        psi = 0.5 * math.pi * t
-        q = lam[:, :1] * np.sin(psi) ** 2 + lam[:, 1:2] * np.cos(psi) ** 2
         return np.sum(wt * _chi_cdf_radial(2, R / np.sqrt(q)), axis=1)
-    # z = v_1 (uniform measure on the sphere), t = azimuth / (pi/2); one octant by symmetry
-    z, wz = _graded_nodes(cz, pz, nodes)
-    t, wt = _graded_nodes(ct, pt, nodes)
-    psi = 0.5 * math.pi * t  # angle from the lam3 axis towards the lam2 axis
-    perp = lam[:, 1:2] * np.sin(psi) ** 2 + lam[:, 2:3] * np.cos(psi) ** 2  # (m, nt)
-    q = lam[:, 0, None, None] * (z**2)[:, :, None] + (1.0 - z**2)[:, :, None] * perp[:, None, :]
-    f = _chi_cdf_radial(3, R / np.sqrt(q))
-    return np.einsum("mz,mt,mzt->m", wz, wt, f)
+    l3 = lam[:, 2:3]
+    q_minus = (lam[:, :1] - l3) * s2 + (lam[:, 1:2] - l3) * c2  # q - lam3 without cancellation
+    a = R / np.sqrt(2.0 * l3)
+    return np.sum(wt * _ball3_kernel(a, q_minus / q, l3 / q), axis=1)
 
 
 def _ball_rows(lam: np.ndarray, R: float, tol: float, max_nodes: int, out: np.ndarray, err: np.ndarray,
                rows: np.ndarray, budget: int = 4_000_000) -> None:
     """Converge the rows ``rows`` of ``lam`` (all of one dimension), grouped by panel counts and
     chunked so that no quadrature grid exceeds ``budget`` points."""
-    cz, ct = _scales(lam[rows])
-    pz, pt = _n_panels(cz), _n_panels(ct)
-    if lam.shape[1] == 2:
-        pz = np.ones_like(pz)
-    for key in sorted(set(zip(pz.tolist(), pt.tolist()))):
-        group = rows[(pz == key[0]) & (pt == key[1])]
+    pt = _n_panels(_scales(lam[rows], R))
+    for key in sorted(set(pt.tolist())):
+        group = rows[pt == key]
         prev, nodes = None, 8
         while group.size:
-            per_row = key[0] * key[1] * nodes * nodes if lam.shape[1] == 3 else key[1] * nodes
-            chunk = max(1, budget // per_row)
+            chunk = max(1, budget // (key * nodes))
             val = np.concatenate([
-                _ball_quadrature(lam[group[a : a + chunk]], R, nodes, *key) for a in range(0, group.size, chunk)
+                _ball_quadrature(lam[group[a : a + chunk]], R, nodes, key) for a in range(0, group.size, chunk)
             ])
             if prev is not None:
                 delta = np.abs(val - prev)
@@ -355,19 +408,24 @@ def p_ball_batch(variances, R: float, tol: float = 1e-12, max_nodes: int = 512, 
     """``P(|w| <= R)`` for many zero-mean normal vectors with independent components.
 
     ``variances`` has shape (N, k), k <= 3 (mm^2, or rad^2 for the cone); returns shape (N,).
-    This is Eq. 5 (the sphere) for three variances and Eq. 8 (the cone) for two.  In whitened
-    coordinates ``w = diag(sigma) r v`` (``r`` chi-distributed, ``v`` uniform on the unit sphere),
+    This is Eq. 5 (the sphere) for three variances and Eq. 8 (the cone) for two.  Both are one
+    integral over the azimuth ``psi`` in the plane of the two largest variances (whitened
+    coordinates, ``q(psi) = lam1 sin^2 psi + lam2 cos^2 psi``):
 
-        P = mean over unit v of  F_n( R / sqrt(sum_j lam_j v_j^2) ),
+        2-D:  P = mean over psi of  1 - exp(-R^2 / 2q)
+        3-D:  P = mean over psi of  erf(a) - exp(-R^2 / 2q) erf(a sqrt(kappa)) / sqrt(kappa),
+              a = R / sqrt(2 lam3),  kappa = 1 - lam3 / q
 
-    with ``F_n`` the chi CDF in n dimensions: a smooth integral over one octant, taken by
-    Gauss-Legendre in ``v_1`` and in the azimuth, on panels graded geometrically from the smallest
-    scale ``0.1 sqrt(lam_min / lam_max)`` of the integrand (so very unequal variances cost a few
-    panels, not a finer grid).  The node count per panel doubles until two successive values agree
-    to ``tol`` in every row.  Equal variances make the integrand constant, so the result is then
-    the closed form ``erf(x/sqrt2) - sqrt(2/pi) x exp(-x^2/2)`` to rounding.  Variances below
-    ``1e-15 * max`` of their row are below an eigensolver's rounding and are taken as 0; the
-    dimension drops accordingly (1-D: ``erf``).
+    (3-D: the disc probability of the two largest components, in closed form per direction,
+    integrated in closed form over the smallest one, a Gaussian integral since ``q >= lam3``;
+    evaluated without cancellation by :func:`_ball3_kernel`, so small probabilities keep their
+    relative accuracy).  Gauss-Legendre in ``psi``, on panels graded geometrically from the
+    smallest scale of the integrand (about ``0.1 sqrt(lam2 / lam1)``, so very unequal variances
+    cost a few panels, not a finer grid).  The node count per panel doubles until two successive
+    values agree to ``tol`` in every row.  Equal variances make the integrand constant, so the
+    result is then the closed form ``erf(x/sqrt2) - sqrt(2/pi) x exp(-x^2/2)`` to rounding.
+    Variances below ``1e-15 * max`` of their row are below an eigensolver's rounding and are
+    taken as 0; the dimension drops accordingly (1-D: ``erf``).
 
     Raises ``RuntimeError`` if ``max_nodes`` per panel is reached without meeting ``tol``: an
     unconverged value is never returned.
