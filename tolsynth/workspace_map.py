@@ -312,12 +312,11 @@ def probability_map(
     idx = np.flatnonzero(ok)
     chk = rng.choice(idx, size=min(int(check_points), idx.size), replace=False) if idx.size else idx
     alt = np.zeros(chk.size, bool)
-    for s in ik.seed_set:
-        if chk.size == 0:
-            break
-        Q, good, _ = ik.attempt(np.repeat(s[:, None], chk.size, axis=1), T[:, chk])
-        diff = np.max(np.abs(Q[list(free)] - Qs[list(free)][:, chk]), axis=0)
-        alt |= good & (diff > 1e-5)
+    if chk.size:  # every seed at every checked point, in one batch
+        nseed = len(ik.seed_set)
+        Q, good, _ = ik.attempt(np.repeat(np.column_stack(ik.seed_set), chk.size, axis=1), np.tile(T[:, chk], nseed))
+        diff = np.max(np.abs(Q[list(free)] - np.tile(Qs[list(free)][:, chk], nseed)), axis=0)
+        alt = np.any((good & (diff > 1e-5)).reshape(nseed, chk.size), axis=0)
     n_alt = int(np.count_nonzero(alt))
     branch = ("continuation from the reference configuration"
               + (f"; loop branch {', '.join(f'{lp.name} {lp.branch:+d}' for lp in mechanism.spec.loops)} (model file)"
