@@ -210,12 +210,60 @@ def test_cli_map_and_worst_pose(tmp_path, capsys):
 
 
 def test_full_resolution_map(xz):
+    """The benchmark's map: reachable exactly where the closed form is (away from the edge), the
+    same joints there, and P equal to the one-pose analysis at the closed-form joints."""
     pm = probability_map(xz, "figure3", R=0.2, n=100, progress=False)
+    inside = 0
     for j in range(0, 100, 7):
         for i in range(0, 100, 7):
             q, margin = closed_form_ik(pm.u[i], pm.v[j])
             if abs(margin) > 0.005:
                 assert np.isfinite(pm.P[j, i]) == (margin > 0)
+            if margin > 0.005:
+                inside += 1
+                assert np.allclose(pm.Q[:, j, i], q, atol=1e-6)
+                if inside % 4 == 0:
+                    ref = xz.analyze(q, "figure3", R=0.2).p_sphere
+                    assert pm.P[j, i] == pytest.approx(ref, abs=1e-9)
+    assert inside > 50
+    assert int(pm.reachable.sum()) == 3799  # the figure of the benchmark (issue 8)
+
+
+# ---------------------------------------------------------------------------------------------
+# the map's inverse kinematics internals
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("n", [1, 2, 3, 6])
+def test_batched_cholesky_solve_against_numpy(n, rng):
+    from tolsynth.ik import _spd_solve
+
+    M = rng.normal(size=(40, n, n))
+    A = M @ M.transpose(0, 2, 1) + 1e-3 * np.eye(n)
+    b = rng.normal(size=(40, n))
+    x, ok = _spd_solve(A.transpose(1, 2, 0).copy(), b.T.copy())
+    assert ok.all()
+    assert np.allclose(x.T, np.linalg.solve(A, b[:, :, None])[:, :, 0], rtol=1e-9, atol=1e-12)
+    A[3] = -np.eye(n)  # not positive definite: flagged
+    A[5, 0, 0] = np.nan
+    x, ok = _spd_solve(A.transpose(1, 2, 0).copy(), b.T.copy())
+    assert not ok[3] and not ok[5] and ok[[0, 1, 2, 4]].all()
+
+
+@pytest.mark.parametrize("model, kw", [("xu_zhang_1988", {"hand_axis": None}), ("planar_2r", {"plane": "xy"})])
+def test_map_seeds_together_as_one_at_a_time(model, kw, monkeypatch):
+    """The seeds run together on the points left give what they give one at a time (the map's
+    earlier loop): same reachable set, joints, margins and alternative-solution count."""
+    from tolsynth.ik import _GridIK
+
+    m = tolsynth.load_model(model)
+    tol = "figure3" if model == "xu_zhang_1988" else "coarse"
+    together = probability_map(m, tol, R=0.2, n=11, progress=False, **kw)
+    monkeypatch.setattr(_GridIK, "seed_batch", 1)
+    alone = probability_map(m, tol, R=0.2, n=11, progress=False, **kw)
+    assert np.array_equal(together.reachable, alone.reachable) and together.reachable.any()
+    assert together.n_alternative_solutions == alone.n_alternative_solutions
+    assert np.allclose(together.Q, alone.Q, equal_nan=True, rtol=0, atol=1e-12)
+    assert np.allclose(together.limit_margin, alone.limit_margin, equal_nan=True, rtol=0, atol=1e-12)
+    assert np.allclose(together.P, alone.P, equal_nan=True, rtol=0, atol=1e-13)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -78,11 +78,10 @@ def _solve_ik(ev: NumpyEvaluator, free: tuple[int, ...], Q0: np.ndarray, targets
         return Q, np.zeros(0, bool)
     fr = list(free)
     nf = len(fr)
-    pairs = [(k, l) for k in range(nf) for l in range(k + 1)]
 
     def residual(Qa, Ta):
         r, J = ev([Qa, Ta, axis])
-        return r, J.reshape(r.shape[0], nf, -1, order="F")  # column-major dense J (nr x nf)
+        return r, J.reshape(nf, r.shape[0], -1)  # J[k, :, b]: column k of the dense (nr x nf) J
 
     r, J = residual(Q, targets)
     cost = np.einsum("rb,rb->b", r, r)
@@ -96,32 +95,35 @@ def _solve_ik(ev: NumpyEvaluator, free: tuple[int, ...], Q0: np.ndarray, targets
         if w.size == 0:
             break
         A = np.empty((nf, nf, w.size))
-        for k, l in pairs:
-            A[k, l] = A[l, k] = np.einsum("rb,rb->b", Jw[:, k], Jw[:, l])
-        g = np.einsum("rkb,rb->kb", Jw, rw)
+        g = np.empty((nf, w.size))
+        for k in range(nf):
+            g[k] = np.einsum("rb,rb->b", Jw[k], rw)
+            for l in range(k + 1):
+                A[k, l] = A[l, k] = np.einsum("rb,rb->b", Jw[k], Jw[l])
         # a non-finite Jacobian (a loop at its limit): every step from there is non-finite and
         # rejected, so the column can never move
-        moving = np.isfinite(g).all(axis=0) & np.isfinite(A.reshape(nf * nf, -1)).all(axis=0)
-        Ad = A
+        moving = np.isfinite(g.sum(axis=0) + A.reshape(nf * nf, -1).sum(axis=0))
         for k in range(nf):
-            Ad[k, k] += mu * (A[k, k] + 1e-9)
+            A[k, k] += mu * (A[k, k] + 1e-9)  # damped (A is the damped matrix from here)
         with np.errstate(all="ignore"):
-            step, solved = _spd_solve(Ad, -g)
+            step, solved = _spd_solve(A, -g)
         for c in np.flatnonzero(~solved & moving):  # breakdown (a singular system): least squares
-            step[:, c] = np.linalg.lstsq(Ad[:, :, c], -g[:, c], rcond=None)[0]
+            step[:, c] = np.linalg.lstsq(A[:, :, c], -g[:, c], rcond=None)[0]
         Qn = Qw.copy()
         Qn[fr] += step
         rn, Jn = residual(Qn, Tw)
         cn = np.einsum("rb,rb->b", rn, rn)
         acc = moving & np.isfinite(cn) & (cn < cw)
-        Qw[:, acc] = Qn[:, acc]
-        rw[:, acc] = rn[:, acc]
-        Jw[:, :, acc] = Jn[:, :, acc]
+        np.copyto(Qw, Qn, where=acc)
+        np.copyto(rw, rn, where=acc)
+        np.copyto(Jw, Jn, where=acc)
         small_gain = acc & (cw - cn <= 1e-14 * cw)
         cw = np.where(acc, cn, cw)
         mu = np.where(acc, np.maximum(mu / 3.0, 1e-12), mu * 4.0)
-        tiny_step = np.abs(step).max(axis=0, initial=0.0) < 1e-13
-        keep = moving & (cw > tol * tol) & ~((mu > 1e8) | small_gain | tiny_step)
+        big_step = np.abs(step[0])
+        for k in range(1, nf):
+            np.maximum(big_step, np.abs(step[k]), out=big_step)
+        keep = moving & (cw > tol * tol) & ~((mu > 1e8) | small_gain | (big_step < 1e-13))
         if not keep.all():  # finished columns out of the working set
             done = ~keep
             Q[:, w[done]] = Qw[:, done]
@@ -149,6 +151,9 @@ def _halton(n: int, dim: int) -> np.ndarray:
 class _GridIK:
     """Inverse kinematics on a grid of a plane: Levenberg-Marquardt on the fk graph, continuation
     over the grid from the reference configuration, quasi-random seeds for what it misses."""
+
+    #: seeds run together on the points left after the first (None: all; 1: one at a time)
+    seed_batch: int | None = None
 
     def __init__(self, mech, free, held, ref_q, axis, plane, offset, seeds):
         self.mech = mech
@@ -248,7 +253,8 @@ class _GridIK:
             rest = np.flatnonzero(~ok)
             if rest.size == 0:
                 break
-            batch = pending[:1] if len(pending) == len(self.seed_set) else pending
+            first = len(pending) == len(self.seed_set)
+            batch = pending[:1] if first else pending[: self.seed_batch or len(pending)]
             pending = pending[len(batch):]
             Qa, good, mg = self.attempt(np.repeat(np.column_stack(batch), rest.size, axis=1),
                                         np.tile(T[:, rest], len(batch)))
