@@ -79,8 +79,18 @@ def _solve_ik(ev: NumpyEvaluator, free: tuple[int, ...], Q0: np.ndarray, targets
     fr = list(free)
     nf = len(fr)
 
+    # entries the same in every column -- the held joints (never moved here) and a target
+    # coordinate constant over the batch (the plane's offset) -- are bound as fixed: what depends
+    # only on them (the held joints' sines and cosines) is evaluated once, not per column
+    vq = np.ones(Q.shape[0], bool)
+    vq[fr] = False
+    vq &= ~np.all(Q == Q[:, :1], axis=1)
+    vq[fr] = True
+    vt = ~np.all(targets == targets[:, :1], axis=1)
+    prog = ev.bind([Q[:, 0], targets[:, 0], axis], [vq, vt, np.zeros(3, bool)])
+
     def residual(Qa, Ta):
-        r, J = ev([Qa, Ta, axis])
+        r, J = prog(np.vstack([Qa[vq], Ta[vt]]))
         return r, J.reshape(nf, r.shape[0], -1)  # J[k, :, b]: column k of the dense (nr x nf) J
 
     r, J = residual(Q, targets)
