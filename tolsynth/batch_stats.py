@@ -38,6 +38,21 @@ def _evaluator(mech, name: str) -> NumpyEvaluator:
     return c[name]
 
 
+#: batches up to this size are evaluated by CasADi's own virtual machine (about 11 us per pose for
+#: xu_zhang_1988) rather than the NumPy interpreter (about 1.6 ms per call plus 0.8 us per pose):
+#: the pattern search's polls are a few dozen poses each
+SMALL_BATCH = 128
+
+
+def _small_maps(mech, N: int):
+    """The sensitivity and covariance graphs mapped over N poses (cached per mechanism and N)."""
+    c = _cache(mech)
+    key = ("small_maps", N)
+    if key not in c:
+        c[key] = (mech.graphs.sensitivity.map(N), covariance_graph(mech.n).map(N))
+    return c[key]
+
+
 def principal_std_batch(mechanism, Q: np.ndarray, tolerances, distribution=None) -> np.ndarray:
     """Principal standard deviations (mm, descending) of the linearised position error at many poses.
 
@@ -68,9 +83,14 @@ def principal_std_batch(mechanism, Q: np.ndarray, tolerances, distribution=None)
     chunk = 20000
     for a in range(0, Q.shape[1], chunk):
         Qc = Q[:, a : a + chunk]
-        S = sens.dense(0, sens([Qc, np.zeros(mechanism.n)])[0])  # (6, n, N)
-        S = S.transpose(1, 0, 2).reshape(6 * mechanism.n, -1)  # column-major vec of each S
-        V = cov.dense(0, cov([S, eps, c])[0]).transpose(2, 0, 1)  # (N, 3, 3) mm^2
+        if Qc.shape[1] <= SMALL_BATCH:  # CasADi's own evaluation of the same graphs (a map)
+            sm, cm = _small_maps(mechanism, Qc.shape[1])
+            S = np.asarray(sm(Qc, np.zeros(mechanism.n)))  # (6, n N): the S side by side
+            V = np.asarray(cm(S, eps, c)[0]).reshape(3, -1, 3).transpose(1, 0, 2)  # (N, 3, 3) mm^2
+        else:
+            S = sens.dense(0, sens([Qc, np.zeros(mechanism.n)])[0])  # (6, n, N)
+            S = S.transpose(1, 0, 2).reshape(6 * mechanism.n, -1)  # column-major vec of each S
+            V = cov.dense(0, cov([S, eps, c])[0]).transpose(2, 0, 1)  # (N, 3, 3) mm^2
         lam = np.linalg.eigvalsh(0.5 * (V + V.transpose(0, 2, 1)))[:, ::-1]
         floor = 1e-15 * np.maximum(lam[:, :1], 0.0)
         lam = np.where(lam <= floor, 0.0, lam)
