@@ -252,6 +252,26 @@ def test_batched_cholesky_solve_against_numpy(n, rng):
     assert not ok[3] and not ok[5] and ok[[0, 1, 2, 4]].all()
 
 
+def test_ik_small_batches_by_casadi_as_large_by_numpy(xz, monkeypatch):
+    """The IK's two evaluations of its residual graph (CasADi's VM for small batches, the NumPy
+    interpreter for large ones) give the same solutions, which are the closed-form joints."""
+    import tolsynth.ik as ik
+
+    pts = [(925.0, 1200.0), (800.0, 800.0), (700.0, 1300.0), (1000.0, 1000.0)]
+    T = np.array([[x, 0.0, z] for x, z in pts]).T
+    ev = ik._ik_evaluator(xz, (1, 2, 3), True)
+    Q0 = np.repeat(xz.configurations["home"][:, None], len(pts), axis=1)
+    axis = np.array([0.0, 0.0, 1.0])
+    Qs, cs = ik._solve_ik(ev, (1, 2, 3), Q0, T, axis)
+    monkeypatch.setattr(ik, "SMALL_BATCH", 0)
+    Ql, cl = ik._solve_ik(ev, (1, 2, 3), Q0, T, axis)
+    assert cs.all() and cl.all()
+    assert np.allclose(Qs, Ql, rtol=0, atol=1e-9)
+    for k, (x, z) in enumerate(pts):
+        q, margin = closed_form_ik(x, z)
+        assert np.allclose(ik._wrap(xz, Qs[:, [k]])[:, 0], q, atol=1e-6)
+
+
 @pytest.mark.parametrize("model, kw", [("xu_zhang_1988", {"hand_axis": None}), ("planar_2r", {"plane": "xy"})])
 def test_map_seeds_together_as_one_at_a_time(model, kw, monkeypatch):
     """The seeds run together on the points left give what they give one at a time (the map's
