@@ -273,7 +273,8 @@ def _scales(lam: np.ndarray, R: float) -> np.ndarray:
     """
     c = 0.1 * np.sqrt(lam[:, 1] / lam[:, 0])
     if lam.shape[1] == 3:
-        a = R / np.sqrt(2.0 * lam[:, 2])
+        with np.errstate(over="ignore"):  # a = inf is clipped like any a >= 6
+            a = R / np.sqrt(2.0 * lam[:, 2])
         c = c / np.clip(a, 1.0, 6.0)
     return np.minimum(1.0, c)
 
@@ -313,13 +314,14 @@ _SERIES_C = _series_coefficients(_SERIES_TERMS)
 _SERIES_A = 0.25
 
 
-def _ball3_kernel(a: np.ndarray, kappa: np.ndarray, one_minus_kappa: np.ndarray) -> np.ndarray:
-    """``h(a, kappa) = erf(a) - e^(-a^2 (1 - kappa)) erf(a sqrt(kappa)) / sqrt(kappa)``, kappa in
-    [0, 1), without cancellation: by the series in ``a`` for small ``a``, and for ``kappa >= 1/2``
-    as ``(1 - 1/s) - erfc(a) + erfc(a s)/s - expm1(-c) erf(a s)/s`` (``s = sqrt(kappa)``,
-    ``c = a^2 (1 - kappa)``, ``1 - 1/s = -(1 - kappa) / (s (1 + s))``), which keeps the relative
-    accuracy of small probabilities of flat ellipsoids.  Arrays broadcast."""
-    a, kappa, omk = np.broadcast_arrays(a, kappa, one_minus_kappa)
+def _ball3_kernel(a: np.ndarray, c: np.ndarray, kappa: np.ndarray, one_minus_kappa: np.ndarray) -> np.ndarray:
+    """``h(a, kappa) = erf(a) - e^(-c) erf(a sqrt(kappa)) / sqrt(kappa)``, ``c = a^2 (1 - kappa)``,
+    kappa in [0, 1), without cancellation: by the series in ``a`` for small ``a``, and for
+    ``kappa >= 1/2`` as ``(1 - 1/s) - erfc(a) + erfc(a s)/s - expm1(-c) erf(a s)/s``
+    (``s = sqrt(kappa)``, ``1 - 1/s = -(1 - kappa) / (s (1 + s))``), which keeps the relative
+    accuracy of small probabilities of flat ellipsoids.  ``a`` may be clipped (at 1e8) and ``c``
+    saturated (at 800, where ``e^(-c)`` is 0): the value does not change.  Arrays broadcast."""
+    a, c, kappa, omk = np.broadcast_arrays(a, c, kappa, one_minus_kappa)
     out = np.empty(a.shape)
     small = a < _SERIES_A
     if np.any(small):
@@ -336,18 +338,17 @@ def _ball3_kernel(a: np.ndarray, kappa: np.ndarray, one_minus_kappa: np.ndarray)
         out[small] = 2.0 / math.sqrt(math.pi) * total
     big = ~small
     if np.any(big):
-        aa, kk, om = a[big], kappa[big], omk[big]
+        aa, cc, kk, om = a[big], c[big], kappa[big], omk[big]
         s = np.sqrt(kk)
         y = aa * s
-        c = aa * aa * om
         # E = erf(y)/s = a erf(y)/y, by the series of erf(y)/y for small y (s may be 0)
         tiny = y < 1e-3
         ys = np.where(tiny, 1.0, y)
         G = np.where(tiny, 2.0 / math.sqrt(math.pi) * (1.0 - y * y / 3.0 + y**4 / 10.0), _erf(ys) / ys)
         E = aa * G
-        direct = _erf(aa) - np.exp(-c) * E
+        direct = _erf(aa) - np.exp(-cc) * E
         with np.errstate(divide="ignore", invalid="ignore"):
-            split = (-om / (s * (1.0 + s)) - _erfc(aa) + _erfc(y) / s) - np.expm1(-c) * E
+            split = (-om / (s * (1.0 + s)) - _erfc(aa) + _erfc(y) / s) - np.expm1(-cc) * E
         out[big] = np.where(kk >= 0.5, split, direct)
     return out
 
@@ -371,8 +372,10 @@ def _ball_quadrature(lam: np.ndarray, R: float, nodes: int, pt: int) -> np.ndarr
         return np.sum(wt * _chi_cdf_radial(2, R / np.sqrt(q)), axis=1)
     l3 = lam[:, 2:3]
     q_minus = (lam[:, :1] - l3) * s2 + (lam[:, 1:2] - l3) * c2  # q - lam3 without cancellation
-    a = R / np.sqrt(2.0 * l3)
-    return np.sum(wt * _ball3_kernel(a, q_minus / q, l3 / q), axis=1)
+    with np.errstate(over="ignore"):  # huge R / sigma: clipped where nothing changes any more
+        a = np.minimum(R / np.sqrt(2.0 * l3), 1e8)
+        x = np.minimum(R / np.sqrt(q), CHI_SATURATION)
+    return np.sum(wt * _ball3_kernel(a, 0.5 * x * x, q_minus / q, l3 / q), axis=1)
 
 
 def _ball_rows(lam: np.ndarray, R: float, tol: float, max_nodes: int, out: np.ndarray, err: np.ndarray,
