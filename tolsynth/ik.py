@@ -94,24 +94,33 @@ def _solve_ik(ev: NumpyEvaluator, free: tuple[int, ...], Q0: np.ndarray, targets
     vt = ~np.all(targets == targets[:, :1], axis=1)
     prog = ev.bind([Q[:, 0], targets[:, 0], axis], [vq, vt, np.zeros(3, bool)])
 
-    def residual(Qa, Ta):
-        n = Qa.shape[1]
+    iq, it = np.flatnonzero(vq), np.flatnonzero(vt)
+    nv = iq.size
+    fpos = np.searchsorted(iq, fr)  # rows of the free joints among the program's rows
+
+    def residual(X):
+        """r (nr, n) and J (nf, nr, n) at the program's rows X: varying joints, then targets."""
+        n = X.shape[1]
         if n <= SMALL_BATCH:  # CasADi's own evaluation of the same graph, mapped over the columns
             maps = ev.__dict__.setdefault("_maps", {})
             if n not in maps:
                 maps[n] = ev.function.map(n)
+            Qa = np.repeat(Q[:, :1], n, axis=1)
+            Ta = np.repeat(targets[:, :1], n, axis=1)
+            Qa[iq], Ta[it] = X[:nv], X[nv:]
             r, J = (np.asarray(x) for x in maps[n](Qa, Ta, axis))
             return r, J.reshape(r.shape[0], n, nf).transpose(2, 0, 1)  # J_b side by side
-        r, J = prog(np.vstack([Qa[vq], Ta[vt]]))
+        r, J = prog(X)
         return r, J.reshape(nf, r.shape[0], -1)  # J[k, :, b]: column k of the dense (nr x nf) J
 
-    r, J = residual(Q, targets)
+    X = np.vstack([Q[iq], targets[it]])
+    r, J = residual(X)
     cost = np.einsum("rb,rb->b", r, r)
     cost = np.where(np.isfinite(cost), cost, np.inf)
     conv = cost <= tol * tol
     # the columns still running (a non-finite residual, a loop that does not close, never moves)
     w = np.flatnonzero(~conv & np.isfinite(cost))
-    Qw, Tw, rw, Jw, cw = Q[:, w], targets[:, w], r[:, w], J[:, :, w], cost[w]
+    Xw, rw, Jw, cw = X[:, w], r[:, w], J[:, :, w], cost[w]
     mu = np.full(w.size, 1e-3)
     for _ in range(max_iter):
         if w.size == 0:
@@ -122,21 +131,24 @@ def _solve_ik(ev: NumpyEvaluator, free: tuple[int, ...], Q0: np.ndarray, targets
             g[k] = np.einsum("rb,rb->b", Jw[k], rw)
             for l in range(k + 1):
                 A[k, l] = A[l, k] = np.einsum("rb,rb->b", Jw[k], Jw[l])
-        # a non-finite Jacobian (a loop at its limit): every step from there is non-finite and
-        # rejected, so the column can never move
-        moving = np.isfinite(g.sum(axis=0) + A.reshape(nf * nf, -1).sum(axis=0))
+        # a non-finite Jacobian (a loop at its limit; it shows in the diagonal of J^T J): every
+        # step from there is non-finite and rejected, so the column can never move
+        trace = A[0, 0].copy()
+        for k in range(1, nf):
+            trace += A[k, k]
+        moving = np.isfinite(trace)
         for k in range(nf):
             A[k, k] += mu * (A[k, k] + 1e-9)  # damped (A is the damped matrix from here)
         with np.errstate(all="ignore"):
             step, solved = _spd_solve(A, -g)
         for c in np.flatnonzero(~solved & moving):  # breakdown (a singular system): least squares
             step[:, c] = np.linalg.lstsq(A[:, :, c], -g[:, c], rcond=None)[0]
-        Qn = Qw.copy()
-        Qn[fr] += step
-        rn, Jn = residual(Qn, Tw)
+        Xn = Xw.copy()
+        Xn[fpos] += step
+        rn, Jn = residual(Xn)
         cn = np.einsum("rb,rb->b", rn, rn)
         acc = moving & np.isfinite(cn) & (cn < cw)
-        np.copyto(Qw, Qn, where=acc)
+        np.copyto(Xw, Xn, where=acc)
         np.copyto(rw, rn, where=acc)
         np.copyto(Jw, Jn, where=acc)
         small_gain = acc & (cw - cn <= 1e-14 * cw)
@@ -148,11 +160,10 @@ def _solve_ik(ev: NumpyEvaluator, free: tuple[int, ...], Q0: np.ndarray, targets
         keep = moving & (cw > tol * tol) & ~((mu > 1e8) | small_gain | (big_step < 1e-13))
         if not keep.all():  # finished columns out of the working set
             done = ~keep
-            Q[:, w[done]] = Qw[:, done]
+            Q[np.ix_(iq, w[done])] = Xw[:nv, done]
             conv[w[done]] = cw[done] <= tol * tol
-            w, Qw, Tw, rw, Jw, cw, mu = (w[keep], Qw[:, keep], Tw[:, keep], rw[:, keep], Jw[:, :, keep],
-                                         cw[keep], mu[keep])
-    Q[:, w] = Qw  # the iteration limit reached
+            w, Xw, rw, Jw, cw, mu = w[keep], Xw[:, keep], rw[:, keep], Jw[:, :, keep], cw[keep], mu[keep]
+    Q[np.ix_(iq, w)] = Xw[:nv]  # the iteration limit reached
     return Q, conv
 
 
