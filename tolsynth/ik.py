@@ -1,9 +1,10 @@
 """Inverse kinematics on the model's forward-kinematics graph, for grids of hand positions.
 
 A batched Levenberg-Marquardt iteration on all grid points at once (residual and Jacobian from
-the model's CasADi fk graph, evaluated by :class:`tolsynth.numpy_eval.NumpyEvaluator`), with
+the model's CasADi fk graph, evaluated by :class:`tolsynth.numpy_eval.NumpyEvaluator` for large
+batches and by CasADi itself for small ones; each column independent of the others), with
 continuation over a grid in a base-frame plane from a reference configuration and deterministic
-quasi-random seeds for the points it misses.  Used by :mod:`tolsynth.workspace_map`.  Units: mm
+quasi-random seeds for the points it misses (the seeds after the first run together).  Used by :mod:`tolsynth.workspace_map`.  Units: mm
 and rad.
 """
 
