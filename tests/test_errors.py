@@ -259,10 +259,14 @@ def test_every_entry_point_takes_a_model_name_and_types_anything_else():
     one); anything else is an InputError naming the argument."""
     mc = tolsynth.monte_carlo("planar_2r", "elbow90", "coarse", R=0.5, n=20_000, seed=1)
     assert 0.0 <= mc.p_sphere <= 1.0 and mc.n == 20_000
+    w = tolsynth.worst_pose("planar_2r", "coarse", grid=4, starts=1)
+    assert w.model == "planar_2r" and np.isfinite(w.value)
     for fn, args, kw in [
         (tolsynth.monte_carlo, (5, "elbow90", {"*": 0.01}), dict(R=0.5, n=1000)),
         (tolsynth.synthesize, (3.0, 0.5, 0.9), {}),
         (tolsynth.validate, (object(), {"*": 0.01}), dict(R=0.5, p=0.9, n=1000)),
+        (tolsynth.worst_pose, (None, {"*": 0.01}), {}),
+        (tolsynth.probability_map, (["planar_2r"],), {}),
     ]:
         with pytest.raises(InputError, match="mechanism"):
             fn(*args, **kw)

@@ -26,7 +26,7 @@ from .batch_stats import _criterion_batch, principal_std_batch
 from .checks import check_count, check_mapping, check_positive, check_real, check_seed
 from .errors import InputError, OutOfRangeError, UnknownNameError
 from .joint_space import MODEL_REFERENCE, _feasible, _limits, _reference
-from .stats import p_ball, variance_divisor
+from .stats import p_ball
 from .tables import Tabular
 
 __all__ = ["WorstPose", "worst_pose"]
@@ -235,6 +235,9 @@ def worst_pose(
     True
     """
     t0 = time.perf_counter()
+    from .mechanism import as_mechanism
+
+    mechanism = as_mechanism(mechanism)
     if criterion not in ("sigma", "probability"):
         raise OutOfRangeError("criterion", f"got {criterion!r}", "'sigma' or 'probability'")
     from .distributions import resolve

@@ -23,7 +23,7 @@ from .ik import PLANES, _GridIK, _ik_evaluator
 from .joint_space import MODEL_REFERENCE, _limits, _reference
 from .progress import make_bar
 from .tables import Tabular
-from .stats import check_positive, p_ball_batch, variance_divisor
+from .stats import check_positive, p_ball_batch
 
 __all__ = ["ProbabilityMap", "probability_map", "PLANES"]
 
@@ -196,8 +196,11 @@ def probability_map(
     ProbabilityMap
     """
     t0 = time.perf_counter()
-    R = check_positive(R, "R")
     from .distributions import resolve
+    from .mechanism import as_mechanism
+
+    mechanism = as_mechanism(mechanism)
+    R = check_positive(R, "R")
 
     distribution = resolve(distribution, mechanism)
     n = check_count(n, "n", 5, 2000)  # grid points per axis
