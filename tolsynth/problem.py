@@ -398,6 +398,7 @@ class ToleranceNLP:
         # scaled rows of every block, (m, 3, n): block b's constraint is lambda_max(As V As^T) <= 1
         self.As = np.array([b.scale * b.A for b in spec.blocks]).reshape(len(spec.blocks), 3, spec.n)
         self._graphs = None
+        self._values_memo = None  # (eps bytes, block_values at eps): the last point asked
 
     @property
     def graphs(self) -> "NLPGraphs":
@@ -408,7 +409,11 @@ class ToleranceNLP:
 
     # -- evaluations (NumPy in, NumPy out) ----------------------------------------------------
     def cost(self, eps: np.ndarray) -> float:
-        return float(cost_graph(self.spec.n, self.costs.signature)(np.log(eps), self.theta))
+        """The cost at ``eps``: NumPy for the paper's power law (:meth:`CostSet.total`, the same
+        expression as the graph's), else the cost graph the solvers read."""
+        u = np.log(eps)
+        f = self.costs.total(u)
+        return f if f is not None else float(cost_graph(self.spec.n, self.costs.signature)(u, self.theta))
 
     def G(self, eps: np.ndarray) -> list[np.ndarray]:
         Gm = np.array(self.graphs.lmi(np.log(eps), self.P))
@@ -424,11 +429,20 @@ class ToleranceNLP:
 
     def block_values(self, eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``sigma_j z / R`` (or ``/ Phi``) of every block, descending, shape (m, 3), and the
-        principal directions (m, 3, 3; columns), by NumPy's batched symmetric eigensolver."""
+        principal directions (m, 3, 3; columns), by NumPy's batched symmetric eigensolver.
+
+        The last point's answer is remembered (the exchange's check, the result's constraint values
+        and the certificate all ask at the solver's point): callers must not modify the arrays."""
+        eps = np.asarray(eps, dtype=float)
+        key = eps.tobytes()
+        memo = self._values_memo
+        if memo is not None and memo[0] == key:
+            return memo[1]
         V = self.block_covariances(eps)
         lam, vec = np.linalg.eigh(0.5 * (V + V.transpose(0, 2, 1)))
-        lam, vec = lam[:, ::-1], vec[:, :, ::-1]
-        return np.sqrt(np.clip(lam, 0.0, None)), vec
+        out = np.sqrt(np.maximum(lam[:, ::-1], 0.0)), vec[:, :, ::-1]
+        self._values_memo = (key, out)
+        return out
 
     def constraint_values(self, eps: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per block: the paper's ``sigma_j * z / R`` (descending) and the principal directions."""
@@ -531,42 +545,58 @@ class ToleranceNLP:
         bound from these certifies the returned point whichever solver found it.
         """
         spec = self.spec
+        eps = np.asarray(eps, dtype=float)
+        m = len(spec.blocks)
+        Z = np.zeros((m, 3, 3))
         free = (eps > spec.lower * (1 + active_tol)) & (eps < spec.upper * (1 - active_tol))
+        vals, dirs = self.block_values(eps)
+        r_of = np.count_nonzero(vals >= 1.0 - active_tol, axis=1)  # values descend: active first
+        blocks = np.nonzero(r_of)[0]
+        if not len(blocks):
+            return list(Z)
         cols, layout = [], []
-        for b, (block, (vals, dirs)) in enumerate(zip(spec.blocks, self.constraint_values(eps))):
-            D = dirs[:, vals >= 1.0 - active_tol]
-            proj = D.T @ block.A  # r x n: components of a_bi along the active directions
-            r = D.shape[1]
-            for i in range(r):
-                for j in range(i, r):
-                    mult = 1.0 if i == j else 2.0
-                    cols.append(mult * 2 * eps**2 * block.scale**2 * proj[i] * proj[j] / spec.c)
-                    layout.append((b, i, j, D))
-        Z = [np.zeros((3, 3)) for _ in spec.blocks]
-        if not cols:
-            return Z
-        M = np.column_stack(cols)[free]
+        scale = 2.0 * eps**2 / spec.c
+        for b in blocks:
+            r = int(r_of[b])
+            D = dirs[b][:, :r]
+            proj = D.T @ self.As[b]  # r x n: components of scale_b a_bi along the active directions
+            i, j = _TRIU[r]
+            cols.append(np.where(i == j, 1.0, 2.0)[:, None] * proj[i] * proj[j] * scale)
+            layout.append((b, r, D))
+        M = np.concatenate(cols).T[free]
         rhs = -self.costs.du(np.log(eps))[free]
         y, *_ = np.linalg.lstsq(M, rhs, rcond=None)
-        Ys: dict[int, np.ndarray] = {}
-        for value, (b, i, j, D) in zip(y, layout):
-            Y = Ys.setdefault(b, np.zeros((D.shape[1], D.shape[1])))
-            Y[i, j] = Y[j, i] = value
+        pos = 0
+        for b, r, D in layout:
+            i, j = _TRIU[r]
+            Y = np.zeros((r, r))
+            Y[i, j] = y[pos : pos + len(i)]
+            Y[j, i] = Y[i, j]
+            pos += len(i)
             Z[b] = D @ Y @ D.T
-        return Z
+        return list(Z)
 
     def dual_weights(self, Z: Sequence[np.ndarray]) -> tuple[np.ndarray, float]:
         """``(w, tr)`` of the Lagrangian ``f(u) - sum_b tr(Z_b G_b(u)) = sum_i [c_i(u_i) + w_i e^{2u_i}]
         - tr`` for LMI multipliers ``Z_b`` (each projected onto the PSD cone first)."""
-        spec = self.spec
-        w = np.zeros(spec.n)
-        trace = 0.0
-        for block, Zb in zip(spec.blocks, Z):
-            lam, vec = np.linalg.eigh(0.5 * (Zb + Zb.T))
-            Zp = (vec * np.clip(lam, 0.0, None)) @ vec.T
-            trace += float(np.trace(Zp))
-            w += block.scale**2 * np.einsum("in,ij,jn->n", block.A, Zp, block.A) / spec.c
+        (w,), (trace,) = self._dual_weights([Z])
         return w, trace
+
+    def _dual_weights(self, Zsets) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`dual_weights` of several multiplier sets at once (one batched eigensolve):
+        ``w`` (sets, n) and the traces (sets,)."""
+        m, n = self.As.shape[0], self.spec.n
+        k = len(Zsets)
+        if m == 0:
+            return np.zeros((k, n)), np.zeros(k)
+        Zs = np.concatenate([np.asarray(Z, dtype=float).reshape(m, 3, 3) for Z in Zsets])
+        lam, vec = np.linalg.eigh(0.5 * (Zs + Zs.transpose(0, 2, 1)))
+        lam = np.maximum(lam, 0.0)
+        Zp = (vec * lam[:, None, :]) @ vec.transpose(0, 2, 1)  # the PSD projection
+        # w_i = sum_b (scale_b a_bi)^T Zp_b (scale_b a_bi) / c; tr Zp_b = sum of its eigenvalues
+        As = self.As if k == 1 else np.tile(self.As, (k, 1, 1))
+        w = ((Zp @ As) * As).reshape(k, 3 * m, n).sum(axis=1) / self.spec.c
+        return w, lam.reshape(k, 3 * m).sum(axis=1)
 
     def dual_bound(self, Z: Sequence[np.ndarray]) -> float:
         """Lagrangian lower bound on the optimal cost for LMI multipliers ``Z_b`` (3x3).
@@ -577,6 +607,13 @@ class ToleranceNLP:
         :meth:`tolsynth.cost.CostModel.dual_min` (closed form for the power law; exact where the cost
         is convex in eps^2, a rigorous lower bound otherwise).
         """
-        w, trace = self.dual_weights(Z)
-        vals, _ = self.costs.dual_min(w, self.lu, self.uu)
-        return float(np.sum(vals) - trace)
+        return self.dual_bounds(Z)[0]
+
+    def dual_bounds(self, *Zsets: Sequence[np.ndarray]) -> list[float]:
+        """:meth:`dual_bound` of each multiplier set (one batched eigensolve for all of them)."""
+        W, traces = self._dual_weights(Zsets)
+        return [float(np.sum(self.costs.dual_min(w, self.lu, self.uu)[0]) - tr) for w, tr in zip(W, traces)]
+
+
+#: upper-triangle index pairs of an r x r matrix, r = 0..3 (the entries of Y_b in kkt_multipliers)
+_TRIU = {r: np.triu_indices(r) for r in range(4)}

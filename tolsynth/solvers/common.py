@@ -45,50 +45,48 @@ def assemble(
     certified optimum of the per-component relaxation (same p), solved here by IPOPT.
     """
     spec = nlp.spec
-    eps = np.clip(eps, spec.lower, spec.upper)  # exp(ln eps) may round one ulp past a bound (a lock)
-    blocks = []
-    for block, (vals, dirs), Zb in zip(spec.blocks, nlp.constraint_values(eps), Z):
-        mult = np.array([2.0 * float(dirs[:, j] @ Zb @ dirs[:, j]) for j in range(3)])
-        blocks.append(
-            ConstraintBlock(
-                label=block.label,
-                pose=block.pose,
-                kind=block.kind,
-                values=vals,
-                directions=dirs,
-                active=vals >= 1.0 - ACTIVE_TOL,
-                multipliers=mult,
+    # exp(ln eps) may round one ulp past a bound (a lock)
+    eps = np.minimum(np.maximum(np.asarray(eps, dtype=float), spec.lower), spec.upper)
+    vals, dirs = nlp.block_values(eps)
+    vals, dirs = vals.copy(), dirs.copy()  # the result's own (block_values remembers its answer)
+    m = len(spec.blocks)
+    Zs = np.asarray(Z, dtype=float).reshape(m, 3, 3)
+    mults = 2.0 * np.sum(dirs * (Zs @ dirs), axis=1)  # 2 d_j^T Z d_j for every block and j
+    active = vals >= 1.0 - ACTIVE_TOL
+    blocks = [
+        ConstraintBlock(label=block.label, pose=block.pose, kind=block.kind, values=vals[b],
+                        directions=dirs[b], active=active[b], multipliers=mults[b])
+        for b, block in enumerate(spec.blocks)
+    ]
+    if spec.sphere_blocks:
+        sphere_vals = nlp.sphere_values(eps)
+        mu_sphere = np.zeros(len(sphere_vals)) if mu_sphere is None else np.asarray(mu_sphere, dtype=float)
+        for block, (vals, dirs, _), mu in zip(spec.sphere_blocks, sphere_vals, mu_sphere):
+            blocks.append(
+                ConstraintBlock(
+                    label=block.label,
+                    pose=block.pose,
+                    kind="sphere",
+                    values=vals,
+                    directions=dirs,
+                    active=vals >= 1.0 - ACTIVE_TOL,
+                    multipliers=np.array([mu * (1.0 - block.p)]),
+                )
             )
-        )
-    sphere_vals = nlp.sphere_values(eps)
-    mu_sphere = np.zeros(len(sphere_vals)) if mu_sphere is None else np.asarray(mu_sphere, dtype=float)
-    for block, (vals, dirs, _), mu in zip(spec.sphere_blocks, sphere_vals, mu_sphere):
-        blocks.append(
-            ConstraintBlock(
-                label=block.label,
-                pose=block.pose,
-                kind="sphere",
-                values=vals,
-                directions=dirs,
-                active=vals >= 1.0 - ACTIVE_TOL,
-                multipliers=np.array([mu * (1.0 - block.p)]),
-            )
-        )
+    at_lower = eps <= spec.lower * (1 + ACTIVE_TOL)
+    at_upper = ~at_lower & (eps >= spec.upper * (1 - ACTIVE_TOL))
     bounds_active, bound_mult = {}, {}
-    for i, name in enumerate(spec.names):
-        if eps[i] <= spec.lower[i] * (1 + ACTIVE_TOL):
-            bounds_active[name] = "lower"
-        elif eps[i] >= spec.upper[i] * (1 - ACTIVE_TOL):
-            bounds_active[name] = "upper"
-        if name in bounds_active:
-            bound_mult[name] = float(bound_mult_u[i] / eps[i])  # d/d eps = (1/eps) d/du
+    for i in np.flatnonzero(at_lower | at_upper):
+        name = spec.names[i]
+        bounds_active[name] = "lower" if at_lower[i] else "upper"
+        bound_mult[name] = float(bound_mult_u[i] / eps[i])  # d/d eps = (1/eps) d/du
     cost = nlp.cost(eps)
     if spec.sphere_blocks:
         lower = _relaxation_bound(nlp)
     else:
         # both are valid lower bounds: the solver's own multipliers, and those recomputed from the
         # primal point by least squares on stationarity (sharper when the solver's are loose)
-        lower = max(nlp.dual_bound(Z), nlp.dual_bound(nlp.kkt_multipliers(eps)))
+        lower = max(nlp.dual_bounds(Zs, nlp.kkt_multipliers(eps)))
     status, message = _verified(status, message, blocks, cost, lower, certified=not spec.sphere_blocks)
     if not spec.sphere_blocks and not spec.convex:
         # weak duality still holds (the dual bound's 1-D minima are global), so a closed gap still
@@ -102,7 +100,7 @@ def assemble(
         status=status,
         success=status is Status.OPTIMAL,
         message=message,
-        tolerances=dict(zip(spec.names, (float(e) for e in eps))),
+        tolerances=dict(zip(spec.names, eps.tolist())),
         units=dict(zip(spec.names, spec.units)),
         cost=cost,
         constraints=tuple(blocks),

@@ -31,6 +31,7 @@ raised again.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections import OrderedDict
 from functools import lru_cache
@@ -75,9 +76,67 @@ AGGREGATE = True  # aggregate multiplier directions as cuts and drop inactive cu
 NEAR_ACTIVE = 0.9
 
 
+class CutNLP:
+    """A cut NLP's ``nlpsol``, called through CasADi's zero-copy buffers.
+
+    :meth:`solve` copies the inputs into NumPy arrays that the solver reads in place, runs it, and
+    returns copies of the outputs with the solver's ``stats``: no ``DM`` conversion on the way in
+    or out (about 0.15 ms of a 0.6 ms warm IPOPT call on the paper's column).  Each thread gets its
+    own buffer (a buffer holds one solver memory), made on its first call.
+    """
+
+    _INPUTS = ("x0", "p", "lbx", "ubx", "lbg", "ubg", "lam_x0", "lam_g0")
+    _OUTPUTS = ("x", "f", "g", "lam_x", "lam_g")
+
+    def __init__(self, function: ca.Function):
+        self.function = function
+        self._local = threading.local()
+        self._in_index = [function.index_in(name) for name in self._INPUTS]
+        self._out_index = [function.index_out(name) for name in self._OUTPUTS]
+
+    def _buffer(self):
+        buf = getattr(self._local, "buf", None)
+        if buf is None:
+            f = self.function
+            ins = [np.zeros(f.nnz_in(i)) for i in self._in_index]
+            outs = [np.zeros(f.nnz_out(i)) for i in self._out_index]
+            handle, run = f.buffer()
+            for i, a in zip(self._in_index, ins):
+                handle.set_arg(i, memoryview(a))
+            for i, a in zip(self._out_index, outs):
+                handle.set_res(i, memoryview(a))
+            buf = self._local.buf = (handle, run, ins, outs)
+        return buf
+
+    def solve(self, x0, p, lbx, ubx, lbg, ubg, lam_x0=None, lam_g0=None) -> tuple[dict, dict]:
+        """Run IPOPT; ``({"x", "f", "g", "lam_x", "lam_g"}: 1-D arrays, stats)``."""
+        handle, run, ins, outs = self._buffer()
+        for a, v in zip(ins, (x0, p, lbx, ubx, lbg, ubg, lam_x0, lam_g0)):
+            if v is None:
+                a.fill(0.0)
+            else:
+                a[:] = v
+        run()
+        return dict(zip(self._OUTPUTS, (a.copy() for a in outs))), handle.stats()
+
+
+class _CallNLP(CutNLP):
+    """The same through ``Function.__call__`` (a CasADi without ``Function.buffer``)."""
+
+    def __init__(self, function: ca.Function):
+        self.function = function
+
+    def solve(self, x0, p, lbx, ubx, lbg, ubg, lam_x0=None, lam_g0=None) -> tuple[dict, dict]:
+        kw = dict(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        if lam_x0 is not None:
+            kw.update(lam_x0=lam_x0, lam_g0=lam_g0)
+        sol = self.function(**kw)
+        return {k: np.array(sol[k]).ravel() for k in self._OUTPUTS}, self.function.stats()
+
+
 @lru_cache(maxsize=64)
 def _solver(n: int, K: int, tol: float, constr_viol_tol: float, max_iter: int, mu_strategy: str,
-            m_sphere: int = 0, sphere_nodes: int = 0, cost_signature: tuple | None = None) -> ca.Function:
+            m_sphere: int = 0, sphere_nodes: int = 0, cost_signature: tuple | None = None) -> CutNLP:
     """The cut NLP for n parameters and K cut slots: ``min f(u)/f0  s.t.  C exp(2u) <= 1``."""
     n_ps = 1 + m_sphere + 3 * n * m_sphere if m_sphere else 0
     cost = cost_graph(n, cost_signature)
@@ -113,7 +172,8 @@ def _solver(n: int, K: int, tol: float, constr_viol_tol: float, max_iter: int, m
                      "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
                      "ipopt.warm_start_bound_frac": 1e-9, "ipopt.warm_start_slack_bound_push": 1e-9,
                      "ipopt.warm_start_slack_bound_frac": 1e-9})
-    return ca.nlpsol("tolerance_cuts", "ipopt", nlp, opts)
+    solver = ca.nlpsol("tolerance_cuts", "ipopt", nlp, opts)
+    return CutNLP(solver) if hasattr(solver, "buffer") else _CallNLP(solver)
 
 
 #: the active cuts at the end of recent solves, by the blocks' sensitivity rows (directions do not
@@ -227,12 +287,11 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             if mu_strategy == "warm":
                 lam0 = np.zeros(slots)
                 lam0[:K] = warm[1] / f0
-                sol = solver(x0=u, p=pval, lbx=nlp.lu, ubx=nlp.uu, lbg=lbg, ubg=ubg, lam_g0=lam0, lam_x0=warm[2] / f0)
+                sol, stats = solver.solve(u, pval, nlp.lu, nlp.uu, lbg, ubg, warm[2] / f0, lam0)
             else:
                 if rounds == 1 and use_warm:  # the warm attempt failed: the cold ones from the usual start
                     u = np.log(nlp.start_point())
-                sol = solver(x0=u, p=pval, lbx=nlp.lu, ubx=nlp.uu, lbg=lbg, ubg=ubg)
-            stats = solver.stats()
+                sol, stats = solver.solve(u, pval, nlp.lu, nlp.uu, lbg, ubg)
             code = stats.get("return_status", "unknown")
             if code in ("NonIpopt_Exception_Thrown", "User_Requested_Stop"):
                 # Ctrl-C inside the solve: CasADi swallows the signal; never retry, re-raise it
@@ -248,9 +307,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             if status is Status.OPTIMAL:
                 break
             tried.append(f"round {rounds} {mu_strategy}: {code}")
-        u = np.array(sol["x"]).ravel()
-        lam_g = np.array(sol["lam_g"]).ravel()
-        lam_x = np.array(sol["lam_x"]).ravel()
+        u, lam_g, lam_x = sol["x"], sol["lam_g"], sol["lam_x"]
         if status is not Status.OPTIMAL:
             break
         if not m:
@@ -305,23 +362,19 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     eps = np.exp(u)
     K = len(cut_b)
     mu = np.maximum(lam_g[:K], 0.0) * f0 if K else np.zeros(0)
-    Z = [np.zeros((3, 3)) for _ in range(m)]
-    for b, w, mk in zip(cut_b, cut_w, mu):
-        if mk > 0:
-            Z[b] += mk * np.outer(w, w)
+    Z = np.zeros((m, 3, 3))
+    on = mu > 0
+    if np.any(on):
+        Wk = cut_w[on] * np.sqrt(mu[on])[:, None]
+        np.add.at(Z, cut_b[on], Wk[:, :, None] * Wk[:, None, :])  # Z_b = sum_k mu_k w_k w_k^T
     if status is Status.OPTIMAL and K:
         # remember each block's multiplier matrix by its eigenvectors: the fewest cuts that
-        # reproduce this optimum's Lagrangian
-        rb, rw, rl = [], [], []
-        zmax = max(float(np.max(np.linalg.eigvalsh(Zb))) for Zb in Z)
-        for b in np.unique(cut_b):
-            lz, vz = np.linalg.eigh(Z[b])
-            for j in np.nonzero(lz > 1e-9 * zmax)[0]:
-                rb.append(b)
-                rw.append(vz[:, j])
-                rl.append(lz[j])  # the multiplier of the cut along an eigenvector of Z_b
-        if rb:
-            _remember(key, np.array(rb, dtype=int), np.array(rw), (eps.copy(), np.array(rl), lam_x * f0))
+        # reproduce this optimum's Lagrangian (Z is zero on the blocks without a cut)
+        bs = np.unique(cut_b)
+        lz, vz = np.linalg.eigh(Z[bs])
+        rows, cols = np.nonzero(lz > 1e-9 * max(float(np.max(lz)), 0.0))
+        if len(rows):  # the multiplier of the cut along an eigenvector of Z_b is its eigenvalue
+            _remember(key, bs[rows], vz[rows, :, cols], (eps.copy(), lz[rows, cols], lam_x * f0))
     # P_b >= p_b active at its lower bound: CasADi's lam is <= 0 there; f - mu (P - p) with mu >= 0
     mu_sphere = -lam_g[len(lam_g) - ms :] * f0 if ms else np.zeros(0)
     message = code if status is Status.OPTIMAL else "; ".join(tried) or code
