@@ -42,6 +42,7 @@ from .errors import InputError, OutOfRangeError
 __all__ = ["Shape", "SHAPES", "shape", "shapes_of", "divisors", "divisor_of", "resolve", "describe", "label", "DEFAULT_SHAPE"]
 
 DEFAULT_SHAPE = "uniform"
+_EXACT_DIVISORS = {"uniform": 3.0, "normal": 9.0, "triangular": 6.0}
 #: the names accepted (``truncnormal(beta)`` with 0.5 <= beta <= 8 as well)
 SHAPES = ("uniform", "normal", "triangular", "truncnormal")
 _TRUNC = re.compile(r"^truncnormal\(\s*([0-9.eE+-]+)\s*\)$")
@@ -72,8 +73,8 @@ class Shape:
     @property
     def divisor(self) -> float:
         """``eps^2 / Var(delta)``: 3 uniform, 9 normal, 6 triangular."""
-        exact = {"uniform": 3.0, "normal": 9.0, "triangular": 6.0}
-        return exact[self.kind] if self.kind in exact else 1.0 / self.variance
+        exact = _EXACT_DIVISORS.get(self.kind)
+        return exact if exact is not None else 1.0 / self.variance
 
     @property
     def bounded(self) -> bool:

@@ -284,6 +284,10 @@ class Mechanism:
         """
         waive: tuple[str, ...] = ()
         if isinstance(q, str):
+            # a named configuration checked before (and unchanged since) passes again
+            checked, cfg = self.__dict__.get("_checked_configurations", {}).get(q), self.configurations.get(q)
+            if checked is not None and cfg is not None and checked == cfg.tobytes():
+                return cfg.copy()
             if q not in self.spec.configurations:
                 raise UnknownNameError(
                     "configuration", f"unknown configuration {q!r}", "one of " + ", ".join(self.configurations)
@@ -316,6 +320,8 @@ class Mechanism:
                         f"q ({c.name}: {expr})", f"{math.degrees(v):.4f} deg is outside the limit",
                         f"{math.degrees(c.lower):g} to {math.degrees(c.upper):g} deg",
                     )
+            if isinstance(q, str):
+                self.__dict__.setdefault("_checked_configurations", {})[q] = qv.tobytes()
         return qv
 
     def deltas(self, deltas: Mapping[str, float] | Sequence[float] | np.ndarray | None) -> np.ndarray:
@@ -391,8 +397,13 @@ class Mechanism:
         Rows: dx, dy, dz (mm) and the small rotation dphi_x, dphi_y, dphi_z (rad, base frame);
         column i per one tolerance unit of error parameter i.
         """
-        qv = self.joints(q, check_limits)
-        dv = self.deltas(deltas)
+        return self.sensitivity_at(self.joints(q, check_limits), self.deltas(deltas))
+
+    def sensitivity_at(self, qv: np.ndarray, dv: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`sensitivity` at joint values and errors already checked (``qv`` from
+        :meth:`joints`, ``dv`` from :meth:`deltas`; None: no errors)."""
+        if dv is None:
+            dv = np.zeros(self.n)
         # a re-solve at the same poses (a sweep, a warm solve) asks again: remembered per
         # (joints, errors); the graphs of a Mechanism never change
         key = (qv.tobytes(), dv.tobytes())

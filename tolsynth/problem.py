@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import Mapping, Sequence
 
 import casadi as ca
@@ -159,6 +159,8 @@ def _per_parameter(value, names: Sequence[str], index, field_name: str, default=
         if default is None:
             raise InputError(field_name, "missing", f"a number or {n} numbers")
         value = default
+    if isinstance(value, float) and -HUGE <= value <= HUGE:  # the common case: one number for all
+        return np.full(n, value)
     if isinstance(value, Mapping):
         out = np.array(default, dtype=float).copy() if default is not None else np.full(n, np.nan)
         for key, v in value.items():
@@ -172,6 +174,15 @@ def _per_parameter(value, names: Sequence[str], index, field_name: str, default=
     if arr.shape != (n,):
         raise InputError(field_name, f"expected {n} values, got shape {arr.shape}", f"a number or {n} numbers")
     return arr.astype(float)
+
+
+def _outside(x: np.ndarray, lower, upper) -> np.ndarray:
+    """Indices of the entries of ``x`` that are not finite numbers in ``[lower, upper]``."""
+    return np.flatnonzero(~(np.isfinite(x) & (x >= lower) & (x <= upper)))
+
+
+#: z(p) of a validated probability (remembered: a sweep and a warm solve ask again)
+_z_of_p = lru_cache(maxsize=1024)(z_of_p)
 
 
 def make_specification(
@@ -202,22 +213,20 @@ def make_specification(
 
     distribution = resolve(distribution, mechanism)
     shapes = shapes_of(distribution, mechanism.error_parameters, mechanism.index)
-    cvec = np.array([s.divisor for s in shapes])
-    if np.all(cvec == cvec[0]):
-        c, col_scale = float(cvec[0]), 1.0
+    divisors = [s.divisor for s in shapes]
+    if len(set(divisors)) == 1:
+        c, col_scale = float(divisors[0]), 1.0
     else:  # mixed shapes: one divisor (3) for the graphs, the columns scaled to it
-        c, col_scale = 3.0, np.sqrt(3.0 / cvec)
+        c, col_scale = 3.0, np.sqrt(3.0 / np.array(divisors))
     if criterion not in CRITERIA:
         raise InputError("criterion", f"unknown criterion {criterion!r}", " or ".join(repr(c) for c in CRITERIA))
     names = mechanism.error_parameters
     alpha_v = _per_parameter(alpha, names, mechanism.index, "alpha")
-    for nm, a in zip(names, alpha_v):
-        if not (math.isfinite(a) and TINY <= a <= ALPHA_MAX):
-            raise OutOfRangeError(f"alpha[{nm}]", f"got {a}", f"{TINY:g} <= alpha <= {ALPHA_MAX:g} (the paper: alpha <= 1, typically 0.7)")
+    for i in _outside(alpha_v, TINY, ALPHA_MAX):
+        raise OutOfRangeError(f"alpha[{names[i]}]", f"got {alpha_v[i]}", f"{TINY:g} <= alpha <= {ALPHA_MAX:g} (the paper: alpha <= 1, typically 0.7)")
     k_v = _per_parameter(k, names, mechanism.index, "k", default=mechanism.k)
-    for nm, kk in zip(names, k_v):
-        if not (math.isfinite(kk) and TINY <= kk <= HUGE):
-            raise OutOfRangeError(f"k[{nm}]", f"got {kk}", f"{TINY:g} <= k <= {HUGE:g} (the paper: k >= 1)")
+    for i in _outside(k_v, TINY, HUGE):
+        raise OutOfRangeError(f"k[{names[i]}]", f"got {k_v[i]}", f"{TINY:g} <= k <= {HUGE:g} (the paper: k >= 1)")
     lo_default, hi_default = mechanism.bounds
     if bounds is None:
         lo, hi = lo_default.copy(), hi_default.copy()
@@ -235,18 +244,20 @@ def make_specification(
             lo, hi = (np.asarray(b, dtype=float) * np.ones(len(names)) for b in bounds)
         except (TypeError, ValueError, OverflowError):
             raise InputError("bounds", f"got {bounds!r}", "(lower, upper), each a number or one per parameter, or a dict name -> (lower, upper)") from None
-    for nm, a, b, u in zip(names, lo, hi, mechanism.units):
-        if not (math.isfinite(a) and TINY <= a <= HUGE):
-            raise OutOfRangeError(f"bounds[{nm}].lower", f"got {a} {u}", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})")
-        if not (math.isfinite(b) and a <= b <= HUGE):
-            raise OutOfRangeError(f"bounds[{nm}]", f"lower {a}, upper {b} ({u})", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})")
+    units = tuple(mechanism.units)
+    if len(_outside(lo, TINY, HUGE)) or len(_outside(hi, lo, HUGE)):  # name the first offender
+        for nm, a, b, u in zip(names, lo, hi, units):
+            if not (math.isfinite(a) and TINY <= a <= HUGE):
+                raise OutOfRangeError(f"bounds[{nm}].lower", f"got {a} {u}", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})")
+            if not (math.isfinite(b) and a <= b <= HUGE):
+                raise OutOfRangeError(f"bounds[{nm}]", f"lower {a}, upper {b} ({u})", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})")
     costs = cost_set(cost, names, mechanism.index, k=k_v, alpha=alpha_v)
     costs.check_ranges(names, lo, hi)
-    z = z_of_p(p)
+    z = _z_of_p(p)
     if Phi is not None:
         Phi = check_positive(Phi, "Phi", "rad")
         p_orientation = p if p_orientation is None else check_probability(p_orientation, "p_orientation")
-        z_o = z_of_p(p_orientation)
+        z_o = _z_of_p(p_orientation)
     elif p_orientation is not None:
         raise InputError("p_orientation", "given without Phi", "give Phi (rad) with it")
 
@@ -260,7 +271,7 @@ def make_specification(
     for i, ps in enumerate(pose_list):
         label = ps if isinstance(ps, str) else f"#{i}"
         q = mechanism.joints(ps)
-        S = mechanism.sensitivity(q, check_limits=False) * col_scale
+        S = mechanism.sensitivity_at(q) * col_scale
         qs[label] = q
         if criterion == "sphere":
             sphere.append(SphereBlock(label, R, p, S[:3].copy()))
@@ -270,7 +281,7 @@ def make_specification(
             blocks.append(Block(label, "orientation", z_o / Phi, S[3:].copy()))
     return Specification(
         names=tuple(names),
-        units=tuple(mechanism.units),
+        units=units,
         R=R,
         p=p,
         z=z,
@@ -385,20 +396,32 @@ class ToleranceNLP:
         self.spec = spec
         self.costs = spec.costs
         self.theta = self.costs.theta  # the cost models' numbers, parameter of cost_graph
-        self.P = np.concatenate(
-            [[spec.c], [b.scale for b in spec.blocks]] + [b.A.ravel(order="F") for b in spec.blocks]
-        )
         self.lu = np.log(spec.lower)
         self.uu = np.log(spec.upper)
         self.sphere_nodes = sphere_nodes
-        sb = spec.sphere_blocks
-        self.sphere = sphere_graph(spec.n, len(sb), sphere_nodes)
-        self.Ps = np.concatenate([[spec.c], [b.R for b in sb]] + [b.A.ravel(order="F") for b in sb])
-        self.p_sphere = np.array([b.p for b in sb])
+        self.p_sphere = np.array([b.p for b in spec.sphere_blocks])
         # scaled rows of every block, (m, 3, n): block b's constraint is lambda_max(As V As^T) <= 1
         self.As = np.array([b.scale * b.A for b in spec.blocks]).reshape(len(spec.blocks), 3, spec.n)
         self._graphs = None
         self._values_memo = None  # (eps bytes, block_values at eps): the last point asked
+
+    # the graphs' parameter vectors, built on first use (IPOPT's exchange method reads neither)
+    @cached_property
+    def P(self) -> np.ndarray:
+        """``[c, scale_1..scale_m, vec(A_1)..vec(A_m)]``, the parameter of :func:`nlp_graphs`' LMI."""
+        spec = self.spec
+        return np.concatenate([[spec.c], [b.scale for b in spec.blocks]] + [b.A.ravel(order="F") for b in spec.blocks])
+
+    @cached_property
+    def sphere(self) -> ca.Function:
+        """``P(|dr| <= R_b)`` of the sphere blocks (:func:`sphere_graph`)."""
+        return sphere_graph(self.spec.n, len(self.spec.sphere_blocks), self.sphere_nodes)
+
+    @cached_property
+    def Ps(self) -> np.ndarray:
+        """``[c, R_1..R_m, vec(A_1)..vec(A_m)]`` of the sphere blocks, the parameter of :attr:`sphere`."""
+        sb = self.spec.sphere_blocks
+        return np.concatenate([[self.spec.c], [b.R for b in sb]] + [b.A.ravel(order="F") for b in sb])
 
     @property
     def graphs(self) -> "NLPGraphs":
@@ -459,6 +482,8 @@ class ToleranceNLP:
         from .stats import p_ball, principal
 
         out = []
+        if not self.spec.sphere_blocks:
+            return out
         cov = covariance_graph(self.spec.n)
         for b in self.spec.sphere_blocks:
             V, _ = cov(np.vstack([b.A, np.zeros_like(b.A)]), eps, self.spec.c)
@@ -476,16 +501,18 @@ class ToleranceNLP:
         """Raise :class:`InfeasibleSpecificationError` if even the tightest tolerances (all at
         their lower bounds) violate a constraint: V grows with every eps, so nothing else can
         do better."""
-        for block, (vals, _) in zip(self.spec.blocks, self.constraint_values(self.spec.lower)):
-            if vals[0] > 1.0:
-                what = "z/R" if block.kind == "position" else "z/Phi"
-                raise InfeasibleSpecificationError(
-                    block.label,
-                    float(vals[0]),
-                    f"infeasible specification: the {block.label} fails even with every tolerance at its "
-                    f"lower bound: largest principal sigma*{what} = {vals[0]:.6g} > 1.  Lower the bounds, "
-                    f"or relax R/Phi or p.",
-                )
+        worst = self.block_values(self.spec.lower)[0][:, 0]
+        bad = np.flatnonzero(worst > 1.0)
+        if len(bad):
+            block, value = self.spec.blocks[bad[0]], float(worst[bad[0]])
+            what = "z/R" if block.kind == "position" else "z/Phi"
+            raise InfeasibleSpecificationError(
+                block.label,
+                value,
+                f"infeasible specification: the {block.label} fails even with every tolerance at its "
+                f"lower bound: largest principal sigma*{what} = {value:.6g} > 1.  Lower the bounds, "
+                f"or relax R/Phi or p.",
+            )
         for block, (vals, _, P) in zip(self.spec.sphere_blocks, self.sphere_values(self.spec.lower)):
             if vals[0] > 1.0:
                 raise InfeasibleSpecificationError(
