@@ -698,7 +698,9 @@ def cost_set(cost, names: Sequence[str], index=None, k=None, alpha=None) -> Cost
         return PowerLaw(float(np.broadcast_to(k, (n,))[i]), float(np.broadcast_to(alpha, (n,))[i]))
 
     if cost is None and k is not None and alpha is not None:
-        kk, aa = (np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in (k, alpha))
+        kk, aa = (np.asarray(x, dtype=float) for x in (k, alpha))
+        if kk.shape != (n,) or aa.shape != (n,):
+            kk, aa = np.broadcast_to(kk, (n,)), np.broadcast_to(aa, (n,))
         return _power_set(tuple(kk.tolist()), tuple(aa.tolist()))
     if cost is None:
         return CostSet(tuple(default(i) for i in range(n)))

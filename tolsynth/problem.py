@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import casadi as ca
 import numpy as np
@@ -135,7 +135,7 @@ class Specification:
     @property
     def convex(self) -> bool:
         """True if every cost is convex in eps^2 on its range (then the problem is convex)."""
-        return bool(np.all(self.costs.convex(self.lower, self.upper)))
+        return bool(self.costs.convex(self.lower, self.upper).all())
 
     @property
     def n(self) -> int:
@@ -178,7 +178,7 @@ def _per_parameter(value, names: Sequence[str], index, field_name: str, default=
 
 def _outside(x: np.ndarray, lower, upper) -> np.ndarray:
     """Indices of the entries of ``x`` that are not finite numbers in ``[lower, upper]``."""
-    return np.flatnonzero(~(np.isfinite(x) & (x >= lower) & (x <= upper)))
+    return (~(np.isfinite(x) & (x >= lower) & (x <= upper))).nonzero()[0]
 
 
 #: z(p) of a validated probability (remembered: a sweep and a warm solve ask again)
@@ -502,7 +502,7 @@ class ToleranceNLP:
         their lower bounds) violate a constraint: V grows with every eps, so nothing else can
         do better."""
         worst = self.block_values(self.spec.lower)[0][:, 0]
-        bad = np.flatnonzero(worst > 1.0)
+        bad = (worst > 1.0).nonzero()[0]
         if len(bad):
             block, value = self.spec.blocks[bad[0]], float(worst[bad[0]])
             what = "z/R" if block.kind == "position" else "z/Phi"
@@ -603,43 +603,37 @@ class ToleranceNLP:
             Z[b] = D @ Y @ D.T
         return list(Z)
 
-    def dual_weights(self, Z: Sequence[np.ndarray]) -> tuple[np.ndarray, float]:
+    def dual_weights(self, Z: Sequence[np.ndarray], eig=None) -> tuple[np.ndarray, float]:
         """``(w, tr)`` of the Lagrangian ``f(u) - sum_b tr(Z_b G_b(u)) = sum_i [c_i(u_i) + w_i e^{2u_i}]
-        - tr`` for LMI multipliers ``Z_b`` (each projected onto the PSD cone first)."""
-        (w,), (trace,) = self._dual_weights([Z])
-        return w, trace
+        - tr`` for LMI multipliers ``Z_b`` (each projected onto the PSD cone first).
 
-    def _dual_weights(self, Zsets) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`dual_weights` of several multiplier sets at once (one batched eigensolve):
-        ``w`` (sets, n) and the traces (sets,)."""
+        ``eig``: ``np.linalg.eigh`` of the stack of the symmetric parts ``(Z_b + Z_b^T)/2``, shape
+        (m, 3, 3), if the caller has it already."""
         m, n = self.As.shape[0], self.spec.n
-        k = len(Zsets)
         if m == 0:
-            return np.zeros((k, n)), np.zeros(k)
-        Zs = np.concatenate([np.asarray(Z, dtype=float).reshape(m, 3, 3) for Z in Zsets])
-        lam, vec = np.linalg.eigh(0.5 * (Zs + Zs.transpose(0, 2, 1)))
+            return np.zeros(n), 0.0
+        if eig is None:
+            Zs = np.asarray(Z, dtype=float).reshape(m, 3, 3)
+            eig = np.linalg.eigh(0.5 * (Zs + Zs.transpose(0, 2, 1)))
+        lam, vec = eig
         lam = np.maximum(lam, 0.0)
         Zp = (vec * lam[:, None, :]) @ vec.transpose(0, 2, 1)  # the PSD projection
         # w_i = sum_b (scale_b a_bi)^T Zp_b (scale_b a_bi) / c; tr Zp_b = sum of its eigenvalues
-        As = self.As if k == 1 else np.tile(self.As, (k, 1, 1))
-        w = ((Zp @ As) * As).reshape(k, 3 * m, n).sum(axis=1) / self.spec.c
-        return w, lam.reshape(k, 3 * m).sum(axis=1)
+        w = ((Zp @ self.As) * self.As).sum(axis=(0, 1)) / self.spec.c
+        return w, float(lam.sum())
 
-    def dual_bound(self, Z: Sequence[np.ndarray]) -> float:
+    def dual_bound(self, Z: Sequence[np.ndarray], eig=None) -> float:
         """Lagrangian lower bound on the optimal cost for LMI multipliers ``Z_b`` (3x3).
 
         ``Z_b`` is projected onto the positive semi-definite cone first (any PSD Z gives a valid
         bound, weak duality), then ``min over the box of f(u) - sum_b tr(Z_b G_b(u))`` separates per
-        parameter: ``c_i(u) + w_i e^{2u}`` (:meth:`dual_weights`), minimised by
+        parameter: ``c_i(u) + w_i e^{2u}`` (:meth:`dual_weights`; ``eig`` as there), minimised by
         :meth:`tolsynth.cost.CostModel.dual_min` (closed form for the power law; exact where the cost
         is convex in eps^2, a rigorous lower bound otherwise).
         """
-        return self.dual_bounds(Z)[0]
-
-    def dual_bounds(self, *Zsets: Sequence[np.ndarray]) -> list[float]:
-        """:meth:`dual_bound` of each multiplier set (one batched eigensolve for all of them)."""
-        W, traces = self._dual_weights(Zsets)
-        return [float(np.sum(self.costs.dual_min(w, self.lu, self.uu)[0]) - tr) for w, tr in zip(W, traces)]
+        w, trace = self.dual_weights(Z, eig)
+        vals, _ = self.costs.dual_min(w, self.lu, self.uu)
+        return float(vals.sum() - trace)
 
 
 #: upper-triangle index pairs of an r x r matrix, r = 0..3 (the entries of Y_b in kkt_multipliers)

@@ -255,7 +255,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     if use_warm:
         # that optimum rescaled onto this specification's constraint (V is homogeneous of degree
         # 2 in eps): the start of the warm attempt, and the cost scale f0 (no start_point needed)
-        eps_w = np.minimum(np.maximum(warm[0] / max(float(np.max(nlp.block_values(warm[0])[0][:, 0])), 1e-300),
+        eps_w = np.minimum(np.maximum(warm[0] / max(float(nlp.block_values(warm[0])[0][:, 0].max()), 1e-300),
                                       spec.lower), spec.upper)
         eps = eps_w
     else:
@@ -332,7 +332,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             break
         vals, dirs = nlp.block_values(np.exp(u))
         over = vals - 1.0  # (m, 3)
-        max_viol = float(np.max(over[:, 0]))
+        max_viol = float(over[:, 0].max())
         if max_viol <= feas_tol:
             break
         # new cuts, for the most violated blocks: their near-active principal directions and,
@@ -382,17 +382,17 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     mu = np.maximum(lam_g[:K], 0.0) * f0 if K else np.zeros(0)
     Z = np.zeros((m, 3, 3))
     on = mu > 0
-    if np.any(on):
+    if on.any():
         Wk = cut_w[on] * np.sqrt(mu[on])[:, None]
         np.add.at(Z, cut_b[on], Wk[:, :, None] * Wk[:, None, :])  # Z_b = sum_k mu_k w_k w_k^T
+    Z_eig = np.linalg.eigh(Z) if m else None  # Z is symmetric; the certificate reads this too
     if status is Status.OPTIMAL and K:
         # remember each block's multiplier matrix by its eigenvectors: the fewest cuts that
         # reproduce this optimum's Lagrangian (Z is zero on the blocks without a cut)
-        bs = np.unique(cut_b)
-        lz, vz = np.linalg.eigh(Z[bs])
-        rows, cols = np.nonzero(lz > 1e-9 * max(float(np.max(lz)), 0.0))
+        lz, vz = Z_eig
+        rows, cols = (lz > 1e-9 * max(float(lz.max()), 0.0)).nonzero()
         if len(rows):  # the multiplier of the cut along an eigenvector of Z_b is its eigenvalue
-            _remember(key, bs[rows], vz[rows, :, cols], (eps.copy(), lz[rows, cols], lam_x * f0))
+            _remember(key, rows, vz[rows, :, cols], (eps.copy(), lz[rows, cols], lam_x * f0))
     # P_b >= p_b active at its lower bound: CasADi's lam is <= 0 there; f - mu (P - p) with mu >= 0
     mu_sphere = -lam_g[len(lam_g) - ms :] * f0 if ms else np.zeros(0)
     message = code if status is Status.OPTIMAL else "; ".join(tried) or code
@@ -413,4 +413,5 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         wall,
         history,
         mu_sphere=mu_sphere,
+        Z_eig=Z_eig,
     )
