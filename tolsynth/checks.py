@@ -76,6 +76,8 @@ def check_real(x: Any, field: str, unit: str = "", lower: float = -HUGE, upper: 
 
 def check_positive(x: Any, field: str, unit: str = "mm", upper: float = HUGE, lower: float = TINY) -> float:
     """``x`` as a float, or a typed error unless ``lower <= x <= upper`` (a positive quantity)."""
+    if type(x) is float and x > 0 and lower <= x <= upper:  # the common case (NaN and inf fail here)
+        return x
     allowed = f"a finite number > 0, from {lower:g} to {upper:g}" + (f" ({unit})" if unit else "")
     v = _as_float(x, field, allowed)
     if not (v > 0 and lower <= v <= upper):
@@ -86,6 +88,8 @@ def check_positive(x: Any, field: str, unit: str = "mm", upper: float = HUGE, lo
 def check_probability(p: Any, field: str = "p") -> float:
     """``p`` as a float, or a typed error unless ``P_MIN <= p <= P_MAX`` (0 < p < 1 with the
     normal quantile representable)."""
+    if type(p) is float and P_MIN <= p <= P_MAX:  # the common case (NaN fails here)
+        return p
     allowed = f"0 < {field} < 1, from {P_MIN:g} to 1 - {1 - P_MAX:.0e}"
     v = _as_float(p, field, allowed)
     if not P_MIN <= v <= P_MAX:
@@ -118,23 +122,26 @@ def check_vector(x: Any, field: str, size: int | None = None, unit: str = "",
                  lower: float = -HUGE, upper: float = HUGE, names=None) -> np.ndarray:
     """A 1-D float array of finite numbers in ``[lower, upper]`` (of length ``size`` if given);
     an offending element is named ``field[names[i]]`` (or ``field[i]``)."""
-    u = f" {unit}" if unit else ""
-    allowed = f"{size if size is not None else 'some'} finite numbers >= {lower:g} and <= {upper:g}{u}"
+
+    def allowed() -> str:  # the message, built only for an error
+        u = f" {unit}" if unit else ""
+        return f"{size if size is not None else 'some'} finite numbers >= {lower:g} and <= {upper:g}{u}"
+
     if isinstance(x, (str, bytes)) or x is None:
-        raise InputError(field, f"expected numbers, got {x!r}", allowed)
+        raise InputError(field, f"expected numbers, got {x!r}", allowed())
     try:
         arr = np.asarray(x, dtype=float)
     except (TypeError, ValueError, OverflowError):
-        raise InputError(field, f"expected numbers, got {x!r}", allowed) from None
+        raise InputError(field, f"expected numbers, got {x!r}", allowed()) from None
     if arr.ndim > 1 and arr.size == max(arr.shape):
         arr = arr.ravel()
     if arr.ndim != 1 or (size is not None and arr.shape != (size,)):
         raise InputError(field, f"expected {size if size is not None else 'a vector of'} values, "
-                                f"got shape {arr.shape}", allowed)
+                                f"got shape {arr.shape}", allowed())
     bad = ~(np.isfinite(arr) & (arr >= lower) & (arr <= upper))
-    if np.any(bad):
-        i = int(np.flatnonzero(bad)[0])
-        raise OutOfRangeError(f"{field}[{names[i] if names is not None else i}]", f"got {float(arr[i])!r}", allowed)
+    if bad.any():
+        i = int(bad.nonzero()[0][0])
+        raise OutOfRangeError(f"{field}[{names[i] if names is not None else i}]", f"got {float(arr[i])!r}", allowed())
     return arr
 
 

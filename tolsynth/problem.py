@@ -158,6 +158,8 @@ def _per_parameter(value, names: Sequence[str], index, field_name: str, default=
     if value is None:
         if default is None:
             raise InputError(field_name, "missing", f"a number or {n} numbers")
+        if isinstance(default, np.ndarray) and default.shape == (n,):  # the model's own (checked on load)
+            return np.array(default, dtype=float)
         value = default
     if isinstance(value, float) and -HUGE <= value <= HUGE:  # the common case: one number for all
         return np.full(n, value)
@@ -176,9 +178,11 @@ def _per_parameter(value, names: Sequence[str], index, field_name: str, default=
     return arr.astype(float)
 
 
-def _outside(x: np.ndarray, lower, upper) -> np.ndarray:
-    """Indices of the entries of ``x`` that are not finite numbers in ``[lower, upper]``."""
-    return (~(np.isfinite(x) & (x >= lower) & (x <= upper))).nonzero()[0]
+def _outside(x: np.ndarray, lower, upper: float) -> list[int]:
+    """Indices of the entries of ``x`` (a few numbers) that are not in ``[lower, upper]`` (NaN is
+    not; ``lower`` a number or one per entry)."""
+    lo = lower.tolist() if isinstance(lower, np.ndarray) else [lower] * len(x)
+    return [i for i, (v, a) in enumerate(zip(x.tolist(), lo)) if not a <= v <= upper]
 
 
 #: z(p) of a validated probability (remembered: a sweep and a warm solve ask again)
@@ -213,7 +217,7 @@ def make_specification(
 
     distribution = resolve(distribution, mechanism)
     shapes = shapes_of(distribution, mechanism.error_parameters, mechanism.index)
-    divisors = [s.divisor for s in shapes]
+    divisors = [shapes[0].divisor] if all(s is shapes[0] for s in shapes) else [s.divisor for s in shapes]
     if len(set(divisors)) == 1:
         c, col_scale = float(divisors[0]), 1.0
     else:  # mixed shapes: one divisor (3) for the graphs, the columns scaled to it
@@ -271,7 +275,9 @@ def make_specification(
     for i, ps in enumerate(pose_list):
         label = ps if isinstance(ps, str) else f"#{i}"
         q = mechanism.joints(ps)
-        S = mechanism.sensitivity_at(q) * col_scale
+        S = mechanism.sensitivity_at(q)  # a copy of the remembered one
+        if isinstance(col_scale, np.ndarray):  # mixed shapes
+            S *= col_scale
         qs[label] = q
         if criterion == "sphere":
             sphere.append(SphereBlock(label, R, p, S[:3].copy()))
@@ -401,7 +407,9 @@ class ToleranceNLP:
         self.sphere_nodes = sphere_nodes
         self.p_sphere = np.array([b.p for b in spec.sphere_blocks])
         # scaled rows of every block, (m, 3, n): block b's constraint is lambda_max(As V As^T) <= 1
-        self.As = np.array([b.scale * b.A for b in spec.blocks]).reshape(len(spec.blocks), 3, spec.n)
+        self.scales = np.array([b.scale for b in spec.blocks])
+        self.As = (self.scales[:, None, None] * np.array([b.A for b in spec.blocks]).reshape(-1, 3, spec.n)
+                   if spec.blocks else np.zeros((0, 3, spec.n)))
         self._graphs = None
         self._values_memo = None  # (eps bytes, block_values at eps): the last point asked
 
@@ -501,7 +509,18 @@ class ToleranceNLP:
         """Raise :class:`InfeasibleSpecificationError` if even the tightest tolerances (all at
         their lower bounds) violate a constraint: V grows with every eps, so nothing else can
         do better."""
-        worst = self.block_values(self.spec.lower)[0][:, 0]
+        spec = self.spec
+        # lambda_max(A_b diag(lower^2) A_b^T) is free of z/R and c: remembered by the blocks' rows
+        # and the lower bounds (a sweep over R, p or the distribution checks the same again)
+        key = (b"".join(b.A.tobytes() for b in spec.blocks), spec.lower.tobytes())
+        raw = _LOWER_RAW.get(key)
+        if raw is None:
+            worst = self.block_values(spec.lower)[0][:, 0]
+            if len(_LOWER_RAW) >= 256:
+                _LOWER_RAW.clear()
+            _LOWER_RAW[key] = (worst / self.scales) ** 2 * spec.c
+        else:
+            worst = np.sqrt(raw * self.scales**2 / spec.c)
         bad = (worst > 1.0).nonzero()[0]
         if len(bad):
             block, value = self.spec.blocks[bad[0]], float(worst[bad[0]])
@@ -631,10 +650,17 @@ class ToleranceNLP:
         :meth:`tolsynth.cost.CostModel.dual_min` (closed form for the power law; exact where the cost
         is convex in eps^2, a rigorous lower bound otherwise).
         """
-        w, trace = self.dual_weights(Z, eig)
+        return self.lagrangian_bound(*self.dual_weights(Z, eig))
+
+    def lagrangian_bound(self, w: np.ndarray, trace: float) -> float:
+        """``min over the box of sum_i [c_i(u_i) + w_i e^{2u_i}] - trace``: the Lagrangian lower bound
+        of :meth:`dual_bound` from its weights (``w >= 0``, the weights of PSD multipliers)."""
         vals, _ = self.costs.dual_min(w, self.lu, self.uu)
         return float(vals.sum() - trace)
 
+
+#: ToleranceNLP.check_feasible's lambda_max(A_b diag(lower^2) A_b^T) per block, by (A_b bytes, lower bytes)
+_LOWER_RAW: dict = {}
 
 #: upper-triangle index pairs of an r x r matrix, r = 0..3 (the entries of Y_b in kkt_multipliers)
 _TRIU = {r: np.triu_indices(r) for r in range(4)}

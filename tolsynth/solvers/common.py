@@ -35,7 +35,7 @@ def assemble(
     wall_time: float,
     history: list,
     mu_sphere: np.ndarray | None = None,
-    Z_eig=None,
+    lagrangian: tuple[np.ndarray, float] | None = None,
 ) -> SynthesisResult:
     """Constraint values, activity, multipliers and the dual-bound certificate at ``eps``.
 
@@ -48,7 +48,8 @@ def assemble(
     ``g = (1 - P)/(1 - p) <= 1`` as ``mu (1 - p)``.  With sphere blocks the lower bound is the
     certified optimum of the per-component relaxation (same p), solved here by IPOPT.
 
-    ``Z_eig``: ``np.linalg.eigh`` of the (symmetric) ``Z`` stack, if the solver has it already.
+    ``lagrangian``: ``(w, tr)`` of the solver's multipliers (:meth:`ToleranceNLP.dual_weights`),
+    if it has them without ``Z`` (IPOPT's cut multipliers); default: from ``Z``.
     """
     spec = nlp.spec
     # exp(ln eps) may round one ulp past a bound (a lock)
@@ -93,7 +94,7 @@ def assemble(
         # both are valid lower bounds: the solver's own multipliers, and those recomputed from the
         # primal point by least squares on stationarity (sharper when the solver's are loose, so
         # tried unless the solver's already close the gap with room to spare)
-        lower = nlp.dual_bound(Zs, Z_eig)
+        lower = nlp.lagrangian_bound(*lagrangian) if lagrangian is not None else nlp.dual_bound(Zs)
         if not cost - lower <= KKT_SKIP * GAP_TOL * abs(cost):
             lower = max(lower, nlp.dual_bound(nlp.kkt_multipliers(eps)))
     status, message = _verified(status, message, blocks, cost, lower, certified=not spec.sphere_blocks)

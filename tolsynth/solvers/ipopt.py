@@ -31,6 +31,7 @@ raised again.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import OrderedDict
@@ -195,7 +196,9 @@ def _cache_key(nlp: ToleranceNLP) -> tuple:
 
 def _remember(key: tuple, cut_b: np.ndarray, cut_w: np.ndarray, warm: tuple | None = None) -> None:
     """Remember a solve's active cuts and, for a warm start, ``(eps, cut multipliers, bound
-    multipliers in u)`` with the multipliers in cost units (not divided by that solve's f0)."""
+    multipliers in u, lambda_max(A_b diag(eps^2) A_b^T) per block)`` with the multipliers in cost
+    units (not divided by that solve's f0); the last, free of z/R and c, rescales eps onto another
+    specification of the same blocks without an eigensolve."""
     _CUT_CACHE[key] = (cut_b.copy(), cut_w.copy(), warm)
     _CUT_CACHE.move_to_end(key)
     while len(_CUT_CACHE) > _CUT_CACHE_SIZE:
@@ -255,8 +258,8 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     if use_warm:
         # that optimum rescaled onto this specification's constraint (V is homogeneous of degree
         # 2 in eps): the start of the warm attempt, and the cost scale f0 (no start_point needed)
-        eps_w = np.minimum(np.maximum(warm[0] / max(float(nlp.block_values(warm[0])[0][:, 0].max()), 1e-300),
-                                      spec.lower), spec.upper)
+        worst = math.sqrt(float((warm[3] * nlp.scales**2).max()) / spec.c)  # largest sigma z/R at warm[0]
+        eps_w = np.minimum(np.maximum(warm[0] / max(worst, 1e-300), spec.lower), spec.upper)
         eps = eps_w
     else:
         eps = nlp.start_point() if eps0 is None else np.clip(np.asarray(eps0, dtype=float), spec.lower, spec.upper)
@@ -286,8 +289,9 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         # the parameter [vec(C) (column-major), pfix]: C written in place through a transposed view
         pval = np.zeros(slots * n + len(pfix))
         pval[slots * n :] = pfix
-        if K:
-            pval[: slots * n].reshape(n, slots).T[:K] = _cut_rows(nlp, cut_b, cut_w)
+        rows = _cut_rows(nlp, cut_b, cut_w) if K else np.zeros((0, n))
+        pval[: slots * n].reshape(n, slots).T[:K] = rows
+        solved = (cut_b, cut_w, rows)  # the cuts of this round's NLP (its multipliers' order)
         if ms:
             lbg = np.concatenate([np.full(slots, -np.inf), nlp.p_sphere])
             ubg = np.concatenate([np.ones(slots), np.full(ms, np.inf)])
@@ -378,21 +382,35 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     wall = time.perf_counter() - t_start
 
     eps = np.exp(u)
+    # the multipliers of the cuts of the last NLP solved (later rounds' new cuts have none)
+    cut_b, cut_w, rows = solved if rounds else (cut_b[:0], cut_w[:0], np.zeros((0, n)))
     K = len(cut_b)
-    mu = np.maximum(lam_g[:K], 0.0) * f0 if K else np.zeros(0)
+    mu = np.maximum(lam_g[:K], 0.0) * f0
+    # the cut NLP's Lagrangian f(u) - sum_k mu_k (1 - C_k e^{2u}) = sum_i [c_i(u_i) + w_i e^{2u_i}] -
+    # sum_k mu_k |w_k|^2: the LMI's with Z_b = sum_k mu_k w_k w_k^T (PSD by construction), so no
+    # eigensolve is needed for the certificate
+    lagrangian = (mu @ rows, float(mu @ np.einsum("ki,ki->k", cut_w, cut_w)))
     Z = np.zeros((m, 3, 3))
     on = mu > 0
     if on.any():
         Wk = cut_w[on] * np.sqrt(mu[on])[:, None]
         np.add.at(Z, cut_b[on], Wk[:, :, None] * Wk[:, None, :])  # Z_b = sum_k mu_k w_k w_k^T
-    Z_eig = np.linalg.eigh(Z) if m else None  # Z is symmetric; the certificate reads this too
     if status is Status.OPTIMAL and K:
         # remember each block's multiplier matrix by its eigenvectors: the fewest cuts that
-        # reproduce this optimum's Lagrangian (Z is zero on the blocks without a cut)
-        lz, vz = Z_eig
-        rows, cols = (lz > 1e-9 * max(float(lz.max()), 0.0)).nonzero()
-        if len(rows):  # the multiplier of the cut along an eigenvector of Z_b is its eigenvalue
-            _remember(key, rows, vz[rows, :, cols], (eps.copy(), lz[rows, cols], lam_x * f0))
+        # reproduce this optimum's Lagrangian.  Without new cuts (one round) the cuts of each block
+        # are orthonormal already (the eigenvectors remembered last time, or the principal
+        # directions of the start), so they are Z_b's eigenvectors with eigenvalues mu_k
+        if rounds == 1:
+            keep = mu > 1e-9 * max(float(mu.max()), 0.0)
+            rb, rw, rl = cut_b[keep], cut_w[keep], mu[keep]
+        else:
+            bs = np.unique(cut_b)
+            lz, vz = np.linalg.eigh(Z[bs])
+            i, j = (lz > 1e-9 * max(float(lz.max()), 0.0)).nonzero()
+            rb, rw, rl = bs[i], vz[i, :, j], lz[i, j]  # the cut along an eigenvector: its eigenvalue
+        if len(rb):
+            raw = (vals[:, 0] / nlp.scales) ** 2 * spec.c  # vals: the check at eps, last round
+            _remember(key, rb, rw, (eps.copy(), rl, lam_x * f0, raw))
     # P_b >= p_b active at its lower bound: CasADi's lam is <= 0 there; f - mu (P - p) with mu >= 0
     mu_sphere = -lam_g[len(lam_g) - ms :] * f0 if ms else np.zeros(0)
     message = code if status is Status.OPTIMAL else "; ".join(tried) or code
@@ -413,5 +431,5 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         wall,
         history,
         mu_sphere=mu_sphere,
-        Z_eig=Z_eig,
+        lagrangian=lagrangian if m else None,
     )
