@@ -16,7 +16,9 @@ cut NLP stays convex in every variable IPOPT sees and only as large as the set o
 (a handful of (pose, direction) pairs even at 1000 poses).
 
 The cut multipliers ``mu_k >= 0`` give the LMI multipliers ``Z_b = sum_k mu_k w_k w_k^T``, positive
-semi-definite by construction, for the dual-bound certificate of :meth:`ToleranceNLP.dual_bound`.
+semi-definite by construction, for the dual-bound certificate of :meth:`ToleranceNLP.dual_bound`;
+its Lagrangian weights come from the cuts directly (:meth:`ToleranceNLP.lagrangian_bound`), with no
+eigensolve.
 
 Scaling: the cost is divided by its value at the start point (so k, alpha and the tolerance units
 can be extreme); the cuts are normalised to 1 by construction.
