@@ -45,7 +45,7 @@ import numpy as np
 from .checks import HUGE, TINY, check_real, check_vector
 from .cost import CostSet, cost_set
 from .errors import InfeasibleSpecificationError, InputError, OutOfRangeError
-from .stats import check_positive, check_probability, chi3_cdf, covariance_graph, variance_divisor, z_of_p
+from .stats import check_positive, check_probability, chi3_cdf, covariance_graph, z_of_p
 
 __all__ = [
     "Specification",
