@@ -413,3 +413,17 @@ def test_p_cone_vs_monte_carlo_of_the_axis_angle(xz):
         se = math.sqrt(max(P * (1 - P), 1e-12) / N)
         assert abs(P - p_mc) <= 4 * se + 1e-9, (P, p_mc, se)
     assert a.p_cone == pytest.approx(p_cone(cases[0][0], axis, 5e-4), abs=1e-15)
+
+
+def test_erf_and_erfc_without_scipy_match_the_standard_library(monkeypatch):
+    """The SciPy-free fallback of stats._special: math.erf / math.erfc element by element."""
+    import math
+    import sys
+
+    import tolsynth.stats as st
+
+    x = np.linspace(-6.0, 6.0, 241)
+    monkeypatch.setitem(sys.modules, "scipy", None)
+    monkeypatch.setitem(sys.modules, "scipy.special", None)
+    assert np.array_equal(st._erf(x), [math.erf(v) for v in x])
+    assert np.array_equal(st._erfc(x), [math.erfc(v) for v in x])

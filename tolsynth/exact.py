@@ -47,6 +47,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .checks import check_positive
 from .distributions import Shape, shape
 from .errors import OutOfRangeError, TolsynthError
 
@@ -190,9 +191,7 @@ def direction_probability(b, shapes, R: float, tol: float = DEFAULT_TOL, kmax: i
     on the truncation error.  Raises :class:`ExactProbabilityError` if ``kmax`` terms cannot meet
     ``tol`` (unless ``return_error``, which then reports the larger bound).
     """
-    R = float(R)
-    if not (math.isfinite(R) and R > 0):
-        raise OutOfRangeError("R", f"got {R}", "R > 0")
+    R = check_positive(R, "R")
     b = np.asarray(b, dtype=float)
     one = b.ndim == 1
     b = np.atleast_2d(np.abs(b))
@@ -243,9 +242,7 @@ def components_probability(A, eps, shapes, R: float, tol: float = DEFAULT_TOL):
     """Exact ``P(|w_j| <= R)`` along the three principal directions of the covariance of
     ``dr = A diag(eps) Y`` (``A`` 3 x n, mm per tolerance unit): the paper's Eq. 6-7 without the
     Gaussian approximation.  Returns ``(P (3,), directions (3, 3) columns)`` descending in sigma."""
-    A = np.asarray(A, dtype=float)
-    eps = np.asarray(eps, dtype=float)
-    sh = _shapes(shapes, A.shape[1])
+    A, eps, sh = _matrix_inputs(A, eps, shapes, 3, "A")
     var = np.array([s.variance for s in sh])
     V = (A * (eps**2 * var)) @ A.T
     lam, vec = np.linalg.eigh(0.5 * (V + V.T))
@@ -355,6 +352,15 @@ def _ball_level(A, eps, sh, R, nodes, tol, kmax):
     return total, float(np.sum(w * bound))
 
 
+def _matrix_inputs(M, eps, shapes, rows: int, field: str):
+    """``M`` (``rows`` x n) and ``eps`` as float arrays and the n shapes; a typed error naming
+    ``field`` for another shape of ``M``."""
+    M = np.asarray(M, dtype=float)
+    if M.ndim != 2 or M.shape[0] != rows:
+        raise OutOfRangeError(field, f"shape {M.shape}", f"{rows} x n rows")
+    return M, np.asarray(eps, dtype=float), _shapes(shapes, M.shape[1])
+
+
 def ball_probability(A, eps, shapes, R: float, tol: float = 1e-7, max_nodes: int = 128,
                      kmax: int = KMAX, return_error: bool = False):
     """Exact ``P(|dr| <= R)`` for ``dr = A diag(eps) Y`` in 3-D (``A`` 3 x n, mm per tolerance unit):
@@ -364,14 +370,8 @@ def ball_probability(A, eps, shapes, R: float, tol: float = 1e-7, max_nodes: int
     error estimate is that change plus the series' tail bound.  Raises
     :class:`ExactProbabilityError` if ``max_nodes`` or ``kmax`` cannot meet ``tol``.
     """
-    R = float(R)
-    if not (math.isfinite(R) and R > 0):
-        raise OutOfRangeError("R", f"got {R}", "R > 0")
-    A = np.asarray(A, dtype=float)
-    eps = np.asarray(eps, dtype=float)
-    if A.ndim != 2 or A.shape[0] != 3:
-        raise OutOfRangeError("A", f"shape {A.shape}", "3 x n sensitivity rows")
-    sh = _shapes(shapes, A.shape[1])
+    R = check_positive(R, "R")
+    A, eps, sh = _matrix_inputs(A, eps, shapes, 3, "A")
     prev, nodes = None, 16
     while True:
         val, tail = _ball_level(A, eps, sh, R, nodes, 0.1 * tol, kmax)
@@ -406,14 +406,8 @@ def cone_probability(C, eps, shapes, Phi: float, tol: float = 1e-7, max_nodes: i
     tolerance unit: the rotation components perpendicular to the hand axis): Eq. 8 without the
     Gaussian approximation, by the polar inversion of the module docstring.  Default tolerance
     1e-7 (the Bessel kernel decays only like rho^-1/2, so the radial integral is long)."""
-    Phi = float(Phi)
-    if not (math.isfinite(Phi) and Phi > 0):
-        raise OutOfRangeError("Phi", f"got {Phi}", "Phi > 0 (rad)")
-    C = np.asarray(C, dtype=float)
-    eps = np.asarray(eps, dtype=float)
-    if C.ndim != 2 or C.shape[0] != 2:
-        raise OutOfRangeError("C", f"shape {C.shape}", "2 x n rows")
-    sh = _shapes(shapes, C.shape[1])
+    Phi = check_positive(Phi, "Phi", "rad")
+    C, eps, sh = _matrix_inputs(C, eps, shapes, 2, "C")
     prev, nt = None, 16
     while True:
         theta = (np.arange(nt) + 0.5) * np.pi / nt  # midpoint rule on a periodic integrand

@@ -188,21 +188,24 @@ def principal_cubic_function() -> ca.Function:
 # ---------------------------------------------------------------------------------------------
 # probabilities
 # ---------------------------------------------------------------------------------------------
-def _erf(x: np.ndarray) -> np.ndarray:
-    """Vectorised error function, double precision (NumPy has none).
-
-    SciPy's ``erf`` when SciPy is installed (it is not a run-time dependency; about 10x faster),
-    else the standard library's ``math.erf`` element by element; both agree to 3e-16.
-    """
+def _special(name: str, x) -> np.ndarray:
+    """``scipy.special.<name>`` (erf, erfc) when SciPy is installed (it is not a run-time
+    dependency; about 10x faster), else the standard library's ``math.<name>`` element by element;
+    both agree to 3e-16."""
     x = np.asarray(x, dtype=float)
     try:
-        from scipy.special import erf
+        import scipy.special
     except ImportError:  # pragma: no cover - exercised where SciPy is absent
-        return _ERF_UFUNC(x).astype(float)
-    return erf(x)
+        return _MATH_UFUNCS[name](x).astype(float)
+    return getattr(scipy.special, name)(x)
 
 
-_ERF_UFUNC = np.frompyfunc(math.erf, 1, 1)
+_MATH_UFUNCS = {name: np.frompyfunc(getattr(math, name), 1, 1) for name in ("erf", "erfc")}
+
+
+def _erf(x: np.ndarray) -> np.ndarray:
+    """Vectorised error function, double precision (NumPy has none): :func:`_special`."""
+    return _special("erf", x)
 
 
 def p_components(sigma, R: float) -> np.ndarray:
@@ -285,16 +288,8 @@ def _n_panels(c: np.ndarray) -> np.ndarray:
 
 
 def _erfc(x: np.ndarray) -> np.ndarray:
-    """Vectorised complementary error function (SciPy's when installed, else ``math.erfc``)."""
-    x = np.asarray(x, dtype=float)
-    try:
-        from scipy.special import erfc
-    except ImportError:  # pragma: no cover - exercised where SciPy is absent
-        return _ERFC_UFUNC(x).astype(float)
-    return erfc(x)
-
-
-_ERFC_UFUNC = np.frompyfunc(math.erfc, 1, 1)
+    """Vectorised complementary error function: :func:`_special`."""
+    return _special("erfc", x)
 
 
 def _series_coefficients(terms: int) -> np.ndarray:
