@@ -17,10 +17,11 @@ import pytest
 
 import tolsynth
 from tolsynth import synthesize
+from tolsynth import cbuild
 from tolsynth.solvers import cpowell
 from tolsynth.solvers.powell import powell
 
-needs_cc = pytest.mark.skipif(cpowell._compiler() is None, reason="no C compiler")
+needs_cc = pytest.mark.skipif(cbuild.find_compiler() is None, reason="no C compiler")
 
 
 @pytest.mark.parametrize("env", [{"TOLSYNTH_NO_COMPILE": "1"}, {"TOLSYNTH_CC": "no-such-compiler-here"}])
@@ -66,7 +67,7 @@ def test_library_is_cached_on_disk(tmp_path, monkeypatch):
     """First use compiles into the cache directory; a fresh process (here: emptied in-process
     tables) loads the same file without compiling again; the result is unchanged."""
     monkeypatch.setenv("TOLSYNTH_CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(cpowell, "_loaded", {})
+    monkeypatch.setattr(cbuild, "_loaded", {})
     monkeypatch.setattr(cpowell, "_by_function", {})
     mech = tolsynth.load_model("planar_2r")
     first = synthesize(mech, 0.1, 0.9, solver="sumt")
@@ -76,7 +77,7 @@ def test_library_is_cached_on_disk(tmp_path, monkeypatch):
     files = list(tmp_path.iterdir())
     assert len(files) == 1 and files[0].suffix == ".so"  # no temporaries left
     stamp = files[0].stat().st_mtime_ns
-    monkeypatch.setattr(cpowell, "_loaded", {})
+    monkeypatch.setattr(cbuild, "_loaded", {})
     monkeypatch.setattr(cpowell, "_by_function", {})
     again = synthesize(mech, 0.1, 0.9, solver="sumt")
     assert list(tmp_path.iterdir()) == files and files[0].stat().st_mtime_ns == stamp

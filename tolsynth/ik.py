@@ -14,6 +14,7 @@ import casadi as ca
 import numpy as np
 
 from .batch_stats import _cache
+from .ik_compiled import compile_lm
 from .joint_space import _feasible, _limit_margin, _limits, _wrap
 from .numpy_eval import NumpyEvaluator
 
@@ -78,10 +79,13 @@ def _solve_ik(ev: NumpyEvaluator, free: tuple[int, ...], Q0: np.ndarray, targets
     """Levenberg-Marquardt on all columns at once, each column independent of the others (the
     iteration keeps compact arrays of the columns still running).  Returns joints (nq, N) and a
     converged flag (residual norm below ``tol``: mm, and 1e-3 * tol in the axis direction)."""
-    Q = Q0.copy()
-    N = Q.shape[1]
+    N = Q0.shape[1]
     if N == 0:
-        return Q, np.zeros(0, bool)
+        return Q0.copy(), np.zeros(0, bool)
+    lm = compile_lm(ev.function)
+    if lm is not None:  # the same iteration, compiled with the same graph
+        return lm.solve(free, Q0, targets, axis, tol, max_iter)
+    Q = Q0.copy()
     fr = list(free)
     nf = len(fr)
 

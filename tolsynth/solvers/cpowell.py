@@ -10,31 +10,26 @@ minimisation is one call.  The algorithm is the Python one step for step (same b
 Brent line search, same direction-replacement rule, same stopping tests), so both give the same
 iterates up to rounding; the Python one stays as the fallback where no C compiler is found.
 
-The library is cached on disk, keyed by a hash of the generated code, this file's C source, the
-compiler and its flags: ``$TOLSYNTH_CACHE_DIR``, else ``$XDG_CACHE_HOME/tolsynth``, else
-``~/.cache/tolsynth`` (a temporary directory if none is writable).  The first use of a graph
+The library is built and cached on disk by :mod:`tolsynth.cbuild` (keyed by a hash of the
+generated code, this file's C source, the compiler and its flags).  The first use of a graph
 compiles it (about 0.2 s with gcc); later uses, in this process or another, only load it.
 ``TOLSYNTH_NO_COMPILE=1`` turns compilation off (the Python path is then used); ``TOLSYNTH_CC``
-(or ``CC``) names the compiler, by default ``cc`` or ``gcc`` on the PATH.
+(or ``CC``) names the compiler.
 """
 
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import math
-import os
-import shutil
-import tempfile
-import threading
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
+from ..cbuild import cache_dir, disabled, find_compiler, load_library
+
 __all__ = ["CompiledPowell", "compile_powell", "backend_status", "cache_dir"]
 
-CFLAGS = ["-O2", "-fPIC", "-shared", "-ffp-contract=off"]
 #: graphs larger than this stay on the Python path: their first compilation takes longer than a
 #: Python solve (about 0.2 ms per instruction with gcc -O2: 0.7 s for 10 poses, 3,440 instructions;
 #: 2.1 s for 30 poses; 5 s for the sphere criterion's quadrature, 39,000), and CasADi's per-call
@@ -280,8 +275,6 @@ _MESSAGES = {
     4: "out of memory",
 }
 
-_lock = threading.Lock()
-_loaded: dict[str, "CompiledPowell"] = {}  # by hash of the source
 _by_function: dict[int, tuple] = {}  # id(F) -> (F, CompiledPowell, compiler): no code generation on reuse
 _status = {"backend": "not tried", "reason": ""}
 
@@ -290,34 +283,6 @@ def backend_status() -> dict:
     """How the last :func:`compile_powell` went: ``backend`` ("compiled", "python" or "not
     tried") and, for "python", the reason (no compiler, compilation failed, turned off)."""
     return dict(_status)
-
-
-def cache_dir() -> Path:
-    """Where compiled libraries are kept (created on demand; see the module docstring)."""
-    env = os.environ.get("TOLSYNTH_CACHE_DIR")
-    if env:
-        return Path(env)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    base = Path(xdg) if xdg else Path.home() / ".cache"
-    return base / "tolsynth"
-
-
-def _compiler() -> str | None:
-    name = os.environ.get("TOLSYNTH_CC") or os.environ.get("CC")
-    if name:
-        return shutil.which(name)
-    return shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
-
-
-def _writable_dir() -> Path:
-    for d in (cache_dir(), Path(tempfile.gettempdir()) / f"tolsynth-{os.getuid() if hasattr(os, 'getuid') else 0}"):
-        try:
-            d.mkdir(parents=True, exist_ok=True)
-            if os.access(d, os.W_OK):
-                return d
-        except OSError:
-            continue
-    raise OSError("no writable cache directory")
 
 
 class CompiledPowell:
@@ -383,13 +348,13 @@ class CompiledPowell:
 def compile_powell(F: ca.Function) -> CompiledPowell | None:
     """The compiled Powell minimiser of ``F``'s first output over its first input, or None (then
     use the Python :func:`tolsynth.solvers.powell.powell`; :func:`backend_status` says why)."""
-    if os.environ.get("TOLSYNTH_NO_COMPILE", "") not in ("", "0"):
+    if disabled():
         _status.update(backend="python", reason="TOLSYNTH_NO_COMPILE is set")
         return None
     if F.n_instructions() > MAX_INSTRUCTIONS:
         _status.update(backend="python", reason=f"graph of {F.n_instructions()} instructions > {MAX_INSTRUCTIONS}")
         return None
-    cc = _compiler()
+    cc = find_compiler()
     hit = _by_function.get(id(F))
     if hit is not None and hit[0] is F and hit[2] == cc:
         _status.update(backend="compiled", reason="")
@@ -402,54 +367,12 @@ def compile_powell(F: ca.Function) -> CompiledPowell | None:
     name = F.name()
     source = (cg.dump() + f"\n#define TS_F {name}\n#define TS_F_WORK {name}_work\n#define TS_N_IN {F.n_in()}\n"
               + C_SOURCE)
-    key = hashlib.sha256("\0".join([source, cc, " ".join(CFLAGS), ca.__version__]).encode()).hexdigest()[:24]
-    with _lock:
-        if key in _loaded:
-            _by_function[id(F)] = (F, _loaded[key], cc)
-            _status.update(backend="compiled", reason="")
-            return _loaded[key]
-        try:
-            try:
-                lib_path = _build(source, key, cc)
-                out = CompiledPowell(ctypes.CDLL(str(lib_path)), F.n_in(), lib_path)
-            except (OSError, AttributeError):  # a damaged file in the cache: build it again, once
-                lib_path.unlink(missing_ok=True)
-                lib_path = _build(source, key, cc)
-                out = CompiledPowell(ctypes.CDLL(str(lib_path)), F.n_in(), lib_path)
-        except (OSError, AttributeError, RuntimeError) as err:
-            _status.update(backend="python", reason=f"compilation failed: {err}")
-            return None
-        _loaded[key] = out
-        _by_function[id(F)] = (F, out, cc)
-        _status.update(backend="compiled", reason="")
-        return out
-
-
-def _build(source: str, key: str, cc: str) -> Path:
-    """Compile ``source`` into ``<cache>/<key>.so`` unless it is there (atomic: a temporary name,
-    then a rename, so concurrent processes never load a half-written library)."""
-    d = _writable_dir()
-    target = d / f"powell_{key}.so"
-    if target.exists():
-        return target
-    fd, c_path = tempfile.mkstemp(suffix=".c", dir=d)
-    with os.fdopen(fd, "w") as fh:
-        fh.write(source)
-    tmp_so = c_path[:-2] + ".so"
-    import subprocess
-
     try:
-        proc = subprocess.run([cc, *CFLAGS, "-o", tmp_so, c_path, "-lm"], capture_output=True, text=True,
-                              timeout=300)
-        if proc.returncode != 0:
-            raise RuntimeError(proc.stderr.strip()[-2000:] or f"{cc} exited {proc.returncode}")
-        os.replace(tmp_so, target)
-    except subprocess.SubprocessError as err:  # a timeout
-        raise RuntimeError(str(err)) from None
-    finally:
-        for p in (c_path, tmp_so):
-            try:
-                os.unlink(p)
-            except OSError:
-                pass
-    return target
+        lib, path = load_library(source, "powell", cc, ("tolsynth_powell", "tolsynth_eval"))
+        out = CompiledPowell(lib, F.n_in(), path)
+    except (OSError, AttributeError, RuntimeError) as err:
+        _status.update(backend="python", reason=f"compilation failed: {err}")
+        return None
+    _by_function[id(F)] = (F, out, cc)
+    _status.update(backend="compiled", reason="")
+    return out

@@ -1,0 +1,126 @@
+"""C code generated from the model's CasADi graphs, compiled into shared libraries cached on disk.
+
+Shared by the compiled Powell of SUMT (:mod:`tolsynth.solvers.cpowell`) and the compiled
+Levenberg-Marquardt of the map's inverse kinematics (:mod:`tolsynth.ik_compiled`): each writes
+one C file (CasADi's generated code for its graph and a hand-written driver) and loads it here.
+
+The library is cached on disk, keyed by a hash of the C source, the compiler, its flags and the
+CasADi version: ``$TOLSYNTH_CACHE_DIR``, else ``$XDG_CACHE_HOME/tolsynth``, else
+``~/.cache/tolsynth`` (a temporary directory if none is writable).  ``TOLSYNTH_NO_COMPILE=1``
+turns compilation off (the callers then use their Python paths); ``TOLSYNTH_CC`` (or ``CC``)
+names the compiler, by default ``cc``, ``gcc`` or ``clang`` on the PATH.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+import threading
+from pathlib import Path
+
+import casadi as ca
+
+__all__ = ["CFLAGS", "cache_dir", "find_compiler", "disabled", "load_library"]
+
+#: -ffp-contract=off: no fused multiply-adds, so the compiled arithmetic is the IEEE arithmetic of
+#: the Python/CasADi paths operation for operation
+CFLAGS = ["-O2", "-fPIC", "-shared", "-ffp-contract=off"]
+
+_lock = threading.Lock()
+_loaded: dict[str, tuple[ctypes.CDLL, Path]] = {}  # by key
+
+
+def cache_dir() -> Path:
+    """Where compiled libraries are kept (created on demand; see the module docstring)."""
+    env = os.environ.get("TOLSYNTH_CACHE_DIR")
+    if env:
+        return Path(env)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg) if xdg else Path.home() / ".cache"
+    return base / "tolsynth"
+
+
+_found: dict[tuple, str | None] = {}
+
+
+def find_compiler() -> str | None:
+    """The C compiler to use (full path), or None if there is none (looked up once per value of
+    the environment variables it depends on)."""
+    key = tuple(os.environ.get(k) for k in ("TOLSYNTH_CC", "CC", "PATH"))
+    if key not in _found:
+        name = key[0] or key[1]
+        _found[key] = (shutil.which(name) if name
+                       else shutil.which("cc") or shutil.which("gcc") or shutil.which("clang"))
+    return _found[key]
+
+
+def disabled() -> bool:
+    """True when ``TOLSYNTH_NO_COMPILE`` is set (to anything but "" or "0")."""
+    return os.environ.get("TOLSYNTH_NO_COMPILE", "") not in ("", "0")
+
+
+def _writable_dir() -> Path:
+    for d in (cache_dir(), Path(tempfile.gettempdir()) / f"tolsynth-{os.getuid() if hasattr(os, 'getuid') else 0}"):
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+            if os.access(d, os.W_OK):
+                return d
+        except OSError:
+            continue
+    raise OSError("no writable cache directory")
+
+
+def _build(source: str, name: str, cc: str) -> Path:
+    """Compile ``source`` into ``<cache>/<name>.so`` unless it is there (atomic: a temporary name,
+    then a rename, so concurrent processes never load a half-written library)."""
+    d = _writable_dir()
+    target = d / f"{name}.so"
+    if target.exists():
+        return target
+    fd, c_path = tempfile.mkstemp(suffix=".c", dir=d)
+    with os.fdopen(fd, "w") as fh:
+        fh.write(source)
+    tmp_so = c_path[:-2] + ".so"
+    try:
+        proc = subprocess.run([cc, *CFLAGS, "-o", tmp_so, c_path, "-lm"], capture_output=True, text=True,
+                              timeout=300)
+        if proc.returncode != 0:
+            raise RuntimeError(proc.stderr.strip()[-2000:] or f"{cc} exited {proc.returncode}")
+        os.replace(tmp_so, target)
+    except subprocess.SubprocessError as err:  # a timeout
+        raise RuntimeError(str(err)) from None
+    finally:
+        for p in (c_path, tmp_so):
+            try:
+                os.unlink(p)
+            except OSError:
+                pass
+    return target
+
+
+def load_library(source: str, prefix: str, cc: str, symbols: tuple[str, ...]) -> tuple[ctypes.CDLL, Path]:
+    """The shared library compiled from ``source`` by ``cc`` (built on first use, then loaded from
+    the cache; once per process), with each of ``symbols`` present.  Raises OSError,
+    AttributeError or RuntimeError (the compiler's message) when it cannot be built or loaded."""
+    key = hashlib.sha256("\0".join([source, cc, " ".join(CFLAGS), ca.__version__]).encode()).hexdigest()[:24]
+    name = f"{prefix}_{key}"
+    with _lock:
+        if name in _loaded:
+            return _loaded[name]
+        try:
+            path = _build(source, name, cc)
+            lib = ctypes.CDLL(str(path))
+            for sym in symbols:
+                getattr(lib, sym)
+        except (OSError, AttributeError):  # a damaged file in the cache: build it again, once
+            (_writable_dir() / f"{name}.so").unlink(missing_ok=True)
+            path = _build(source, name, cc)
+            lib = ctypes.CDLL(str(path))
+            for sym in symbols:
+                getattr(lib, sym)
+        _loaded[name] = (lib, path)
+        return lib, path
