@@ -132,7 +132,7 @@ class Specification:
         ``cost`` was given)."""
         return self.cost if self.cost is not None else cost_set(None, self.names, k=self.k, alpha=self.alpha)
 
-    @property
+    @cached_property  # a frozen specification: asked at every solve's certificate
     def convex(self) -> bool:
         """True if every cost is convex in eps^2 on its range (then the problem is convex)."""
         return bool(self.costs.convex(self.lower, self.upper).all())

@@ -391,12 +391,14 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     # the cut NLP's Lagrangian f(u) - sum_k mu_k (1 - C_k e^{2u}) = sum_i [c_i(u_i) + w_i e^{2u_i}] -
     # sum_k mu_k |w_k|^2: the LMI's with Z_b = sum_k mu_k w_k w_k^T (PSD by construction), so no
     # eigensolve is needed for the certificate
-    lagrangian = (mu @ rows, float(mu @ np.einsum("ki,ki->k", cut_w, cut_w)))
-    Z = np.zeros((m, 3, 3))
     on = mu > 0
-    if on.any():
-        Wk = cut_w[on] * np.sqrt(mu[on])[:, None]
-        np.add.at(Z, cut_b[on], Wk[:, :, None] * Wk[:, None, :])  # Z_b = sum_k mu_k w_k w_k^T
+    Wk = cut_w[on] * np.sqrt(mu[on])[:, None]  # Z_b = sum_k mu_k w_k w_k^T = sum_k Wk Wk^T
+    lagrangian = (mu @ rows, float((Wk * Wk).sum()))  # sum_b tr Z_b = sum_k mu_k |w_k|^2
+    if m == 1:  # one block (one pose): no scatter
+        Z = (Wk.T @ Wk)[None]
+    else:
+        Z = np.zeros((m, 3, 3))
+        np.add.at(Z, cut_b[on], Wk[:, :, None] * Wk[:, None, :])
     if status is Status.OPTIMAL and K:
         # remember each block's multiplier matrix by its eigenvectors: the fewest cuts that
         # reproduce this optimum's Lagrangian.  Without new cuts (one round) the cuts of each block
