@@ -1,11 +1,14 @@
 """Inverse kinematics on the model's forward-kinematics graph, for grids of hand positions.
 
 A batched Levenberg-Marquardt iteration on all grid points at once (residual and Jacobian from
-the model's CasADi fk graph, evaluated by :class:`tolsynth.numpy_eval.NumpyEvaluator` for large
-batches and by CasADi itself for small ones; each column independent of the others), with
-continuation over a grid in a base-frame plane from a reference configuration and deterministic
-quasi-random seeds for the points it misses (the seeds after the first run together).  Used by :mod:`tolsynth.workspace_map`.  Units: mm
-and rad.
+the model's CasADi fk graph; each column independent of the others), with continuation over a
+grid in a base-frame plane from a reference configuration and deterministic quasi-random seeds for
+the points it misses (the seeds after the first run together).  Where a C compiler is found the
+iteration runs compiled with CasADi's generated code of the same graph
+(:mod:`tolsynth.ik_compiled`, the columns split over threads); otherwise here in NumPy, the graph
+evaluated by :class:`tolsynth.numpy_eval.NumpyEvaluator` for large batches and by CasADi itself
+for small ones.  Both give the same iterates up to rounding.  Used by
+:mod:`tolsynth.workspace_map`.  Units: mm and rad.
 """
 
 from __future__ import annotations
