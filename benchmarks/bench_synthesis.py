@@ -24,7 +24,7 @@ Prints medians over repeats (same process, same machine, same moment) of
 5. ``worst_pose(criterion="probability")`` (figure3 tolerances, R = 0.2 mm).
 
 Ends with a Markdown table of every figure against its target (what the README shows).
-``--quick`` keeps the whole run to about a minute; the default run takes a few minutes.
+``--quick`` keeps the whole run to about half a minute; the default run takes about a minute here.
 
 Run: ``python benchmarks/bench_synthesis.py [--quick]`` (needs the ``bench`` extra: cvxpy,
 clarabel, scipy).
