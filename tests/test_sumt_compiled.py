@@ -68,7 +68,7 @@ def test_library_is_cached_on_disk(tmp_path, monkeypatch):
     tables) loads the same file without compiling again; the result is unchanged."""
     monkeypatch.setenv("TOLSYNTH_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(cbuild, "_loaded", {})
-    monkeypatch.setattr(cpowell, "_by_function", {})
+    monkeypatch.setattr(cpowell._LIBS, "_by_function", {})
     mech = tolsynth.load_model("planar_2r")
     first = synthesize(mech, 0.1, 0.9, solver="sumt")
     assert cpowell.backend_status()["backend"] == "compiled"
@@ -78,7 +78,7 @@ def test_library_is_cached_on_disk(tmp_path, monkeypatch):
     assert len(files) == 1 and files[0].suffix == ".so"  # no temporaries left
     stamp = files[0].stat().st_mtime_ns
     monkeypatch.setattr(cbuild, "_loaded", {})
-    monkeypatch.setattr(cpowell, "_by_function", {})
+    monkeypatch.setattr(cpowell._LIBS, "_by_function", {})
     again = synthesize(mech, 0.1, 0.9, solver="sumt")
     assert list(tmp_path.iterdir()) == files and files[0].stat().st_mtime_ns == stamp
     assert again.cost == first.cost

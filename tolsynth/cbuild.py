@@ -22,13 +22,18 @@ import tempfile
 import threading
 from pathlib import Path
 
+from typing import Any, Callable
+
 import casadi as ca
 
-__all__ = ["CFLAGS", "cache_dir", "find_compiler", "disabled", "load_library"]
+__all__ = ["CFLAGS", "cache_dir", "find_compiler", "disabled", "load_library", "GraphLibraries"]
 
 #: -ffp-contract=off: no fused multiply-adds, so the compiled arithmetic is the IEEE arithmetic of
 #: the Python/CasADi paths operation for operation
 CFLAGS = ["-O2", "-fPIC", "-shared", "-ffp-contract=off"]
+
+#: the C library headers every driver may use (written before it)
+C_INCLUDES = "#include <float.h>\n#include <math.h>\n#include <stdlib.h>\n#include <string.h>\n"
 
 _lock = threading.Lock()
 _loaded: dict[str, tuple[ctypes.CDLL, Path]] = {}  # by key
@@ -124,3 +129,56 @@ def load_library(source: str, prefix: str, cc: str, symbols: tuple[str, ...]) ->
                 getattr(lib, sym)
         _loaded[name] = (lib, path)
         return lib, path
+
+
+class GraphLibraries:
+    """Compiled libraries of CasADi graphs, each with the same hand-written C driver.
+
+    :meth:`get` writes ``F`` out as C with CasADi's code generator, appends ``#define TS_F
+    <name>``, ``TS_F_WORK <name>_work``, the ``defines`` of ``F``, :data:`C_INCLUDES` and the
+    ``driver``, builds it through :func:`load_library` and returns ``wrap(lib, path)``; or None,
+    when compilation is turned off, no compiler is found, the graph has more than
+    ``max_instructions`` instructions or the build fails (:attr:`status` says which; the caller
+    then runs its Python path).  The outcome is remembered per graph object and compiler, a failed
+    build included (not retried in this process).
+    """
+
+    def __init__(self, prefix: str, driver: str, symbols: tuple[str, ...], fallback: str,
+                 max_instructions: int, defines: Callable[[ca.Function], dict] | None = None):
+        self.prefix = prefix
+        self.driver = driver
+        self.symbols = symbols
+        self.fallback = fallback
+        self.max_instructions = max_instructions
+        self.defines = defines
+        self.status = {"backend": "not tried", "reason": ""}
+        self._by_function: dict[int, tuple] = {}  # id(F) -> (F, compiler, result or None, reason)
+
+    def _set(self, out, reason: str):
+        self.status.update(backend="compiled" if out is not None else self.fallback, reason=reason)
+        return out
+
+    def get(self, F: ca.Function, wrap: Callable[[ctypes.CDLL, Path], Any]):
+        if disabled():
+            return self._set(None, "TOLSYNTH_NO_COMPILE is set")
+        cc = find_compiler()
+        hit = self._by_function.get(id(F))
+        if hit is not None and hit[0] is F and hit[1] == cc:
+            return self._set(hit[2], hit[3])
+        if F.n_instructions() > self.max_instructions:
+            return self._set(None, f"graph of {F.n_instructions()} instructions > {self.max_instructions}")
+        if cc is None:
+            return self._set(None, "no C compiler found (cc, gcc, clang; or set TOLSYNTH_CC)")
+        cg = ca.CodeGenerator(f"tolsynth_{self.prefix}.c", {"with_header": False})
+        cg.add(F)
+        name = F.name()
+        defines = {"TS_F": name, "TS_F_WORK": f"{name}_work", **(self.defines(F) if self.defines else {})}
+        source = (cg.dump() + "".join(f"\n#define {k} {v}" for k, v in defines.items()) + "\n" + C_INCLUDES
+                  + self.driver)
+        try:
+            lib, path = load_library(source, self.prefix, cc, self.symbols)
+            out, reason = wrap(lib, path), ""
+        except (OSError, AttributeError, RuntimeError) as err:
+            out, reason = None, f"compilation failed: {err}"
+        self._by_function[id(F)] = (F, cc, out, reason)
+        return self._set(out, reason)

@@ -26,7 +26,7 @@ from concurrent.futures import ThreadPoolExecutor
 import casadi as ca
 import numpy as np
 
-from .cbuild import disabled, find_compiler, load_library
+from .cbuild import GraphLibraries
 
 __all__ = ["CompiledLM", "compile_lm", "backend_status"]
 
@@ -37,11 +37,6 @@ MAX_INSTRUCTIONS = 20_000
 # The C port of tolsynth.ik._solve_ik (keep the two in step).  TS_F / TS_F_WORK are the
 # CasADi-generated residual function ik_residual(q, target, axis) -> (r, J) and its work sizes.
 C_SOURCE = r"""
-#include <math.h>
-#include <stdlib.h>
-#include <string.h>
-#include <float.h>
-
 typedef struct {
   const casadi_real **arg;
   casadi_real **res;
@@ -241,14 +236,10 @@ def _pool(workers: int) -> ThreadPoolExecutor:
     return _pools[key]
 
 
-_by_function: dict[int, tuple] = {}  # id(F) -> (F, CompiledLM or None, compiler, reason)
-_status = {"backend": "not tried", "reason": ""}
-
-
 def backend_status() -> dict:
     """How the last :func:`compile_lm` went: ``backend`` ("compiled", "numpy" or "not tried") and,
     for "numpy", the reason (no compiler, compilation failed, turned off, graph too large)."""
-    return dict(_status)
+    return dict(_LIBS.status)
 
 
 class CompiledLM:
@@ -314,29 +305,7 @@ class CompiledLM:
 def compile_lm(F: ca.Function) -> CompiledLM | None:
     """The compiled iteration for the IK graph ``F``, or None (then use the NumPy path;
     :func:`backend_status` says why)."""
-    cc = find_compiler()
-    hit = _by_function.get(id(F))
-    if hit is not None and hit[0] is F and hit[2] == cc and not disabled():
-        _status.update(backend="compiled" if hit[1] is not None else "numpy", reason=hit[3])
-        return hit[1]
-    if disabled():
-        _status.update(backend="numpy", reason="TOLSYNTH_NO_COMPILE is set")
-        return None
-    if F.n_instructions() > MAX_INSTRUCTIONS:
-        _status.update(backend="numpy", reason=f"graph of {F.n_instructions()} instructions > {MAX_INSTRUCTIONS}")
-        return None
-    if cc is None:
-        _status.update(backend="numpy", reason="no C compiler found (cc, gcc, clang; or set TOLSYNTH_CC)")
-        return None
-    cg = ca.CodeGenerator("tolsynth_ik.c", {"with_header": False})
-    cg.add(F)
-    name = F.name()
-    source = cg.dump() + f"\n#define TS_F {name}\n#define TS_F_WORK {name}_work\n" + C_SOURCE
-    try:
-        lib, _path = load_library(source, "ik", cc, ("tolsynth_lm", "tolsynth_sym_lstsq"))
-        out, reason = CompiledLM(lib, F), ""
-    except (OSError, AttributeError, RuntimeError) as err:
-        out, reason = None, f"compilation failed: {err}"
-    _status.update(backend="compiled" if out is not None else "numpy", reason=reason)
-    _by_function[id(F)] = (F, out, cc, reason)  # a failed build is not retried in this process
-    return out
+    return _LIBS.get(F, lambda lib, path: CompiledLM(lib, F))
+
+
+_LIBS = GraphLibraries("ik", C_SOURCE, ("tolsynth_lm", "tolsynth_sym_lstsq"), "numpy", MAX_INSTRUCTIONS)

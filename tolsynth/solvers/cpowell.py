@@ -26,7 +26,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..cbuild import cache_dir, disabled, find_compiler, load_library
+from ..cbuild import GraphLibraries, cache_dir
 
 __all__ = ["CompiledPowell", "compile_powell", "backend_status", "cache_dir"]
 
@@ -41,10 +41,6 @@ HISTORY_MAX = 100_000
 # The C port of tolsynth.solvers.powell (keep the two in step).  TS_F / TS_F_WORK are the
 # CasADi-generated function and its work-size query; argument 0 of TS_F is the point.
 C_SOURCE = r"""
-#include <math.h>
-#include <stdlib.h>
-#include <string.h>
-
 #define TS_GOLD 1.618033988749895
 #define TS_CGOLD 0.3819660112501051
 
@@ -275,14 +271,11 @@ _MESSAGES = {
     4: "out of memory",
 }
 
-_by_function: dict[int, tuple] = {}  # id(F) -> (F, CompiledPowell, compiler): no code generation on reuse
-_status = {"backend": "not tried", "reason": ""}
-
 
 def backend_status() -> dict:
     """How the last :func:`compile_powell` went: ``backend`` ("compiled", "python" or "not
     tried") and, for "python", the reason (no compiler, compilation failed, turned off)."""
-    return dict(_status)
+    return dict(_LIBS.status)
 
 
 class CompiledPowell:
@@ -348,31 +341,8 @@ class CompiledPowell:
 def compile_powell(F: ca.Function) -> CompiledPowell | None:
     """The compiled Powell minimiser of ``F``'s first output over its first input, or None (then
     use the Python :func:`tolsynth.solvers.powell.powell`; :func:`backend_status` says why)."""
-    if disabled():
-        _status.update(backend="python", reason="TOLSYNTH_NO_COMPILE is set")
-        return None
-    if F.n_instructions() > MAX_INSTRUCTIONS:
-        _status.update(backend="python", reason=f"graph of {F.n_instructions()} instructions > {MAX_INSTRUCTIONS}")
-        return None
-    cc = find_compiler()
-    hit = _by_function.get(id(F))
-    if hit is not None and hit[0] is F and hit[2] == cc:
-        _status.update(backend="compiled", reason="")
-        return hit[1]
-    if cc is None:
-        _status.update(backend="python", reason="no C compiler found (cc, gcc, clang; or set TOLSYNTH_CC)")
-        return None
-    cg = ca.CodeGenerator("tolsynth_penalty.c", {"with_header": False})
-    cg.add(F)
-    name = F.name()
-    source = (cg.dump() + f"\n#define TS_F {name}\n#define TS_F_WORK {name}_work\n#define TS_N_IN {F.n_in()}\n"
-              + C_SOURCE)
-    try:
-        lib, path = load_library(source, "powell", cc, ("tolsynth_powell", "tolsynth_eval"))
-        out = CompiledPowell(lib, F.n_in(), path)
-    except (OSError, AttributeError, RuntimeError) as err:
-        _status.update(backend="python", reason=f"compilation failed: {err}")
-        return None
-    _by_function[id(F)] = (F, out, cc)
-    _status.update(backend="compiled", reason="")
-    return out
+    return _LIBS.get(F, lambda lib, path: CompiledPowell(lib, F.n_in(), path))
+
+
+_LIBS = GraphLibraries("powell", C_SOURCE, ("tolsynth_powell", "tolsynth_eval"), "python", MAX_INSTRUCTIONS,
+                       lambda F: {"TS_N_IN": F.n_in()})
