@@ -624,35 +624,30 @@ class ToleranceNLP:
             Z[b] = D @ Y @ D.T
         return list(Z)
 
-    def dual_weights(self, Z: Sequence[np.ndarray], eig=None) -> tuple[np.ndarray, float]:
+    def dual_weights(self, Z: Sequence[np.ndarray]) -> tuple[np.ndarray, float]:
         """``(w, tr)`` of the Lagrangian ``f(u) - sum_b tr(Z_b G_b(u)) = sum_i [c_i(u_i) + w_i e^{2u_i}]
-        - tr`` for LMI multipliers ``Z_b`` (each projected onto the PSD cone first).
-
-        ``eig``: ``np.linalg.eigh`` of the stack of the symmetric parts ``(Z_b + Z_b^T)/2``, shape
-        (m, 3, 3), if the caller has it already."""
+        - tr`` for LMI multipliers ``Z_b`` (each projected onto the PSD cone first)."""
         m, n = self.As.shape[0], self.spec.n
         if m == 0:
             return np.zeros(n), 0.0
-        if eig is None:
-            Zs = np.asarray(Z, dtype=float).reshape(m, 3, 3)
-            eig = np.linalg.eigh(0.5 * (Zs + Zs.transpose(0, 2, 1)))
-        lam, vec = eig
+        Zs = np.asarray(Z, dtype=float).reshape(m, 3, 3)
+        lam, vec = np.linalg.eigh(0.5 * (Zs + Zs.transpose(0, 2, 1)))
         lam = np.maximum(lam, 0.0)
         Zp = (vec * lam[:, None, :]) @ vec.transpose(0, 2, 1)  # the PSD projection
         # w_i = sum_b (scale_b a_bi)^T Zp_b (scale_b a_bi) / c; tr Zp_b = sum of its eigenvalues
         w = ((Zp @ self.As) * self.As).sum(axis=(0, 1)) / self.spec.c
         return w, float(lam.sum())
 
-    def dual_bound(self, Z: Sequence[np.ndarray], eig=None) -> float:
+    def dual_bound(self, Z: Sequence[np.ndarray]) -> float:
         """Lagrangian lower bound on the optimal cost for LMI multipliers ``Z_b`` (3x3).
 
         ``Z_b`` is projected onto the positive semi-definite cone first (any PSD Z gives a valid
         bound, weak duality), then ``min over the box of f(u) - sum_b tr(Z_b G_b(u))`` separates per
-        parameter: ``c_i(u) + w_i e^{2u}`` (:meth:`dual_weights`; ``eig`` as there), minimised by
+        parameter: ``c_i(u) + w_i e^{2u}`` (:meth:`dual_weights`), minimised by
         :meth:`tolsynth.cost.CostModel.dual_min` (closed form for the power law; exact where the cost
         is convex in eps^2, a rigorous lower bound otherwise).
         """
-        return self.lagrangian_bound(*self.dual_weights(Z, eig))
+        return self.lagrangian_bound(*self.dual_weights(Z))
 
     def lagrangian_bound(self, w: np.ndarray, trace: float) -> float:
         """``min over the box of sum_i [c_i(u_i) + w_i e^{2u_i}] - trace``: the Lagrangian lower bound

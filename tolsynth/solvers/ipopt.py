@@ -175,24 +175,22 @@ def _solver(n: int, K: int, tol: float, constr_viol_tol: float, max_iter: int, m
         "ipopt.hessian_approximation": "exact",
         "ipopt.mu_strategy": "monotone" if mu_strategy in ("warm", "rewarm") else mu_strategy,
     }
-    if mu_strategy == "warm":  # from the remembered optimum of the same blocks, with its multipliers
-        # the slacks and bounds pushed as little as the point itself: from an optimum IPOPT then
-        # needs 1 iteration instead of 3 (measured on the paper's column), and none where the
-        # point already meets this problem's KKT conditions to tol (the same column solved again:
-        # a push of 1e-9 alone left a complementarity of ~1e-10 there, one iteration more).  On 384
-        # solves (3 models, R 0.3-10 mm, p 0.9-0.999, both distributions) 1e-12 against 1e-9: 107
-        # solves with 0 iterations instead of 1, none slower, none failed.
-        push = 1e-12
-        opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
-                     "ipopt.warm_start_bound_push": push, "ipopt.warm_start_mult_bound_push": push,
-                     "ipopt.warm_start_bound_frac": push, "ipopt.warm_start_slack_bound_push": push,
-                     "ipopt.warm_start_slack_bound_frac": push})
-    elif mu_strategy == "rewarm":  # a later exchange round: the last round's optimum and multipliers
-        # (0 for the new cuts, which that point violates).  On 48 random pose sets (1-30 poses, four
-        # models, two distributions) 4.45 s against 5.94 s from a cold start, the same optima to
-        # 3.5e-9, no round left to the cold attempts (which follow if it does not succeed)
-        push = REWARM_PUSH
-        opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": REWARM_MU,
+    # warm starts, from a point and multipliers given with the call:
+    # * "warm": the remembered optimum of the same blocks.  The slacks and bounds pushed as little as
+    #   the point itself: from an optimum IPOPT then needs 1 iteration instead of 3 (measured on the
+    #   paper's column), and none where the point already meets this problem's KKT conditions to tol
+    #   (the same column solved again: a push of 1e-9 alone left a complementarity of ~1e-10 there,
+    #   one iteration more).  On 384 solves (3 models, R 0.3-10 mm, p 0.9-0.999, both
+    #   distributions) 1e-12 against 1e-9: 107 solves with 0 iterations instead of 1, none slower,
+    #   none failed.
+    # * "rewarm": a later exchange round, from the last round's optimum and multipliers (0 for the
+    #   new cuts, which that point violates).  On 48 random pose sets (1-30 poses, four models, two
+    #   distributions) 4.45 s against 5.94 s from a cold start, the same optima to 3.5e-9, no round
+    #   left to the cold attempts (which follow if it does not succeed).
+    warm = {"warm": (1e-6, 1e-12), "rewarm": (REWARM_MU, REWARM_PUSH)}.get(mu_strategy)
+    if warm is not None:
+        mu_init, push = warm
+        opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": mu_init,
                      "ipopt.warm_start_bound_push": push, "ipopt.warm_start_mult_bound_push": push,
                      "ipopt.warm_start_bound_frac": push, "ipopt.warm_start_slack_bound_push": push,
                      "ipopt.warm_start_slack_bound_frac": push})
@@ -297,6 +295,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     history: list[dict] = []
     lam_g = np.zeros(0)
     lam_x = np.zeros(n)
+    lam_next = np.zeros(0)  # the multipliers a later round starts from (set at the end of each round)
     status, code = Status.ITERATION_LIMIT, f"exchange method: no convergence in {opts['max_rounds']} rounds"
     max_viol = np.inf
     t_start = time.perf_counter()
