@@ -243,9 +243,8 @@ def _power_du(u, k, alpha):
 
 def _power_dual_min(w, k, alpha, A, lu, uu):
     """Closed form of ``min A + k e^{-alpha u} + w e^{2u}`` over ``[lu, uu]`` (one copy)."""
-    pos = w > 0
-    with np.errstate(divide="ignore"):
-        u = np.where(pos, np.log(alpha * k / (2.0 * np.where(pos, w, 1.0))) / (2.0 + alpha), uu)
+    # w <= 0: the minimum is at the upper bound (the log of the floored w is finite, then replaced)
+    u = np.where(w > 0, (np.log(alpha * k) - np.log(2.0 * np.maximum(w, 1e-300))) / (2.0 + alpha), uu)
     u = np.minimum(np.maximum(u, lu), uu)
     return A + k * np.exp(-alpha * u) + w * np.exp(2.0 * u), u
 
@@ -630,7 +629,7 @@ class CostSet:
         pl = self.power_law()
         if pl is None:
             return None
-        return float(np.sum(PowerLaw._expr(np.asarray(u, dtype=float), pl, np)))
+        return float(PowerLaw._expr(np.asarray(u, dtype=float), pl, np).sum())
 
     def du(self, u) -> np.ndarray:
         """``dc_i/du_i`` per parameter at ``u`` (for the stationarity condition)."""

@@ -158,6 +158,7 @@ class Mechanism:
         # pickled for worker processes (tolsynth.sweep): without the remembered sensitivities
         state = self.__dict__.copy()
         state.pop("_sensitivity_cache", None)
+        state.pop("_per_parameter", None)
         return state
 
     @cached_property
@@ -170,15 +171,31 @@ class Mechanism:
         """Number of error parameters."""
         return len(self.error_parameters)
 
+    @cached_property
+    def _per_parameter(self) -> dict:
+        """What the properties below read, derived once from the (frozen) parameter declarations:
+        every solve asks for them, and a warm solve takes well under a millisecond.  Arrays are
+        read-only; the properties hand out copies (and new dicts)."""
+        ps = self.parameters
+        out = {"units": tuple(p.unit for p in ps), "k": np.array([p.k for p in ps], dtype=float),
+               "lower": np.array([p.lower for p in ps], dtype=float),
+               "upper": np.array([p.upper for p in ps], dtype=float),
+               "cost_models": {p.name: p.cost for p in ps if p.cost is not None},
+               "locks": {p.name: p.lock for p in ps if p.lock is not None},
+               "fixed_joint_errors": {p.name: p.lock for p in ps if p.at_joint is not None and p.lock is not None}}
+        for key in ("k", "lower", "upper"):
+            out[key].setflags(write=False)
+        return out
+
     @property
     def units(self) -> tuple[str, ...]:
         """Tolerance unit of each error parameter."""
-        return tuple(p.unit for p in self.parameters)
+        return self._per_parameter["units"]
 
     @property
     def k(self) -> np.ndarray:
         """Cost factors (the paper's k_i)."""
-        return np.array([p.k for p in self.parameters])
+        return self._per_parameter["k"].copy()
 
     @property
     def distribution(self):
@@ -193,7 +210,7 @@ class Mechanism:
     @property
     def cost_models(self) -> dict:
         """Name -> cost model given in the model file (issue 13); the others use ``k eps^-alpha``."""
-        return {p.name: p.cost for p in self.parameters if p.cost is not None}
+        return dict(self._per_parameter["cost_models"])
 
     @property
     def processes(self) -> dict:
@@ -203,7 +220,7 @@ class Mechanism:
     @property
     def locks(self) -> dict:
         """Name -> locked tolerance given in the model file."""
-        return {p.name: p.lock for p in self.parameters if p.lock is not None}
+        return dict(self._per_parameter["locks"])
 
     @property
     def joint_error_parameters(self) -> tuple[str, ...]:
@@ -213,7 +230,7 @@ class Mechanism:
     @property
     def fixed_joint_errors(self) -> dict:
         """Name -> locked tolerance of the fixed joint errors (always locked by synthesize)."""
-        return {p.name: p.lock for p in self.parameters if p.at_joint is not None and p.lock is not None}
+        return dict(self._per_parameter["fixed_joint_errors"])
 
     def with_joint_errors(self, joint_errors) -> "Mechanism":
         """The same mechanism with joint errors as further error parameters (appended after its
@@ -237,7 +254,7 @@ class Mechanism:
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Default tolerance bounds (Eq. 22) in tolerance units."""
-        return np.array([p.lower for p in self.parameters]), np.array([p.upper for p in self.parameters])
+        return self._per_parameter["lower"].copy(), self._per_parameter["upper"].copy()
 
     def index(self, name: str) -> int:
         """Position of an error parameter by name or alias (``"h2"`` or ``"x1"``)."""

@@ -45,6 +45,7 @@ import numpy as np
 from .checks import HUGE, TINY, check_real, check_vector
 from .cost import CostSet, cost_set
 from .errors import InfeasibleSpecificationError, InputError, OutOfRangeError
+from .distributions import resolve, shape, shapes_of
 from .stats import check_positive, check_probability, chi3_cdf, covariance_graph, z_of_p
 
 __all__ = [
@@ -213,17 +214,17 @@ def make_specification(
     """
     R = check_positive(R, "R")
     p = check_probability(p, "p")
-    from .distributions import shapes_of
-
-    from .distributions import resolve
-
     distribution = resolve(distribution, mechanism)
-    shapes = shapes_of(distribution, mechanism.error_parameters, mechanism.index)
-    divisors = [shapes[0].divisor] if all(s is shapes[0] for s in shapes) else [s.divisor for s in shapes]
-    if len(set(divisors)) == 1:
-        c, col_scale = float(divisors[0]), 1.0
-    else:  # mixed shapes: one divisor (3) for the graphs, the columns scaled to it
-        c, col_scale = 3.0, np.sqrt(3.0 / np.array(divisors))
+    if isinstance(distribution, str):  # one shape for every parameter (checked by resolve)
+        shp = shape(distribution)
+        shapes, c, col_scale = (shp,) * mechanism.n, float(shp.divisor), 1.0
+    else:
+        shapes = shapes_of(distribution, mechanism.error_parameters, mechanism.index)
+        divisors = [s.divisor for s in shapes]
+        if len(set(divisors)) == 1:
+            c, col_scale = float(divisors[0]), 1.0
+        else:  # mixed shapes: one divisor (3) for the graphs, the columns scaled to it
+            c, col_scale = 3.0, np.sqrt(3.0 / np.array(divisors))
     if criterion not in CRITERIA:
         raise InputError("criterion", f"unknown criterion {criterion!r}", " or ".join(repr(c) for c in CRITERIA))
     names = mechanism.error_parameters
@@ -233,11 +234,10 @@ def make_specification(
     k_v = _per_parameter(k, names, mechanism.index, "k", default=mechanism.k)
     for i in _outside(k_v, TINY, HUGE):
         raise OutOfRangeError(f"k[{names[i]}]", f"got {k_v[i]}", f"{TINY:g} <= k <= {HUGE:g} (the paper: k >= 1)")
-    lo_default, hi_default = mechanism.bounds
     if bounds is None:
-        lo, hi = lo_default.copy(), hi_default.copy()
+        lo, hi = mechanism.bounds  # copies
     elif isinstance(bounds, Mapping):
-        lo, hi = lo_default.copy(), hi_default.copy()
+        lo, hi = mechanism.bounds
         for key, pair in bounds.items():
             try:
                 a, b = pair
@@ -471,8 +471,8 @@ class ToleranceNLP:
         memo = self._values_memo
         if memo is not None and memo[0] == key:
             return memo[1]
-        V = self.block_covariances(eps)
-        lam, vec = np.linalg.eigh(0.5 * (V + V.transpose(0, 2, 1)))
+        # eigh reads the lower triangle only (V is symmetric by construction; no symmetrising)
+        lam, vec = np.linalg.eigh(self.block_covariances(eps))
         out = np.sqrt(np.maximum(lam[:, ::-1], 0.0)), vec[:, :, ::-1]
         self._values_memo = (key, out)
         return out
@@ -489,11 +489,11 @@ class ToleranceNLP:
     def sphere_values(self, eps: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float]]:
         """Per sphere block: ``[(1 - P) / (1 - p)]`` (<= 1 meets it), the principal directions and
         P itself, with P by the error-controlled quadrature of :func:`tolsynth.stats.p_ball`."""
-        from .stats import p_ball, principal
-
         out = []
         if not self.spec.sphere_blocks:
             return out
+        from .stats import p_ball, principal
+
         cov = covariance_graph(self.spec.n)
         for b in self.spec.sphere_blocks:
             V, _ = cov(np.vstack([b.A, np.zeros_like(b.A)]), eps, self.spec.c)
@@ -534,7 +534,7 @@ class ToleranceNLP:
                 f"lower bound: largest principal sigma*{what} = {value:.6g} > 1.  Lower the bounds, "
                 f"or relax R/Phi or p.",
             )
-        for block, (vals, _, P) in zip(self.spec.sphere_blocks, self.sphere_values(self.spec.lower)):
+        for block, (vals, _, P) in zip(spec.sphere_blocks, self.sphere_values(spec.lower) if spec.sphere_blocks else ()):
             if vals[0] > 1.0:
                 raise InfeasibleSpecificationError(
                     block.label,

@@ -210,12 +210,14 @@ def _cache_key(nlp: ToleranceNLP) -> tuple:
             nlp.costs.signature, nlp.theta.tobytes(), spec.lower.tobytes(), spec.upper.tobytes())
 
 
-def _remember(key: tuple, cut_b: np.ndarray, cut_w: np.ndarray, warm: tuple | None = None) -> None:
-    """Remember a solve's active cuts and, for a warm start, ``(eps, cut multipliers, bound
-    multipliers in u, lambda_max(A_b diag(eps^2) A_b^T) per block)`` with the multipliers in cost
-    units (not divided by that solve's f0); the last, free of z/R and c, rescales eps onto another
-    specification of the same blocks without an eigensolve."""
-    _CUT_CACHE[key] = (cut_b.copy(), cut_w.copy(), warm)
+def _remember(key: tuple, cut_b: np.ndarray, cut_w: np.ndarray, raw: np.ndarray, warm: tuple | None = None) -> None:
+    """Remember a solve's active cuts (blocks, unit directions and their rows ``(A_b^T w)^2`` free of
+    z/R and c: ``_cut_rows`` is ``raw * scale_b^2 / c``) and, for a warm start, ``(eps, cut
+    multipliers, bound multipliers in u, lambda_max(A_b diag(eps^2) A_b^T) per block)`` with the
+    multipliers in cost units (not divided by that solve's f0); the last, free of z/R and c,
+    rescales eps onto another specification of the same blocks without an eigensolve.  The arrays
+    are kept as given (callers pass arrays of their own)."""
+    _CUT_CACHE[key] = (cut_b, cut_w, raw, warm)
     _CUT_CACHE.move_to_end(key)
     while len(_CUT_CACHE) > _CUT_CACHE_SIZE:
         _CUT_CACHE.popitem(last=False)
@@ -267,9 +269,9 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     cut_w = np.zeros((0, 3))
     key = _cache_key(nlp)
     cached = _CUT_CACHE.get(key)
-    warm = None
+    warm = raw_rows = None
     if cached is not None:
-        cut_b, cut_w, warm = cached
+        cut_b, cut_w, raw_rows, warm = cached
     use_warm = warm is not None and eps0 is None and not ms and len(cut_b) == len(warm[1])
     if use_warm:
         # that optimum rescaled onto this specification's constraint (V is homogeneous of degree
@@ -298,6 +300,8 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     lam_next = np.zeros(0)  # the multipliers a later round starts from (set at the end of each round)
     status, code = Status.ITERATION_LIMIT, f"exchange method: no convergence in {opts['max_rounds']} rounds"
     max_viol = np.inf
+    settings = (float(opts["tol"]), float(opts["constr_viol_tol"]), int(opts["max_iter"]))
+    sphere = (ms, nlp.sphere_nodes if ms else 0, nlp.costs.signature)
     t_start = time.perf_counter()
     while rounds < int(opts["max_rounds"]):
         rounds += 1
@@ -306,7 +310,10 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         # the parameter [vec(C) (column-major), pfix]: C written in place through a transposed view
         pval = np.zeros(slots * n + len(pfix))
         pval[slots * n :] = pfix
-        rows = _cut_rows(nlp, cut_b, cut_w) if K else np.zeros((0, n))
+        if rounds == 1 and raw_rows is not None:  # the remembered cuts: their rows rescaled
+            rows = raw_rows * (nlp.scales[cut_b] ** 2 / spec.c)[:, None]
+        else:
+            rows = _cut_rows(nlp, cut_b, cut_w) if K else np.zeros((0, n))
         pval[: slots * n].reshape(n, slots).T[:K] = rows
         solved = (cut_b, cut_w, rows)  # the cuts of this round's NLP (its multipliers' order)
         if ms:
@@ -323,8 +330,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         elif rounds > 1 and REWARM and not ms:
             attempts = ("rewarm",) + ATTEMPTS
         for mu_strategy in attempts:
-            solver = _solver(n, slots, float(opts["tol"]), float(opts["constr_viol_tol"]), int(opts["max_iter"]),
-                             mu_strategy, ms, nlp.sphere_nodes if ms else 0, nlp.costs.signature)
+            solver = _solver(n, slots, *settings, mu_strategy, *sphere)
             if mu_strategy == "warm":
                 lam0 = np.zeros(slots)
                 lam0[:K] = warm[1] / f0
@@ -420,6 +426,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     else:
         Z = np.zeros((m, 3, 3))
         np.add.at(Z, cut_b[on], Wk[:, :, None] * Wk[:, None, :])
+    lam_u = lam_x * f0  # the bound multipliers in u, cost units
     if status is Status.OPTIMAL and K:
         # remember each block's multiplier matrix by its eigenvectors: the fewest cuts that
         # reproduce this optimum's Lagrangian.  Without new cuts (one round) the cuts of each block
@@ -428,14 +435,16 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         if rounds == 1:
             keep = mu > 1e-9 * max(float(mu.max()), 0.0)
             rb, rw, rl = cut_b[keep], cut_w[keep], mu[keep]
+            rr = rows[keep] * (spec.c / nlp.scales[rb] ** 2)[:, None]  # (A_b^T w)^2
         else:
             bs = np.unique(cut_b)
             lz, vz = np.linalg.eigh(Z[bs])
             i, j = (lz > 1e-9 * max(float(lz.max()), 0.0)).nonzero()
             rb, rw, rl = bs[i], vz[i, :, j], lz[i, j]  # the cut along an eigenvector: its eigenvalue
+            rr = np.einsum("kin,ki->kn", nlp.As[rb], rw) ** 2 / (nlp.scales[rb] ** 2)[:, None]
         if len(rb):
-            raw = (vals[:, 0] / nlp.scales) ** 2 * spec.c  # vals: the check at eps, last round
-            _remember(key, rb, rw, (eps.copy(), rl, lam_x * f0, raw))
+            top = (vals[:, 0] / nlp.scales) ** 2 * spec.c  # vals: the check at eps, last round
+            _remember(key, rb, rw, rr, (eps, rl, lam_u, top))
     # P_b >= p_b active at its lower bound: CasADi's lam is <= 0 there; f - mu (P - p) with mu >= 0
     mu_sphere = -lam_g[len(lam_g) - ms :] * f0 if ms else np.zeros(0)
     message = code if status is Status.OPTIMAL else "; ".join(tried) or code
@@ -448,7 +457,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         nlp,
         eps,
         Z,
-        lam_x * f0,
+        lam_u,
         status,
         message,
         iters,
