@@ -340,8 +340,11 @@ def test_synthesize_workspace_reports_rounds_certificate_and_violation(xz, capsy
                "--everywhere", "--json"])
     assert rc == 0
     data = json.loads(capsys.readouterr().out)
-    # (a re-solve: the same optimum to the solver's tolerance, not bit for bit)
-    assert data["worst_value"] == pytest.approx(w.worst_value, rel=1e-7)
+    # (a re-solve: the same optimum to the solver's tolerance, not bit for bit; the worst value is
+    # a compass search's maximum of the largest sigma, which has a kink where two principal sigmas
+    # meet, so two searches from optima 1e-10 apart may end 2e-7 apart: the final step is 1e-7 of
+    # each joint's range, and the error at a kink is first order in it)
+    assert data["worst_value"] == pytest.approx(w.worst_value, rel=1e-6)
     assert data["lower_bound"] == pytest.approx(w.lower_bound, rel=1e-7) and data["gap"] <= 1e-6 * data["cost"]
     rc = main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--dist", "uniform", "--everywhere"])
     out = capsys.readouterr().out

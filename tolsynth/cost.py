@@ -629,7 +629,7 @@ class CostSet:
         pl = self.power_law()
         if pl is None:
             return None
-        return float(PowerLaw._expr(np.asarray(u, dtype=float), pl, np).sum())
+        return math.fsum(PowerLaw._expr(np.asarray(u, dtype=float), pl, np).tolist())  # fsum: faster than .sum() on a few
 
     def du(self, u) -> np.ndarray:
         """``dc_i/du_i`` per parameter at ``u`` (for the stationarity condition)."""

@@ -307,6 +307,9 @@ def resolve(distribution, mechanism):
     ``"uniform"``); anything else is checked (typed errors naming ``distribution``) and returned."""
     if distribution is None:
         return getattr(mechanism, "distribution", DEFAULT_SHAPE)
+    if isinstance(distribution, str):
+        shape(distribution)  # validates (remembered)
+        return distribution
     divisor_of(distribution, mechanism)  # validates
     return distribution
 

@@ -229,7 +229,8 @@ def make_specification(
         raise InputError("criterion", f"unknown criterion {criterion!r}", " or ".join(repr(c) for c in CRITERIA))
     names = mechanism.error_parameters
     alpha_v = _per_parameter(alpha, names, mechanism.index, "alpha")
-    for i in _outside(alpha_v, TINY, ALPHA_MAX):
+    bad_alpha = () if isinstance(alpha, float) and TINY <= alpha <= ALPHA_MAX else _outside(alpha_v, TINY, ALPHA_MAX)
+    for i in bad_alpha:
         raise OutOfRangeError(f"alpha[{names[i]}]", f"got {alpha_v[i]}", f"{TINY:g} <= alpha <= {ALPHA_MAX:g} (the paper: alpha <= 1, typically 0.7)")
     k_v = _per_parameter(k, names, mechanism.index, "k", default=mechanism.k)
     for i in _outside(k_v, TINY, HUGE):
@@ -472,7 +473,7 @@ class ToleranceNLP:
         if memo is not None and memo[0] == key:
             return memo[1]
         # eigh reads the lower triangle only (V is symmetric by construction; no symmetrising)
-        lam, vec = np.linalg.eigh(self.block_covariances(eps))
+        lam, vec = eigh(self.block_covariances(eps))
         out = np.sqrt(np.maximum(lam[:, ::-1], 0.0)), vec[:, :, ::-1]
         self._values_memo = (key, out)
         return out
@@ -653,7 +654,29 @@ class ToleranceNLP:
         """``min over the box of sum_i [c_i(u_i) + w_i e^{2u_i}] - trace``: the Lagrangian lower bound
         of :meth:`dual_bound` from its weights (``w >= 0``, the weights of PSD multipliers)."""
         vals, _ = self.costs.dual_min(w, self.lu, self.uu)
-        return float(vals.sum() - trace)
+        return math.fsum(vals.tolist()) - trace
+
+
+try:  # NumPy's LAPACK gufunc behind np.linalg.eigh (numpy/linalg/_umath_linalg, NumPy 1.8 to 2.x)
+    from numpy.linalg import _umath_linalg
+
+    _EIGH_LO = _umath_linalg.eigh_lo
+except (ImportError, AttributeError):  # pragma: no cover - another NumPy: its public eigh
+    _EIGH_LO = None
+
+
+def eigh(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.linalg.eigh(V)`` of a stack of real symmetric matrices (lower triangle read).
+
+    NumPy's own gufunc is called directly: the public wrapper's type and shape checks take 5 of
+    its 8 us on one 3x3 matrix, and every solve's feasibility check and certificate ask for this.
+    Where the gufunc does not give finite eigenvalues (NaN input, LAPACK not converging) or is
+    missing, ``np.linalg.eigh`` itself answers (and raises ``LinAlgError`` as before)."""
+    if _EIGH_LO is not None and V.dtype == np.float64 and V.ndim >= 2:
+        lam, vec = _EIGH_LO(V)
+        if math.isfinite(lam.sum()):
+            return lam, vec
+    return np.linalg.eigh(V)
 
 
 #: ToleranceNLP.check_feasible's lambda_max(A_b diag(lower^2) A_b^T) per block, by (A_b bytes, lower bytes)

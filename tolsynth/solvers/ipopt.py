@@ -194,6 +194,14 @@ def _solver(n: int, K: int, tol: float, constr_viol_tol: float, max_iter: int, m
                      "ipopt.warm_start_bound_push": push, "ipopt.warm_start_mult_bound_push": push,
                      "ipopt.warm_start_bound_frac": push, "ipopt.warm_start_slack_bound_push": push,
                      "ipopt.warm_start_slack_bound_frac": push})
+    if mu_strategy == "warm":
+        # from a rescaled optimum every cut is <= 1 (gradient <= 2) and the objective is divided
+        # by f0 (for the power law each gradient is at most alpha_i <= 10), so IPOPT's
+        # gradient-based scaling (only where a gradient exceeds 100) would be 1 anyway: "none"
+        # saves its extra gradient and Jacobian evaluations.  (Another cost model may have
+        # steeper gradients; the warm attempt then runs unscaled, and the cold attempts, with
+        # the default scaling, follow if it does not succeed.)
+        opts["ipopt.nlp_scaling_method"] = "none"
     solver = ca.nlpsol("tolerance_cuts", "ipopt", nlp, opts)
     return CutNLP(solver) if hasattr(solver, "buffer") else _CallNLP(solver)
 
@@ -363,7 +371,8 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             break
         if not m:
             break
-        vals, dirs = nlp.block_values(np.exp(u))
+        eps = np.exp(u)
+        vals, dirs = nlp.block_values(eps)
         over = vals - 1.0  # (m, 3)
         max_viol = float(over[:, 0].max())
         if max_viol <= feas_tol:
@@ -410,7 +419,8 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         status = Status.ITERATION_LIMIT
     wall = time.perf_counter() - t_start
 
-    eps = np.exp(u)
+    if not (m and status is Status.OPTIMAL):  # else eps = exp(u) was checked at the end of the last round
+        eps = np.exp(u)
     # the multipliers of the cuts of the last NLP solved (later rounds' new cuts have none)
     cut_b, cut_w, rows = solved if rounds else (cut_b[:0], cut_w[:0], np.zeros((0, n)))
     K = len(cut_b)
@@ -418,12 +428,12 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     # the cut NLP's Lagrangian f(u) - sum_k mu_k (1 - C_k e^{2u}) = sum_i [c_i(u_i) + w_i e^{2u_i}] -
     # sum_k mu_k |w_k|^2: the LMI's with Z_b = sum_k mu_k w_k w_k^T (PSD by construction), so no
     # eigensolve is needed for the certificate
-    on = mu > 0
-    Wk = cut_w[on] * np.sqrt(mu[on])[:, None]  # Z_b = sum_k mu_k w_k w_k^T = sum_k Wk Wk^T
-    lagrangian = (mu @ rows, float((Wk * Wk).sum()))  # sum_b tr Z_b = sum_k mu_k |w_k|^2
+    lagrangian = (mu @ rows, float(mu @ (cut_w * cut_w).sum(axis=1)))  # sum_b tr Z_b = sum_k mu_k |w_k|^2
     if m == 1:  # one block (one pose): no scatter
-        Z = (Wk.T @ Wk)[None]
+        Z = ((cut_w.T * mu) @ cut_w)[None]
     else:
+        on = mu > 0
+        Wk = cut_w[on] * np.sqrt(mu[on])[:, None]  # Z_b = sum_k mu_k w_k w_k^T = sum_k Wk Wk^T
         Z = np.zeros((m, 3, 3))
         np.add.at(Z, cut_b[on], Wk[:, :, None] * Wk[:, None, :])
     lam_u = lam_x * f0  # the bound multipliers in u, cost units
