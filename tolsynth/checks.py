@@ -18,6 +18,7 @@ The model-file reader (:mod:`tolsynth.model`) applies the same limits to the num
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -147,8 +148,6 @@ def check_vector(x: Any, field: str, size: int | None = None, unit: str = "",
 
 def check_mapping(x: Any, field: str, allowed: str = "a dict", optional: bool = True) -> dict:
     """``x`` as a dict (``None`` -> ``{}`` when ``optional``), or InputError unless it is a mapping."""
-    from collections.abc import Mapping
-
     if x is None and optional:
         return {}
     if not isinstance(x, Mapping):
@@ -160,11 +159,11 @@ def check_options(options: Any, defaults: dict, field: str = "options") -> dict:
     """Solver options: a dict whose keys are those of ``defaults``; each value of the type of its
     default (a float default: a positive number; an int: a count >= 0; None: None or a positive
     number; a string: a string)."""
-    import difflib
-
     options = check_mapping(options, field, "a dict with keys " + ", ".join(defaults))
     for key, value in options.items():
         if key not in defaults:
+            import difflib
+
             near = difflib.get_close_matches(str(key), list(defaults), n=1)
             hint = f" (did you mean {near[0]!r}?)" if near else ""
             raise InputError(field, f"unknown option {key!r}{hint}", ", ".join(defaults))

@@ -241,12 +241,16 @@ def _power_du(u, k, alpha):
     return -alpha * k * np.exp(-alpha * u)
 
 
-def _power_dual_min(w, k, alpha, A, lu, uu):
-    """Closed form of ``min A + k e^{-alpha u} + w e^{2u}`` over ``[lu, uu]`` (one copy)."""
+def _power_dual_min(w, k, alpha, A, lu, uu, consts=None):
+    """Closed form of ``min A + k e^{-alpha u} + w e^{2u}`` over ``[lu, uu]`` (one copy): the
+    stationary point ``u* = ln(alpha k / (2 w)) / (2 + alpha)`` clipped to the box.  ``consts``:
+    ``(ln(alpha k / 2), 1 / (2 + alpha))`` if the caller keeps them."""
+    la, inv = consts if consts is not None else (np.log(0.5 * alpha * k), 1.0 / (2.0 + alpha))
     # w <= 0: the minimum is at the upper bound (the log of the floored w is finite, then replaced)
-    u = np.where(w > 0, (np.log(alpha * k) - np.log(2.0 * np.maximum(w, 1e-300))) / (2.0 + alpha), uu)
+    u = np.where(w > 0, (la - np.log(np.maximum(w, 1e-300))) * inv, uu)
     u = np.minimum(np.maximum(u, lu), uu)
-    return A + k * np.exp(-alpha * u) + w * np.exp(2.0 * u), u
+    f = k * np.exp(-alpha * u) + w * np.exp(2.0 * u)
+    return (f + A if A else f), u
 
 
 @dataclass(frozen=True)
@@ -655,7 +659,7 @@ class CostSet:
         pl = self.power_law()
         if pl is not None:  # every parameter the paper's power law: one vectorised closed form
             return _power_dual_min(np.asarray(w, dtype=float), pl[0], pl[1], 0.0, np.asarray(lu, dtype=float),
-                                   np.asarray(uu, dtype=float))
+                                   np.asarray(uu, dtype=float), self._power_consts)
         vals, us = zip(*(m.dual_min(np.asarray(wi, dtype=float), a, b) for m, wi, a, b in zip(self.models, w, lu, uu)))
         return np.array(vals, dtype=float), np.array(us, dtype=float)
 
@@ -671,6 +675,13 @@ class CostSet:
             alpha.setflags(write=False)
             return k, alpha
         return None
+
+    @cached_property
+    def _power_consts(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(ln(alpha k / 2), 1 / (2 + alpha))`` of the power law, for :func:`_power_dual_min`
+        (every certificate asks for the dual minimum)."""
+        k, alpha = self._power_law
+        return np.log(0.5 * alpha * k), 1.0 / (2.0 + alpha)
 
     def describe(self, names: Sequence[str]) -> dict[str, str]:
         return {nm: f"{m.kind}: {m.describe()}" for nm, m in zip(names, self.models)}

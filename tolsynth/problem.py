@@ -408,11 +408,15 @@ class ToleranceNLP:
         self.lu = np.log(spec.lower)
         self.uu = np.log(spec.upper)
         self.sphere_nodes = sphere_nodes
-        self.p_sphere = np.array([b.p for b in spec.sphere_blocks])
+        self.p_sphere = np.array([b.p for b in spec.sphere_blocks]) if spec.sphere_blocks else np.zeros(0)
         # scaled rows of every block, (m, 3, n): block b's constraint is lambda_max(As V As^T) <= 1
-        self.scales = np.array([b.scale for b in spec.blocks])
-        self.As = (self.scales[:, None, None] * np.array([b.A for b in spec.blocks]).reshape(-1, 3, spec.n)
-                   if spec.blocks else np.zeros((0, 3, spec.n)))
+        blocks = spec.blocks
+        self.scales = np.array([b.scale for b in blocks])
+        if len(blocks) == 1:  # one pose, one kind
+            self.As = (blocks[0].scale * blocks[0].A).reshape(1, 3, spec.n)
+        else:
+            self.As = (self.scales[:, None, None] * np.array([b.A for b in blocks]).reshape(-1, 3, spec.n)
+                       if blocks else np.zeros((0, 3, spec.n)))
         self._graphs = None
         self._values_memo = None  # (eps bytes, block_values at eps): the last point asked
 
@@ -442,10 +446,11 @@ class ToleranceNLP:
         return self._graphs
 
     # -- evaluations (NumPy in, NumPy out) ----------------------------------------------------
-    def cost(self, eps: np.ndarray) -> float:
-        """The cost at ``eps``: NumPy for the paper's power law (:meth:`CostSet.total`, the same
-        expression as the graph's), else the cost graph the solvers read."""
-        u = np.log(eps)
+    def cost(self, eps: np.ndarray, u: np.ndarray | None = None) -> float:
+        """The cost at ``eps`` (``u = ln eps`` if the caller has it): NumPy for the paper's power law
+        (:meth:`CostSet.total`, the same expression as the graph's), else the cost graph the
+        solvers read."""
+        u = np.log(eps) if u is None else u
         f = self.costs.total(u)
         return f if f is not None else float(cost_graph(self.spec.n, self.costs.signature)(u, self.theta))
 

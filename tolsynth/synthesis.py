@@ -15,6 +15,8 @@ import numpy as np
 
 from .checks import TINY, check_count, check_mapping, check_options, check_positive, check_vector
 from .errors import InputError
+from .exact_synthesis import PROBABILITIES
+from .mechanism import as_mechanism
 from .problem import SPHERE_NODES, ToleranceNLP, make_specification
 from .result import Status, SynthesisResult
 from .stats import z_of_p
@@ -157,19 +159,16 @@ def synthesize(
     OutOfRangeError, InputError, UnknownNameError
         For bad inputs, naming the field.
     """
-    from .mechanism import as_mechanism
-
     mechanism = as_mechanism(mechanism)
     if not isinstance(solver, str) or solver not in SOLVERS:
         raise InputError("solver", f"unknown solver {solver!r}", " or ".join(repr(s) for s in SOLVERS))
-    from .exact_synthesis import PROBABILITIES
-
     again = dict(k=k, bounds=bounds, pose=pose, poses=poses, Phi=Phi, p_orientation=p_orientation,
                  criterion=criterion, cost=cost, locks=locks, options=options, probability=probability)
 
     if not isinstance(probability, str) or probability not in PROBABILITIES:
         raise InputError("probability", f"got {probability!r}", " or ".join(repr(s) for s in PROBABILITIES))
-    options = check_options(options, _solver_defaults(solver)) if probability == "gaussian" else options
+    if probability == "gaussian" and options is not None:  # (None: every default)
+        options = check_options(options, _solver_defaults(solver))
     if validate is not None and validate is not False:
         validate = check_count(validate, "validate", lower=0)
     if cost is None and mechanism.cost_models:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..problem import ToleranceNLP
@@ -141,7 +143,7 @@ def _verified(status: Status, message: str, blocks, cost: float, lower: float, c
     if status is not Status.OPTIMAL:
         return status, message
     worst = max((float(b.values[0]) for b in blocks), default=0.0)
-    if not np.isfinite(cost) or not worst <= 1.0 + FEAS_TOL:
+    if not math.isfinite(cost) or not worst <= 1.0 + FEAS_TOL:
         return Status.NUMERICAL_ERROR, (f"{message}; rejected: the point violates the specification "
                                         f"(largest constraint value {worst:.6g} > 1 + {FEAS_TOL:g})")
     gap = cost - lower

@@ -289,8 +289,8 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         eps = eps_w
     else:
         eps = nlp.start_point() if eps0 is None else np.clip(np.asarray(eps0, dtype=float), spec.lower, spec.upper)
-    f0 = nlp.cost(eps)
     u = np.log(eps)
+    f0 = nlp.cost(eps, u)
     pfix = np.concatenate([nlp.theta, [f0]] + ([nlp.Ps] if ms else []))
     if cached is None and m:
         vals, dirs = nlp.block_values(eps)
@@ -444,8 +444,11 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         # directions of the start), so they are Z_b's eigenvectors with eigenvalues mu_k
         if rounds == 1:
             keep = mu > 1e-9 * max(float(mu.max()), 0.0)
-            rb, rw, rl = cut_b[keep], cut_w[keep], mu[keep]
-            rr = rows[keep] * (spec.c / nlp.scales[rb] ** 2)[:, None]  # (A_b^T w)^2
+            if raw_rows is not None and keep.all():  # the remembered cuts, all still active
+                rb, rw, rl, rr = cut_b, cut_w, mu, raw_rows
+            else:
+                rb, rw, rl = cut_b[keep], cut_w[keep], mu[keep]
+                rr = rows[keep] * (spec.c / nlp.scales[rb] ** 2)[:, None]  # (A_b^T w)^2
         else:
             bs = np.unique(cut_b)
             lz, vz = np.linalg.eigh(Z[bs])
