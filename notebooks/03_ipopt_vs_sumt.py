@@ -26,8 +26,10 @@
 #   (`r -> r / 10`), each from the previous minimiser; stop when the barrier's duality-gap bound
 #   `r * nu` is below `1e-8` of the cost.
 #
-# Every column of Tables 1-3 is solved once by each (SUMT takes 1-2 s a column, so this cell takes
-# about half a minute).  Units: cost in the paper's units; tolerances in mm and 1e-2 rad; times in ms.
+# Every column of Tables 1-3 is solved once by each, both from scratch (`tolsynth.compare` does not
+# let IPOPT start from an earlier column's optimum; a few to tens of ms a column for either, so
+# this cell takes a second or two).  Units: cost in the paper's units; tolerances in mm and
+# 1e-2 rad; times in ms.
 
 # %%
 import matplotlib.pyplot as plt
@@ -71,13 +73,13 @@ for lab, c in zip(labels, comparisons):
     i, s = c.ipopt, c.sumt
     print(f"{lab:<28} {i.cost:11.6f} {s.cost:11.6f} {c.cost_rel_diff:9.1e} {max(c.tolerance_rel_diff.values()):9.1e} "
           f"{i.gap:8.1e} {s.gap:8.1e} {i.iterations:5d} {s.iterations:5d} {i.function_evaluations:5d} "
-          f"{s.function_evaluations:7d} {i.wall_time * 1e3:6.1f} {s.wall_time * 1e3:7.0f} {c.time_ratio:5.0f}")
+          f"{s.function_evaluations:7d} {i.wall_time * 1e3:6.1f} {s.wall_time * 1e3:7.0f} {c.time_ratio:5.2f}")
 cd = np.array([c.cost_rel_diff for c in comparisons])
 td = np.array([max(c.tolerance_rel_diff.values()) for c in comparisons])
 tr = np.array([c.time_ratio for c in comparisons])
 ev = np.array([c.sumt.function_evaluations / c.ipopt.function_evaluations for c in comparisons])
 print(f"\ncost agreement: max relative difference {cd.max():.1e}; tolerances: max {td.max():.1e}")
-print(f"SUMT / IPOPT: wall time x{np.median(tr):.0f} (median; range {tr.min():.0f}-{tr.max():.0f}), "
+print(f"SUMT / IPOPT: wall time x{np.median(tr):.2f} (median; range {tr.min():.2f}-{tr.max():.2f}), "
       f"evaluations x{np.median(ev):.0f} (median)")
 fallback = [lab for lab, c in zip(labels, comparisons) if ";" in c.ipopt.message]
 print("IPOPT columns solved on the fallback strategy:", fallback or "none")
@@ -132,6 +134,12 @@ plt.show()
 # Both solvers stop at a certified optimum (dual gap near 0, table above).  The tolerances agree
 # less closely than the costs because the cost is flat at the optimum: a tolerance error `d`
 # changes the cost only by `O(d^2)`.
+#
+# From scratch, on one pose, the compiled SUMT + Powell is the faster of the two here (the `S/I`
+# column): IPOPT's exchange method spends about ten rounds closing in on the double principal
+# sigma at the optimum.  IPOPT's speed is in re-solves, which start from a remembered optimum
+# (under a millisecond, about ten times faster than SUMT: `benchmarks/bench_synthesis.py`), and
+# in many poses (1000 poses in about a third of a second there).
 #
 # ## 3. Convergence histories
 #
@@ -203,17 +211,18 @@ plt.show()
 # %% [markdown]
 # ### IPOPT: objective and infeasibility per iteration
 #
-# IPOPT's iterates need not be feasible: its primal infeasibility `inf_pr` is that of the factor
-# form `G = B B^T` of the constraint.  The objective and `inf_pr` converge fast, superlinearly at
-# the end.  In some columns the dual infeasibility `inf_du` then jumps about for a few iterations
-# before it falls below the tolerance: at the optimum two principal sigma coincide and the factor
-# `B` is not unique, a plausible cause of the slow final convergence of the multipliers.
+# `tolsynth.compare` runs IPOPT from scratch (no cuts or optimum remembered from an earlier
+# solve), so these are whole solves.  IPOPT solves a cut NLP per exchange round (the constraint
+# `sum_i eps_i^2 C_i(w) <= 1` along a finite set of directions w, found round by round), each
+# round starting from the last one's optimum; the x axis counts IPOPT iterations over all rounds.
+# Its iterates need not be feasible: `inf_pr` is the violation of the current round's cuts, and
+# it jumps up where a round adds new cuts that the last optimum violates.
 
 # %%
 fig, axes = plt.subplots(1, 3, figsize=(15, 4.5), layout="constrained")
 for k, c in enumerate(comparisons):
     h = c.ipopt.history
-    it = [e["iteration"] for e in h]
+    it = range(len(h))  # IPOPT iterations counted over all exchange rounds
     color = plt.cm.viridis(k / (len(comparisons) - 1))
     axes[0].semilogy(it, [max(abs(e["objective"] - c.ipopt.cost), 1e-14) for e in h], lw=0.9, color=color)
     axes[1].semilogy(it, [max(e["inf_pr"], 1e-17) for e in h], lw=0.9, color=color)
@@ -224,7 +233,7 @@ for ax, ylabel, title in zip(
      "dual infeasibility inf_du (cost units)"),
     ("IPOPT objective", "IPOPT primal infeasibility", "IPOPT dual infeasibility"),
 ):
-    ax.set_xlabel("IPOPT iteration (count)")
+    ax.set_xlabel("IPOPT iteration, over all exchange rounds (count)")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(True, which="both", color="0.92")
@@ -233,7 +242,7 @@ plt.show()
 first = []
 for c in comparisons:
     h = c.ipopt.history
-    ok = [e["iteration"] for e in h if abs(e["objective"] - c.ipopt.cost) <= 1e-9 * c.ipopt.cost and e["inf_pr"] <= 1e-8]
+    ok = [k for k, e in enumerate(h) if abs(e["objective"] - c.ipopt.cost) <= 1e-9 * c.ipopt.cost and e["inf_pr"] <= 1e-8]
     first.append((ok[0] if ok else len(h), len(h) - 1))
 first = np.array(first)
 print(f"iterations until cost within 1e-9 and inf_pr <= 1e-8: median {np.median(first[:, 0]):.0f}; "

@@ -63,8 +63,11 @@ IPOPT_STATUS = {
     "Invalid_Number_Detected": Status.NUMERICAL_ERROR,
 }
 
-#: IPOPT's own tolerances, its iteration limit per cut NLP, and the exchange method's limits
-DEFAULT_OPTIONS = {"tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500, "feas_tol": None, "max_rounds": 60}
+#: IPOPT's own tolerances, its iteration limit per cut NLP, the exchange method's limits, and
+#: whether a solve may start from what an earlier solve of the same blocks left (its active cuts
+#: and its optimum rescaled; False: from scratch, as :func:`tolsynth.compare` runs IPOPT)
+DEFAULT_OPTIONS = {"tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500, "feas_tol": None, "max_rounds": 60,
+                   "warm_start": True}
 
 #: tried in turn on a cut NLP until one ends in Solve_Succeeded
 ATTEMPTS = ("adaptive", "monotone")
@@ -97,6 +100,8 @@ class CutNLP:
 
     _INPUTS = ("x0", "p", "lbx", "ubx", "lbg", "ubg", "lam_x0", "lam_g0")
     _OUTPUTS = ("x", "f", "g", "lam_x", "lam_g")
+    #: a buffer's solver memory counts evaluations over all its calls: reported per call
+    _COUNTERS = ("n_call_nlp_f", "n_call_nlp_g")
 
     def __init__(self, function: ca.Function):
         self.function = function
@@ -116,6 +121,7 @@ class CutNLP:
             for i, a in zip(self._out_index, outs):
                 handle.set_res(i, memoryview(a))
             buf = self._local.buf = (handle, run, ins, outs)
+            self._local.calls = dict.fromkeys(self._COUNTERS, 0)
         return buf
 
     def solve(self, x0, p, lbx, ubx, lbg, ubg, lam_x0=None, lam_g0=None) -> tuple[dict, dict]:
@@ -127,7 +133,12 @@ class CutNLP:
             else:
                 a[:] = v
         run()
-        return dict(zip(self._OUTPUTS, (a.copy() for a in outs))), handle.stats()
+        stats = handle.stats()
+        last = self._local.calls
+        for key in self._COUNTERS:  # this call's own evaluations
+            total = stats.get(key, 0)
+            stats[key], last[key] = total - last[key], total
+        return dict(zip(self._OUTPUTS, (a.copy() for a in outs))), stats
 
 
 class _CallNLP(CutNLP):
@@ -221,8 +232,8 @@ def _cache_key(nlp: ToleranceNLP) -> tuple:
 def _remember(key: tuple, cut_b: np.ndarray, cut_w: np.ndarray, raw: np.ndarray, warm: tuple | None = None) -> None:
     """Remember a solve's active cuts (blocks, unit directions and their rows ``(A_b^T w)^2`` free of
     z/R and c: ``_cut_rows`` is ``raw * scale_b^2 / c``) and, for a warm start, ``(eps, cut
-    multipliers, bound multipliers in u, lambda_max(A_b diag(eps^2) A_b^T) per block)`` with the
-    multipliers in cost units (not divided by that solve's f0); the last, free of z/R and c,
+    multipliers, bound multipliers in u, lambda_max(A_b diag(eps^2) A_b^T) per block, cost)`` with
+    the multipliers in cost units (not divided by that solve's f0); the fourth, free of z/R and c,
     rescales eps onto another specification of the same blocks without an eigensolve.  The arrays
     are kept as given (callers pass arrays of their own)."""
     _CUT_CACHE[key] = (cut_b, cut_w, raw, warm)
@@ -257,8 +268,9 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     """Solve with IPOPT by the exchange method from ``eps0`` (default: :meth:`ToleranceNLP.start_point`).
 
     Options: tol, constr_viol_tol, max_iter (IPOPT's own, per cut NLP), feas_tol (largest
-    ``sigma z / R - 1`` accepted over all blocks; default ``min(1e-9, 10 tol)``) and max_rounds
-    (exchange rounds).
+    ``sigma z / R - 1`` accepted over all blocks; default ``min(1e-9, 10 tol)``), max_rounds
+    (exchange rounds) and warm_start (default True: start from the active cuts and the rescaled
+    optimum of the last solve of the same blocks, cost model and bounds, if there is one).
     """
     opts = {**DEFAULT_OPTIONS, **options}
     unknown = set(opts) - set(DEFAULT_OPTIONS)
@@ -276,7 +288,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     cut_b = np.zeros(0, dtype=int)
     cut_w = np.zeros((0, 3))
     key = _cache_key(nlp)
-    cached = _CUT_CACHE.get(key)
+    cached = _CUT_CACHE.get(key) if opts["warm_start"] else None
     warm = raw_rows = None
     if cached is not None:
         cut_b, cut_w, raw_rows, warm = cached
@@ -341,8 +353,12 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             solver = _solver(n, slots, *settings, mu_strategy, *sphere)
             if mu_strategy == "warm":
                 lam0 = np.zeros(slots)
-                lam0[:K] = warm[1] / f0
-                sol, stats = solver.solve(u, pval, nlp.lu, nlp.uu, lbg, ubg, warm[2] / f0, lam0)
+                # the multipliers divided by the remembered cost, not by f0: under the rescaling
+                # u + ln s, the cost (a common alpha) and every multiplier scale by s^-alpha, so in
+                # f0 units they are what they were in that solve's own (an R or p sweep's warm start
+                # is then the new optimum with its multipliers: no IPOPT iteration)
+                lam0[:K] = warm[1] / warm[4]
+                sol, stats = solver.solve(u, pval, nlp.lu, nlp.uu, lbg, ubg, warm[2] / warm[4], lam0)
             elif mu_strategy == "rewarm":
                 lam0 = np.zeros(slots)
                 lam0[: len(lam_next)] = lam_next
@@ -457,7 +473,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             rr = np.einsum("kin,ki->kn", nlp.As[rb], rw) ** 2 / (nlp.scales[rb] ** 2)[:, None]
         if len(rb):
             top = (vals[:, 0] / nlp.scales) ** 2 * spec.c  # vals: the check at eps, last round
-            _remember(key, rb, rw, rr, (eps, rl, lam_u, top))
+            _remember(key, rb, rw, rr, (eps, rl, lam_u, top, float(sol["f"][0]) * f0))
     # P_b >= p_b active at its lower bound: CasADi's lam is <= 0 there; f - mu (P - p) with mu >= 0
     mu_sphere = -lam_g[len(lam_g) - ms :] * f0 if ms else np.zeros(0)
     message = code if status is Status.OPTIMAL else "; ".join(tried) or code
