@@ -33,6 +33,8 @@ def planar():
     (lambda m: m.analyze("worst", np.full(4, 1e155), R=0.5), "tolerances[l1]"),
     (lambda m: tolsynth.synthesize_workspace(m, 0.5, 0.99, max_rounds=0), "max_rounds"),
     (lambda m: tolsynth.compare(m, 0.5, 0.99, options="tol"), "options"),
+    (lambda m: tolsynth.compare(m, 0.5, 0.99, options={"ipopt": "a"}), "options['ipopt']"),
+    (lambda m: tolsynth.compare(m, 0.5, 0.99, options={"ipopt": {"warm_start": 1}}), "options['warm_start']"),
     (lambda m: m.tolerances({"l1": "a", "l2": 1, "o1": 1, "o2": 1}), "tolerances[l1]"),
     (lambda m: m.fk(["a", "b"]), "q"),
     (lambda m: m.index(["l1"]), "error parameter"),

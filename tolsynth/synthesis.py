@@ -324,7 +324,8 @@ def compare(mechanism, R: float, p: float, distribution=None, alpha=0.7, **kwarg
     options = check_mapping(kwargs.pop("options", None), "options", "a dict with keys 'ipopt' and 'sumt'")
     check_options(options, {"ipopt": {}, "sumt": {}})
     kwargs.pop("solver", None)
-    given = {"ipopt": {"warm_start": False, **(options.get("ipopt") or {})}, "sumt": options.get("sumt")}
+    ipopt = check_mapping(options.get("ipopt"), "options['ipopt']", "a dict of IPOPT options")
+    given = {"ipopt": {"warm_start": False, **ipopt}, "sumt": options.get("sumt")}
     res = {
         s: synthesize(mechanism, R, p, distribution, alpha, solver=s, options=given[s], **kwargs)
         for s in ("ipopt", "sumt")
