@@ -229,8 +229,7 @@ def make_specification(
         raise InputError("criterion", f"unknown criterion {criterion!r}", " or ".join(repr(c) for c in CRITERIA))
     names = mechanism.error_parameters
     alpha_v = _per_parameter(alpha, names, mechanism.index, "alpha")
-    bad_alpha = () if isinstance(alpha, float) and TINY <= alpha <= ALPHA_MAX else _outside(alpha_v, TINY, ALPHA_MAX)
-    for i in bad_alpha:
+    for i in _outside(alpha_v, TINY, ALPHA_MAX):
         raise OutOfRangeError(f"alpha[{names[i]}]", f"got {alpha_v[i]}", f"{TINY:g} <= alpha <= {ALPHA_MAX:g} (the paper: alpha <= 1, typically 0.7)")
     k_v = _per_parameter(k, names, mechanism.index, "k", default=mechanism.k)
     for i in _outside(k_v, TINY, HUGE):
@@ -410,13 +409,9 @@ class ToleranceNLP:
         self.sphere_nodes = sphere_nodes
         self.p_sphere = np.array([b.p for b in spec.sphere_blocks]) if spec.sphere_blocks else np.zeros(0)
         # scaled rows of every block, (m, 3, n): block b's constraint is lambda_max(As V As^T) <= 1
-        blocks = spec.blocks
-        self.scales = np.array([b.scale for b in blocks])
-        if len(blocks) == 1:  # one pose, one kind
-            self.As = (blocks[0].scale * blocks[0].A).reshape(1, 3, spec.n)
-        else:
-            self.As = (self.scales[:, None, None] * np.array([b.A for b in blocks]).reshape(-1, 3, spec.n)
-                       if blocks else np.zeros((0, 3, spec.n)))
+        self.scales = np.array([b.scale for b in spec.blocks])
+        self.As = (self.scales[:, None, None] * np.array([b.A for b in spec.blocks]).reshape(-1, 3, spec.n)
+                   if spec.blocks else np.zeros((0, 3, spec.n)))
         self._graphs = None
         self._values_memo = None  # (eps bytes, block_values at eps): the last point asked
 

@@ -231,7 +231,7 @@ def _cache_key(nlp: ToleranceNLP) -> tuple:
 
 def _remember(key: tuple, cut_b: np.ndarray, cut_w: np.ndarray, raw: np.ndarray, warm: tuple | None = None) -> None:
     """Remember a solve's active cuts (blocks, unit directions and their rows ``(A_b^T w)^2`` free of
-    z/R and c: ``_cut_rows`` is ``raw * scale_b^2 / c``) and, for a warm start, ``(eps, cut
+    z/R and c: see :func:`_row_factor`) and, for a warm start, ``(eps, cut
     multipliers, bound multipliers in u, lambda_max(A_b diag(eps^2) A_b^T) per block, cost)`` with
     the multipliers in cost units (not divided by that solve's f0); the fourth, free of z/R and c,
     rescales eps onto another specification of the same blocks without an eigensolve.  The arrays
@@ -262,6 +262,12 @@ def _cut_rows(nlp: ToleranceNLP, blocks: np.ndarray, W: np.ndarray) -> np.ndarra
     """``C_i = (As_b^T w)_i^2 / c`` for cuts (block b, unit direction w); shape (K, n)."""
     proj = np.einsum("kin,ki->kn", nlp.As[blocks], W)
     return proj**2 / nlp.spec.c
+
+
+def _row_factor(nlp: ToleranceNLP, blocks: np.ndarray) -> np.ndarray:
+    """``scale_b^2 / c`` per cut, a column: :func:`_cut_rows` is ``(A_b^T w)^2`` times this, and
+    ``(A_b^T w)^2``, free of z/R and c, is what the cut cache keeps."""
+    return (nlp.scales[blocks] ** 2 / nlp.spec.c)[:, None]
 
 
 def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
@@ -331,7 +337,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         pval = np.zeros(slots * n + len(pfix))
         pval[slots * n :] = pfix
         if rounds == 1 and raw_rows is not None:  # the remembered cuts: their rows rescaled
-            rows = raw_rows * (nlp.scales[cut_b] ** 2 / spec.c)[:, None]
+            rows = raw_rows * _row_factor(nlp, cut_b)
         else:
             rows = _cut_rows(nlp, cut_b, cut_w) if K else np.zeros((0, n))
         pval[: slots * n].reshape(n, slots).T[:K] = rows
@@ -464,13 +470,13 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
                 rb, rw, rl, rr = cut_b, cut_w, mu, raw_rows
             else:
                 rb, rw, rl = cut_b[keep], cut_w[keep], mu[keep]
-                rr = rows[keep] * (spec.c / nlp.scales[rb] ** 2)[:, None]  # (A_b^T w)^2
+                rr = rows[keep] / _row_factor(nlp, rb)  # (A_b^T w)^2
         else:
             bs = np.unique(cut_b)
             lz, vz = np.linalg.eigh(Z[bs])
             i, j = (lz > 1e-9 * max(float(lz.max()), 0.0)).nonzero()
             rb, rw, rl = bs[i], vz[i, :, j], lz[i, j]  # the cut along an eigenvector: its eigenvalue
-            rr = np.einsum("kin,ki->kn", nlp.As[rb], rw) ** 2 / (nlp.scales[rb] ** 2)[:, None]
+            rr = _cut_rows(nlp, rb, rw) / _row_factor(nlp, rb)
         if len(rb):
             top = (vals[:, 0] / nlp.scales) ** 2 * spec.c  # vals: the check at eps, last round
             _remember(key, rb, rw, rr, (eps, rl, lam_u, top, float(sol["f"][0]) * f0))
