@@ -1,4 +1,4 @@
-"""Issue 11's acceptance table: the uniform columns of Tables 1-2 (xu_zhang_1988, R = 0.5 mm,
+"""The acceptance table: the uniform columns of Tables 1-2 (xu_zhang_1988, R = 0.5 mm,
 alpha 0.7, p = 0.7, 0.8, 0.9, 0.99) designed with the Gaussian reading (the paper's) and with the
 exact probabilities, each checked by the nonlinear Monte Carlo along its binding direction
 (the worst direction of the exact design; the same direction for the Gaussian one), 99 % Wilson
@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 import tolsynth
-from tolsynth.exact import direction_probability
+from tolsynth.probability.exact import direction_probability
 
 
 def main() -> None:

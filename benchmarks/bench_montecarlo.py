@@ -1,4 +1,4 @@
-"""Benchmark of the Monte Carlo, the worst-pose search and the Figure 3 map (issue 4).
+"""Benchmark of the Monte Carlo, the worst-pose search and the Figure 3 map.
 
 Run:  python benchmarks/bench_montecarlo.py [--quick]
 
@@ -39,8 +39,8 @@ import casadi as ca  # noqa: E402
 import numpy as np  # noqa: E402
 
 import tolsynth  # noqa: E402
-from tolsynth.montecarlo import DEFAULT_BATCH, NumpyEvaluator, monte_carlo  # noqa: E402
-from tolsynth.workspace import probability_map, worst_pose  # noqa: E402
+from tolsynth.analysis.montecarlo import DEFAULT_BATCH, NumpyEvaluator, monte_carlo  # noqa: E402
+from tolsynth import probability_map, worst_pose  # noqa: E402
 
 
 def median_time(fn, repeats: int) -> float:

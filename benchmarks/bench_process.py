@@ -1,4 +1,4 @@
-"""Process choice (issue 13 point 2): branch and bound against brute-force enumeration, and the
+"""Process choice: branch and bound against brute-force enumeration, and the
 proven optimum against rounding the continuous relaxation to a process.
 
 Prints, per case: combinations, continuous solves by B&B, wall times (median of --repeat runs),
@@ -11,8 +11,8 @@ import statistics
 import time
 
 import tolsynth
-from tolsynth.cost import Chase, Exponential, PowerLaw
-from tolsynth.process import Process, enumerate_processes, synthesize_processes
+from tolsynth.model.cost import Chase, Exponential, PowerLaw
+from tolsynth.synthesis.processes import Process, enumerate_processes, synthesize_processes
 
 
 def planar():

@@ -5,7 +5,7 @@ Prints, in one run:
 * wall time of ``tolsynth reproduce`` as a subprocess (what a user waits for: import, graphs,
   36 IPOPT solves, 18 SUMT solves, the report), median of --repeat runs with the compiled-library
   cache warm, and one run with an empty cache (the first run after installing: it compiles);
-* the same in-process (``tolsynth.reproduce.reproduce()``), median of --repeat after one warm-up,
+* the same in-process (``tolsynth.synthesis.reproduce.reproduce()``), median of --repeat after one warm-up,
   with the time split into its IPOPT and SUMT solves;
 * SUMT + Powell per column: the compiled Powell (:mod:`tolsynth.solvers.cpowell`, the default
   where a C compiler is found); the Python Powell on the same graph with the same options (the
@@ -28,7 +28,7 @@ import time
 
 import tolsynth
 from tolsynth import synthesize
-from tolsynth.reproduce import reproduce
+from tolsynth.synthesis.reproduce import reproduce
 from tolsynth.solvers import cpowell
 
 
@@ -72,7 +72,7 @@ def main():
           f"(min {min(warm):.2f}, max {max(warm):.2f}, {a.repeat} runs, compiled library cached); "
           f"first run, empty cache: {cold:.2f} s")
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "import tolsynth.cli, tolsynth.reproduce"], check=True)
+    subprocess.run([sys.executable, "-c", "import tolsynth.cli, tolsynth.synthesis.reproduce"], check=True)
     print(f"  of which starting Python and importing tolsynth: {time.perf_counter() - t0:.2f} s")
 
     # -- in-process ---------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Sweep throughput (issue 9 point 2): rows per second of tolsynth.sweep on each engine, in one run.
+"""Sweep throughput: rows per second of tolsynth.sweep on each engine, in one run.
 
 The grid: xu_zhang_1988 (11 parameters), R x p x alpha x distribution = --size values each of
 R and p, two alphas, two distributions (default 6 x 6 x 2 x 2 = 144 IPOPT solves).  Engines: this

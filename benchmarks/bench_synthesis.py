@@ -1,4 +1,4 @@
-"""Benchmark: every speed figure of issue 8, with its target and the alternatives, in one run.
+"""Benchmark: every speed figure, with its target and the alternatives, in one run.
 
 Prints medians over repeats (same process, same machine, same moment) of
 
@@ -21,7 +21,7 @@ Prints medians over repeats (same process, same machine, same moment) of
    (least squares in log-log) over 30..1000 poses;
 3. ``tolsynth reproduce`` (18 columns, IPOPT and SUMT + Powell): in-process ``reproduce()`` and
    the command as a subprocess;
-4. the 100 x 100 probability map (``tolsynth.workspace_map.probability_map``, Figure 3), with the
+4. the 100 x 100 probability map (``tolsynth.analysis.workspace_map.probability_map``, Figure 3), with the
    compiled inverse kinematics on every core, on one thread, and by the NumPy iteration (what a
    machine without a C compiler runs);
 5. ``worst_pose(criterion="probability")`` (figure3 tolerances, R = 0.2 mm).
@@ -48,8 +48,9 @@ import casadi as ca
 import numpy as np
 
 import tolsynth
-from tolsynth.joint_space import _feasible, _limits
-from tolsynth.problem import ToleranceNLP, cost_graph, make_specification
+from tolsynth.kinematics.joint_space import _feasible, _limits
+from tolsynth.problem.nlp import ToleranceNLP, cost_graph
+from tolsynth.problem.specification import make_specification
 
 R, P, DIST, ALPHA = 0.5, 0.99, "uniform", 0.7
 
@@ -378,7 +379,7 @@ def main():
     wb.batch("after the pose sets")
 
     # == 3. tolsynth reproduce ==================================================================
-    from tolsynth.reproduce import reproduce
+    from tolsynth.synthesis.reproduce import reproduce
 
     reproduce()  # warm-up (compiled libraries, graphs)
     t_rep, reps = median_time(reproduce, rep_big)
@@ -401,10 +402,10 @@ def main():
     wb.batch("after reproduce")
 
     # == 4. map, 5. worst pose ===================================================================
-    from tolsynth.pose_search import worst_pose
-    from tolsynth.workspace_map import probability_map
+    from tolsynth.analysis.pose_search import worst_pose
+    from tolsynth.analysis.workspace_map import probability_map
 
-    from tolsynth import ik_compiled
+    from tolsynth.kinematics import ik_compiled
 
     def one_map():
         return probability_map(m, "figure3", R=0.2, n=100, progress=False)

@@ -1,6 +1,6 @@
 """Pages generated from the code at build time, so that they cannot drift from it:
 ``_generated/cli.md`` (every sub-command's ``--help``) and ``_generated/format_keys.md`` (every
-table and key of :data:`tolsynth.model.FORMAT`)."""
+table and key of :data:`tolsynth.model.fields.FORMAT`)."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ def cli_page() -> str:
 
 
 def format_page() -> str:
-    from tolsynth.model import FORMAT
+    from tolsynth.model.fields import FORMAT
 
     out = ["| table | required keys | optional keys |", "|---|---|---|"]
     for table, keys in FORMAT.items():

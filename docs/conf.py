@@ -1,4 +1,4 @@
-"""Sphinx configuration of tolsynth's documentation (issue 9 point 4).
+"""Sphinx configuration of tolsynth's documentation.
 
 Build (from the repository root): ``pip install -e ".[docs]"`` then
 ``sphinx-build -W --keep-going -b html docs docs/_build/html`` (warnings fail the build).
@@ -7,7 +7,7 @@ Build (from the repository root): ``pip install -e ".[docs]"`` then
 - notebooks: the jupytext ``py:percent`` files of ``notebooks/`` (linked into ``docs/notebooks/``),
   executed by myst-nb on every build, outputs and plots included;
 - the model-file format: the README's section and the table of every key from
-  ``tolsynth.model.FORMAT``; the command line: each sub-command's ``--help``.
+  ``tolsynth.model.fields.FORMAT``; the command line: each sub-command's ``--help``.
 """
 
 from __future__ import annotations

@@ -43,7 +43,7 @@ import numpy as np
 from matplotlib.ticker import NullFormatter
 
 import tolsynth
-from tolsynth.reproduce import reproduce
+from tolsynth.synthesis.reproduce import reproduce
 
 m = tolsynth.load_model("xu_zhang_1988")
 print(m.title)
@@ -355,13 +355,13 @@ plt.show()
 # ## 5. Figure 3: `P(|dr| <= 0.2 mm)` over the `X0 Z0` plane
 #
 # The paper's Figure 3 is lost; its caption survives, with the tolerances it used (the model's
-# `figure3` set) and the condition: uniform errors, hand axis vertical.  `tolsynth.workspace`
+# `figure3` set) and the condition: uniform errors, hand axis vertical.  `tolsynth.probability_map`
 # redraws it: at each grid point of the plane the inverse kinematics is solved on the model's own
 # forward-kinematics graph, and the sphere probability of Eq. 5 is computed from the linear,
 # Gaussian error model.
 
 # %%
-from tolsynth.workspace import plot_map, probability_map, worst_pose
+from tolsynth import plot_map, probability_map, worst_pose
 
 pmap = probability_map(m, "figure3", R=0.2, distribution="uniform", n=70, progress=False)
 fig = plot_map(pmap)

@@ -35,7 +35,7 @@ from matplotlib.ticker import FuncFormatter
 from tqdm import tqdm
 
 import tolsynth
-from tolsynth.workspace import plot_map, probability_map, worst_pose
+from tolsynth import plot_map, probability_map, worst_pose
 
 m = tolsynth.load_model("xu_zhang_1988")
 names = m.error_parameters
@@ -285,7 +285,7 @@ plt.show()
 # ## 3. The worst pose moves when the tolerances change
 #
 # The paper imposes Eq. 20 only at one pose, found beforehand with *other* tolerances.  But the
-# pose of largest error depends on the tolerances themselves.  `tolsynth.workspace.worst_pose`
+# pose of largest error depends on the tolerances themselves.  `tolsynth.worst_pose`
 # searches the whole joint space (inside the joint limits and the interference limit) for the
 # largest principal sigma, which is exactly the quantity the constraint bounds.  For several
 # tolerance sets:
@@ -372,7 +372,7 @@ plt.show()
 # sphere probability the per-component optimum actually reaches, and the cost of each criterion.
 
 # %%
-from tolsynth.stats import covariance, p_ball, principal
+from tolsynth.probability.stats import covariance, p_ball, principal
 
 p_grid = [0.7, 0.8, 0.9, 0.95, 0.99, 0.999]
 rows = []

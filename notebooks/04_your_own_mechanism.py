@@ -36,8 +36,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import tolsynth
-from tolsynth.montecarlo import monte_carlo, validate
-from tolsynth.workspace import principal_std_batch
+from tolsynth import monte_carlo, validate
+from tolsynth.kinematics.batch_stats import principal_std_batch
 
 # %% [markdown]
 # ## 1. The model file
@@ -253,7 +253,7 @@ plt.show()
 # ## 5. Monte Carlo validation
 #
 # The synthesis rests on two approximations: the pose error is *linear* in the errors, and it is
-# *Gaussian*.  `tolsynth.montecarlo.validate` samples the errors (uniform within `+-eps`, or normal
+# *Gaussian*.  `tolsynth.analysis.montecarlo.validate` samples the errors (uniform within `+-eps`, or normal
 # with `3 sigma = eps`), pushes every sample through the model's full nonlinear forward kinematics
 # and counts how often each principal component stays within `R`.
 #

@@ -42,8 +42,8 @@ import time
 import matplotlib.pyplot as plt
 
 import tolsynth
-from tolsynth.cost import Chase
-from tolsynth.process import Process
+from tolsynth.model.cost import Chase
+from tolsynth.model.process import Process
 
 m = tolsynth.load_model("xu_zhang_1988")
 IT = {3: 0.013, 5: 0.025, 7: 0.057, 11: 0.36}  # mm, ISO 286-1, 315-400 mm

@@ -17,7 +17,7 @@
 #
 # Xu & Zhang (1988) tolerance only the link dimensions and leave joint clearances and servo
 # errors as future work. On a real arm those errors use up part of the accuracy budget, and the
-# link tolerances get what is left. This notebook does the budget study of issue 11 on the paper's
+# link tolerances get what is left. This notebook does the budget study on the paper's
 # robot (at its worst pose) and on the Puma 560 (at `qn`). The specification is Table 1's:
 # R = 0.5 mm, p = 0.99 per principal component, uniform errors, alpha = 0.7.
 #
@@ -157,7 +157,7 @@ fig.tight_layout()
 # At `q = 0.8 q_max` on the paper's robot: 100,000 samples through the nonlinear kinematics,
 # link errors and encoder errors together. The achieved probability per principal component is
 # compared with the p asked for. The Gaussian reading of uniform errors makes it differ a little
-# from p, as issue 11's table shows for the links alone.
+# from p, as table shows for the links alone.
 
 # %%
 m = mechs["xu_zhang_1988"]

@@ -23,7 +23,7 @@
 # * **Gaussian** (`probability="gaussian"`, the default and the paper's): `z(p) sigma_1 <= R`;
 # * **exact** (`probability="exact"`): `P(|u . dr| <= R) >= p` along every direction `u`, with the
 #   exact probability of the linear error model (the characteristic function inverted with a
-#   rigorous error bound, `tolsynth.exact`), as the NLP's constraints;
+#   rigorous error bound, `tolsynth.probability.exact`), as the NLP's constraints;
 # * **verified** (`verify=True`): the nonlinear Monte Carlo at the optimum, and a tighter target
 #   until the 99 % lower confidence bound of the achieved probability reaches `p`.
 #
@@ -36,7 +36,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import tolsynth
-from tolsynth.exact import direction_probability
+from tolsynth.probability.exact import direction_probability
 
 m = tolsynth.load_model("xu_zhang_1988")
 A = m.sensitivity(m.joints("worst"))[:3]

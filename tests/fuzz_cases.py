@@ -1,4 +1,4 @@
-"""The fuzz cases of issue 10, shared by ``tests/test_fuzz.py`` (hypothesis, the invariant as an
+"""The fuzz cases, shared by ``tests/test_fuzz.py`` (hypothesis, the invariant as an
 assertion) and ``benchmarks/fuzz_counts.py`` (the same cases, outcomes counted per category).
 
 The invariant for every case: it either succeeds with finite, independently checked numbers, or
@@ -574,7 +574,7 @@ def case_valid_extremes(draw):
             if criterion == "components":
                 _check_synthesis(mech, res, R, p, "uniform", [cfg])
             elif res.success:  # the sphere probability reached, by the independent quadrature
-                from tolsynth.stats import p_ball
+                from tolsynth.probability.stats import p_ball
 
                 e = np.array([res.tolerances[n] for n in mech.error_parameters])
                 S = mech.sensitivity(cfg, check_limits=False)[:3]

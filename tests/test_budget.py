@@ -1,10 +1,10 @@
-"""Budget mode (issue 13 point 4): the round trip cost(R) -> budget -> R, and the bracket's ends
+"""Budget mode: the round trip cost(R) -> budget -> R, and the bracket's ends
 re-checked by fresh solves."""
 
 import pytest
 
 import tolsynth
-from tolsynth.budget import best_accuracy
+from tolsynth.synthesis.budget import best_accuracy
 
 
 @pytest.fixture(scope="module")

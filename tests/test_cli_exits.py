@@ -1,4 +1,4 @@
-"""Honest exits of the command line (issue 10, point 3): Ctrl-C stops a running command with status
+"""Honest exits of the command line: Ctrl-C stops a running command with status
 130 and no traceback, a closed output pipe ends quietly (141), a command with nothing to do says so
 and exits non-zero, output paths and the optional plotting dependency are checked before any work,
 and messages quote the CLI's own values."""

@@ -1,4 +1,4 @@
-"""The command line reaches what the API reaches (issue 9, point 5), checked against the API and
+"""The command line reaches what the API reaches, checked against the API and
 against conversions done by hand: unit suffixes, wildcards, per-parameter alpha / k / bounds,
 several poses, p_orientation, --version, help texts and defaults, JSON inputs, the side-by-side
 table of --solver both, and plain progress lines without tqdm (point 6)."""

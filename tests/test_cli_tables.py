@@ -1,4 +1,4 @@
-"""The command line's tables (issue 9 points 1-2): ``--out FILE.csv|.json|.parquet`` on solve,
+"""The command line's tables: ``--out FILE.csv|.json|.parquet`` on solve,
 montecarlo, map (``--data``), worst-pose and sweep, read back with pandas against the API's numbers;
 an unknown suffix is refused before any work; ``tolsynth sweep`` from arguments and from a TOML file;
 every ``--json`` records its inputs."""

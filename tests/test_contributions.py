@@ -1,4 +1,4 @@
-"""Contributor report (issue 13 point 6), checked against sensitivities by central finite
+"""Contributor report, checked against sensitivities by central finite
 differences of the forward kinematics (not the CasADi sensitivity the report uses) and against
 finite differences of the error-controlled sphere probability stats.p_ball."""
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth.stats import p_ball, principal
+from tolsynth.probability.stats import p_ball, principal
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Cost models (issue 13 point 1): values, derivatives, CasADi graph, convexity flags and the dual
+"""Cost models: values, derivatives, CasADi graph, convexity flags and the dual
 bound's 1-D minimisation, each against something independent (SciPy's PCHIP and bounded scalar
 minimiser, central finite differences, dense grids, closed forms with Lambert W)."""
 
@@ -8,7 +8,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from tolsynth.cost import Chase, CostSet, Exponential, PowerLaw, Tabulated, cost_model, cost_set
+from tolsynth.model.cost import Chase, Exponential, PowerLaw, Tabulated, cost_model
+from tolsynth.model.cost_set import CostSet, cost_set
 from tolsynth.errors import InputError, OutOfRangeError
 
 scipy = pytest.importorskip("scipy")

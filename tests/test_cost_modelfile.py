@@ -1,4 +1,4 @@
-"""Cost models, processes and locks in model files (issue 13 point 7): parsed strictly and used
+"""Cost models, processes and locks in model files: parsed strictly and used
 by synthesize / synthesize_processes exactly as the same objects given through the API."""
 
 from pathlib import Path
@@ -6,8 +6,8 @@ from pathlib import Path
 import pytest
 
 import tolsynth
-from tolsynth.cost import Chase, Exponential
-from tolsynth.process import Process
+from tolsynth.model.cost import Chase, Exponential
+from tolsynth.synthesis.processes import Process
 
 BASE = (Path(tolsynth.__file__).resolve().parent.parent / "models" / "planar_2r.toml").read_text()
 

@@ -1,4 +1,4 @@
-"""Cost models and locks inside synthesize (issue 13 points 1 and 3): closed forms of the
+"""Cost models and locks inside synthesize: closed forms of the
 one-direction problem through the real solvers, the paper's robot with mixed models against cvxpy
 + Clarabel in y = eps^2 (an independent convex solver), certificates and their absence, locks."""
 
@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth.cost import Chase, CostSet, Exponential, PowerLaw, Tabulated
-from tolsynth.problem import Block, Specification, ToleranceNLP
+from tolsynth.model.cost import Chase, Exponential, PowerLaw, Tabulated
+from tolsynth.model.cost_set import CostSet
+from tolsynth.problem.nlp import ToleranceNLP
+from tolsynth.problem.specification import Block, Specification
 from tolsynth.solvers.ipopt import solve_ipopt
 from tolsynth.solvers.sumt import solve_sumt
 

@@ -1,4 +1,4 @@
-"""``tolsynth.Mechanism.from_dh`` (issue 12 point 2): a robot from a D-H table in Python.
+"""``tolsynth.Mechanism.from_dh``: a robot from a D-H table in Python.
 
 References: the same robot loaded from its bundled model file (forward kinematics, sensitivities
 and the synthesis optimum to 1e-9), and plain-NumPy D-H chains written here (the Puma 560 of

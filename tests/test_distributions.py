@@ -1,4 +1,4 @@
-"""A distribution per error parameter (issue 11 point 1): mixed shapes in one mechanism, through
+"""A distribution per error parameter: mixed shapes in one mechanism, through
 the API, the command line and model files, checked by Monte Carlo through the nonlinear chain and
 by the covariance written out by hand."""
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth.distributions import shape
+from tolsynth.probability.distributions import shape
 from tolsynth.errors import InputError, ModelFileError, OutOfRangeError
 
 MIXED = {"*": "uniform", "h2": "normal", "h3": "triangular", "a": "truncnormal", "alpha1": "truncnormal(3)"}
@@ -47,7 +47,7 @@ def test_mixed_optimum_is_checked_by_monte_carlo(xz):
 
 
 def test_model_file_declares_shapes_and_the_default_uses_them(tmp_path):
-    from tolsynth.model import model_path
+    from tolsynth.model.reader import model_path
 
     text = model_path("xu_zhang_1988").read_text()
     text = text.replace('name = "h3"\n', 'name = "h3"\ndistribution = "normal"\n', 1)

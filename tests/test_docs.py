@@ -1,4 +1,4 @@
-"""The documentation (issue 9 point 4): every public name has an API entry, every notebook is
+"""The documentation: every public name has an API entry, every notebook is
 linked into the docs, and (slow) the Sphinx build passes with warnings as errors.  CI runs the full
 build with the notebooks executed (.ci/run); the slow test here builds without executing them, to
 check the docstrings, the generated pages and the configuration in about 15 s."""

@@ -23,7 +23,7 @@ from tolsynth.errors import (
     TolsynthError,
     UnknownNameError,
 )
-from tolsynth.stats import p_ball, p_components, p_cone, z_of_p
+from tolsynth.probability.stats import p_ball, p_components, p_cone, z_of_p
 
 from test_kinematics import planar_fk, xu_fk
 

@@ -1,4 +1,4 @@
-"""Every bundled model runs every command of the CLI (issue 12 points 3 and 5).
+"""Every bundled model runs every command of the CLI.
 
 A model without a reference pose (``puma560``) is given its first named configuration with
 ``--pose``; the others run on their defaults.  The numbers of each command are checked elsewhere;
@@ -16,7 +16,7 @@ import pytest
 
 import tolsynth
 from tolsynth.cli import main
-from tolsynth.joint_space import model_reference
+from tolsynth.kinematics.joint_space import model_reference
 
 MODELS = tolsynth.bundled_models()
 

@@ -1,5 +1,5 @@
-"""Exact probabilities of the linear error model (tolsynth.exact) and the error shapes
-(tolsynth.distributions), against closed forms, direct quadrature and Monte Carlo intervals."""
+"""Exact probabilities of the linear error model (tolsynth.probability.exact) and the error shapes
+(tolsynth.probability.distributions), against closed forms, direct quadrature and Monte Carlo intervals."""
 
 import math
 from math import comb, factorial
@@ -8,10 +8,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from tolsynth import stats
-from tolsynth.distributions import divisors, shape, shapes_of
+from tolsynth.probability import stats
+from tolsynth.probability.distributions import divisors, shape, shapes_of
 from tolsynth.errors import InputError, OutOfRangeError
-from tolsynth.exact import (ExactProbabilityError, ball_probability, components_probability, cone_probability,
+from tolsynth.probability.exact import (ExactProbabilityError, ball_probability, components_probability, cone_probability,
                             direction_probability, worst_direction)
 
 ALL = ["uniform", "normal", "triangular", "truncnormal", "truncnormal(3)", "truncnormal(0.5)"]

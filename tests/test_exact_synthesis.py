@@ -1,5 +1,5 @@
-"""synthesize(..., probability="exact") and verify= (issue 11 points 3-4), against the exact
-probabilities recomputed independently (tolsynth.exact, rigorous bounds), closed forms (all-normal
+"""synthesize(..., probability="exact") and verify=, against the exact
+probabilities recomputed independently (tolsynth.probability.exact, rigorous bounds), closed forms (all-normal
 errors: the exact design is the Gaussian one), the nonlinear Monte Carlo, and SUMT + Powell."""
 
 import math
@@ -9,8 +9,8 @@ import pytest
 
 import tolsynth
 from tolsynth.errors import InputError
-from tolsynth.exact import ball_probability, direction_probability
-from tolsynth.verify import sample_size
+from tolsynth.probability.exact import ball_probability, direction_probability
+from tolsynth.analysis.verify import sample_size
 
 R = 0.5
 
@@ -88,7 +88,7 @@ def test_exact_at_several_poses(xz):
     assert r.success, r.message
     for q in qs:
         A = xz.sensitivity(q, check_limits=False)[:3]
-        from tolsynth.exact import worst_direction
+        from tolsynth.probability.exact import worst_direction
 
         assert worst_direction(A, r.x, ["uniform"] * xz.n, R)[1] >= 0.8 - 1e-7
 
@@ -128,7 +128,7 @@ def test_sumt_reads_the_same_graphs(xz):
 @pytest.mark.slow
 @pytest.mark.parametrize("p", [0.7, 0.8, 0.9, 0.99])
 def test_acceptance_uniform_columns_of_tables_1_2(xz, p):
-    """Issue 11's acceptance: the nonlinear Monte Carlo at the exact optimum contains p in its
+    """The acceptance: the nonlinear Monte Carlo at the exact optimum contains p in its
     99 % interval along the binding direction (R = 0.5 mm, uniform, alpha 0.7)."""
     r = tolsynth.synthesize(xz, R=R, p=p, probability="exact")
     assert r.success, r.message
@@ -152,7 +152,7 @@ def test_command_line_exact_and_verify(xz):
     import subprocess
     import sys
 
-    from tolsynth.exact import worst_direction
+    from tolsynth.probability.exact import worst_direction
 
     out = subprocess.run([sys.executable, "-m", "tolsynth", "solve", "--model", "xu_zhang_1988", "--R", "0.5",
                           "--p", "0.8", "--probability", "exact", "--json"], capture_output=True, text=True, timeout=600)

@@ -1,4 +1,4 @@
-"""Fuzz suite of issue 10 (hypothesis): model-file mutations of every bundled model, bad and
+"""Fuzz suite (hypothesis): model-file mutations of every bundled model, bad and
 extreme arguments of every public function, and command lines.
 
 The invariant (``fuzz_cases.outcome``): a case either succeeds with finite, independently checked
@@ -95,7 +95,7 @@ def test_outcome_classifies():
 
     def warn():
         import warnings
-        warnings.warn_explicit("x", RuntimeWarning, "tolsynth/stats.py", 1, module="tolsynth.stats")
+        warnings.warn_explicit("x", RuntimeWarning, "tolsynth/stats.py", 1, module="tolsynth.probability.stats")
 
     def hang():
         while True:

@@ -1,4 +1,4 @@
-"""The named findings of issue 10, each pinned: a typed error naming the field, or a correct
+"""The named findings, each pinned: a typed error naming the field, or a correct
 number where there was a wrong one (checked against SciPy or a closed form)."""
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ def test_p_sphere_at_tiny_radius_is_positive_and_right(planar):
     CDF for equal variances, and positive in general."""
     from scipy.stats import chi
 
-    from tolsynth.stats import p_ball
+    from tolsynth.probability.stats import p_ball
 
     for R in (1e-12, 1e-6, 0.3, 0.5, 0.7):
         assert p_ball([2.0, 2.0, 2.0], R) == pytest.approx(chi.cdf(R / math.sqrt(2.0), 3), rel=1e-12, abs=0)
@@ -68,7 +68,7 @@ def test_p_sphere_at_tiny_radius_is_positive_and_right(planar):
 
 def test_no_overflow_warning_from_stats():
     """Huge arguments of the chi CDF (variance 1e-300 against R = 1e9) saturate at 1 silently."""
-    from tolsynth.stats import p_ball, p_components
+    from tolsynth.probability.stats import p_ball, p_components
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")

@@ -1,4 +1,4 @@
-"""The map's compiled inverse kinematics (tolsynth.ik_compiled) against the NumPy iteration, NumPy's
+"""The map's compiled inverse kinematics (tolsynth.kinematics.ik_compiled) against the NumPy iteration, NumPy's
 least squares, a plain-NumPy forward kinematics and the closed form of tests/test_workspace.py.
 
 The compiled path is the default wherever a C compiler is found (the map tests in
@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth import cbuild, ik, ik_compiled
-from tolsynth.workspace import probability_map
+from tolsynth import cbuild
+from tolsynth.kinematics import ik, ik_compiled
+from tolsynth.analysis.workspace_map import probability_map
 
 needs_cc = pytest.mark.skipif(cbuild.find_compiler() is None, reason="no C compiler")
 

@@ -1,4 +1,4 @@
-"""Joint errors (issue 11 point 5): servo errors and revolute-joint clearances as error parameters.
+"""Joint errors: servo errors and revolute-joint clearances as error parameters.
 
 Independent references:
 
@@ -257,7 +257,7 @@ def test_fixed_joint_errors_alone_break_the_specification():
 def test_user_locks_and_costs_keep_the_fixed_joint_errors_fixed_and_free():
     """locks= and cost= for the links leave the fixed joint errors locked and at no cost: the
     reported cost is the links' own (k eps^-alpha summed by hand, or the Chase model's)."""
-    from tolsynth.cost import Chase
+    from tolsynth.model.cost import Chase
 
     base = tolsynth.load_model("xu_zhang_1988")
     m = base.with_joint_errors([JointError("theta2", "servo", value=0.05)])
@@ -442,7 +442,7 @@ def test_command_line_reads_joint_errors_from_the_file(tmp_path, capsys):
     values, and `analyze` with the file's tolerance set includes them (its P per component is the
     one from the NumPy chain's differences)."""
     from tolsynth.cli import main
-    from tolsynth.stats import covariance, p_components, principal
+    from tolsynth.probability.stats import covariance, p_components, principal
 
     path = tmp_path / "xu_fixed.toml"
     path.write_text(_xu_text() + JOINT_TABLES.split("[[joint_errors]]\njoint = \"theta2\"")[0])
@@ -478,9 +478,10 @@ def test_with_units_converts_the_fixed_values():
 
 
 def test_given_cost_model():
-    """tolsynth.cost.Given: 0 everywhere, derivative 0, dual minimum w e^{2 lu} at lu (the
+    """tolsynth.model.cost.Given: 0 everywhere, derivative 0, dual minimum w e^{2 lu} at lu (the
     closed form of min over [lu, uu] of 0 + w e^{2u}), round trip through its dict."""
-    from tolsynth.cost import Given, cost_model, cost_set
+    from tolsynth.model.cost import Given, cost_model
+    from tolsynth.model.cost_set import cost_set
 
     g = Given()
     assert np.all(g.cost(np.array([1e-6, 1.0, 1e6])) == 0.0) and np.all(g.du(np.array([-3.0, 2.0])) == 0.0)

@@ -1,6 +1,5 @@
 """The package layout: the library never imports its command line or matplotlib,
-``python -m tolsynth`` runs the CLI, and the old import paths of
-``tolsynth.montecarlo`` / ``tolsynth.workspace`` still give the same objects as the new modules."""
+``python -m tolsynth`` runs the CLI (the layers themselves: test_architecture.py)."""
 
 from __future__ import annotations
 
@@ -18,7 +17,7 @@ def _library_modules():
 
 def test_library_never_imports_the_cli_or_matplotlib():
     mods = _library_modules()
-    assert "tolsynth.montecarlo" in mods and "tolsynth.workspace_map" in mods
+    assert "tolsynth.analysis.montecarlo" in mods and "tolsynth.analysis.workspace_map" in mods
     code = ("import sys, importlib\n"
             f"for m in {mods!r}:\n"
             "    importlib.import_module(m)\n"
@@ -35,14 +34,3 @@ def test_python_dash_m_runs_the_cli():
     assert run.returncode == 0, run.stderr
     for cmd in ("analyze", "solve", "reproduce", "montecarlo", "map", "worst-pose"):
         assert cmd in run.stdout
-
-
-def test_old_import_paths_are_the_new_objects():
-    from tolsynth import montecarlo, numpy_eval, plot, pose_search, validation, workspace, workspace_map
-
-    assert montecarlo.NumpyEvaluator is numpy_eval.NumpyEvaluator
-    assert montecarlo.validate is validation.validate is tolsynth.validate
-    assert montecarlo.ValidationResult is validation.ValidationResult
-    assert workspace.worst_pose is pose_search.worst_pose is tolsynth.worst_pose
-    assert workspace.probability_map is workspace_map.probability_map
-    assert workspace.plot_map is plot.plot_map

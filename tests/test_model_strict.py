@@ -1,4 +1,4 @@
-"""Strict model files (issue 12 point 4, issue 10): every defect is a ModelFileError naming the
+"""Strict model files: every defect is a ModelFileError naming the
 file and the field, with the nearest valid name for a misspelt key.
 
 Each case edits one bundled model (as a dict, written back as TOML) and asserts the field named;
@@ -15,7 +15,7 @@ import pytest
 
 import tolsynth
 from tolsynth.errors import ModelFileError
-from tolsynth.model import FORMAT
+from tolsynth.model.fields import FORMAT
 
 from model_text import model_dict, toml_text
 

@@ -35,7 +35,7 @@ def _half_ulp(text: str) -> float:
 
 
 def test_bundled_models_are_those_of_the_issues():
-    """The three of issue 2 and the two real arms of issue 12."""
+    """The three and the two real arms."""
     assert {"xu_zhang_1988", "puma560", "planar_2r", "ur5", "panda"} <= set(tolsynth.bundled_models())
 
 

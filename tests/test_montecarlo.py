@@ -1,4 +1,4 @@
-"""Monte Carlo through the nonlinear kinematics (tolsynth.montecarlo), checked against an
+"""Monte Carlo through the nonlinear kinematics (tolsynth.analysis.montecarlo), checked against an
 independent sampler written here: plain NumPy forward kinematics of the reconstructed robot
 (shared/paper/RECONSTRUCTION.md), including the parallelogram loop, with its own random numbers."""
 
@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
-from tolsynth.montecarlo import NumpyEvaluator, monte_carlo, validate, wilson_interval
+from tolsynth.analysis.montecarlo import NumpyEvaluator, monte_carlo, wilson_interval
+from tolsynth.analysis.validation import validate
 
 Z999 = NormalDist().inv_cdf(0.9995)  # two-sided 99.9 %
 
@@ -128,7 +129,7 @@ def test_evaluator_rejects_mx():
 
 
 # ---------------------------------------------------------------------------------------------
-# Monte Carlo against the independent sampler (the acceptance check of issue 4)
+# Monte Carlo against the independent sampler (the acceptance check)
 # ---------------------------------------------------------------------------------------------
 def test_independent_sampler_reproduces_the_paper_pose():
     p0, closes = independent_positions(WORST_DEG, np.zeros((1, 11)))

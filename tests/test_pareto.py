@@ -1,11 +1,11 @@
-"""Pareto fronts (issue 13 point 5): monotone, warm-started points equal cold solves, the paper's
+"""Pareto fronts: monotone, warm-started points equal cold solves, the paper's
 printed columns lie above the front, the process-choice front is a staircase above the continuous one."""
 
 import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth.pareto import pareto_front
+from tolsynth.synthesis.pareto import pareto_front
 
 
 def test_cost_against_R_and_p():
@@ -31,8 +31,8 @@ def test_cost_against_R_and_p():
 
 
 def test_process_staircase_lies_above_the_continuous_front():
-    from tolsynth.cost import Chase
-    from tolsynth.process import Process
+    from tolsynth.model.cost import Chase
+    from tolsynth.synthesis.processes import Process
 
     lengths = [Process("turning", Chase(1.0, 0.4, 1.0), 0.1, 1.0), Process("grinding", Chase(3.0, 0.3, 1.0), 0.02, 0.06)]
     procs = {"l1": lengths, "l2": lengths}

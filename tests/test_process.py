@@ -1,12 +1,12 @@
-"""Discrete process choice (issue 13 point 2): branch and bound against brute-force enumeration."""
+"""Discrete process choice: branch and bound against brute-force enumeration."""
 
 import math
 
 import pytest
 
 import tolsynth
-from tolsynth.cost import Chase, Exponential, PowerLaw
-from tolsynth.process import Process, enumerate_processes, synthesize_processes
+from tolsynth.model.cost import Chase, Exponential, PowerLaw
+from tolsynth.synthesis.processes import Process, enumerate_processes, synthesize_processes
 
 
 def _processes():

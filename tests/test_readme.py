@@ -36,7 +36,7 @@ def test_quickstart_runs_and_its_numbers_hold(capsys):
     ws, mc, w = namespace["ws"], namespace["mc"], namespace["w"]
     assert ws.converged and ws.rounds[0]["worst_value"] > 1.1 and ws.result.cost > res.cost
     # the README says: Monte Carlo 0.1997, Gaussian 0.2692 (independent: stats.p_ball on S)
-    from tolsynth.stats import covariance, p_ball, principal
+    from tolsynth.probability.stats import covariance, p_ball, principal
 
     sig, _ = principal(covariance(m.sensitivity("worst"), m.tolerances("figure3"), "uniform")[0])
     assert mc.p_sphere_analytic == pytest.approx(p_ball(sig**2, 0.2), rel=1e-9)
@@ -63,7 +63,7 @@ def test_from_dh_block_says_true_things():
                           [0, sa, ca, di], [0, 0, 0, 1]])
     np.testing.assert_allclose(T[:3, 3], [-911.9, -191.45, 89.159], atol=1e-9)  # the comment
     np.testing.assert_allclose(ur5.fk("stretched"), T, atol=1e-9)
-    from tolsynth.stats import covariance, principal
+    from tolsynth.probability.stats import covariance, principal
 
     ref = tolsynth.load_model("ur5")
     S = ref.sensitivity("worst")[:, [ref.index(n) for n in ur5.error_parameters]]

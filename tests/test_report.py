@@ -1,4 +1,4 @@
-"""The design-review report (issue 9 point 3): well-formed, escaped HTML that holds the result's
+"""The design-review report: well-formed, escaped HTML that holds the result's
 numbers as printed, checked against independent recomputations (the cost from the printed table and
 the model's k, alpha; the Wilson interval from the printed estimate and n by its closed form), and a
 command line that writes the file and answers bad input with a typed message, never a traceback."""
@@ -160,7 +160,7 @@ def test_orientation_rows_with_phi():
 
 
 def test_text_is_escaped_and_markdown_writes_figures(tmp_path):
-    from tolsynth.mechanism import load_model
+    from tolsynth.kinematics.mechanism import load_model
 
     text = open(load_model("planar_2r").spec.path, encoding="utf-8").read()
     evil = 'Planar <b>2R</b> & "x" <script>alert(1)</script>'

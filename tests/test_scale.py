@@ -1,4 +1,4 @@
-"""The solver core at scale (issue 8): every feasible problem solved, at any number of poses.
+"""The solver core at scale: every feasible problem solved, at any number of poses.
 
 Independent references:
 * cvxpy + Clarabel on the convex form in ``v = eps^2`` (cost ``k v^(-alpha/2)``, one 3x3 LMI
@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth.joint_space import _feasible, _limits
-from tolsynth.problem import make_specification
-from tolsynth.stats import z_of_p
+from tolsynth.kinematics.joint_space import _feasible, _limits
+from tolsynth.problem.specification import make_specification
+from tolsynth.probability.stats import z_of_p
 
 cp = pytest.importorskip("cvxpy")
 

@@ -1,4 +1,4 @@
-"""Every bundled model against the source its file cites (issue 12 point 3).
+"""Every bundled model against the source its file cites.
 
 The sources' numbers are typed in here, with the citation next to them; nothing is read back from
 the model file to build the reference.  Where an independent library exists (the Robotics Toolbox
@@ -86,7 +86,7 @@ XU_TABLES = {
     ("Table 3", 0.5, 0.99, 0.6, "uniform"): [0.045, 0.272, 0.132, 0.050, 0.036, 0.049, 0.177, 0.151, 0.018, 0.082, 0.072],
     ("Table 3", 0.5, 0.99, 0.6, "normal"): [0.096, 0.399, 0.256, 0.088, 0.057, 0.073, 0.274, 0.222, 0.031, 0.103, 0.103],
 }
-# planar_2r cites itself (tolsynth example model, issue 2): l1 = 500 mm, l2 = 300 mm.
+# planar_2r cites itself (tolsynth example model): l1 = 500 mm, l2 = 300 mm.
 PLANAR = {"l1": 500.0, "l2": 300.0}
 
 SOURCE_TESTED = {"ur5", "panda", "puma560", "xu_zhang_1988", "planar_2r"}
@@ -201,7 +201,7 @@ def test_panda_fk_against_numpy_chain():
 
 
 # ---------------------------------------------------------------------------------------------
-# Puma 560 (the known discrepancy of issue 12: d1 was 672.0)
+# Puma 560 (an earlier version of the file had d1 = 672.0, 0.17 mm off the source)
 # ---------------------------------------------------------------------------------------------
 def test_puma_numbers_are_the_toolbox_values():
     m = tolsynth.load_model("puma560")

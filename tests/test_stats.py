@@ -22,7 +22,7 @@ import pytest
 from scipy import integrate, special, stats
 
 import tolsynth
-from tolsynth.stats import (
+from tolsynth.probability.stats import (
     covariance,
     p_ball,
     p_components,
@@ -346,7 +346,7 @@ def test_p_ball_batch_random_rows_vs_scipy_integral():
     rng = np.random.default_rng(20261123)
     lam = np.exp(rng.uniform(-8, 1, (8, 3)))
     for R in (5e-3, 0.2, 3.0):
-        got = tolsynth.stats.p_ball_batch(lam, R)
+        got = tolsynth.probability.stats.p_ball_batch(lam, R)
         for row, P in zip(lam, got):
             assert abs(P - ball_probability_scipy(row, R)) <= 1e-10, (row, R, P)
 
@@ -355,7 +355,7 @@ def test_p_ball_batch_rows_vs_scipy_integral(rng):
     """One batch mixing 3-D rows of different panel counts, 2-D, 1-D and all-zero rows."""
     rows = [np.exp(rng.normal(-3, 2.0, 3)) for _ in range(6)]
     rows += [(0.04, 0.01, 0.0), (0.02, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 1e-5, 1e-9)]
-    got = tolsynth.stats.p_ball_batch(np.array(rows), 0.2)
+    got = tolsynth.probability.stats.p_ball_batch(np.array(rows), 0.2)
     for lam, P in zip(rows, got):
         lam = sorted((v for v in lam if v > 0), reverse=True)
         if not lam:
@@ -421,7 +421,7 @@ def test_erf_and_erfc_without_scipy_match_scipy(monkeypatch):
     import sys
 
     special = pytest.importorskip("scipy.special")
-    import tolsynth.stats as st
+    import tolsynth.probability.stats as st
 
     x = np.linspace(-6.0, 6.0, 241)
     ref_erf, ref_erfc = special.erf(x), special.erfc(x)

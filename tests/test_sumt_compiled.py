@@ -42,7 +42,8 @@ def test_compiled_and_python_powell_find_the_same_minimiser():
     """One SUMT inner problem of the paper's robot (r fixed): the C port and the Python Powell from
     the same start reach the same minimiser; the penalty is checked at the C minimiser through
     CasADi's own evaluator (not the compiled code)."""
-    from tolsynth.problem import ToleranceNLP, make_specification
+    from tolsynth.problem.nlp import ToleranceNLP
+    from tolsynth.problem.specification import make_specification
     from tolsynth.solvers.sumt import penalty_graph
 
     mech = tolsynth.load_model("xu_zhang_1988")

@@ -1,4 +1,4 @@
-"""tolsynth.sweep (issue 9 point 2): rows checked against individual synthesize calls, on every
+"""tolsynth.sweep: rows checked against individual synthesize calls, on every
 engine (this process, local processes, a dask.distributed.LocalCluster started here); a failed
 solve is a row; bad grids are typed errors before any work."""
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import tolsynth
-import tolsynth.sweeps as sweeps
+import tolsynth.synthesis.sweeps as sweeps
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
 
 pd = pytest.importorskip("pandas")

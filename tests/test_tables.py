@@ -1,4 +1,4 @@
-"""Results as tables (issue 9 point 1): every result type written as CSV, JSON and Parquet and read
+"""Results as tables: every result type written as CSV, JSON and Parquet and read
 back with plain pandas; the numbers must equal the result object's own attributes, and the file
 must hold every input and the package version."""
 

@@ -1,4 +1,4 @@
-"""URDF import (issue 12 point 1): tolsynth.load_urdf and model files whose chain is a URDF.
+"""URDF import: tolsynth.load_urdf and model files whose chain is a URDF.
 
 References, none of them tolsynth's CasADi graph:
 * the real URDFs that example-robot-data ships inside its wheel (UR5 of ur_description, Franka

@@ -1,4 +1,4 @@
-"""Worst-pose search and the workspace probability map (tolsynth.workspace).
+"""Worst-pose search and the workspace probability map (tolsynth.worst_pose, tolsynth.probability_map).
 
 The map's reachable region is checked against a closed-form inverse kinematics of the
 reconstructed robot written here (planar two-link arm to the wrist centre, law of cosines), and
@@ -14,8 +14,9 @@ import pytest
 
 import tolsynth
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
-from tolsynth.stats import p_ball_batch
-from tolsynth.workspace import principal_std_batch, probability_map, worst_pose
+from tolsynth.probability.stats import p_ball_batch
+from tolsynth import probability_map, worst_pose
+from tolsynth.kinematics.batch_stats import principal_std_batch
 
 
 # ---------------------------------------------------------------------------------------------
@@ -55,7 +56,7 @@ def test_closed_form_reproduces_the_paper_pose(xz):
 # ---------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("N", [12, 300])  # CasADi's evaluation (small batches), the NumPy interpreter
 def test_principal_std_batch_matches_analyze(xz, rng, N):
-    from tolsynth.batch_stats import SMALL_BATCH
+    from tolsynth.kinematics.batch_stats import SMALL_BATCH
 
     assert (N <= SMALL_BATCH) == (N == 12)
     lo = np.array([j.lower for j in xz.spec.joints])
@@ -230,7 +231,7 @@ def test_full_resolution_map(xz):
                     ref = xz.analyze(q, "figure3", R=0.2).p_sphere
                     assert pm.P[j, i] == pytest.approx(ref, abs=1e-9)
     assert inside > 50
-    assert int(pm.reachable.sum()) == 3799  # the figure of the benchmark (issue 8)
+    assert int(pm.reachable.sum()) == 3799  # the figure of the benchmark
 
 
 # ---------------------------------------------------------------------------------------------
@@ -238,7 +239,7 @@ def test_full_resolution_map(xz):
 # ---------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("n", [1, 2, 3, 6])
 def test_batched_cholesky_solve_against_numpy(n, rng):
-    from tolsynth.ik import _spd_solve
+    from tolsynth.kinematics.ik import _spd_solve
 
     M = rng.normal(size=(40, n, n))
     A = M @ M.transpose(0, 2, 1) + 1e-3 * np.eye(n)
@@ -255,7 +256,7 @@ def test_batched_cholesky_solve_against_numpy(n, rng):
 def test_ik_small_batches_by_casadi_as_large_by_numpy(xz, monkeypatch):
     """The IK's two evaluations of its residual graph (CasADi's VM for small batches, the NumPy
     interpreter for large ones) give the same solutions, which are the closed-form joints."""
-    import tolsynth.ik as ik
+    import tolsynth.kinematics.ik as ik
 
     pts = [(925.0, 1200.0), (800.0, 800.0), (700.0, 1300.0), (1000.0, 1000.0)]
     T = np.array([[x, 0.0, z] for x, z in pts]).T
@@ -276,7 +277,7 @@ def test_ik_small_batches_by_casadi_as_large_by_numpy(xz, monkeypatch):
 def test_map_seeds_together_as_one_at_a_time(model, kw, monkeypatch):
     """The seeds run together on the points left give what they give one at a time (the map's
     earlier loop): same reachable set, joints, margins and alternative-solution count."""
-    from tolsynth.ik import _GridIK
+    from tolsynth.kinematics.ik import _GridIK
 
     m = tolsynth.load_model(model)
     tol = "figure3" if model == "xu_zhang_1988" else "coarse"
@@ -291,7 +292,7 @@ def test_map_seeds_together_as_one_at_a_time(model, kw, monkeypatch):
 
 
 # ---------------------------------------------------------------------------------------------
-# synthesize_workspace (issue 8 point 3): rounds, certificate and the largest value found
+# synthesize_workspace: rounds, certificate and the largest value found
 # afterwards, checked through a hand-written NumPy chain (central differences) at its own worst
 # pose and at independently sampled poses
 # ---------------------------------------------------------------------------------------------
@@ -299,7 +300,7 @@ def _chain_value(fk, mech, eps, q, R, p):
     """Largest sigma z / R at q from the hand-written NumPy kinematics (central differences)."""
     from test_kinematics import fd_sensitivity, fd_steps
 
-    from tolsynth.stats import z_of_p
+    from tolsynth.probability.stats import z_of_p
 
     S = fd_sensitivity(fk, q, mech.error_parameters, fd_steps(mech))[:3]
     V = (S * (np.asarray(eps) ** 2 / 3.0)) @ S.T  # uniform: eps^2 / 3

@@ -9,7 +9,7 @@ Units: mm and rad throughout the API; tolerances in each error parameter's own u
 mm and 1e-2 rad); cost in the paper's units (sum of k * eps**-alpha on those numbers).
 """
 
-from .errors import (
+from tolsynth.errors import (
     InfeasibleSpecificationError,
     InputError,
     LoopClosureError,
@@ -21,40 +21,40 @@ from .errors import (
     UnknownNameError,
     UnsupportedJointError,
 )
-from .mechanism import Analysis, Mechanism, load_model
-from .model import bundled_models
-from .result import Status, SynthesisResult
-from .stats import p_ball, p_components, p_cone, z_of_p
-from .montecarlo import MonteCarloResult, monte_carlo  # issue 4
-from .validation import ValidationResult, validate
-from .pose_search import WorstPose, worst_pose
-from .workspace_map import ProbabilityMap, probability_map
-from .plot import plot_map
-from .contributions import Contributions, contributions  # issue 13
-from .process import Process, ProcessChoice, synthesize_processes
-from .budget import BudgetResult, best_accuracy
-from .pareto import ParetoFront, pareto_front
-from .synthesis import Comparison, WorkspaceSynthesis, compare, synthesize, synthesize_workspace
-from .tables import read_table, write_table  # issue 9: tables
-from .sweeps import sweep
-from .joint_errors import JointError  # issue 11 point 5
-from .reports import DesignReport, report  # issue 9 point 3
-# issue 11 points 1-4: error shapes, exact probabilities, the closed loop
-from .exact import ExactProbabilityError, ball_probability, cone_probability, direction_probability, worst_direction
-from .verify import Verification
-from .urdf import load_urdf  # issue 12 point 1 (yourdfpy imported on use)
+from tolsynth.kinematics.mechanism import Analysis, Mechanism, load_model, load_urdf
+from tolsynth.model.reader import bundled_models
+from tolsynth.problem.result import Status, SynthesisResult
+from tolsynth.probability.stats import p_ball, p_components, p_cone, z_of_p
+from tolsynth.analysis.montecarlo import MonteCarloResult, monte_carlo
+from tolsynth.analysis.validation import ValidationResult, validate
+from tolsynth.analysis.pose_search import WorstPose, worst_pose
+from tolsynth.analysis.workspace_map import ProbabilityMap, probability_map
+from tolsynth.analysis.plot import plot_map
+from tolsynth.analysis.contributions import Contributions, contributions
+from tolsynth.synthesis.processes import Process, ProcessChoice, synthesize_processes
+from tolsynth.synthesis.budget import BudgetResult, best_accuracy
+from tolsynth.synthesis.pareto import ParetoFront, pareto_front
+from tolsynth.synthesis.single import Comparison, compare, synthesize
+from tolsynth.synthesis.workspace import WorkspaceSynthesis, synthesize_workspace
+from tolsynth.io.tables import read_table, write_table
+from tolsynth.synthesis.sweeps import sweep
+from tolsynth.synthesis.options import DesignSpec, SolverOptions
+from tolsynth.model.joint_errors import JointError
+from tolsynth.io.reports import DesignReport, report
+from tolsynth.probability.exact import ExactProbabilityError, ball_probability, cone_probability, direction_probability, worst_direction
+from tolsynth.analysis.verify import Verification
 
-__version__ = "0.1.0"
+from tolsynth.version import __version__  # noqa: F401  (the package version, as tolsynth.__version__)
 
 __all__ = [
-    # issue 11: exact probabilities of the linear error model, verify=
+    "DesignSpec",
+    "SolverOptions",
     "direction_probability",
     "ball_probability",
     "cone_probability",
     "worst_direction",
     "ExactProbabilityError",
     "Verification",
-    # issue 13: designer's cost
     "contributions",
     "Contributions",
     "synthesize_processes",
@@ -64,7 +64,6 @@ __all__ = [
     "ParetoFront",
     "Process",
     "ProcessChoice",
-    # issue 4: Monte Carlo, validation, worst pose, workspace map
     "monte_carlo",
     "MonteCarloResult",
     "validate",

@@ -1,7 +1,7 @@
 """C code generated from the model's CasADi graphs, compiled into shared libraries cached on disk.
 
 Shared by the compiled Powell of SUMT (:mod:`tolsynth.solvers.cpowell`) and the compiled
-Levenberg-Marquardt of the map's inverse kinematics (:mod:`tolsynth.ik_compiled`): each writes
+Levenberg-Marquardt of the map's inverse kinematics (:mod:`tolsynth.kinematics.ik_compiled`): each writes
 one C file (CasADi's generated code for its graph and a hand-written driver) and loads it here.
 
 The library is cached on disk, keyed by a hash of the C source, the compiler, its flags and the

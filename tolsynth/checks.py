@@ -12,7 +12,7 @@ input never reaches a formula that would overflow, divide by zero or loop foreve
   not representable in double precision: ``z(1 - 1e-16)`` is infinite);
 * a count is an integer (an integral float such as ``1e4`` is accepted) inside stated limits.
 
-The model-file reader (:mod:`tolsynth.model`) applies the same limits to the numbers in a file.
+The model-file reader (:mod:`tolsynth.model.reader`) applies the same limits to the numbers in a file.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import InputError, OutOfRangeError
+from tolsynth.errors import InputError, OutOfRangeError
 
 __all__ = [
     "HUGE",

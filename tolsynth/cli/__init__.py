@@ -17,9 +17,9 @@ import argparse
 import os
 import sys
 
-from ..errors import TolsynthError
-from . import analyze, montecarlo, report, reproduce, solve, sweep, workspace
-from .args import HelpFormatter, add_pose_arguments, emit_json, parse_pose, parse_tolerances, version
+from tolsynth.errors import TolsynthError
+from tolsynth.cli import analyze, montecarlo, report, reproduce, solve, sweep, workspace
+from tolsynth.cli.args import HelpFormatter, add_pose_arguments, emit_json, parse_pose, parse_tolerances, version
 
 __all__ = ["main", "build_parser", "add_pose_arguments", "parse_pose", "parse_tolerances", "emit_json"]
 

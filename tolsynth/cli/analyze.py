@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mechanism import load_model
-from .args import dist_for, add_pose_arguments, default_pose, emit_json, fmt_vec as _fmt_vec, inputs_record, parse_pose, parse_tolerances, pose_label
+from tolsynth.kinematics.mechanism import load_model
+from tolsynth.cli.args import dist_for, add_pose_arguments, default_pose, emit_json, fmt_vec as _fmt_vec, inputs_record, parse_pose, parse_tolerances, pose_label
 
 __all__ = ["register"]
 
@@ -48,7 +48,7 @@ def cmd_analyze(args) -> int:
         return 0
     print(f"model        {mech.name}: {mech.title}")
     print(f"pose         {pose_name}  q = {_fmt_vec(np.degrees(a.q), '{:.4f}')} deg")
-    from ..distributions import describe
+    from tolsynth.probability.distributions import describe
 
     print(f"errors       {describe(args.dist)}")
     print("tolerances   " + ", ".join(f"{n}={v:g} {u}" for (n, v), u in zip(a.tolerances.items(), mech.units)))

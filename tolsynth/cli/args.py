@@ -19,10 +19,10 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import InputError, UnknownNameError
-from ..mechanism import Mechanism
-from ..tables import jsonable
-from ..units import ANGLE_UNITS, LENGTH_UNITS, to_base, unit_kind
+from tolsynth.errors import InputError, UnknownNameError
+from tolsynth.kinematics.mechanism import Mechanism
+from tolsynth.io.tables import jsonable
+from tolsynth.units import ANGLE_UNITS, LENGTH_UNITS, to_base, unit_kind
 
 __all__ = [
     "dist_for",
@@ -66,7 +66,7 @@ def version() -> str:
             pass
     except ImportError:  # pragma: no cover
         pass
-    from .. import __version__
+    from tolsynth import __version__
 
     return __version__
 
@@ -198,7 +198,7 @@ def parse_pose(mech: Mechanism, text: str, field: str = "--pose"):
 
 def default_pose(mech: Mechanism, field: str = "--pose"):
     """The model's reference pose, or an error asking for ``--pose`` if it has none."""
-    from ..joint_space import model_reference
+    from tolsynth.kinematics.joint_space import model_reference
 
     ref = model_reference(mech)
     if ref is None:
@@ -217,7 +217,7 @@ def parse_poses(mech: Mechanism, texts: list[str] | None, field: str = "--pose")
 
 def parse_reference(mech: Mechanism, text: str | None):
     """``--reference``: None (the model's reference pose), ``none``, a configuration or joints (deg)."""
-    from ..joint_space import MODEL_REFERENCE
+    from tolsynth.kinematics.joint_space import MODEL_REFERENCE
 
     if text is None:
         return MODEL_REFERENCE
@@ -455,14 +455,14 @@ def check_table_out(args, option: str = "--out") -> None:
     """Before any work: the table file's suffix is known, pandas (pyarrow) installed, the folder writable."""
     path = getattr(args, option.lstrip("-").replace("-", "_"))
     if path is not None:
-        from ..tables import check_table_path
+        from tolsynth.io.tables import check_table_path
 
         check_table_path(path, option)
 
 
 def write_out(frame, args, mech: Mechanism | None = None, option: str = "--out", **resolved) -> None:
     """Write ``frame`` to the file of ``option``, with the command line's inputs beside the library's."""
-    from ..tables import write_table
+    from tolsynth.io.tables import write_table
 
     path = getattr(args, option.lstrip("-").replace("-", "_"))
     if path is None:
@@ -483,7 +483,7 @@ def add_model_argument(p: argparse.ArgumentParser) -> None:
 def parse_distribution(text: str):
     """``--dist``: one shape for every error (``uniform``, ``normal``, ``triangular``, ``truncnormal``,
     ``truncnormal(3)``), or per parameter: ``*=uniform,h2=normal``."""
-    from ..distributions import shape
+    from tolsynth.probability.distributions import shape
 
     text = text.strip()
     if "=" not in text:
@@ -504,13 +504,13 @@ def parse_distribution(text: str):
 
 def dist_for(args, mech):
     """``--dist`` resolved against the model (not given: the model file's own shapes, else uniform)."""
-    from ..distributions import resolve
+    from tolsynth.probability.distributions import resolve
 
     return resolve(args.dist, mech)
 
 
 def dist_label(distribution) -> str:
-    from ..distributions import label
+    from tolsynth.probability.distributions import label
 
     return label(distribution)
 

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from ..mechanism import load_model
-from ..montecarlo import DEFAULT_BATCH, monte_carlo
-from .args import (  # noqa: I001
+from tolsynth.kinematics.mechanism import load_model
+from tolsynth.analysis.montecarlo import DEFAULT_BATCH, monte_carlo
+from tolsynth.cli.args import (  # noqa: I001
     dist_for,
     add_pose_arguments,
     add_table_out_argument,

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import sys
 
-from ..errors import InputError
-from ..mechanism import load_model
-from .args import (  # noqa: I001
+from tolsynth.errors import InputError
+from tolsynth.kinematics.mechanism import load_model
+from tolsynth.cli.args import (  # noqa: I001
     add_specification_arguments,
     dist_for,
     emit_json,
@@ -14,14 +14,14 @@ from .args import (  # noqa: I001
     number,
     parse_poses,
 )
-from .solve import _parse_locks, _spec_kwargs
-from .workspace import _hand_axis
+from tolsynth.cli.solve import _parse_locks, _spec_kwargs
+from tolsynth.cli.workspace import _hand_axis
 
 __all__ = ["register"]
 
 
 def _cmd_report(args) -> int:
-    from ..reports import check_report_path, report
+    from tolsynth.io.reports import check_report_path, report
 
     fmt = check_report_path(args.out, args.format, "--out")  # before any work: the folder, matplotlib
     if not 0 < args.p < 1:

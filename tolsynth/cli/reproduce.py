@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import sys
 
-from ..errors import InputError
-from ..mechanism import load_model
-from .args import emit_json, inputs_record
+from tolsynth.errors import InputError
+from tolsynth.kinematics.mechanism import load_model
+from tolsynth.cli.args import emit_json, inputs_record
 
 __all__ = ["register"]
 
 
 def cmd_reproduce(args) -> int:
-    from ..reproduce import format_report, reproduce
+    from tolsynth.synthesis.reproduce import format_report, reproduce
 
     mech = load_model(args.model)
     if not mech.spec.reference_results:  # nothing to do is an error, not an empty table

@@ -6,9 +6,9 @@ import sys
 
 import numpy as np
 
-from ..errors import InputError
-from ..mechanism import load_model
-from .args import (  # noqa: I001
+from tolsynth.errors import InputError
+from tolsynth.kinematics.mechanism import load_model
+from tolsynth.cli.args import (  # noqa: I001
     add_specification_arguments,
     dist_for,
     dist_label,
@@ -97,7 +97,7 @@ def _spec_kwargs(mech, args) -> tuple:
 
 
 def cmd_solve(args) -> int:
-    from ..synthesis import compare, synthesize
+    from tolsynth.synthesis.single import compare, synthesize
 
     check_table_out(args)  # before any work
     mech = load_model(args.model)
@@ -111,8 +111,8 @@ def cmd_solve(args) -> int:
                   k=kw.get("k", mech.k), bounds=kw.get("bounds", mech.bounds), probability=args.probability,
                   verify=args.verify)
     if args.everywhere:
-        from ..joint_space import _reference
-        from ..synthesis import synthesize_workspace
+        from tolsynth.kinematics.joint_space import _reference
+        from tolsynth.synthesis.workspace import synthesize_workspace
 
         if args.solver == "both":
             raise InputError("--solver", "'both' does not combine with --everywhere", "ipopt or sumt")
@@ -176,7 +176,7 @@ def cmd_solve(args) -> int:
         res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
         rep = None
         if args.contributions:
-            from ..contributions import contributions
+            from tolsynth.analysis.contributions import contributions
 
             rep = contributions(res)
         if args.out:

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import sys
 
-from ..errors import InputError
-from ..mechanism import load_model
-from .args import (
+from tolsynth.errors import InputError
+from tolsynth.kinematics.mechanism import load_model
+from tolsynth.cli.args import (
     POSE_HELP,
     add_table_out_argument,
     angle_rad,
@@ -24,7 +24,7 @@ from .args import (
     split_items,
     write_out,
 )
-from .args import _number  # the InputError form of number(), for comma-separated items
+from tolsynth.cli.args import _number  # the InputError form of number(), for comma-separated items
 
 __all__ = ["register", "GRID_KEYS", "read_grid_file"]
 
@@ -79,7 +79,7 @@ def _numbers(text: str, field: str, parse) -> list:
 
 
 def cmd_sweep(args) -> int:
-    from ..sweeps import sweep
+    from tolsynth.synthesis.sweeps import sweep
 
     check_table_out(args)  # before any work: the suffix, pandas / pyarrow, the folder
     grid = read_grid_file(args.grid) if args.grid else {}

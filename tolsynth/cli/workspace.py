@@ -6,11 +6,11 @@ import math
 
 import numpy as np
 
-from ..errors import InputError
-from ..mechanism import load_model
-from ..pose_search import worst_pose
-from ..workspace_map import PLANES, ProbabilityMap, probability_map
-from .args import (  # noqa: I001
+from tolsynth.errors import InputError
+from tolsynth.kinematics.mechanism import load_model
+from tolsynth.analysis.pose_search import worst_pose
+from tolsynth.analysis.workspace_map import PLANES, ProbabilityMap, probability_map
+from tolsynth.cli.args import (  # noqa: I001
     dist_for,
     TOLERANCES_HELP,
     add_dist_argument,
@@ -77,7 +77,7 @@ def _cmd_map(args) -> int:
         import matplotlib
 
         matplotlib.use("Agg")
-        from ..plot import plot_map
+        from tolsynth.analysis.plot import plot_map
 
         plot_map(pm, path=args.out)
     record = dict(tolerances=pm.tolerances, distribution=args.dist, R_mm=args.R, plane=args.plane,

@@ -1,4 +1,4 @@
-"""Assembly of a :class:`~tolsynth.result.SynthesisResult` from a solver's raw output (shared)."""
+"""Assembly of a :class:`~tolsynth.problem.result.SynthesisResult` from a solver's raw output (shared)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from ..problem import ToleranceNLP
-from ..result import ConstraintBlock, Status, SynthesisResult
+from tolsynth.problem.nlp import ToleranceNLP
+from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult
 
 __all__ = ["assemble"]
 
@@ -38,6 +38,7 @@ def assemble(
     history: list,
     mu_sphere: np.ndarray | None = None,
     lagrangian: tuple[np.ndarray, float] | None = None,
+    relaxation_bound=None,
 ) -> SynthesisResult:
     """Constraint values, activity, multipliers and the dual-bound certificate at ``eps``.
 
@@ -91,7 +92,7 @@ def assemble(
         bound_mult[name] = float(bound_mult_u[i] / eps[i])  # d/d eps = (1/eps) d/du
     cost = nlp.cost(eps)
     if spec.sphere_blocks:
-        lower = _relaxation_bound(nlp)
+        lower = relaxation_bound(nlp)
     else:
         # both are valid lower bounds: the solver's own multipliers, and those recomputed from the
         # primal point by least squares on stationarity (sharper when the solver's are loose, so
@@ -126,15 +127,6 @@ def assemble(
         spec=spec,
         history=history,
     )
-
-
-def _relaxation_bound(nlp: ToleranceNLP) -> float:
-    """Certified lower bound for the sphere criterion: the per-component problem with the same p
-    contains its feasible set; its own dual bound is valid whatever its solver's status."""
-    from .ipopt import solve_ipopt
-
-    relaxed = ToleranceNLP(nlp.spec.relaxed())
-    return solve_ipopt(relaxed).lower_bound
 
 
 def _verified(status: Status, message: str, blocks, cost: float, lower: float, certified: bool):

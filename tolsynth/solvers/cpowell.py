@@ -26,7 +26,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..cbuild import GraphLibraries, cache_dir
+from tolsynth.cbuild import GraphLibraries, cache_dir
 
 __all__ = ["CompiledPowell", "compile_powell", "backend_status", "cache_dir"]
 
@@ -321,7 +321,7 @@ class CompiledPowell:
 
     def minimize(self, params, x0, *, directions=None, step=0.1, ftol=1e-13, line_rtol=1e-9,
                  maxiter=5000, maxfev=2_000_000):
-        from .powell import PowellResult
+        from tolsynth.solvers.powell import PowellResult
 
         x = np.array(x0, dtype=float)  # a fresh contiguous copy: the C code writes into it
         n = x.size

@@ -25,9 +25,9 @@ Scaling: the cost is divided by its value at the start point (so k, alpha and th
 can be extreme); the cuts are normalised to 1 by construction.
 
 For the sphere criterion (beyond the paper) each sphere block adds the smooth inequality
-``P_b(u) >= p_b`` from :func:`tolsynth.problem.sphere_graph` to the same NLP.
+``P_b(u) >= p_b`` from :func:`tolsynth.problem.nlp.sphere_graph` to the same NLP.
 
-Return codes are mapped to :class:`tolsynth.result.Status` here (``Solved_To_Acceptable_Level``
+Return codes are mapped to :class:`tolsynth.problem.result.Status` here (``Solved_To_Acceptable_Level``
 is *not* plain success).  A solve interrupted by Ctrl-C is never retried: KeyboardInterrupt is
 raised again.
 """
@@ -43,9 +43,9 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from ..problem import ToleranceNLP, cost_graph, sphere_graph
-from ..result import Status
-from .common import assemble
+from tolsynth.problem.nlp import ToleranceNLP, cost_graph, sphere_graph
+from tolsynth.problem.result import Status
+from tolsynth.solvers.common import assemble
 
 __all__ = ["solve_ipopt", "IPOPT_STATUS", "DEFAULT_OPTIONS"]
 
@@ -281,7 +281,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     opts = {**DEFAULT_OPTIONS, **options}
     unknown = set(opts) - set(DEFAULT_OPTIONS)
     if unknown:
-        from ..errors import InputError
+        from tolsynth.errors import InputError
 
         raise InputError("options", f"unknown IPOPT option(s) {sorted(unknown)}", ", ".join(DEFAULT_OPTIONS))
     spec = nlp.spec
@@ -501,4 +501,11 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         history,
         mu_sphere=mu_sphere,
         lagrangian=lagrangian if m else None,
+        relaxation_bound=relaxation_bound,
     )
+
+
+def relaxation_bound(nlp: ToleranceNLP) -> float:
+    """Certified lower bound for the sphere criterion: the per-component problem with the same p
+    contains its feasible set; its own dual bound is valid whatever its solver's status."""
+    return solve_ipopt(ToleranceNLP(nlp.spec.relaxed())).lower_bound

@@ -14,7 +14,7 @@ at the paper's constraint boundary ``g_j = 0``, but stays smooth where principal
 paper, the accuracy constraints carry the larger weight (``w_acc`` = 1 against ``w_bnd`` = 0.01).
 Outside the interior (a leading minor of some G_b <= 0, or a bound crossed) P is +inf.  For the
 sphere criterion each sphere block adds ``-w_acc ln(P_b(u) - p_b)`` from the shared sphere graph.
-A locked tolerance (``lower = upper``: :mod:`tolsynth.locks`, a fixed joint error) has no
+A locked tolerance (``lower = upper``: :mod:`tolsynth.model.locks`, a fixed joint error) has no
 interior; SUMT gives it a box of relative half-width ``FIXED_WIDTH`` (1e-9) around its value, in
 which the bound barrier holds it at the centre, and returns it exactly at its value.
 
@@ -40,12 +40,13 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from ..errors import InputError
-from ..problem import ToleranceNLP, nlp_graphs, sphere_graph
-from ..result import Status
-from .common import assemble
-from .cpowell import compile_powell
-from .powell import powell
+from tolsynth.errors import InputError
+from tolsynth.problem.nlp import ToleranceNLP, nlp_graphs, sphere_graph
+from tolsynth.problem.result import Status
+from tolsynth.solvers.common import assemble
+from tolsynth.solvers.cpowell import compile_powell
+from tolsynth.solvers.ipopt import relaxation_bound
+from tolsynth.solvers.powell import powell
 
 __all__ = ["solve_sumt", "DEFAULT_OPTIONS", "penalty_graph"]
 
@@ -137,7 +138,7 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     if not 0 < o["line_rtol"] < 1:
         raise InputError("options.line_rtol", f"got {o['line_rtol']}", "0 < line_rtol < 1")
     spec = nlp.spec
-    # a locked tolerance (lower = upper: tolsynth.locks, a fixed joint error) gets a box of
+    # a locked tolerance (lower = upper: tolsynth.model.locks, a fixed joint error) gets a box of
     # relative width 2 * FIXED_WIDTH around its value: the barrier keeps it at the centre (the
     # penalty has no interior otherwise); it is put back exactly at its value at the end
     fixed = np.array([not a < b for a, b in zip(spec.lower, spec.upper)], dtype=bool)
@@ -226,4 +227,4 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         bound_mult = np.where(fixed, -(nlp.costs.du(u) + pull), bound_mult)
     mu_sphere = r * o["w_acc"] / (nlp.sphere_quadrature(eps) - nlp.p_sphere) if ms else None
     return assemble("sumt", nlp, eps, Z, bound_mult, status, message, nit, nfev, wall, history,
-                    mu_sphere=mu_sphere)
+                    mu_sphere=mu_sphere, relaxation_bound=relaxation_bound)

@@ -1,0 +1,585 @@
+"""Monte Carlo through the full nonlinear kinematics, and validation of an optimum.
+
+The analytic model of the paper (section 3) is linear in the errors and treats the hand error as
+Gaussian.  :func:`monte_carlo` checks both approximations: it samples the error parameters
+(uniform within ``+-eps``, or normal with ``3 sigma = eps``), pushes every sample through the
+model's own CasADi forward-kinematics graph (``graphs.position`` -- never a second copy of the
+formula), and reports the covariance and the probabilities ``P(|w_j| <= R)`` along the analytic
+principal directions and ``P(|dr| <= R)`` in the sphere, each with a confidence interval, next to
+the analytic values of :meth:`tolsynth.Mechanism.analyze`.
+
+Speed: the CasADi SX graph is evaluated on whole NumPy batches by
+:class:`tolsynth.kinematics.numpy_eval.NumpyEvaluator`, a small interpreter of the graph's instruction list
+(one NumPy ufunc per CasADi operation, the sub-graph that does not depend on the sampled errors
+evaluated once).  On one core this runs the
+paper's robot at several million samples per second; ``benchmarks/bench_montecarlo.py`` compares
+it with CasADi's own ``map`` evaluation and with per-sample calls.  Samples are drawn and
+evaluated in batches of fixed size, so memory does not grow with ``n``.
+
+The validation of an optimum against the ``p`` asked for is :func:`tolsynth.analysis.validation.validate`
+(also importable from here).
+
+Units: mm and rad; tolerances in each error parameter's tolerance unit; covariances in mm^2.
+
+>>> import tolsynth
+>>> m = tolsynth.load_model("xu_zhang_1988")
+>>> r = tolsynth.monte_carlo(m, "worst", "figure3", R=0.2, n=200_000, seed=1)
+>>> bool(r.p_sphere_ci[0] <= r.p_sphere <= r.p_sphere_ci[1])
+True
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from statistics import NormalDist
+from typing import Callable
+
+import casadi as ca
+import numpy as np
+
+from tolsynth.checks import check_count, check_seed
+from tolsynth.errors import InputError, LoopClosureError, OutOfRangeError
+from tolsynth.kinematics.numpy_eval import NumpyEvaluator
+from tolsynth.progress import Progress, make_bar  # noqa: F401  (make_bar: re-exported for older imports)
+from tolsynth.tabular import Tabular
+from tolsynth.probability.stats import check_positive, check_probability, principal
+
+__all__ = [
+    "NumpyEvaluator",
+    "MonteCarloResult",
+    "monte_carlo",
+    "wilson_interval",
+]
+
+DEFAULT_BATCH = 1 << 14  # samples per batch: a few MB of work arrays, whatever n is
+MAX_BATCH = 1 << 20  # a few hundred MB of work arrays
+
+
+# =============================================================================================
+# statistics helpers
+# =============================================================================================
+def wilson_interval(k, n: int, confidence: float = 0.95) -> np.ndarray:
+    """Wilson score interval of a binomial proportion ``k / n``.
+
+    Parameters
+    ----------
+    k : int or array of int
+        Successes.
+    n : int
+        Trials (> 0).
+    confidence : float
+        Two-sided confidence level, 0 < confidence < 1.
+
+    Returns
+    -------
+    ndarray, shape ``(..., 2)``
+        Lower and upper bounds.  Unlike the normal approximation, the interval stays inside
+        [0, 1] and does not collapse to a point at ``k = 0`` or ``k = n``.
+    """
+    confidence = check_probability(confidence, "confidence")
+    z = NormalDist().inv_cdf(0.5 + 0.5 * confidence)
+    k = np.asarray(k, dtype=float)
+    ph = k / n
+    den = 1.0 + z * z / n
+    centre = (ph + z * z / (2 * n)) / den
+    half = z * np.sqrt(ph * (1 - ph) / n + z * z / (4.0 * n * n)) / den
+    return np.stack([np.clip(centre - half, 0, 1), np.clip(centre + half, 0, 1)], axis=-1)
+
+
+def _check_n(n, field: str = "n") -> int:
+    """Samples (up to 1e12) or a batch size (up to MAX_BATCH: its work arrays must fit in memory)."""
+    return check_count(n, field, 1, MAX_BATCH if field == "batch" else 10**12)
+
+
+_check_seed = check_seed
+
+
+
+def _dist_text(distribution) -> str:
+    from tolsynth.probability.distributions import describe, label
+
+    return describe(distribution) if isinstance(distribution, str) else label(distribution)
+
+# =============================================================================================
+# the sampler
+# =============================================================================================
+class _Sampler:
+    """One pose, one set of tolerances: draws error batches and evaluates the hand position
+    (and, with ``orientation``, the hand rotation) through the model's graphs."""
+
+    def __init__(self, mechanism, q: np.ndarray, eps: np.ndarray, distribution: str, orientation: bool):
+        self.mech = mechanism
+        self.eps = eps
+        self.distribution = distribution
+        self.active = np.flatnonzero(eps > 0)  # zero tolerance: that error is exactly 0
+        g = mechanism.graphs
+        qs = ca.SX.sym("q", len(q))
+        ds = ca.SX.sym("delta", mechanism.n)
+        outs = [g.position(qs, ds), g.closure(qs, ds)]
+        if orientation:
+            T = g.fk(qs, ds)
+            outs.append(ca.vec(T[:3, :3]))
+        f = ca.Function("mc_eval", [qs, ds], outs, ["q", "delta"], ["p", "c", "R"][: len(outs)])
+        # one SX graph built from the model's graphs; cse merges what position/closure/fk share
+        if hasattr(ca, "cse"):
+            f = ca.Function("mc_eval", [qs, ds], [ca.cse(o) for o in outs])
+        self.evaluator = NumpyEvaluator(f)
+        varying_d = np.zeros(mechanism.n, bool)
+        varying_d[self.active] = True
+        self.program = self.evaluator.bind([q, np.zeros(mechanism.n)], [np.zeros(len(q), bool), varying_d])
+        nominal = self.evaluator([q, np.zeros(mechanism.n)])
+        self.p0 = nominal[0]
+        self.R0 = nominal[2].reshape(3, 3, order="F") if orientation else None
+        from tolsynth.probability.distributions import shapes_of
+
+        shapes = shapes_of(distribution, mechanism.error_parameters, mechanism.index)
+        act = [shapes[i] for i in self.active]
+        # rows of the same shape are drawn together; the paper's two shapes keep their fast paths
+        self.groups = {}
+        for j, s in enumerate(act):
+            self.groups.setdefault(s, []).append(j)
+        self.groups = {s: np.array(ix) for s, ix in self.groups.items()}
+        self.scale = eps[self.active].astype(float)
+        self._rows = None
+
+    def draw(self, rng: np.random.Generator, batch: int) -> np.ndarray:
+        if self._rows is None or self._rows.shape[1] != batch:
+            self._rows = np.empty((self.active.size, batch))
+        rows = self._rows
+        if len(self.groups) == 1 and next(iter(self.groups)).kind in ("uniform", "normal"):
+            if next(iter(self.groups)).kind == "uniform":
+                rng.random(out=rows)  # [0, 1)
+                rows *= 2.0
+                rows -= 1.0
+            else:
+                rng.standard_normal(out=rows)
+                rows *= 1.0 / 3.0  # 3 sigma = eps
+        else:
+            for s, ix in self.groups.items():
+                rows[ix] = s.sample(rng, (ix.size, batch))
+        rows *= self.scale[:, None]
+        return rows
+
+    def evaluate(self, rows: np.ndarray) -> list[np.ndarray]:
+        return self.program(rows)
+
+
+# =============================================================================================
+# result types
+# =============================================================================================
+@dataclass(frozen=True)
+class MonteCarloResult(Tabular):
+    """Monte Carlo error statistics at one pose, next to the analytic (linear, Gaussian) ones.
+
+    Every probability has a two-sided confidence interval (``ci_method``, level ``confidence``);
+    ``*_analytic`` are the values of :meth:`tolsynth.Mechanism.analyze` and ``*_diff`` the Monte
+    Carlo value minus the analytic one.  ``*_analytic_in_ci`` is False where the analytic value
+    lies outside the Monte Carlo interval, i.e. where the linear + Gaussian model is off by more
+    than the sampling noise explains.
+
+    Attributes
+    ----------
+    model : str
+    q : ndarray (rad)
+        Joint values of the pose.
+    position : ndarray (mm)
+        Nominal hand position.
+    distribution : str
+        "uniform" (within +-eps) or "normal" (3 sigma = eps, not truncated).
+    tolerances : dict
+        Half-widths, name -> value in the parameter's tolerance unit.
+    R : float (mm)
+    n, seed, batch : int
+        Samples, the seed of ``numpy.random.default_rng`` and the batch size.
+    n_loop_failures : int
+        Samples for which a closed loop could not be assembled.  They are *kept* in ``n`` and
+        counted as outside every tolerance zone (conservative); the moments exclude them.
+    mean, mean_ci : ndarray (mm)
+        Mean position error (3,) and its normal-approximation interval (3, 2).
+    covariance, covariance_analytic : ndarray (mm^2)
+        Sample covariance of the position error (3, 3), and the linear model's.
+    principal_directions : ndarray
+        The analytic principal directions (columns, descending sigma); the components ``w_j``
+        are the projections of the position error on them.
+    principal_std, principal_std_analytic : ndarray (mm)
+        Standard deviation of ``w_j`` sampled, and analytic ``sigma_j``.
+    kurtosis, kurtosis_se : ndarray
+        Excess kurtosis of each ``w_j`` (0 for a normal, -1.2 for one uniform source) and its
+        standard error ``sqrt(24 / n)``.  Far from 0 means the Gaussian reading of that direction
+        is poor (typically one dominant uniform error source).
+    p_components, p_components_ci, p_components_analytic, p_components_diff : ndarray
+        ``P(|w_j| <= R)``.
+    p_sphere, p_sphere_ci, p_sphere_analytic, p_sphere_diff : float / ndarray
+        ``P(|dr| <= R)`` (Eq. 5).
+    p_components_analytic_in_ci : ndarray of bool
+    p_sphere_analytic_in_ci : bool
+    Phi : float (rad) or None
+        With ``Phi``: ``p_orientation_components`` (along the analytic orientation principal
+        directions, of the rotation vector), ``p_cone`` (angle between the actual and nominal hand
+        z axes <= Phi), their intervals and analytic values.
+    elapsed_s, samples_per_s : float
+        Wall time of the sampling.
+    """
+
+    model: str
+    q: np.ndarray
+    position: np.ndarray
+    distribution: str
+    tolerances: dict
+    R: float
+    n: int
+    seed: int
+    batch: int
+    confidence: float
+    ci_method: str
+    n_loop_failures: int
+    mean: np.ndarray
+    mean_ci: np.ndarray
+    covariance: np.ndarray
+    covariance_analytic: np.ndarray
+    principal_directions: np.ndarray
+    principal_std: np.ndarray
+    principal_std_analytic: np.ndarray
+    kurtosis: np.ndarray
+    kurtosis_se: float
+    p_components: np.ndarray
+    p_components_ci: np.ndarray
+    p_components_analytic: np.ndarray
+    p_components_diff: np.ndarray
+    p_components_analytic_in_ci: np.ndarray
+    p_sphere: float
+    p_sphere_ci: np.ndarray
+    p_sphere_analytic: float
+    p_sphere_diff: float
+    p_sphere_analytic_in_ci: bool
+    elapsed_s: float
+    samples_per_s: float
+    Phi: float | None = None
+    p_orientation_components: np.ndarray | None = None
+    p_orientation_components_ci: np.ndarray | None = None
+    p_orientation_components_analytic: np.ndarray | None = None
+    p_cone: float | None = None
+    p_cone_ci: np.ndarray | None = None
+    p_cone_analytic: float | None = None
+    #: with ``directions=``: the unit directions (columns) and ``P(|u^T dr| <= R)`` along each, with intervals
+    directions: np.ndarray | None = None
+    p_directions: np.ndarray | None = None
+    p_directions_ci: np.ndarray | None = None
+    units: dict = field(default_factory=lambda: {
+        "position": "mm", "mean": "mm", "covariance": "mm^2", "principal_std": "mm", "R": "mm",
+        "q": "rad", "Phi": "rad", "tolerances": "each parameter's tolerance unit",
+    })
+
+    def to_dict(self) -> dict:
+        """Plain dict (arrays as lists) for JSON."""
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
+
+    def report(self) -> str:
+        """A readable table: Monte Carlo vs analytic, with intervals and flags."""
+        pct = int(round(100 * self.confidence))
+        lines = [
+            f"model        {self.model}",
+            f"pose         q = ({', '.join(f'{math.degrees(v):.4f}' for v in self.q)}) deg; "
+            f"hand ({', '.join(f'{v:.3f}' for v in self.position)}) mm",
+            f"errors       {_dist_text(self.distribution)}",
+            f"samples      n = {self.n}, seed = {self.seed}, batch = {self.batch}; "
+            f"{self.samples_per_s / 1e6:.2f} M samples/s; loop failures {self.n_loop_failures}",
+            f"intervals    {pct}% {self.ci_method}",
+            f"mean error   ({', '.join(f'{v:+.2e}' for v in self.mean)}) mm",
+            "",
+            f"{'':14}{'Monte Carlo':>12} {pct}% interval{'':9}{'analytic':>10}{'MC-analytic':>13}  flag",
+        ]
+        for j in range(3):
+            lo, hi = self.p_components_ci[j]
+            flag = "" if self.p_components_analytic_in_ci[j] else "analytic outside CI"
+            lines.append(
+                f"P(|w{j + 1}|<=R)    {self.p_components[j]:12.5f} [{lo:.5f}, {hi:.5f}]  "
+                f"{self.p_components_analytic[j]:10.5f}{self.p_components_diff[j]:+13.5f}  {flag}"
+            )
+        lo, hi = self.p_sphere_ci
+        flag = "" if self.p_sphere_analytic_in_ci else "analytic outside CI"
+        lines.append(
+            f"P(|dr|<=R)    {self.p_sphere:12.5f} [{lo:.5f}, {hi:.5f}]  {self.p_sphere_analytic:10.5f}"
+            f"{self.p_sphere_diff:+13.5f}  {flag}"
+        )
+        lines.append("")
+        lines.append(f"{'direction':14}{'sigma MC':>12}{'sigma lin.':>12}{'excess kurtosis':>17} (Gaussian 0, +-{self.kurtosis_se:.3f} s.e.)")
+        for j in range(3):
+            d = self.principal_directions[:, j]
+            note = "" if abs(self.kurtosis[j]) <= 4 * self.kurtosis_se + 0.1 else "  not Gaussian"
+            lines.append(
+                f"w{j + 1} ({d[0]:+.3f},{d[1]:+.3f},{d[2]:+.3f}) {self.principal_std[j]:9.5f}"
+                f"{self.principal_std_analytic[j]:12.5f}{self.kurtosis[j]:+17.3f}{note}"
+            )
+        if self.Phi is not None:
+            lines.append("")
+            lines.append(f"Phi          {self.Phi:g} rad")
+            for j in range(3):
+                lo, hi = self.p_orientation_components_ci[j]
+                lines.append(
+                    f"P(|phi{j + 1}|<=Phi) {self.p_orientation_components[j]:10.5f} [{lo:.5f}, {hi:.5f}]  "
+                    f"{self.p_orientation_components_analytic[j]:10.5f}"
+                )
+            lo, hi = self.p_cone_ci
+            lines.append(f"P(cone)       {self.p_cone:12.5f} [{lo:.5f}, {hi:.5f}]  {self.p_cone_analytic:10.5f}")
+        lines.append("R = {:g} mm; w_j along the analytic principal directions; sphere = Eq. 5".format(self.R))
+        return "\n".join(lines)
+
+
+# =============================================================================================
+# monte_carlo
+# =============================================================================================
+def monte_carlo(
+    mechanism,
+    q,
+    tolerances,
+    distribution=None,
+    *,
+    R: float,
+    n: int = 1_000_000,
+    seed: int = 0,
+    batch: int = DEFAULT_BATCH,
+    Phi: float | None = None,
+    progress: bool | Callable[[int, int], None] | None = None,
+    confidence: float = 0.95,
+    check_limits: bool = True,
+    directions=None,
+) -> MonteCarloResult:
+    """Monte Carlo of the hand position error through the full nonlinear kinematics.
+
+    Parameters
+    ----------
+    mechanism : Mechanism
+        From :func:`tolsynth.load_model`.
+    q : str or array
+        Configuration name or joint values (rad).
+    tolerances : str, dict or array
+        Tolerance set name, or half-widths in each parameter's tolerance unit.
+    distribution : str or dict, optional
+        As :func:`tolsynth.synthesize`; each error is drawn from its own shape ("normal": 3 sigma =
+        eps, not truncated, so that its variance is the analytic ``eps^2 / 9``).
+    R : float
+        Radius of the accuracy sphere and half-width of each component's zone (mm), > 0.
+    n : int
+        Number of samples, >= 1.
+    seed : int
+        Seed of ``numpy.random.default_rng`` (recorded in the result); the same seed and batch
+        size give the same numbers.
+    batch : int
+        Samples per batch (memory ~ ``batch * (work slots + errors) * 8`` bytes, not ~ n).
+    Phi : float, optional
+        Orientation tolerance (rad): adds the orientation-component and cone probabilities.
+    progress : bool, callable or None
+        A tqdm bar on stderr (None: on a terminal, shown once the run has taken 2 s), or a
+        callable ``progress(done, total)``.
+    confidence : float
+        Level of the intervals (Wilson score for the probabilities, normal for the mean).
+    check_limits : bool
+        Check the joint values against the limits (named configurations keep their waivers).
+
+    Returns
+    -------
+    MonteCarloResult
+
+    Raises
+    ------
+    OutOfRangeError
+        ``n <= 0``, ``R <= 0``, negative seed, unknown distribution, a joint past its limit.
+    UnknownNameError
+        Unknown configuration or tolerance set.
+    LoopClosureError
+        The loop cannot close at the nominal dimensions.
+
+    Examples
+    --------
+    >>> import tolsynth
+    >>> m = tolsynth.load_model("xu_zhang_1988")
+    >>> r = tolsynth.monte_carlo(m, "worst", "figure3", R=0.2, n=100_000, seed=7)
+    >>> r.n, r.seed, r.n_loop_failures
+    (100000, 7, 0)
+    """
+    from tolsynth.probability.distributions import resolve
+    from tolsynth.kinematics.mechanism import as_mechanism
+
+    mechanism = as_mechanism(mechanism)
+    distribution = resolve(distribution, mechanism)
+    R = check_positive(R, "R")
+    n = _check_n(n)
+    seed = _check_seed(seed)
+    batch = _check_n(batch, "batch")
+    confidence = check_probability(confidence, "confidence")
+    if Phi is not None:
+        Phi = check_positive(Phi, "Phi", "rad")
+    eps = mechanism.tolerances(tolerances)
+    qv = mechanism.joints(q, check_limits)
+    Ud = None
+    if directions is not None:  # extra unit directions (columns): P(|u . dr| <= R) along each
+        from tolsynth.checks import check_vector
+
+        raw = np.asarray(directions, dtype=float) if not isinstance(directions, str) else np.array([])
+        if raw.size == 0 or raw.shape[0] != 3 or raw.ndim > 2:
+            raise InputError("directions", f"shape {raw.shape}", "a 3-vector or a 3 x d array of directions (columns)")
+        Ud = check_vector(raw.ravel(order="F"), "directions").reshape(3, -1, order="F")
+        norms = np.linalg.norm(Ud, axis=0)
+        if np.any(norms < 1e-12):
+            raise OutOfRangeError("directions", "a zero direction", "non-zero 3-vectors (columns)")
+        Ud = Ud / norms
+    inside_dir = np.zeros(0 if Ud is None else Ud.shape[1], dtype=np.int64)
+    ana = mechanism.analyze(qv, eps, distribution, R=R, Phi=Phi, check_limits=False)
+    U = ana.principal_directions
+    sampler = _Sampler(mechanism, qv, eps, distribution, orientation=Phi is not None)
+    if mechanism.spec.loops:
+        c0 = np.asarray(mechanism.graphs.closure(qv, np.zeros(mechanism.n))).ravel()
+        if not np.all(np.abs(c0) <= 1):
+            raise LoopClosureError(f"a loop cannot close at the nominal dimensions at q = {np.degrees(qv).round(4).tolist()} deg")
+    p0 = sampler.p0
+    if Phi is not None:
+        Uo = principal(ana.orientation_covariance)[1]
+        z0 = sampler.R0[:, 2]
+
+    rng = np.random.default_rng(seed)
+    R2 = R * R
+    inside_sphere = 0
+    inside_comp = np.zeros(3, dtype=np.int64)
+    inside_ocomp = np.zeros(3, dtype=np.int64)
+    inside_cone = 0
+    failures = 0
+    m_ok = 0
+    shift = None
+    s1 = np.zeros(3)
+    s2 = np.zeros((3, 3))
+    w_shift = None
+    wpow = np.zeros((4, 3))  # sums of (w - w_shift)^k, k = 1..4
+    bar = Progress(progress, n, "monte carlo")
+    t0 = time.perf_counter()
+    done = 0
+    try:
+        while done < n:
+            b = min(batch, n - done)
+            rows = sampler.draw(rng, b)
+            outs = sampler.evaluate(rows)
+            p, c = outs[0], outs[1]
+            dr = p - p0[:, None]  # (3, b) mm
+            ok = np.all(np.abs(c) <= 1.0, axis=0) if c.shape[0] else np.ones(b, bool)
+            ok &= np.all(np.isfinite(dr), axis=0)
+            nbad = int(b - np.count_nonzero(ok))
+            failures += nbad
+            if nbad:
+                dr = dr[:, ok]
+            # probabilities: failures count as outside (numerators over ok samples, denominators n)
+            d2 = np.einsum("ib,ib->b", dr, dr)
+            inside_sphere += int(np.count_nonzero(d2 <= R2))
+            w = U.T @ dr  # (3, b) components along the analytic principal directions
+            inside_comp += np.count_nonzero(np.abs(w) <= R, axis=1)
+            if Ud is not None:
+                inside_dir += np.count_nonzero(np.abs(Ud.T @ dr) <= R, axis=1)
+            # moments about a shift (the first batch's mean) for numerical safety
+            if dr.shape[1]:
+                if shift is None:
+                    shift = dr.mean(axis=1)
+                    w_shift = U.T @ shift
+                x = dr - shift[:, None]
+                s1 += x.sum(axis=1)
+                s2 += x @ x.T
+                y = w - w_shift[:, None]
+                y2 = y * y
+                wpow[0] += y.sum(axis=1)
+                wpow[1] += y2.sum(axis=1)
+                wpow[2] += (y2 * y).sum(axis=1)
+                wpow[3] += (y2 * y2).sum(axis=1)
+                m_ok += dr.shape[1]
+            if Phi is not None:
+                Rm = outs[2][:, ok].reshape(3, 3, -1, order="F")  # R[i, j, b]
+                # small rotation of the hand: dR = R R0^T; rotation vector from its skew part
+                dR = np.einsum("ikb,jk->ijb", Rm, sampler.R0)
+                s = 0.5 * np.stack([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
+                sn = np.sqrt(np.einsum("ib,ib->b", s, s))
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    fac = np.where(sn > 0, np.arcsin(np.minimum(sn, 1.0)) / np.where(sn > 0, sn, 1.0), 1.0)
+                phi = s * fac
+                inside_ocomp += np.count_nonzero(np.abs(Uo.T @ phi) <= Phi, axis=1)
+                z = Rm[:, 2, :]
+                ang = np.arctan2(np.linalg.norm(np.cross(z0, z.T), axis=1), z0 @ z)
+                inside_cone += int(np.count_nonzero(ang <= Phi))
+            done += b
+            bar.update(done, b)
+    finally:
+        bar.close()
+    elapsed = time.perf_counter() - t0
+
+    zc = NormalDist().inv_cdf(0.5 + 0.5 * confidence)
+    if m_ok >= 2:
+        mx = s1 / m_ok
+        mean = shift + mx
+        cov = (s2 - m_ok * np.outer(mx, mx)) / (m_ok - 1)
+        # central moments of w_j
+        mu = wpow[0] / m_ok
+        c2 = wpow[1] / m_ok - mu**2
+        c4 = wpow[3] / m_ok - 4 * mu * wpow[2] / m_ok + 6 * mu**2 * wpow[1] / m_ok - 3 * mu**4
+        with np.errstate(invalid="ignore", divide="ignore"):
+            kurt = np.where(c2 > 0, c4 / np.where(c2 > 0, c2, 1.0) ** 2 - 3.0, np.nan)
+        std_w = np.sqrt(np.maximum(np.diag(U.T @ cov @ U), 0.0))
+        se_mean = np.sqrt(np.maximum(np.diag(cov), 0.0) / m_ok)
+    else:
+        mean = np.full(3, np.nan)
+        cov = np.full((3, 3), np.nan)
+        kurt = np.full(3, np.nan)
+        std_w = np.full(3, np.nan)
+        se_mean = np.full(3, np.nan)
+    p_comp = inside_comp / n
+    p_comp_ci = wilson_interval(inside_comp, n, confidence)
+    p_sph = inside_sphere / n
+    p_sph_ci = wilson_interval(inside_sphere, n, confidence)
+    pa = np.asarray(ana.p_components)
+    extra = {}
+    if Ud is not None:
+        extra.update(directions=Ud, p_directions=inside_dir / n,
+                     p_directions_ci=wilson_interval(inside_dir, n, confidence))
+    if Phi is not None:
+        extra.update(
+            Phi=Phi,
+            p_orientation_components=inside_ocomp / n,
+            p_orientation_components_ci=wilson_interval(inside_ocomp, n, confidence),
+            p_orientation_components_analytic=np.asarray(ana.p_orientation_components),
+            p_cone=inside_cone / n,
+            p_cone_ci=wilson_interval(inside_cone, n, confidence),
+            p_cone_analytic=float(ana.p_cone),
+        )
+    return MonteCarloResult(
+        model=mechanism.name,
+        q=qv,
+        position=p0.copy(),
+        distribution=distribution,
+        tolerances=dict(zip(mechanism.error_parameters, eps.tolist())),
+        R=R,
+        n=n,
+        seed=seed,
+        batch=batch,
+        confidence=confidence,
+        ci_method="Wilson score (probabilities), normal approximation (mean)",
+        n_loop_failures=failures,
+        mean=mean,
+        mean_ci=np.stack([mean - zc * se_mean, mean + zc * se_mean], axis=-1),
+        covariance=cov,
+        covariance_analytic=ana.covariance,
+        principal_directions=U,
+        principal_std=std_w,
+        principal_std_analytic=ana.principal_std,
+        kurtosis=kurt,
+        kurtosis_se=math.sqrt(24.0 / max(m_ok, 1)),
+        p_components=p_comp,
+        p_components_ci=p_comp_ci,
+        p_components_analytic=pa,
+        p_components_diff=p_comp - pa,
+        p_components_analytic_in_ci=(p_comp_ci[:, 0] <= pa) & (pa <= p_comp_ci[:, 1]),
+        p_sphere=p_sph,
+        p_sphere_ci=p_sph_ci,
+        p_sphere_analytic=float(ana.p_sphere),
+        p_sphere_diff=p_sph - float(ana.p_sphere),
+        p_sphere_analytic_in_ci=bool(p_sph_ci[0] <= ana.p_sphere <= p_sph_ci[1]),
+        elapsed_s=elapsed,
+        samples_per_s=n / elapsed if elapsed > 0 else math.inf,
+        **extra,
+    )

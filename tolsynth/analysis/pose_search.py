@@ -1,0 +1,401 @@
+"""The worst-error pose search: the configuration of worst accuracy at given tolerances.
+
+:func:`worst_pose` searches the joint ranges, inside the joint constraints (the interference
+limit of the paper's robot), for the configuration of worst accuracy: the largest principal
+standard deviation (``criterion="sigma"``) or the lowest sphere probability ``P(|dr| <= R)``
+(``criterion="probability"``), by a coarse grid and then a local generating-set (pattern)
+search, on the batched analytic statistics of :mod:`tolsynth.kinematics.batch_stats`.  Units: mm and rad.
+
+>>> import tolsynth
+>>> m = tolsynth.load_model("xu_zhang_1988")
+>>> w = tolsynth.worst_pose(m, "figure3", criterion="sigma")
+>>> bool(w.value >= w.reference_value)
+True
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from tolsynth.kinematics.batch_stats import _criterion_batch, principal_std_batch
+from tolsynth.checks import check_count, check_mapping, check_positive, check_real, check_seed
+from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
+from tolsynth.kinematics.joint_space import MODEL_REFERENCE, _feasible, _limits, _reference
+from tolsynth.probability.stats import p_ball
+from tolsynth.tabular import Tabular
+
+__all__ = ["WorstPose", "worst_pose"]
+
+#: largest number of grid points of the coarse search (memory ~ 100 bytes per point and joint)
+MAX_GRID_POINTS = 10**6
+
+
+def _invariant_joints(mech, eps, distribution, rng) -> list[int]:
+    """Joints that do not change the principal standard deviations (checked at random poses)."""
+    lo, hi = _limits(mech)
+    nq = len(lo)
+    Q = lo[:, None] + (hi - lo)[:, None] * rng.random((nq, 6))
+    base = principal_std_batch(mech, Q, eps, distribution)
+    out = []
+    for j in range(nq):
+        Q2 = Q.copy()
+        Q2[j] = lo[j] + (hi[j] - lo[j]) * rng.random(Q.shape[1])
+        s2 = principal_std_batch(mech, Q2, eps, distribution)
+        if np.all(np.abs(s2 - base) <= 1e-9 * np.max(base) + 1e-15):
+            out.append(j)
+    return out
+
+
+@dataclass(frozen=True)
+class WorstPose(Tabular):
+    """The configuration of worst accuracy found, next to a reference configuration.
+
+    Attributes
+    ----------
+    criterion : {"sigma", "probability"}
+        Largest principal standard deviation (mm; larger is worse) or ``P(|dr| <= R)``
+        (Eq. 5; lower is worse), both of the linear, Gaussian model.
+    q, position : ndarray
+        Joint values (rad) and hand position (mm) of the worst pose found.  Inside every joint
+        limit and joint constraint.
+    value : float
+        Criterion there (sigma in mm, or the probability).
+    principal_std : ndarray (mm)
+    p_sphere : float or None
+        ``P(|dr| <= R)`` there (with ``R``).
+    reference, reference_q, reference_position, reference_value, reference_principal_std,
+    reference_p_sphere
+        The same at the reference configuration (None without one; for ``xu_zhang_1988`` by
+        default its ``worst``: the paper's pose
+        (925, 0, 1225) mm, which lies 0.33 deg past the interference limit).
+    held_joints : dict
+        Joints held fixed (rad) because they do not change the error statistics (found
+        numerically), plus any ``fixed`` by the caller.
+    active : list of str
+        Limits and constraints active (within 1e-6 rad) at the worst pose.
+    n_grid, n_evaluations : int
+        Feasible grid points and total poses evaluated.
+    method : str
+    """
+
+    model: str
+    criterion: str
+    distribution: str
+    R: float | None
+    tolerances: dict
+    q: np.ndarray
+    position: np.ndarray
+    value: float
+    principal_std: np.ndarray
+    p_sphere: float | None
+    reference: str | None
+    reference_q: np.ndarray | None
+    reference_position: np.ndarray | None
+    reference_value: float | None
+    reference_principal_std: np.ndarray | None
+    reference_p_sphere: float | None
+    held_joints: dict
+    active: list
+    n_grid: int
+    n_evaluations: int
+    elapsed_s: float
+    method: str
+
+    def to_dict(self) -> dict:
+        """Plain dict (arrays as lists) for JSON."""
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
+
+    def report(self, joint_names: Sequence[str] | None = None) -> str:
+        """Readable table: the worst pose found beside the reference (joints in deg, hand in mm)."""
+        unit = "mm (largest principal sigma)" if self.criterion == "sigma" else f"(P(|dr|<={self.R:g} mm))"
+        names = joint_names or [f"q{i + 1}" for i in range(len(self.q))]
+        lines = [f"worst pose   criterion {self.criterion} {unit}, {self.distribution} errors; {self.method}"]
+        lines.append(f"{'':22}{'found':>42}{'reference (' + str(self.reference) + ')':>40}")
+        fmt = lambda v: "(" + ", ".join(f"{x:.3f}" for x in v) + ")"  # noqa: E731
+        lines.append(f"{'joints (deg)':22}{fmt(np.degrees(self.q)):>42}"
+                     f"{fmt(np.degrees(self.reference_q)) if self.reference_q is not None else '-':>40}")
+        lines.append(f"{'hand (mm)':22}{fmt(self.position):>42}"
+                     f"{fmt(self.reference_position) if self.reference_position is not None else '-':>40}")
+        lines.append(f"{'criterion':22}{self.value:>42.6f}"
+                     f"{self.reference_value if self.reference_value is not None else float('nan'):>40.6f}")
+        lines.append(f"{'principal sigma (mm)':22}{fmt(self.principal_std):>42}"
+                     f"{fmt(self.reference_principal_std) if self.reference_principal_std is not None else '-':>40}")
+        if self.p_sphere is not None:
+            lines.append(f"{'P(|dr|<=R)':22}{self.p_sphere:>42.6f}"
+                         f"{self.reference_p_sphere if self.reference_p_sphere is not None else float('nan'):>40.6f}")
+        lines.append("joint order  " + ", ".join(names))
+        lines.append("held         " + (", ".join(f"{k} = {math.degrees(v):g} deg" for k, v in self.held_joints.items()) or "-"))
+        lines.append("active       " + (", ".join(self.active) or "none (interior)"))
+        return "\n".join(lines)
+
+
+def _tangent_directions(mech, free: list[int], scale: np.ndarray) -> np.ndarray:
+    """Poll directions in scaled coordinates: +-e_i and the constraint-tangent projections of
+    e_i (so that the search can slide along an active joint constraint)."""
+    k = len(free)
+    dirs = [np.eye(k)[i] for i in range(k)]
+    names = list(mech.joint_names)
+    for c in mech.spec.joint_constraints:
+        a = np.zeros(k)
+        for jn, coef in c.terms.items():
+            j = names.index(jn)
+            if j in free:
+                a[free.index(j)] = coef * scale[free.index(j)]
+        if not np.any(a):
+            continue
+        for i in range(k):
+            t = np.eye(k)[i] - a[i] / (a @ a) * a
+            if np.linalg.norm(t) > 1e-12:
+                dirs.append(t / np.linalg.norm(t))
+    D = []
+    for d in dirs:
+        for s in (1.0, -1.0):
+            v = s * d
+            if not any(np.allclose(v, e) for e in D):
+                D.append(v)
+    return np.array(D)
+
+
+#: error allowed in P(|dr| <= R) (criterion "probability") on the coarse grid, which only picks the
+#: starts, and in the pattern search's polls; the value reported is evaluated to 1e-12
+GRID_P_TOL = 1e-7
+SEARCH_P_TOL = 1e-10
+
+
+def worst_pose(
+    mechanism,
+    tolerances,
+    criterion: str = "sigma",
+    R: float | None = None,
+    distribution=None,
+    grid: int | None = None,
+    reference=MODEL_REFERENCE,
+    fixed: Mapping[str, float] | None = None,
+    starts: int = 4,
+    step_tol: float = 1e-7,
+    max_grid_points: int = 20000,
+    seed: int = 0,
+) -> WorstPose:
+    """Search the joint space for the pose of worst accuracy at given tolerances.
+
+    Method: (1) joints that do not change the error statistics are found numerically (at random
+    poses) and held at the reference value -- for ``xu_zhang_1988`` the waist ``theta1`` (it turns
+    the whole error ellipsoid) and the roll ``theta5`` (the hand point lies on its axis); (2) a
+    coarse grid over the remaining joints, inside every joint limit and joint constraint;
+    (3) from the ``starts`` best, mutually separated grid points, a generating-set search
+    (compass search with complete polling; step halved on failure down to ``step_tol`` of each
+    joint's range) whose directions include the tangents of the linear joint constraints, with
+    infeasible polls rejected.  Derivative-free on purpose: the largest principal sigma is not
+    differentiable where two principal variances cross, the sphere probability is a quadrature,
+    and the worst pose typically lies on limits and the interference constraint, where a tangent
+    polling set is all that is needed.
+
+    Parameters
+    ----------
+    mechanism : Mechanism
+    tolerances : str, dict or array
+        Tolerance set name or half-widths (tolerance units).
+    criterion : {"sigma", "probability"}
+        Maximise the largest principal sigma (mm), or minimise ``P(|dr| <= R)`` (needs ``R``).
+    R : float, optional
+        Radius (mm), > 0; required for ``"probability"``, reported otherwise if given.
+    distribution : str or dict, optional
+        As :func:`tolsynth.synthesize` (default: the model file's, else uniform).
+    grid : int, optional
+        Grid points per searched joint (default: as many as keep the grid under
+        ``max_grid_points``).
+    reference : str, array or None
+        Configuration reported beside the result: a configuration name, joint values (rad), or
+        None for none.  Default: the model's reference pose (its ``worst`` configuration if it
+        has one, else none; :func:`tolsynth.kinematics.joint_space.model_reference`).
+    fixed : dict, optional
+        Joint name -> value (rad) to hold in addition to the invariant joints.
+    starts : int
+        Local searches started from the best grid points.
+    step_tol : float
+        Final step, as a fraction of each joint's range.
+    seed : int
+        Seed of the random poses used to detect invariant joints.
+
+    Returns
+    -------
+    WorstPose
+
+    Examples
+    --------
+    >>> import tolsynth
+    >>> m = tolsynth.load_model("xu_zhang_1988")
+    >>> w = tolsynth.worst_pose(m, "figure3", criterion="probability", R=0.2)
+    >>> bool(w.p_sphere <= w.reference_p_sphere)
+    True
+    """
+    t0 = time.perf_counter()
+    from tolsynth.kinematics.mechanism import as_mechanism
+
+    mechanism = as_mechanism(mechanism)
+    if criterion not in ("sigma", "probability"):
+        raise OutOfRangeError("criterion", f"got {criterion!r}", "'sigma' or 'probability'")
+    from tolsynth.probability.distributions import resolve
+
+    distribution = resolve(distribution, mechanism)
+    if R is not None:
+        R = check_positive(R, "R")
+    elif criterion == "probability":
+        raise InputError("R", "criterion 'probability' needs a radius", "a finite number > 0 (mm)")
+    starts = check_count(starts, "starts", 1, 1000)
+    step_tol = check_positive(step_tol, "step_tol", "fraction of each joint's range", upper=1.0)
+    max_grid_points = check_count(max_grid_points, "max_grid_points", 1, MAX_GRID_POINTS)
+    grid = None if grid is None else check_count(grid, "grid", 2, MAX_GRID_POINTS)
+    seed = check_seed(seed)
+    fixed = {name: check_real(v, f"fixed[{name}]", "rad")
+             for name, v in check_mapping(fixed, "fixed", "a dict joint name -> value (rad)").items()}
+    eps = mechanism.tolerances(tolerances)
+    ref_name, ref_q = _reference(mechanism, reference)
+    lo, hi = _limits(mechanism)
+    nq = len(lo)
+    names = list(mechanism.joint_names)
+    rng = np.random.default_rng(seed)
+
+    held: dict[int, float] = {}
+    base_q = ref_q if ref_q is not None else np.clip(np.zeros(nq), lo, hi)
+    for j in _invariant_joints(mechanism, eps, distribution, rng):
+        held[j] = float(np.clip(base_q[j], lo[j], hi[j]))
+    for name, v in (fixed or {}).items():
+        if name not in names:
+            raise UnknownNameError("fixed", f"unknown joint {name!r}", "one of " + ", ".join(names))
+        if not lo[names.index(name)] <= float(v) <= hi[names.index(name)]:
+            raise OutOfRangeError(f"fixed[{name}]", f"{math.degrees(v):g} deg",
+                                  f"{math.degrees(lo[names.index(name)]):g} to {math.degrees(hi[names.index(name)]):g} deg")
+        held[names.index(name)] = float(v)
+    free = [j for j in range(nq) if j not in held]
+    k = len(free)
+    n_eval = 0
+
+    def full(U: np.ndarray) -> np.ndarray:  # scaled (k, N) -> joints (nq, N)
+        Q = np.empty((nq, U.shape[1]))
+        for j, v in held.items():
+            Q[j] = v
+        for i, j in enumerate(free):
+            Q[j] = np.where(U[i] >= 1.0, hi[j], lo[j] + (hi[j] - lo[j]) * U[i])  # the limit itself at 1
+        return Q
+
+    def evaluate(U: np.ndarray, tol: float = SEARCH_P_TOL) -> np.ndarray:
+        nonlocal n_eval
+        Q = full(U)
+        ok = _feasible(mechanism, Q) & np.all((U >= 0) & (U <= 1), axis=0)
+        val = np.full(U.shape[1], -np.inf)
+        if np.any(ok):
+            val[ok] = _criterion_batch(mechanism, Q[:, ok], eps, distribution, criterion, R, tol)[0]
+            n_eval += int(np.count_nonzero(ok))
+        return val
+
+    # (2) coarse grid
+    if k == 0:
+        U = np.zeros((0, 1))
+        vals = evaluate(U)
+        g = 1
+    else:
+        g = int(grid) if grid is not None else max(5, int(math.floor(max_grid_points ** (1.0 / k))))
+        if g < 2:
+            raise OutOfRangeError("grid", f"got {grid}", "an integer >= 2")
+        if g**k > MAX_GRID_POINTS:
+            raise OutOfRangeError("grid", f"{g}**{k} searched joints = {g**k} points",
+                                  f"at most {MAX_GRID_POINTS} points (grid <= {int(MAX_GRID_POINTS ** (1 / k))})")
+        axes = [np.linspace(0.0, 1.0, g)] * k
+        U = np.array([a.ravel() for a in np.meshgrid(*axes, indexing="ij")])
+        vals = evaluate(U, GRID_P_TOL)  # the grid only ranks the starts
+    feasible = np.isfinite(vals)
+    if not np.any(feasible):
+        raise OutOfRangeError("joint limits", "no grid point satisfies every joint limit and constraint",
+                              "a non-empty feasible joint space")
+    n_grid = int(np.count_nonzero(feasible))
+
+    # (3) local generating-set search from the best separated grid points
+    order = np.argsort(-vals)
+    picked: list[int] = []
+    h0 = 1.0 / (g - 1) if k else 0.0
+    for i in order:
+        if not np.isfinite(vals[i]):
+            break
+        if all(np.max(np.abs(U[:, i] - U[:, p])) > 1.5 * h0 for p in picked):
+            picked.append(int(i))
+        if len(picked) >= starts:
+            break
+    best_u = U[:, picked[0]].copy()
+    if k:
+        D = _tangent_directions(mechanism, free, hi[free] - lo[free])
+        X = U[:, picked].copy()  # (k, S)
+        F = vals[picked].copy()
+        h = np.full(len(picked), 0.5 * h0)
+        while np.any(h >= step_tol):
+            act = np.flatnonzero(h >= step_tol)
+            P = X[:, act, None] + h[act][None, :, None] * D.T[:, None, :]  # (k, A, nd)
+            fv = evaluate(P.reshape(k, -1)).reshape(len(act), -1)
+            j = np.argmax(fv, axis=1)
+            gain = fv[np.arange(len(act)), j]
+            better = gain > F[act] + 1e-14 * np.abs(F[act])
+            for a_i, s in enumerate(act):
+                if better[a_i]:
+                    X[:, s] = P[:, a_i, j[a_i]]
+                    F[s] = gain[a_i]
+                else:
+                    h[s] *= 0.5
+        b = int(np.argmax(F))
+        best_u = X[:, b]
+    q = full(best_u[:, None])[:, 0]
+    value, sig, P = _criterion_batch(mechanism, q[:, None], eps, distribution, criterion, R)
+    p_sph = float(p_ball(sig[0] ** 2, R)) if R is not None else None
+    position = np.asarray(mechanism.fk(q, check_limits=True))[:3, 3]
+
+    active = []
+    tol_a = 1e-6
+    for j in range(nq):
+        if j in held:
+            continue
+        if abs(q[j] - lo[j]) <= tol_a:
+            active.append(f"{names[j]} lower ({math.degrees(lo[j]):g} deg)")
+        if abs(q[j] - hi[j]) <= tol_a:
+            active.append(f"{names[j]} upper ({math.degrees(hi[j]):g} deg)")
+    for c in mechanism.spec.joint_constraints:
+        v = sum(coef * q[names.index(jn)] for jn, coef in c.terms.items())
+        if abs(v - c.lower) <= tol_a:
+            active.append(f"{c.name} lower ({math.degrees(c.lower):g} deg)")
+        if abs(v - c.upper) <= tol_a:
+            active.append(f"{c.name} upper ({math.degrees(c.upper):g} deg)")
+
+    ref = dict(reference_q=None, reference_position=None, reference_value=None,
+               reference_principal_std=None, reference_p_sphere=None)
+    if ref_q is not None:
+        rv, rs, rp = _criterion_batch(mechanism, ref_q[:, None], eps, distribution, criterion, R)
+        ref.update(
+            reference_q=ref_q,
+            reference_position=np.asarray(mechanism.fk(ref_name if ref_name != "given" else ref_q))[:3, 3],
+            reference_value=float(rs[0, 0]) if criterion == "sigma" else float(rp[0]),
+            reference_principal_std=rs[0],
+            reference_p_sphere=float(p_ball(rs[0] ** 2, R)) if R is not None else None,
+        )
+    return WorstPose(
+        model=mechanism.name,
+        criterion=criterion,
+        distribution=distribution,
+        R=R,
+        tolerances=dict(zip(mechanism.error_parameters, eps.tolist())),
+        q=q,
+        position=position,
+        value=float(sig[0, 0]) if criterion == "sigma" else float(P[0]),
+        principal_std=sig[0],
+        p_sphere=p_sph,
+        reference=ref_name,
+        held_joints={names[j]: v for j, v in held.items()},
+        active=active,
+        n_grid=n_grid,
+        n_evaluations=n_eval,
+        elapsed_s=time.perf_counter() - t0,
+        method=f"grid {g}^{k} over {', '.join(names[j] for j in free) or '-'}, then pattern search from {len(picked)} starts",
+        **ref,
+    )

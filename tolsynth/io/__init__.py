@@ -1,0 +1,1 @@
+"""Results out of the process: tables (CSV, JSON, Parquet) and design reports."""

@@ -1,0 +1,103 @@
+"""Joint-space helpers shared by the pose search and the workspace map: joint limits, joint
+constraints (the interference limit), wrapping of revolute joints, the distance to the limits,
+and the resolution of a reference configuration.  Units: rad.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from tolsynth.errors import UnknownNameError
+
+__all__ = ["MODEL_REFERENCE", "model_reference"]
+
+
+class _ModelReference:
+    """Default of ``reference=``: the model's own reference pose (see :func:`model_reference`)."""
+
+    _instance = None
+
+    def __new__(cls):
+        if cls._instance is None:
+            cls._instance = super().__new__(cls)
+        return cls._instance
+
+    def __repr__(self) -> str:
+        return "MODEL_REFERENCE"
+
+    def __reduce__(self):
+        return (_ModelReference, ())
+
+
+#: ``reference=MODEL_REFERENCE`` (the default): the model's reference pose, or none if it has none
+MODEL_REFERENCE = _ModelReference()
+
+
+def model_reference(mech) -> str | None:
+    """The model's reference pose: the configuration its file names as ``reference`` (when the
+    format has that field), else its configuration ``worst`` (the paper's pose of largest error),
+    else None -- a model without one works everywhere, with no pose marked or compared."""
+    name = getattr(mech.spec, "reference", None)
+    if isinstance(name, str) and name in mech.configurations:
+        return name
+    return "worst" if "worst" in mech.configurations else None
+
+
+def _limits(mech) -> tuple[np.ndarray, np.ndarray]:
+    return np.array([j.lower for j in mech.spec.joints]), np.array([j.upper for j in mech.spec.joints])
+
+
+def _feasible(mech, Q: np.ndarray) -> np.ndarray:
+    """Joint limits and joint constraints, evaluated exactly as :meth:`Mechanism.joints` does."""
+    lo, hi = _limits(mech)
+    ok = np.all((Q >= lo[:, None]) & (Q <= hi[:, None]), axis=0)
+    names = list(mech.joint_names)
+    for c in mech.spec.joint_constraints:
+        v = 0
+        for jn, coef in c.terms.items():
+            v = v + coef * Q[names.index(jn)]
+        ok &= (c.lower <= v) & (v <= c.upper)
+    return ok
+
+
+def _wrap(mech, Q: np.ndarray) -> np.ndarray:
+    """Move each revolute joint value by a multiple of 2 pi into its limits where possible."""
+    lo, hi = _limits(mech)
+    Q = Q.copy()
+    for j in range(Q.shape[0]):
+        v = Q[j]
+        k = np.ceil((lo[j] - v) / (2 * math.pi))  # smallest shift that reaches the lower limit
+        w = v + 2 * math.pi * k
+        Q[j] = np.where(w <= hi[j], w, v)
+    return Q
+
+
+def _reference(mech, reference) -> tuple[str | None, np.ndarray | None]:
+    """``(name, joints)`` of a reference: ``MODEL_REFERENCE``, None, a configuration name or
+    joint values (rad); the name is ``"given"`` for joint values, None for no reference."""
+    if reference is MODEL_REFERENCE:
+        reference = model_reference(mech)
+    if reference is None:
+        return None, None
+    if isinstance(reference, str):
+        if reference not in mech.configurations:
+            raise UnknownNameError("reference", f"unknown configuration {reference!r}",
+                                   "one of " + ", ".join(mech.configurations))
+        return reference, mech.joints(reference)
+    return "given", mech.joints(reference)
+
+
+def _limit_margin(mech, Q: np.ndarray) -> np.ndarray:
+    """Smallest distance (rad) to a joint limit or joint constraint; negative outside."""
+    lo, hi = _limits(mech)
+    m = np.min(np.minimum(Q - lo[:, None], hi[:, None] - Q), axis=0)
+    names = list(mech.joint_names)
+    for c in mech.spec.joint_constraints:
+        v = 0
+        for jn, coef in c.terms.items():
+            v = v + coef * Q[names.index(jn)]
+        norm = math.sqrt(sum(coef * coef for coef in c.terms.values()))
+        m = np.minimum(m, np.minimum(v - c.lower, c.upper - v) / norm)
+    return m

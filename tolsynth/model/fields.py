@@ -1,0 +1,300 @@
+"""The model-file format (every table and its keys) and the strict reader of its fields.
+
+Unknown keys, misspellings and wrong types are :class:`tolsynth.ModelFileError` naming the field;
+the D-H and URDF imports read through the same :class:`_Reader`, so they report the same way.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from typing import Any
+
+from tolsynth.checks import HUGE, TINY
+from tolsynth.errors import ModelFileError, UnknownNameError
+from tolsynth.units import ANGLE_UNITS, LENGTH_UNITS, allowed_units, to_base, unit_kind
+
+from collections.abc import Mapping
+
+
+__all__ = ["FORMAT", "DEFAULT_K", "DEFAULT_BOUNDS", "DEFAULT_TOLERANCE_UNITS"]
+
+
+# --------------------------------------------------------------------------------------------
+# the format: every table and its keys
+# --------------------------------------------------------------------------------------------
+#: Every table of the model-file format and its keys: ``True`` required, ``False`` optional.
+#: A key that is not listed here is a ModelFileError ("did you mean ...?").  Adding a field to the
+#: format is one line here, plus its parsing in ``_parse`` (or in the module that owns it).
+#: Sections: "" is the top level; "configurations.*" lists the keys besides the joint names;
+#: "tolerance_value" is the ``{ value, unit }`` form of a tolerance.
+FORMAT: dict[str, dict[str, bool]] = {
+    "": {
+        "model": True,
+        "units": True,
+        "symbols": True,
+        "chain": True,
+        "joints": True,
+        "loops": False,
+        "joint_constraints": False,
+        "configurations": True,
+        "error_parameters": True,
+        "tolerance_sets": False,
+        "reference_results": False,
+        "joint_errors": False,
+    },
+    "model": {"name": True, "title": False, "source": True, "assumptions": True, "notes": False},
+    "units": {"length": True, "angle": True},
+    "chain": {"convention": True, "links": True, "base": False, "tool": False},
+    "joints": {"name": True, "limits": True},
+    "loops": {
+        "name": True,
+        "kind": True,
+        "passive_joint": True,
+        "ground": True,
+        "ground_angle": True,
+        "crank": True,
+        "crank_angle": True,
+        "coupler": True,
+        "lever": True,
+        "branch": True,
+    },
+    "joint_constraints": {"name": True, "terms": True, "limits": True},
+    "configurations.*": {"note": False, "waive": False},
+    "error_parameters": {
+        "name": True,
+        "perturbs": True,
+        "unit": True,
+        "k": True,
+        "bounds": True,
+        "label": False,
+        "alias": False,
+        "cost": False,  # a cost model, {model = "chase", A = .., B = .., k = ..} (tolsynth.model.cost)
+        "processes": False,  # [{name, cost, lower, upper}, ...] (tolsynth.synthesis.processes)
+        "lock": False,  # a tolerance fixed at this value (tolerance unit)
+        "distribution": False,  # this error's shape (tolsynth.probability.distributions), default uniform
+    },
+    "tolerance_value": {"value": True, "unit": True},
+    # joint errors (tolsynth.model.joint_errors); value (fixed) or bounds (designable)
+    "joint_errors": {
+        "joint": True,
+        "kind": True,
+        "value": False,
+        "bounds": False,
+        "unit": False,
+        "axial": False,
+        "length": False,
+        "k": False,
+        "cost": False,
+        "note": False,
+    },
+    "reference_results": {
+        "table": True,
+        "R": True,
+        "p": True,
+        "alpha": True,
+        "distribution": True,
+        "tolerances": True,
+    },
+}
+
+
+def _nearest(key: str, valid) -> str:
+    """`` (did you mean `x`?)`` for the closest valid name, or an empty string."""
+    match = difflib.get_close_matches(str(key), [str(v) for v in valid], n=1, cutoff=0.5)
+    return f" (did you mean `{match[0]}`?)" if match else ""
+
+
+def _type_name(value: Any) -> str:
+    return {dict: "a table", list: "a list", str: "a string", bool: "a boolean"}.get(
+        type(value), type(value).__name__
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# parsing
+# --------------------------------------------------------------------------------------------
+class _Reader:
+    """Small helper that reads typed fields and raises ModelFileError naming the field."""
+
+    def __init__(self, path: str):
+        self.path = path
+
+    def fail(self, field_name: str, message: str) -> ModelFileError:
+        return ModelFileError(self.path, field_name, message)
+
+    # ---- tables and keys
+    def keys(self, table: dict, where: str, valid, required=()) -> None:
+        """Unknown keys and missing required keys of ``table`` are errors."""
+        for key in table:
+            if key not in valid:
+                raise self.fail(
+                    f"{where}.{key}" if where else str(key),
+                    f"unknown key{_nearest(key, valid)} (allowed here: {', '.join(map(str, valid))})",
+                )
+        for key in required:
+            if key not in table:
+                raise self.fail(f"{where}.{key}" if where else key, "missing required field")
+
+    def table(self, value: Any, where: str, section: str | None = None, extra=()) -> dict:
+        """``value`` must be a table; with ``section``, its keys must be those of FORMAT[section]
+        (plus ``extra``)."""
+        if not isinstance(value, dict):
+            raise self.fail(where or "(file)", f"expected a table, got {_type_name(value)}: {value!r:.60}")
+        if section is not None:
+            spec = FORMAT[section]
+            self.keys(value, where, list(spec) + list(extra), [k for k, req in spec.items() if req])
+        return value
+
+    def tables(self, value: Any, where: str, section: str) -> list[dict]:
+        """An array of tables (``[[section]]``), each with the keys of FORMAT[section]."""
+        if not isinstance(value, list):
+            raise self.fail(where, f"expected an array of tables [[{where}]], got {_type_name(value)}")
+        return [self.table(item, f"{where}[{i}]", section) for i, item in enumerate(value)]
+
+    def get(self, table: dict, key: str, where: str, kind=None, default: Any = ...):
+        field_name = f"{where}.{key}" if where else key
+        if key not in table:
+            if default is ...:
+                raise self.fail(field_name, "missing required field")
+            return default
+        value = table[key]
+        if kind is float:
+            return self.number(value, field_name)
+        if kind is str:
+            return self.name(value, field_name)
+        if kind is int and (isinstance(value, bool) or not isinstance(value, int)):
+            raise self.fail(field_name, f"expected an integer, got {_type_name(value)}: {value!r}")
+        if kind is not None and not isinstance(value, kind):
+            raise self.fail(field_name, f"expected {kind.__name__}, got {_type_name(value)}: {value!r:.60}")
+        return value
+
+    # ---- values
+    def name(self, value: Any, where: str) -> str:
+        """A non-empty string."""
+        if not isinstance(value, str):
+            raise self.fail(where, f"expected a string, got {_type_name(value)}: {value!r:.60}")
+        if not value.strip():
+            raise self.fail(where, "expected a non-empty string")
+        return value
+
+    def names(self, value: Any, where: str, allow_empty: bool = True) -> list[str]:
+        """A list of distinct non-empty strings."""
+        if not isinstance(value, list):
+            raise self.fail(where, f"expected a list of strings, got {_type_name(value)}: {value!r:.60}")
+        out = [self.name(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        if not allow_empty and not out:
+            raise self.fail(where, "expected at least one name")
+        dup = sorted({v for v in out if out.count(v) > 1})
+        if dup:
+            raise self.fail(where, f"{dup} given more than once")
+        return out
+
+    def number(self, value: Any, where: str, lower: float = -HUGE, upper: float = HUGE) -> float:
+        """A finite number in ``[lower, upper]`` (the shared limits of :mod:`tolsynth.checks`)."""
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(where, f"expected a number, got {_type_name(value)}: {value!r:.60}")
+        try:
+            v = float(value)
+        except OverflowError:  # an integer beyond double range
+            v = math.inf
+        if not (math.isfinite(v) and lower <= v <= upper):
+            raise self.fail(where, f"expected a finite number from {lower:g} to {upper:g}, got {value!r}")
+        return v
+
+    def positive(self, value: Any, where: str) -> float:
+        """A number from TINY to HUGE."""
+        return self.number(value, where, TINY, HUGE)
+
+    def unit(self, value: Any, where: str, kind: str | None = None) -> str:
+        if not isinstance(value, str) or unit_kind(value) is None:
+            raise self.fail(where, f"unknown unit {value!r}{_nearest(value, _UNIT_NAMES)} (known: {allowed_units()})")
+        if kind is not None and unit_kind(value) != kind:
+            raise self.fail(where, f"unit {value!r} is not a unit of {kind}")
+        return value
+
+    def pair(self, value: Any, where: str) -> tuple[float, float]:
+        if not isinstance(value, list) or len(value) != 2:
+            raise self.fail(where, f"expected [lower, upper], got {value!r:.60}")
+        lo, hi = (self.number(v, f"{where}[{i}]") for i, v in enumerate(value))
+        if not lo < hi:
+            raise self.fail(where, f"lower {lo} must be below upper {hi}")
+        return lo, hi
+
+
+_UNIT_NAMES = list(LENGTH_UNITS) + list(ANGLE_UNITS)
+
+
+def _tolerance_sets(r, raw_sets, eparams) -> dict[str, dict[str, float]]:
+    """The ``[tolerance_sets]`` of a file: name -> {error parameter: tolerance in its unit}."""
+    tolerance_sets = {}
+    by_name = {p.name: p for p in eparams}
+    by_name.update({p.alias: p for p in eparams if p.alias})
+    for sname, raw in r.table(raw_sets, "tolerance_sets").items():
+        where = f"tolerance_sets.{sname}"
+        r.table(raw, where)
+        values = {}
+        for key, value in raw.items():
+            if key not in by_name:
+                raise r.fail(f"{where}.{key}",
+                             f"unknown error parameter{_nearest(key, by_name)} (known: {[p.name for p in eparams]})")
+            par = by_name[key]
+            if par.name in values:
+                raise r.fail(f"{where}.{key}", f"{par.name!r} is given twice (by its name and its alias)")
+            if isinstance(value, dict):
+                r.table(value, f"{where}.{key}", "tolerance_value")
+                v = r.number(value["value"], f"{where}.{key}.value")
+                u = r.unit(value["unit"], f"{where}.{key}.unit", par.kind)
+                v = v * to_base(u) / par.scale
+            else:
+                v = r.number(value, f"{where}.{key}")
+            if not 0 <= v <= HUGE:
+                raise r.fail(f"{where}.{key}", f"a tolerance must be >= 0 (and at most {HUGE:g} {par.unit}), got {v}")
+            values[par.name] = v
+        missing = [p.name for p in eparams if p.name not in values]
+        if missing:
+            raise r.fail(where, f"missing tolerance(s) for {missing}")
+        tolerance_sets[sname] = values
+    return tolerance_sets
+
+
+def _unique(r: _Reader, names: list, where: str, what: str) -> None:
+    """Each name at most once."""
+    dup = sorted({str(n) for n in names if names.count(n) > 1})
+    if dup:
+        raise r.fail(where, f"{what} {dup} declared more than once")
+
+
+# --------------------------------------------------------------------------------------------
+# defaults of the robots given in Python (a D-H table, a URDF)
+# --------------------------------------------------------------------------------------------
+#: cost factor by kind, as in Xu & Zhang 1988 (and the bundled models): lengths 1, angles 1.5
+DEFAULT_K = {"length": 1.0, "angle": 1.5}
+#: default tolerance bounds (Eq. 22) by kind, in the default tolerance units: mm and mrad
+DEFAULT_BOUNDS = {"length": (0.001, 5.0), "angle": (0.001, 50.0)}
+DEFAULT_TOLERANCE_UNITS = {"length": "mm", "angle": "mrad"}
+
+
+def _by_kind(arg: Any, argname: str, default: dict, selectable: dict[str, str]) -> dict[str, Any]:
+    """``k``/``bounds``/``tolerance_units``: one value for all, or a mapping whose keys are
+    ``"length"``, ``"angle"`` or error-parameter names; returns name -> value for every selected
+    parameter (name -> kind in ``selectable``)."""
+    out = {name: default[kind] for name, kind in selectable.items()}
+    if arg is None:
+        return out
+    if not isinstance(arg, Mapping):
+        return {name: arg for name in selectable}
+    for key in arg:
+        if key not in ("length", "angle") and key not in selectable:
+            valid = ["length", "angle", *selectable]
+            raise UnknownNameError(
+                f"{argname}[{key}]", f"not 'length', 'angle' or a selected error parameter{_nearest(key, valid)}",
+                "'length', 'angle' or one of " + ", ".join(selectable),
+            )
+    for name, kind in selectable.items():  # by kind first, then by name
+        if kind in arg:
+            out[name] = arg[kind]
+    for name in selectable:
+        if name in arg:
+            out[name] = arg[name]
+    return out

@@ -1,0 +1,175 @@
+"""One result type for every solver, and the status vocabulary.
+
+Each solver module owns the table from its own return codes to :class:`Status`; only
+``Status.OPTIMAL`` counts as ``success``.  A result whose ``success`` is False carries the solver's
+last iterate for inspection, but is never to be read as an optimum.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tolsynth.tabular import Tabular
+
+__all__ = ["Status", "ConstraintBlock", "SynthesisResult"]
+
+
+class Status(str, enum.Enum):
+    """Why the solver stopped, in one vocabulary for all solvers."""
+
+    OPTIMAL = "optimal"  # converged to the requested tolerances
+    OPTIMAL_INACCURATE = "optimal_inaccurate"  # stopped at a looser, "acceptable" level
+    INFEASIBLE = "infeasible"  # the solver concluded that no feasible point exists
+    ITERATION_LIMIT = "iteration_limit"  # stopped by an iteration / evaluation limit
+    NUMERICAL_ERROR = "numerical_error"  # stopped by a numerical difficulty
+    SOLVER_ERROR = "solver_error"  # any other failure
+
+    def __str__(self) -> str:
+        return self.value
+
+
+@dataclass(frozen=True)
+class ConstraintBlock:
+    """The accuracy constraints of one pose and kind, at the returned tolerances.
+
+    ``values`` are the paper's ``sigma_j * z(p) / R`` (``/ Phi`` for orientation), descending, each
+    required <= 1 (for the sphere criterion, kind ``"sphere"``: the one value ``(1 - P)/(1 - p)``,
+    P = P(|dr| <= R) by :func:`tolsynth.probability.stats.p_ball`); ``directions`` the principal directions (columns, base frame); ``active`` which
+    values are at 1 (within 1e-6); ``multipliers`` the Lagrange multipliers of the constraints
+    ``g_j = sigma_j z / R - 1 <= 0`` (cost units per unit of g).
+    """
+
+    label: str
+    pose: str
+    kind: str
+    values: np.ndarray
+    directions: np.ndarray
+    active: np.ndarray
+    multipliers: np.ndarray
+
+
+@dataclass(frozen=True)
+class SynthesisResult(Tabular):
+    """Optimal tolerances from :func:`tolsynth.synthesize` (any solver).
+
+    Attributes
+    ----------
+    tolerances : dict
+        Name -> half-width ``eps_i`` in the parameter's tolerance unit (``units``).
+    cost : float
+        ``sum k_i eps_i**-alpha_i`` in the paper's cost units.
+    success, status, message
+        ``success`` is True only for ``Status.OPTIMAL``; ``message`` is the solver's own reason.
+    constraints : tuple of ConstraintBlock
+        ``sigma_j z / R`` per pose and kind, with activity and multipliers.
+    bounds_active : dict
+        Name -> "lower" / "upper" for parameters at a bound (within 1e-6 relative).
+    bound_multipliers : dict
+        Name -> multiplier of the active bound (cost units per tolerance unit).
+    lower_bound, gap : float
+        Lagrangian (dual) lower bound on the optimal cost from the constraint multipliers, and
+        ``cost - lower_bound``; the problem is convex, so a small gap certifies global optimality.
+        (Sphere criterion: the certified optimum of the per-component relaxation, a valid but
+        not tight bound.)
+    iterations, function_evaluations : int
+        For IPOPT: iterations and NLP function evaluations; for SUMT: Powell iterations summed
+        over the outer loop, and penalty-function evaluations.
+    wall_time : float
+        Seconds in the solver (graph construction excluded).
+    history : list of dict
+        Per iteration (IPOPT: objective and infeasibility; SUMT: outer iterations with their
+        inner Powell histories).
+    inputs : dict or None
+        What :func:`tolsynth.synthesize` was given beyond the specification (model, solver
+        options, locks, start); :meth:`to_frame` and the writers record it with ``spec``'s values.
+    """
+
+    solver: str
+    status: Status
+    success: bool
+    message: str
+    tolerances: dict[str, float]
+    units: dict[str, str]
+    cost: float
+    constraints: tuple[ConstraintBlock, ...]
+    bounds_active: dict[str, str]
+    bound_multipliers: dict[str, float]
+    lower_bound: float
+    gap: float
+    iterations: int
+    function_evaluations: int
+    wall_time: float
+    spec: Any = field(repr=False)
+    history: list = field(default_factory=list, repr=False)
+    validation: Any = field(default=None, repr=False)
+    inputs: dict | None = field(default=None, repr=False)
+    #: ``synthesize(..., verify=...)``: the closed loop's :class:`tolsynth.analysis.verify.Verification`
+    verification: Any = field(default=None, repr=False)
+
+    @property
+    def x(self) -> np.ndarray:
+        """Tolerances as a vector in the model's parameter order."""
+        return np.array(list(self.tolerances.values()))
+
+    @property
+    def max_constraint(self) -> float:
+        """Largest ``sigma_j z / R`` over all blocks (<= 1 means the specification is met)."""
+        return float(max(b.values[0] for b in self.constraints))
+
+    def summary(self) -> str:
+        """Readable summary: status, cost, bound and gap, tolerances with units and bound markers, constraint values and multipliers."""
+        lines = [
+            f"{self.solver}: {self.status} ({self.message})",
+            f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})",
+            f"iterations {self.iterations}, evaluations {self.function_evaluations}, {self.wall_time * 1e3:.1f} ms",
+        ]
+        spec = self.spec
+        fixed = {n for n, a, b in zip(getattr(spec, "names", ()), getattr(spec, "lower", ()), getattr(spec, "upper", ()))
+                 if a == b}  # locked (tolsynth.model.locks) or a fixed joint error
+        for name, value in self.tolerances.items():
+            flag = f"  [{self.bounds_active[name]} bound]" if name in self.bounds_active else ""
+            flag = "  [fixed]" if name in fixed else flag
+            lines.append(f"  {name:>8} = {value:.6g} {self.units[name]}{flag}")
+        for b in self.constraints:
+            vals = ", ".join(f"{v:.6f}" for v in b.values)
+            mult = ", ".join(f"{m:.4g}" for m in b.multipliers)
+            if b.kind.endswith("(exact)"):  # tolsynth.solvers.exact: exact P, worst direction first
+                what = ("exact (1-P)/(1-p) in the sphere" if b.kind.startswith("sphere")
+                        else "exact (1-P)/(1-p) along the worst direction, then the principal axes")
+                lines.append(f"  {b.label}: {what} = ({vals})")
+                continue
+            what = "(1-P)/(1-p)" if b.kind == "sphere" else "sigma z/limit"
+            lines.append(f"  {b.label}: {what} = ({vals}); multipliers ({mult})")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """Plain dict for JSON (tolerances, units, cost, bound, gap, constraints, bounds, counts, time)."""
+        return {
+            "solver": self.solver,
+            "status": str(self.status),
+            "success": self.success,
+            "message": self.message,
+            "tolerances": self.tolerances,
+            "units": self.units,
+            "cost": self.cost,
+            "lower_bound": self.lower_bound,
+            "gap": self.gap,
+            "constraints": [
+                {
+                    "label": b.label,
+                    "values": b.values.tolist(),
+                    "active": b.active.tolist(),
+                    "multipliers": b.multipliers.tolist(),
+                }
+                for b in self.constraints
+            ],
+            "bounds_active": self.bounds_active,
+            "bound_multipliers": self.bound_multipliers,
+            "iterations": self.iterations,
+            "function_evaluations": self.function_evaluations,
+            "wall_time": self.wall_time,
+        }

@@ -1,0 +1,86 @@
+"""The arguments of :func:`tolsynth.synthesize`, grouped: what the design must meet
+(:class:`DesignSpec`) and how to solve it (:class:`SolverOptions`).
+
+Both are frozen dataclasses whose fields carry the keyword names of ``synthesize``, so a study can
+keep one specification and vary one field with :func:`dataclasses.replace`:
+
+>>> import tolsynth
+>>> spec = tolsynth.DesignSpec(R=0.5, p=0.99, distribution="uniform")
+>>> res = tolsynth.synthesize("xu_zhang_1988", spec=spec, solver=tolsynth.SolverOptions("sumt"))  # doctest: +SKIP
+
+The keywords keep working; a field given both in a group and as a keyword with a different value
+is an :class:`~tolsynth.InputError` naming it, never a silent choice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any
+
+from tolsynth.errors import InputError
+
+__all__ = ["DesignSpec", "SolverOptions", "merge_groups"]
+
+
+@dataclass(frozen=True)
+class DesignSpec:
+    """What the design must meet and what it may cost; fields as in :func:`tolsynth.synthesize`."""
+
+    R: float | None = None
+    p: float | None = None
+    distribution: Any = None
+    alpha: Any = 0.7
+    k: Any = None
+    bounds: Any = None
+    pose: Any = "worst"
+    poses: Any = None
+    Phi: float | None = None
+    p_orientation: float | None = None
+    criterion: str = "components"
+    cost: Any = None
+    locks: Any = None
+    probability: str | None = None
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """How to solve: the solver, its options, a start, and the checks run at the optimum."""
+
+    solver: str = "ipopt"
+    options: dict | None = None
+    x0: Any = None
+    validate: int | None = None
+    seed: int = 0
+    verify: Any = None
+
+
+def _same(a, b) -> bool:
+    try:
+        return bool(a == b) if not (hasattr(a, "__len__") or hasattr(b, "__len__")) else a is b or repr(a) == repr(b)
+    except Exception:  # arrays and other values without a plain truth value
+        return a is b
+
+
+def merge_groups(given: dict, spec, solver_options) -> dict:
+    """``given`` (synthesize's keywords as called) with the groups' fields filled in.
+
+    A field takes the group's value where the keyword was left at its default; a keyword set to a
+    different value than the group's is an error naming the field.
+    """
+    out = dict(given)
+    for group, cls, argname in ((spec, DesignSpec, "spec"), (solver_options, SolverOptions, "solver")):
+        if group is None:
+            continue
+        if not isinstance(group, cls):
+            raise InputError(argname, f"got {type(group).__name__}", f"a tolsynth.{cls.__name__}")
+        for f in fields(cls):
+            value = getattr(group, f.name)
+            if f.name not in out:
+                out[f.name] = value
+                continue
+            if _same(out[f.name], f.default) or _same(out[f.name], value):
+                out[f.name] = value
+            else:
+                raise InputError(f.name, f"given as a keyword ({out[f.name]!r}) and in {argname} ({value!r})",
+                                 "one of the two")
+    return out

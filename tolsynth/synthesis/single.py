@@ -1,0 +1,368 @@
+"""The front door: :func:`synthesize` (one solver) and :func:`compare` (IPOPT against SUMT).
+
+>>> import tolsynth
+>>> m = tolsynth.load_model("xu_zhang_1988")
+>>> res = tolsynth.synthesize(m, R=0.5, p=0.99, distribution="uniform", alpha=0.7)
+>>> res.success, round(res.tolerances["h3"], 3)  # doctest: +SKIP
+(True, 0.2...)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tolsynth.checks import TINY, check_count, check_mapping, check_options, check_vector
+from tolsynth.errors import InputError
+from tolsynth.solvers.exact import PROBABILITIES
+from tolsynth.kinematics.mechanism import as_mechanism
+from tolsynth.problem.nlp import ToleranceNLP
+from tolsynth.problem.specification import SPHERE_NODES, make_specification
+from tolsynth.problem.result import Status, SynthesisResult
+from tolsynth.synthesis.options import DesignSpec, SolverOptions, merge_groups
+from tolsynth.tabular import Tabular
+
+__all__ = ["synthesize", "compare", "Comparison", "SOLVERS"]
+
+
+def _ipopt(nlp, eps0, options):
+    from tolsynth.solvers.ipopt import solve_ipopt
+
+    return solve_ipopt(nlp, eps0, **options)
+
+
+def _sumt(nlp, eps0, options):
+    from tolsynth.solvers.sumt import solve_sumt
+
+    return solve_sumt(nlp, eps0, **options)
+
+
+def _solver_defaults(solver: str) -> dict:
+    """The options a solver accepts, with their defaults."""
+    if solver == "ipopt":
+        from tolsynth.solvers.ipopt import DEFAULT_OPTIONS
+    else:
+        from tolsynth.solvers.sumt import DEFAULT_OPTIONS
+    return DEFAULT_OPTIONS
+
+
+#: largest allowed difference between the NLP's fixed sphere quadrature and stats.p_ball
+SPHERE_QUADRATURE_TOL = 1e-9
+
+#: final step of the worst-pose searches that only pick the next pose of synthesize_workspace
+COARSE_STEP_TOL = 1e-4
+
+#: the probability a design meets when none is named
+DEFAULT_PROBABILITY = "gaussian"
+
+#: solver name -> private entry point (each solver lives in its own module)
+SOLVERS = {"ipopt": _ipopt, "sumt": _sumt}
+
+
+def synthesize(
+    mechanism,
+    R: float | None = None,
+    p: float | None = None,
+    distribution=None,
+    alpha=0.7,
+    solver: str = "ipopt",
+    *,
+    k=None,
+    bounds=None,
+    pose="worst",
+    poses=None,
+    Phi: float | None = None,
+    p_orientation: float | None = None,
+    criterion: str = "components",
+    cost=None,
+    locks=None,
+    x0=None,
+    options: dict | None = None,
+    validate: int | None = None,
+    seed: int = 0,
+    probability: str | None = None,
+    verify=None,
+    spec: DesignSpec | None = None,
+) -> SynthesisResult:
+    """Cheapest tolerances meeting the accuracy specification (the paper's Eq. 23).
+
+    minimise ``sum_i k_i eps_i**-alpha_i`` subject to ``sigma_j z(p) / R <= 1`` for the three
+    principal standard deviations of the hand position at every pose (Eq. 20), optionally
+    ``sigma_j z(p_orientation) / Phi <= 1`` for the orientation (Eq. 21), and
+    ``lower_i <= eps_i <= upper_i`` (Eq. 22).
+
+    Parameters
+    ----------
+    mechanism : Mechanism or str
+        A loaded model or a model name / path.
+    R : float
+        Radius of the position accuracy specification, mm (R1 = R2 = R3 = R).
+    p : float
+        Probability per principal component, 0 < p < 1.
+    distribution : str or dict, optional
+        Distribution of each error inside its band: one shape for every error -- "uniform" (variance
+        eps^2/3), "normal" (3 sigma = eps, eps^2/9), "triangular" (eps^2/6), "truncnormal" or
+        "truncnormal(beta)" (sigma = eps/beta, cut at +-eps) -- or a dict name -> shape ("*" the
+        default; :mod:`tolsynth.probability.distributions`); default: the model file's, else uniform.
+    alpha : float, sequence or dict
+        Cost exponent(s) alpha_i > 0.
+    solver : {"ipopt", "sumt"}
+        IPOPT with exact derivatives (default), or the paper's SUMT + Powell.
+    k : float, sequence or dict, optional
+        Cost factors (default: the model's).
+    bounds : (lower, upper) or dict name -> (lower, upper), optional
+        Tolerance bounds in tolerance units (default: the model's).
+    pose, poses : configuration name or joint vector (rad), or a list of them
+        Where the constraints are imposed (default: the model's ``worst`` pose).
+    Phi, p_orientation : float, optional
+        Orientation specification (rad) and its probability (default p).
+    criterion : {"components", "sphere"}
+        ``"components"`` (the paper's Eq. 20: ``P(|w_j| <= R) >= p`` for every principal
+        component, a convex problem with a certificate) or ``"sphere"`` (beyond the paper:
+        ``P(|dr| <= R) >= p`` itself, Eq. 5/13; smooth but not known to be convex, so
+        ``lower_bound`` is the components optimum, which it contains).  The sphere probability is
+        a fixed quadrature inside the NLP, checked at the result against the error-controlled
+        :func:`tolsynth.probability.stats.p_ball` and refined (re-solved with more nodes) until they agree
+        to 1e-9.
+    cost : CostModel, dict, list or dict name -> model, optional
+        Cost model per parameter (:mod:`tolsynth.model.cost`: power law, Chase, exponential, tabulated);
+        parameters without one keep ``k eps^-alpha``.  Where a cost is not convex in eps^2 the
+        result claims no certificate (its ``lower_bound`` stays valid; see ``result.message``).
+    locks : dict name -> tolerance, optional
+        Tolerances fixed at given values (e.g. by a supplier); the others are optimised around
+        them.  Raises :class:`InfeasibleSpecificationError` naming the locked parameters if they
+        alone break the specification.
+    x0 : sequence, optional
+        Starting tolerances (default: a strictly feasible interior point).
+    options : dict, optional
+        Solver options (IPOPT: tol, constr_viol_tol, max_iter; SUMT: see solve_sumt).
+    validate : int, optional
+        Run this many Monte Carlo samples through the nonlinear kinematics at the optimum and
+        attach the achieved probabilities as ``result.validation``.
+    seed : int
+        Seed of that Monte Carlo run.
+    probability : {"gaussian", "exact"}
+        ``"gaussian"`` (default, the paper's: the principal components read as normal) or
+        ``"exact"``: the exact probabilities of the linear error model as the constraints, along
+        every direction (per component) or in the sphere (:mod:`tolsynth.solvers.exact`).
+    verify : int or True, optional
+        Close the loop (:mod:`tolsynth.analysis.verify`): the nonlinear Monte Carlo at the optimum (this many
+        samples per pose; True: chosen from p), and while its 99 % lower bound is below ``p``,
+        a tighter target and a new solve; ``result.verification`` reports the achieved
+        probability with its interval.
+
+    spec : DesignSpec, optional
+        The specification's fields as one object (:mod:`tolsynth.synthesis.options`); ``solver``
+        may likewise be a :class:`SolverOptions`.  A field given both ways must agree.
+
+    Returns
+    -------
+    SynthesisResult
+        ``.success`` is False (with the solver's reason) if the solver did not converge.
+
+    Raises
+    ------
+    InfeasibleSpecificationError
+        If no tolerances inside the bounds can meet the specification.
+    OutOfRangeError, InputError, UnknownNameError
+        For bad inputs, naming the field.
+    """
+    if spec is not None or isinstance(solver, SolverOptions):
+        args = merge_groups(
+            dict(R=R, p=p, distribution=distribution, alpha=alpha, k=k, bounds=bounds, pose=pose, poses=poses,
+                 Phi=Phi, p_orientation=p_orientation, criterion=criterion, cost=cost, locks=locks,
+                 probability=probability, options=options, x0=x0, validate=validate, seed=seed, verify=verify,
+                 **({} if isinstance(solver, SolverOptions) else {"solver": solver})),
+            spec, solver if isinstance(solver, SolverOptions) else None)
+        return synthesize(mechanism, **args)
+    if R is None or p is None:
+        missing = "R" if R is None else "p"
+        raise InputError(missing, "missing", f"a value for {missing} (a keyword, or spec=DesignSpec({missing}=...))")
+    if probability is None:
+        probability = DEFAULT_PROBABILITY
+    mechanism = as_mechanism(mechanism)
+    if not isinstance(solver, str) or solver not in SOLVERS:
+        raise InputError("solver", f"unknown solver {solver!r}", " or ".join(repr(s) for s in SOLVERS))
+    again = dict(k=k, bounds=bounds, pose=pose, poses=poses, Phi=Phi, p_orientation=p_orientation,
+                 criterion=criterion, cost=cost, locks=locks, options=options, probability=probability)
+
+    if not isinstance(probability, str) or probability not in PROBABILITIES:
+        raise InputError("probability", f"got {probability!r}", " or ".join(repr(s) for s in PROBABILITIES))
+    if probability == "gaussian" and options is not None:  # (None: every default)
+        options = check_options(options, _solver_defaults(solver))
+    if validate is not None and validate is not False:
+        validate = check_count(validate, "validate", lower=0)
+    cost, locks, bounds = _costs_and_locks(mechanism, cost, locks, bounds)
+    spec = make_specification(
+        mechanism, R, p, distribution, alpha, k, bounds, pose, poses, Phi, p_orientation, criterion, cost
+    )
+    nlp = ToleranceNLP(spec)
+    if locks:
+        from tolsynth.model.locks import check_locks
+
+        check_locks(nlp, mechanism.joint_error_parameters)
+    nlp.check_feasible()
+    eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0), "x0", lower=TINY)
+    if probability == "exact":
+        from tolsynth.solvers.exact import solve_exact
+
+        result = solve_exact(nlp, spec.shapes, solver, eps0, options)
+    else:
+        result = SOLVERS[solver](nlp, eps0, dict(options or {}))
+    if probability == "gaussian" and spec.sphere_blocks:
+        result = _refine_sphere(nlp, spec, result, solver, options)
+    from dataclasses import replace
+
+    # the solver's fresh result gets its inputs in place of a dataclasses.replace (which runs
+    # __init__ over every field again: ~3 % of a warm solve)
+    object.__setattr__(result, "inputs", _run_inputs(mechanism, solver, options, locks, x0, validate, seed,
+                                                     probability, verify))
+    if validate:
+        from tolsynth.analysis.validation import validate as mc_validate
+
+        report = mc_validate(
+            mechanism, result, R=R, p=p, distribution=distribution,
+            pose=pose if poses is None else list(poses)[0], n=int(validate), seed=seed,
+        )
+        result = replace(result, validation=report)
+    if verify is not None and verify is not False:
+        from tolsynth.analysis.verify import closed_loop
+
+        def solve(p_target):
+            return synthesize(mechanism, R, p_target, distribution, alpha, solver, x0=result.x, **again)
+
+        result = closed_loop(solve, mechanism, result, p=p, R=R, distribution=distribution,
+                             n=None if verify is True else verify, seed=seed)
+        result = replace(result, inputs={**(result.inputs or {}), "verify": verify})  # the re-solves' record it not
+    return result
+
+
+def _costs_and_locks(mechanism, cost, locks, bounds):
+    """The model file's cost models and locks where none are given; fixed joint errors cost
+    nothing and stay locked whatever else is; locks narrow the bounds."""
+    if cost is None and mechanism.cost_models:
+        cost = mechanism.cost_models  # the model file's
+    if mechanism.fixed_joint_errors:  # given, not bought: no cost, whatever cost= says for the others
+        from tolsynth.model.joint_errors import with_given_costs
+
+        cost = with_given_costs(mechanism, cost)
+    if locks is None and mechanism.locks:
+        locks = mechanism.locks
+    elif mechanism.fixed_joint_errors:  # fixed joint errors stay locked whatever else is locked
+        locks = {**mechanism.fixed_joint_errors, **check_mapping(locks, "locks", "a dict parameter name -> tolerance")}
+    if locks:
+        from tolsynth.model.locks import apply_locks
+
+        bounds = apply_locks(mechanism, bounds, locks)
+    return cost, locks, bounds
+
+
+def _refine_sphere(nlp, spec, result, solver, options):
+    """The NLP's sphere probability is a fixed quadrature: checked at the optimum against the
+    error-controlled one, and the solve repeated with twice the nodes until they agree."""
+    from dataclasses import replace
+
+    while result.success:
+        exact = np.array([P for _, _, P in nlp.sphere_values(result.x)])
+        off = np.max(np.abs(nlp.sphere_quadrature(result.x) - exact))
+        if off <= SPHERE_QUADRATURE_TOL:
+            break
+        if nlp.sphere_nodes >= 4 * SPHERE_NODES:
+            return replace(result, success=False, status=Status.NUMERICAL_ERROR,
+                           message=f"{result.message}; sphere quadrature still off by {off:.1e} "
+                                   f"with {nlp.sphere_nodes} nodes")
+        nlp = ToleranceNLP(spec, sphere_nodes=2 * nlp.sphere_nodes)
+        result = SOLVERS[solver](nlp, result.x, dict(options or {}))
+    return result
+
+
+def _run_inputs(mechanism, solver, options, locks, x0, validate, seed, probability="gaussian", verify=None) -> dict:
+    """What a result records beyond its specification (see :mod:`tolsynth.io.tables`)."""
+    path = getattr(mechanism.spec, "path", None)
+    return {"model": {"name": mechanism.name, "title": mechanism.title, "file": str(path) if path else None},
+            "solver": solver, "options": dict(options or {}), "locks": dict(locks) if locks else None,
+            "probability": probability, "verify": None if verify is None or verify is False else verify,
+            "x0": None if x0 is None else np.asarray(mechanism.tolerances(x0), dtype=float).tolist(),
+            "validate": validate or None, "seed": seed if validate else None,
+            "joint_errors": _joint_error_inputs(mechanism)}
+
+
+def _joint_error_inputs(mechanism) -> dict | None:
+    """Name -> joint, transform ("q": the joint variable), unit and fixed value of each joint
+    error (:mod:`tolsynth.model.joint_errors`; a model file does not show those added in memory)."""
+    out = {p.name: {"joint": p.at_joint[0], "transform": p.at_joint[1], "unit": p.unit, "fixed": p.lock}
+           for p in mechanism.parameters if p.at_joint is not None}
+    return out or None
+
+
+@dataclass(frozen=True)
+class Comparison(Tabular):
+    """IPOPT and SUMT on the same specification, side by side."""
+
+    ipopt: SynthesisResult
+    sumt: SynthesisResult
+
+    @property
+    def cost_rel_diff(self) -> float:
+        """``|cost_SUMT - cost_IPOPT| / |cost_IPOPT|``."""
+        return abs(self.sumt.cost - self.ipopt.cost) / abs(self.ipopt.cost)
+
+    @property
+    def tolerance_rel_diff(self) -> dict[str, float]:
+        """Name -> ``|eps_SUMT - eps_IPOPT| / |eps_IPOPT|``."""
+        return {
+            k: abs(self.sumt.tolerances[k] - v) / abs(v) for k, v in self.ipopt.tolerances.items()
+        }
+
+    @property
+    def time_ratio(self) -> float:
+        """SUMT wall time / IPOPT wall time."""
+        return self.sumt.wall_time / self.ipopt.wall_time
+
+    def table(self) -> str:
+        """Short readable table: status, cost and tolerances of both solvers with relative differences."""
+        i, s = self.ipopt, self.sumt
+        rows = [
+            f"{'':>10} {'IPOPT':>14} {'SUMT+Powell':>14} {'rel.diff':>10}",
+            f"{'status':>10} {str(i.status):>14} {str(s.status):>14}",
+            f"{'cost':>10} {i.cost:>14.8g} {s.cost:>14.8g} {self.cost_rel_diff:>10.2e}",
+        ]
+        for name, d in self.tolerance_rel_diff.items():
+            rows.append(f"{name:>10} {i.tolerances[name]:>14.6g} {s.tolerances[name]:>14.6g} {d:>10.2e}")
+        rows += [
+            f"{'iter':>10} {i.iterations:>14d} {s.iterations:>14d}",
+            f"{'evals':>10} {i.function_evaluations:>14d} {s.function_evaluations:>14d}",
+            f"{'time ms':>10} {i.wall_time * 1e3:>14.2f} {s.wall_time * 1e3:>14.2f} {self.time_ratio:>9.1f}x",
+        ]
+        return "\n".join(rows)
+
+    def to_dict(self) -> dict:
+        """Plain dict for JSON: both results and their relative differences."""
+        return {
+            "ipopt": self.ipopt.to_dict(),
+            "sumt": self.sumt.to_dict(),
+            "cost_rel_diff": self.cost_rel_diff,
+            "tolerance_rel_diff": self.tolerance_rel_diff,
+            "time_ratio": self.time_ratio,
+        }
+
+
+def compare(mechanism, R: float, p: float, distribution=None, alpha=0.7, **kwargs) -> Comparison:
+    """Solve the same specification with IPOPT and with SUMT + Powell; see :class:`Comparison`.
+
+    Keyword arguments are those of :func:`synthesize` (``options`` may be a dict with keys
+    ``"ipopt"`` and ``"sumt"``).  Both solvers start from scratch: IPOPT without the cuts and
+    optimum an earlier solve of the same blocks left (``options={"ipopt": {"warm_start": True}}``
+    allows them), so its iterations, evaluations and time compare the algorithms.
+    """
+    options = check_mapping(kwargs.pop("options", None), "options", "a dict with keys 'ipopt' and 'sumt'")
+    check_options(options, {"ipopt": {}, "sumt": {}})
+    kwargs.pop("solver", None)
+    ipopt = check_mapping(options.get("ipopt"), "options['ipopt']", "a dict of IPOPT options")
+    given = {"ipopt": {"warm_start": False, **ipopt}, "sumt": options.get("sumt")}
+    res = {
+        s: synthesize(mechanism, R, p, distribution, alpha, solver=s, options=given[s], **kwargs)
+        for s in ("ipopt", "sumt")
+    }
+    return Comparison(res["ipopt"], res["sumt"])
