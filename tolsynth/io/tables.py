@@ -51,22 +51,31 @@ import numpy as np
 
 from tolsynth import tabular
 from tolsynth.errors import InputError, MissingDependencyError
-from tolsynth.tabular import (  # noqa: F401  (re-exported: the tables API in one place)
-    TABLES_INSTALL, Tabular, _cell, _synthesis_inputs, _version, jsonable, make_frame, require_pandas,
-    spec_inputs, synthesis_row, synthesis_summary,
+from tolsynth.tabular import (
+    TABLES_INSTALL,
+    Tabular,
+    _cell,
+    _synthesis_inputs,
+    _version,
+    jsonable,
+    make_frame,
+    require_pandas,
+    spec_inputs,
+    synthesis_row,
+    synthesis_summary,
 )
 
 __all__ = [
-    "Tabular",
     "TABLE_SUFFIXES",
-    "require_pandas",
+    "Tabular",
     "check_table_path",
-    "write_table",
-    "read_table",
-    "make_frame",
     "jsonable",
+    "make_frame",
+    "read_table",
+    "require_pandas",
     "spec_inputs",
     "synthesis_row",
+    "write_table",
 ]
 
 #: file suffix -> format written by :func:`write_table`
@@ -198,7 +207,9 @@ def _synthesis_frame(res):
     summary["constraints"] = constraints
     if res.validation is not None:  # synthesize(validate=N): the Monte Carlo check at the optimum
         summary["validation"] = res.validation.to_dict()
-    return make_frame(rows, "SynthesisResult", _synthesis_inputs(res), summary,
+    if getattr(res, "statistical", None) is not None:  # a worst-case design's statistical comparison
+        summary["statistical"] = res.statistical
+    return make_frame(rows, type(res).__name__, _synthesis_inputs(res), summary,
                       {"tolerance": "unit column", "lower": "unit column", "upper": "unit column",
                        "cost": "the paper's cost units", "bound_multiplier": "cost units per tolerance unit"})
 
@@ -345,4 +356,12 @@ def _save(result, path, suffix: str | None = None) -> str:
     return write_table(result.to_frame(), path)
 
 
-tabular.register(lambda result: _BUILDERS[type(result).__name__](result), _save)
+def _build(result):
+    """The table builder of the result's type, or of the nearest base type that has one."""
+    for cls in type(result).__mro__:
+        if cls.__name__ in _BUILDERS:
+            return _BUILDERS[cls.__name__](result)
+    raise InputError("result", f"got {type(result).__name__}", "a tolsynth result type: " + ", ".join(_BUILDERS))
+
+
+tabular.register(_build, _save)

@@ -176,6 +176,9 @@ def synthesize(
                  **({} if isinstance(solver, SolverOptions) else {"solver": solver})),
             spec, solver if isinstance(solver, SolverOptions) else None)
         return synthesize(mechanism, **args)
+    if probability == "worst_case":  # every error anywhere in its band: no p or distribution needed
+        return _worst_case(mechanism, R, p, distribution, alpha, solver, k, bounds, pose, poses, Phi, p_orientation,
+                           criterion, cost, locks, x0, options, validate, verify)
     if R is None or p is None:
         missing = "R" if R is None else "p"
         raise InputError(missing, "missing", f"a value for {missing} (a keyword, or spec=DesignSpec({missing}=...))")
@@ -236,6 +239,32 @@ def synthesize(
                              n=None if verify is True else verify, seed=seed)
         result = replace(result, inputs={**(result.inputs or {}), "verify": verify})  # the re-solves' record it not
     return result
+
+
+def _worst_case(mechanism, R, p, distribution, alpha, solver, k, bounds, pose, poses, Phi, p_orientation, criterion,
+                cost, locks, x0, options, validate, verify):
+    """``probability="worst_case"`` (:mod:`tolsynth.synthesis.worst_case`), with the statistical
+    design at the same R and p beside it when p is given."""
+    from tolsynth.synthesis.worst_case import synthesize_worst_case
+
+    if R is None:
+        raise InputError("R", "missing", "a value for R (mm)")
+    for name, value in (("validate", validate), ("verify", verify)):
+        if value is not None and value is not False:
+            raise InputError(name, "given with probability='worst_case' (it reads no probability)",
+                             "no Monte Carlo check, or a statistical probability ('gaussian' or 'exact')")
+    mechanism = as_mechanism(mechanism)
+    given = dict(k=k, bounds=bounds, pose=pose, poses=poses, Phi=Phi, cost=cost, locks=locks)
+    cost, locks, bounds = _costs_and_locks(mechanism, cost, locks, bounds)
+
+    def statistical():
+        return synthesize(mechanism, R, p, distribution, alpha, solver, p_orientation=p_orientation,
+                          criterion=criterion, **given)
+
+    return synthesize_worst_case(
+        mechanism, R, p=p, alpha=alpha, solver=solver, k=k, bounds=bounds, pose=pose, poses=poses, Phi=Phi,
+        cost=cost, x0=x0, options=options, statistical=statistical,
+        inputs=_run_inputs(mechanism, solver, options, locks, x0, None, 0, "worst_case"))
 
 
 def _costs_and_locks(mechanism, cost, locks, bounds):

@@ -1,0 +1,161 @@
+"""The worst-case (arithmetic) stack-up: the exact zonotope maximum against brute force over all
+2^n sign patterns, and the certified design against cvxpy + Clarabel with every sign pattern
+enumerated as a second-order cone."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+import tolsynth
+from tolsynth.errors import InfeasibleSpecificationError, InputError
+from tolsynth.solvers.worst_case_zonotope import zonotope_max, zonotope_patterns
+
+cp = pytest.importorskip("cvxpy")
+
+
+def brute_force(C):
+    """max |C s| over all 2^n sign patterns."""
+    S = np.array(list(itertools.product([-1.0, 1.0], repeat=C.shape[1])))
+    V = S @ C.T
+    return float(np.sqrt(np.max(np.einsum("ij,ij->i", V, V))))
+
+
+def _case(rng, kind, n):
+    C = rng.normal(size=(3, n))
+    if kind == "planar":  # every column in one plane: every circle through the same two poles
+        C[2] = 0.0
+    elif kind == "parallel" and n > 1:
+        C[:, 1] = -2.5 * C[:, 0]
+    elif kind == "zero":
+        C[:, 0] = 0.0
+    elif kind == "coplanar" and n > 2:  # three circles through one vertex
+        C[:, 2] = C[:, 0] + C[:, 1]
+    elif kind == "scaled":
+        C *= np.logspace(-6, 3, n)
+    return C
+
+
+@pytest.mark.parametrize("kind", ["generic", "planar", "parallel", "zero", "coplanar", "scaled"])
+def test_zonotope_maximum_equals_brute_force(kind):
+    rng = np.random.default_rng(abs(hash(kind)) % 2**32)
+    for n in range(1, 13):
+        for _ in range(4):
+            C = _case(rng, kind, n)
+            h, s, w = zonotope_max(C)
+            b = brute_force(C)
+            assert h == pytest.approx(b, rel=1e-12, abs=1e-300)
+            assert np.linalg.norm(C @ s) == pytest.approx(h, rel=1e-12, abs=1e-300)
+            if h > 0:
+                assert np.linalg.norm(w) == pytest.approx(1.0)
+
+
+def test_pattern_count_grows_as_n_squared_not_2_to_the_n():
+    rng = np.random.default_rng(3)
+    n = 40
+    C = rng.normal(size=(3, n))
+    vals, S = zonotope_patterns(C)
+    assert len(S) <= 4 * n * (n - 1)  # four cells around each of the n(n-1) vertices
+    # the arrangement of n generic great circles has n(n-1) + 2 cells: all of them found
+    assert len(S) == n * (n - 1) + 2
+    # 2^40 patterns cannot be checked; the ascent from random patterns never beats the maximum
+    h = vals[0]
+    for _ in range(200):
+        s = np.sign(rng.normal(size=n))
+        for _ in range(50):
+            s = np.where(C.T @ (C @ s) >= 0, 1.0, -1.0)
+        assert np.linalg.norm(C @ s) <= h * (1 + 1e-12)
+
+
+def _cvxpy_worst_case(spec):
+    """The same problem with every sign pattern of every block as a second-order cone."""
+    n = spec.n
+    eps = cp.Variable(n)
+    cons = [eps >= spec.lower, eps <= spec.upper]
+    for b in spec.blocks:
+        limit = spec.R if b.kind == "position" else spec.Phi
+        for s in itertools.product([-1.0, 1.0], repeat=n):
+            cons.append(cp.norm(b.A @ cp.multiply(np.array(s), eps)) <= limit)
+    cost = sum(float(k) * cp.power(eps[i], -float(a), approx=False) for i, (k, a) in enumerate(zip(spec.k, spec.alpha)))
+    prob = cp.Problem(cp.Minimize(cost), cons)
+    prob.solve(solver="CLARABEL", tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10)
+    assert prob.status == "optimal"
+    return prob.value, eps.value
+
+
+@pytest.mark.parametrize("model,kw", [
+    ("planar_2r", {"R": 0.5}),
+    ("planar_2r", {"R": 0.5, "Phi": 0.0006}),  # the orientation block active as well
+    ("planar_2r", {"R": 0.3, "poses": [[0.3, 1.2], [1.0, -2.0], [2.5, 0.4]]}),
+    ("xu_zhang_1988", {"R": 0.8}),  # 11 parameters: 2048 cones
+])
+def test_design_matches_cvxpy_with_every_sign_pattern(model, kw):
+    res = tolsynth.synthesize(model, probability="worst_case", **kw)
+    assert res.success, res.message
+    ref, eps_ref = _cvxpy_worst_case(res.spec)
+    assert res.cost == pytest.approx(ref, rel=1e-6)
+    np.testing.assert_allclose(res.x, eps_ref, rtol=1e-4)
+    # the certificate brackets the independent optimum
+    assert res.lower_bound <= ref * (1 + 1e-8)
+    assert res.gap <= 1e-6 * res.cost
+    # the returned point meets the worst case, checked over all 2^n patterns
+    for b in res.spec.blocks:
+        limit = res.spec.R if b.kind == "position" else res.spec.Phi
+        assert brute_force(b.A * res.x) <= limit * (1 + 1e-6)
+
+
+def test_paper_robot_worst_case_costs_about_69_percent_more_than_gaussian():
+    res = tolsynth.synthesize("xu_zhang_1988", R=0.8, p=0.99, probability="worst_case")
+    gauss = tolsynth.synthesize("xu_zhang_1988", R=0.8, p=0.99, probability="gaussian")
+    assert res.success and gauss.success
+    assert res.cost / gauss.cost == pytest.approx(1.685, abs=0.01)
+    st = res.statistical
+    assert st["p"] == 0.99 and st["cost"] is not None
+    assert "worst case costs" in res.summary()
+    again = tolsynth.synthesize("xu_zhang_1988", R=0.8, p=0.99, probability=st["probability"])
+    assert st["cost"] == pytest.approx(again.cost, rel=1e-9)
+    assert res.cost_ratio == pytest.approx(res.cost / again.cost, rel=1e-9)
+
+
+def test_worst_case_design_meets_any_uniform_probability():
+    # every error inside its band: a Monte Carlo of the linear model never leaves the ball
+    res = tolsynth.synthesize("xu_zhang_1988", R=0.8, probability="worst_case")
+    A = res.spec.blocks[0].A
+    rng = np.random.default_rng(0)
+    U = rng.uniform(-1, 1, size=(200_000, res.spec.n))
+    d = np.linalg.norm((U * res.x) @ A.T, axis=1)
+    assert d.max() <= 0.8 * (1 + 1e-9)
+    assert res.statistical is None and "statistical" not in res.summary()
+
+
+def test_every_bundled_model_default_pose():
+    for name in tolsynth.bundled_models():
+        m = tolsynth.load_model(name)
+        pose = "worst" if "worst" in m.configurations else next(iter(m.configurations))
+        res = tolsynth.synthesize(m, R=0.5, probability="worst_case", pose=pose)
+        assert res.success, (name, res.message)
+        assert res.gap <= 1e-6 * res.cost
+
+
+def test_bad_inputs_are_typed():
+    with pytest.raises(InputError, match="solver"):
+        tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case", solver="sumt")
+    with pytest.raises(InputError, match="validate"):
+        tolsynth.synthesize("planar_2r", R=0.5, p=0.9, probability="worst_case", validate=100)
+    with pytest.raises(InputError, match="R"):
+        tolsynth.synthesize("planar_2r", probability="worst_case")
+    with pytest.raises(InputError):
+        tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case", options={"bogus": 1})
+    with pytest.raises(InfeasibleSpecificationError, match="worst case"):
+        tolsynth.synthesize("planar_2r", R=1e-4, probability="worst_case")
+
+
+def test_table_of_a_worst_case_design():
+    pytest.importorskip("pandas")
+    res = tolsynth.synthesize("planar_2r", R=0.5, p=0.9, probability="worst_case")
+    frame = res.to_frame()
+    assert list(frame["parameter"]) == list(res.tolerances)
+    assert frame.attrs["inputs"]["probability"] == "worst_case"
+    assert frame.attrs["summary"]["statistical"]["p"] == 0.9
