@@ -1,4 +1,4 @@
-"""The command line's tables: ``--out FILE.csv|.json|.parquet`` on solve,
+"""The command line's tables: ``--out FILE.csv|.json|.parquet|.xlsx`` on solve,
 montecarlo, map (``--data``), worst-pose and sweep, read back with pandas against the API's numbers;
 an unknown suffix is refused before any work; ``tolsynth sweep`` from arguments and from a TOML file;
 every ``--json`` records its inputs."""
@@ -30,6 +30,19 @@ def test_solve_out_matches_api(tmp_path, capsys):
     assert cl["arguments"]["out"] == str(path)
 
 
+@pytest.mark.parametrize("suffix", ["csv", "xlsx"])
+def test_solve_out_read_by_plain_pandas(tmp_path, capsys, suffix):
+    pytest.importorskip("openpyxl")
+    path = tmp_path / f"t.{suffix}"
+    assert main(["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.9", "--out", str(path)]) == 0
+    frame = pd.read_csv(path) if suffix == "csv" else pd.read_excel(path)  # no arguments
+    assert list(frame["parameter"]) == list(tolsynth.load_model("planar_2r").error_parameters)
+    assert pd.api.types.is_float_dtype(frame["tolerance"]) and pd.api.types.is_float_dtype(frame["cost"])
+    back = tolsynth.read_table(path)
+    assert back.attrs["inputs"]["command_line"]["command"] == "solve"
+    assert back.attrs["summary"]["cost"] == pytest.approx(frame["cost"].sum(), rel=1e-12)
+
+
 @pytest.mark.parametrize("argv", [
     ["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.9"],
     ["montecarlo", "--model", "planar_2r", "--tolerances", "coarse", "--R", "0.5", "--n", "1000"],
@@ -44,7 +57,7 @@ def test_unknown_suffix_refused_before_work(argv, capsys, tmp_path, monkeypatch)
 
     for name in ("solve", "montecarlo", "workspace", "sweep"):  # each command's own reference
         monkeypatch.setattr(importlib.import_module(f"tolsynth.cli.{name}"), "load_model", boom)
-    assert main(argv + ["--out", str(tmp_path / "t.xlsx")]) == 2
+    assert main(argv + ["--out", str(tmp_path / "t.xls")]) == 2
     err = capsys.readouterr().err
     assert "--out" in err and ".xlsx" in err and ".parquet" in err and "Traceback" not in err
 
@@ -53,7 +66,7 @@ def test_map_data_and_montecarlo_out(tmp_path, capsys):
     data = tmp_path / "map.csv"
     assert main(["map", "--model", "planar_2r", "--tolerances", "coarse", "--plane", "xy", "--n", "6",
                  "--quiet", "--data", str(data)]) == 0
-    frame = pd.read_csv(data, skiprows=2)
+    frame = pd.read_csv(data)  # a plain CSV: its metadata in map.csv.json beside it
     pm = tolsynth.probability_map(tolsynth.load_model("planar_2r"), "coarse", plane="xy", n=6, R=0.2, progress=False)
     np.testing.assert_allclose(frame["P"].to_numpy(), pm.P.ravel(), rtol=1e-12, equal_nan=True)
     out = tmp_path / "mc.parquet"

@@ -1,11 +1,12 @@
-"""Results as tables: every result type written as CSV, JSON and Parquet and read
-back with plain pandas; the numbers must equal the result object's own attributes, and the file
+"""Results as tables: every result type written as CSV, JSON, Parquet and Excel and read
+back with plain pandas (``read_csv``, ``read_excel`` with no arguments); the numbers must equal the result object's own attributes, and the file
 must hold every input and the package version."""
 
 from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,16 +17,23 @@ from tolsynth.errors import InputError, MissingDependencyError
 pd = pytest.importorskip("pandas")
 pytest.importorskip("pyarrow")
 
+pytest.importorskip("openpyxl")
+
+#: exact round trips; Excel keeps 16 significant digits (openpyxl writes "%.16g"): tested on its own
 FORMATS = ["csv", "json", "parquet"]
 
 
 def _read_plain(path):
     """Read back with pandas alone (the documented way), and the metadata by hand."""
     if path.suffix == ".csv":
-        lines = path.read_text().splitlines()
-        assert lines[0].startswith("# tolsynth " + tolsynth.__version__)
-        meta = json.loads(lines[1][2:])
-        return pd.read_csv(path, skiprows=2), meta
+        meta = json.loads(Path(str(path) + ".json").read_text())["tolsynth"]
+        assert meta["tolsynth_version"] == tolsynth.__version__
+        return pd.read_csv(path), meta
+    if path.suffix == ".xlsx":
+        rows = pd.read_excel(path, sheet_name="tolsynth")
+        meta = {k: json.loads("".join(g.sort_values("part")["json"])) for k, g in rows.groupby("key")}
+        assert meta["tolsynth_version"] == tolsynth.__version__
+        return pd.read_excel(path), meta
     if path.suffix == ".json":
         meta = json.loads(path.read_text())["tolsynth"]
         assert meta["tolsynth_version"] == tolsynth.__version__
@@ -127,8 +135,8 @@ def test_workspace_and_worst_pose_frames(xz, solved):
 
 
 def test_bad_paths_and_missing_pandas(solved, tmp_path, monkeypatch):
-    with pytest.raises(InputError, match="unknown table format .xlsx"):
-        solved.save(tmp_path / "r.xlsx")
+    with pytest.raises(InputError, match="unknown table format .xls"):
+        solved.save(tmp_path / "r.xls")
     with pytest.raises(InputError, match="does not end in .csv"):
         solved.to_csv(tmp_path / "r.json")
     with pytest.raises(InputError, match="does not exist"):
@@ -145,3 +153,91 @@ def test_core_import_needs_no_pandas_or_dask():
     code = "import sys, tolsynth, tolsynth.cli; bad = [m for m in ('pandas', 'pyarrow', 'dask', 'distributed') if m in sys.modules]; print(bad)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "[]"
+
+
+@pytest.mark.parametrize("fmt", ["csv", "xlsx"])
+def test_plain_pandas_reads_numeric_columns(solved, tmp_path, fmt):
+    path = tmp_path / f"res.{fmt}"
+    solved.save(path)
+    frame = pd.read_csv(path) if fmt == "csv" else pd.read_excel(path)  # no arguments
+    assert list(frame.columns[:3]) == ["parameter", "unit", "tolerance"]
+    for col in ("tolerance", "lower", "upper", "k", "alpha", "cost", "bound_multiplier"):
+        assert pd.api.types.is_numeric_dtype(frame[col]), col
+    np.testing.assert_allclose(frame["tolerance"].to_numpy(), solved.x, rtol=0 if fmt == "csv" else 1e-15)
+    assert frame["cost"].sum() == pytest.approx(solved.cost, rel=1e-14)
+
+
+def test_excel_round_trip_of_other_results(xz, solved, compared_and_mapped, tmp_path):
+    r = tolsynth.monte_carlo(xz, "worst", solved.x, "normal", R=0.5, n=4000, seed=3)
+    rows = pd.read_excel(_saved_excel(r, tmp_path / "mc.xlsx")).set_index("quantity")
+    np.testing.assert_allclose(rows.loc[[f"p_component_{j}" for j in (1, 2, 3)], "monte_carlo"], r.p_components,
+                               rtol=1e-15)
+    c, pm = compared_and_mapped
+    frame = pd.read_excel(_saved_excel(pm, tmp_path / "map.xlsx"))
+    np.testing.assert_allclose(frame["P"].to_numpy(), pm.P.ravel(), rtol=1e-15, equal_nan=True)  # empty cells: NaN
+    back = tolsynth.read_table(tmp_path / "map.xlsx")
+    assert back.attrs["inputs"]["R_mm"] == 0.2 and back.attrs["kind"] == "ProbabilityMap"
+    frame = pd.read_excel(_saved_excel(c, tmp_path / "cmp.xlsx"))
+    np.testing.assert_allclose(frame["sumt"].to_numpy(), c.sumt.x, rtol=1e-15)
+
+
+def _saved_excel(result, path):
+    assert result.to_excel(path) == str(path)
+    return path
+    back = tolsynth.read_table(path)
+    assert back.attrs["summary"]["cost"] == solved.cost
+    assert back.attrs["inputs"]["model"]["name"] == "xu_zhang_1988"
+
+
+def test_xlsx_metadata_longer_than_a_cell(tmp_path):
+    frame = pd.DataFrame({"x": [1.0, 2.0], "n": [1, 2]})
+    frame.attrs = {"kind": "test", "inputs": {"poses": [[float(i), 0.5] for i in range(5000)]}}
+    path = tolsynth.write_table(frame, tmp_path / "long.xlsx")
+    back = tolsynth.read_table(path)
+    assert back.attrs["inputs"] == frame.attrs["inputs"]
+    assert len(json.dumps(frame.attrs["inputs"])) > 32767  # more than one Excel cell
+    np.testing.assert_array_equal(back["n"].to_numpy(), [1, 2])
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_read_table_bad_files_raise_typed_errors(solved, tmp_path, fmt):
+    path = tmp_path / f"t.{fmt}"
+    with pytest.raises(InputError, match="does not exist"):
+        tolsynth.read_table(path)
+    path.write_bytes(b"")
+    with pytest.raises(InputError, match="is empty"):
+        tolsynth.read_table(path)
+    for junk in (b"\xff\xfe\x00garbage\x80\x81" * 50, b"\x00" * 4096, b'{"tolsynth": '):
+        path.write_bytes(junk)
+        with pytest.raises(InputError, match=str(path.name)):
+            tolsynth.read_table(path)
+    if fmt == "csv":  # a sidecar that is not JSON, or that names other columns
+        solved.save(path)
+        Path(str(path) + ".json").write_text("{not json")
+        with pytest.raises(InputError, match="metadata"):
+            tolsynth.read_table(path)
+        solved.save(path)
+        path.write_text("a,b\n1,2\n")
+        with pytest.raises(InputError, match="columns"):
+            tolsynth.read_table(path)
+
+
+def test_read_table_on_devices_and_folders(tmp_path):
+    import os
+
+    if os.path.exists("/dev/zero"):
+        os.symlink("/dev/zero", tmp_path / "zero.csv")
+        with pytest.raises(InputError, match="not a regular file"):
+            tolsynth.read_table(tmp_path / "zero.csv")
+    (tmp_path / "dir.csv").mkdir()
+    with pytest.raises(InputError, match="not a regular file"):
+        tolsynth.read_table(tmp_path / "dir.csv")
+
+
+def test_csv_of_earlier_versions_still_reads(tmp_path):
+    path = tmp_path / "old.csv"
+    path.write_text('# tolsynth 0.1.0 SynthesisResult\n# {"kind": "SynthesisResult", "summary": {"cost": 1.5}}\n'
+                    "parameter,tolerance\nh2,0.1\n")
+    back = tolsynth.read_table(path)
+    assert back.attrs["summary"]["cost"] == 1.5 and back.attrs["tolsynth_version"] == "0.1.0"
+    assert back["tolerance"].tolist() == [0.1]

@@ -40,7 +40,7 @@ class Tabular:
         return _frame(self)
 
     def save(self, path) -> str:
-        """Write :meth:`to_frame` to ``path`` (``.csv``, ``.json`` or ``.parquet``) with every input."""
+        """Write :meth:`to_frame` to ``path`` (``.csv``, ``.json``, ``.parquet`` or ``.xlsx``) with every input."""
         return _save(self, path)
 
     def to_csv(self, path) -> str:
@@ -54,6 +54,10 @@ class Tabular:
     def to_parquet(self, path) -> str:
         """Write :meth:`to_frame` as Parquet (needs pyarrow), inputs in the file's metadata."""
         return _save(self, path, ".parquet")
+
+    def to_excel(self, path) -> str:
+        """Write :meth:`to_frame` as an Excel workbook (needs openpyxl), inputs in a second sheet."""
+        return _save(self, path, ".xlsx")
 
 
 def require_pandas(what: str = "a table"):

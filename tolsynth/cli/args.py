@@ -446,9 +446,9 @@ def inputs_record(args, mech: Mechanism | None = None, **resolved) -> dict:
 def add_table_out_argument(p: argparse.ArgumentParser, what: str, option: str = "--out") -> None:
     """``--out FILE.csv|.json|.parquet``: the result as a table, inputs recorded."""
     p.add_argument(option, default=None, metavar="FILE",
-                   help=f"write {what} to FILE: .csv, .json or .parquet, with every input and the package "
-                        "version recorded (needs pandas, Parquet pyarrow: pip install \"tolsynth[tables]\"); "
-                        "default: none")
+                   help=f"write {what} to FILE: .csv (plain, metadata in FILE.json), .json, .parquet or .xlsx, with "
+                        "every input and the package version recorded (needs pandas, Parquet pyarrow: pip install "
+                        "\"tolsynth[tables]\"; Excel openpyxl: pip install \"tolsynth[xlsx]\"); default: none")
 
 
 def check_table_out(args, option: str = "--out") -> None:
