@@ -32,6 +32,7 @@ from tolsynth.analysis.workspace_map import ProbabilityMap, probability_map
 from tolsynth.analysis.plot import plot_map
 from tolsynth.analysis.contributions import Contributions, contributions
 from tolsynth.synthesis.processes import Process, ProcessChoice, synthesize_processes
+from tolsynth.synthesis.grades import GradeChoice, round_to_grades
 from tolsynth.synthesis.budget import BudgetResult, best_accuracy
 from tolsynth.synthesis.pareto import ParetoFront, pareto_front
 from tolsynth.synthesis.single import Comparison, compare, synthesize
@@ -58,6 +59,8 @@ __all__ = [
     "contributions",
     "Contributions",
     "synthesize_processes",
+    "round_to_grades",
+    "GradeChoice",
     "best_accuracy",
     "BudgetResult",
     "pareto_front",

@@ -463,7 +463,17 @@ def _validation_frame(v):
     return frame
 
 
+def _grades_frame(g):
+    rows = [{"parameter": n, "unit": g.units[n], "grade": grade, "tolerance": g.tolerances[n],
+             "continuous": g.continuous.get(n, float("nan")), "size_mm": g.sizes.get(n, float("nan"))}
+            for n, grade in g.grades.items()]
+    summary = {k: v for k, v in g.to_dict().items() if k not in ("grades", "tolerances", "units", "continuous", "sizes")}
+    return make_frame(rows, "GradeChoice", {"probability": g.probability, "sizes_mm": g.sizes}, summary,
+                      {"tolerance": "unit column", "continuous": "unit column", "size_mm": "mm"})
+
+
 _BUILDERS = {
+    "GradeChoice": _grades_frame,
     "ValidationResult": _validation_frame,
     "SynthesisResult": _synthesis_frame,
     "Comparison": _comparison_frame,
