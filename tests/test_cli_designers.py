@@ -1,0 +1,131 @@
+"""The command line's full reach: ``tolsynth models``, ``pareto``, ``budget`` and ``processes``
+run what the API runs (the same numbers), with tables, ``--json`` and ``--out``; bad input is one
+line and exit status 2."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import tolsynth
+from tolsynth.cli import main
+
+pd = pytest.importorskip("pandas")
+
+PROCS = """
+[[h3]]
+name = "turning"
+cost = { model = "power", k = 1.0, alpha = 0.7 }
+lower = 0.05
+upper = 0.5
+
+[[h3]]
+name = "grinding"
+cost = { model = "power", k = 3.0, alpha = 0.7 }
+lower = 0.005
+upper = 0.05
+"""
+
+
+def _json(capsys, argv):
+    assert main(argv + ["--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_models_lists_every_bundled_model_with_its_source(capsys, tmp_path):
+    out = _json(capsys, ["models"])
+    names = [m["name"] for m in out["models"]]
+    assert names == tolsynth.bundled_models()
+    for m in out["models"]:
+        model = tolsynth.load_model(m["name"])
+        assert m["title"] == model.title and m["error_parameters"] == model.n and m["source_line"]
+    assert main(["models", "--out", str(tmp_path / "m.csv")]) == 0
+    text = capsys.readouterr().out
+    assert "xu_zhang_1988" in text and "source:" in text
+    assert list(pd.read_csv(tmp_path / "m.csv")["name"]) == names
+
+
+def test_pareto_matches_the_api(capsys, tmp_path):
+    out = _json(capsys, ["pareto", "--model", "planar_2r", "--p", "0.99", "--R", "0.3:0.9:3",
+                         "--probability", "gaussian", "--dist", "uniform"])
+    front = tolsynth.pareto_front("planar_2r", R=[0.3, 0.6, 0.9], p=0.99, probability="gaussian",
+                                  distribution="uniform")
+    assert [r["R"] for r in out["rows"]] == pytest.approx([0.3, 0.6, 0.9])
+    assert [r["cost"] for r in out["rows"]] == pytest.approx([r["cost"] for r in front.rows], rel=1e-9)
+    assert out["inputs"]["command"] == "pareto"
+    path = tmp_path / "front.csv"
+    assert main(["pareto", "--model", "planar_2r", "--R", "0.5", "--p", "0.9,0.99", "--probability", "gaussian",
+                 "--out", str(path)]) == 0
+    frame = pd.read_csv(path)  # plain pandas
+    assert list(frame["p"]) == [0.9, 0.99] and frame["cost"].is_monotonic_increasing
+    assert tolsynth.read_table(path).attrs["summary"]["axis"] == "p"
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["--R", "0.5", "--p", "0.9"], "--R/--p"),
+    (["--R", "0.9:0.3:3", "--p", "0.9"], "START < STOP"),
+    (["--R", "0.3:0.9:1", "--p", "0.9"], "N"),
+    (["--R", "0.3:0.9:x", "--p", "0.9"], "whole number"),
+])
+def test_pareto_bad_ranges(capsys, argv, needle):
+    assert main(["pareto", "--model", "planar_2r"] + argv) == 2
+    err = capsys.readouterr().err
+    assert needle in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_budget_matches_the_api(capsys, tmp_path):
+    out = _json(capsys, ["budget", "--model", "planar_2r", "--p", "0.99", "--cost", "12", "--probability", "gaussian"])
+    api = tolsynth.best_accuracy("planar_2r", 12.0, p=0.99, probability="gaussian")
+    assert out["budget"]["value"] == pytest.approx(api.value, rel=1e-9)
+    assert out["budget"]["certified"] and out["cost"] <= 12.0
+    path = tmp_path / "b.xlsx"
+    pytest.importorskip("openpyxl")
+    assert main(["budget", "--model", "planar_2r", "--R", "0.5", "--cost", "12", "--probability", "gaussian",
+                 "--out", str(path)]) == 0
+    frame = pd.read_excel(path)
+    assert frame["cost"].sum() <= 12.0 + 1e-9
+    assert tolsynth.read_table(path).attrs["summary"]["budget"]["quantity"] == "p"
+    assert main(["budget", "--model", "planar_2r", "--cost", "12"]) == 2
+    assert "--p/--R" in capsys.readouterr().err
+
+
+def test_processes_from_a_table_file(capsys, tmp_path):
+    table = tmp_path / "procs.toml"
+    table.write_text(PROCS)
+    out = _json(capsys, ["processes", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--table", str(table),
+                         "--probability", "gaussian"])
+    from tolsynth.model.cost import PowerLaw
+
+    procs = {"h3": [tolsynth.Process("turning", PowerLaw(1.0, 0.7), 0.05, 0.5),
+                    tolsynth.Process("grinding", PowerLaw(3.0, 0.7), 0.005, 0.05)]}
+    api = tolsynth.synthesize_processes("xu_zhang_1988", 0.5, 0.99, procs, probability="gaussian")
+    assert out["processes"] == api.processes and out["proven"]
+    assert out["cost"] == pytest.approx(api.cost, rel=1e-9)
+    path = tmp_path / "pc.csv"
+    assert main(["processes", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--table", str(table),
+                 "--probability", "gaussian", "--out", str(path)]) == 0
+    frame = pd.read_csv(path).set_index("parameter")
+    assert frame.loc["h3", "process"] == api.processes["h3"]
+    # no table and no processes in the model file; a table that is not TOML
+    assert main(["processes", "--model", "planar_2r", "--R", "0.5", "--p", "0.9"]) == 2
+    assert "--table" in capsys.readouterr().err
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[[h3]\nname=")
+    assert main(["processes", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.9", "--table", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "cannot be read" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("name", tolsynth.bundled_models())
+def test_every_bundled_model_with_the_default_probability(capsys, name):
+    from tolsynth.kinematics.joint_space import model_reference
+
+    m = tolsynth.load_model(name)
+    pose = [] if model_reference(m) else ["--pose", next(iter(m.configurations))]
+    out = _json(capsys, ["pareto", "--model", name, "--R", "0.5,1", "--p", "0.99", *pose])
+    assert all(r["success"] for r in out["rows"]) and out["inputs"]["model"]["name"] == name
+    budget = out["rows"][1]["cost"] * 1.01  # a little above the R = 1 design's cost: it buys R <= 1
+    out = _json(capsys, ["budget", "--model", name, "--p", "0.99", "--cost", f"{budget:.12g}", "--rtol", "1e-3",
+                         *pose])
+    assert out["budget"]["certified"] and out["budget"]["value"] <= 1.0 + 1e-9

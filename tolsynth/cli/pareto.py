@@ -1,0 +1,89 @@
+"""``tolsynth pareto``: the optimal cost along a sweep of R (at a given p) or of p (at a given R),
+each point a certified optimum (:func:`tolsynth.pareto_front`)."""
+
+from __future__ import annotations
+
+import math
+import sys
+
+from tolsynth.cli.args import (
+    _number,
+    add_table_out_argument,
+    check_table_out,
+    emit_json,
+    inputs_record,
+    quantity,
+    write_out,
+)
+from tolsynth.cli.designs import add_design_arguments, design_kwargs, parse_range
+from tolsynth.errors import InputError
+from tolsynth.kinematics.mechanism import load_model
+
+__all__ = ["register", "cmd_pareto"]
+
+
+def _R(text: str) -> float:
+    return quantity(text, "--R", "length", "mm")
+
+
+def cmd_pareto(args) -> int:
+    from tolsynth.io.tables import make_frame
+    from tolsynth.synthesis.pareto import pareto_front
+
+    check_table_out(args)
+    swept = [name for name, text in (("R", args.R), ("p", args.p)) if ":" in text or "," in text]
+    if len(swept) != 1:
+        raise InputError("--R/--p", "give one as a range START:STOP:N (or comma-separated values) and the other "
+                                    "as one number", "e.g. --R 0.2:2:10 --p 0.99, or --R 0.5 --p 0.9:0.999:5")
+    mech = load_model(args.model)
+    kw, record = design_kwargs(mech, args)
+    prob = _number("--p", "0 < p < 1", lambda v: 0 < v < 1)
+    if swept == ["R"]:
+        R = parse_range(args.R, "--R", lambda v: v > 0, _R)
+        p = prob(args.p)
+    else:
+        p = parse_range(args.p, "--p", lambda v: 0 < v < 1, _number("--p", "0 < p < 1"))
+        R = _R(args.R)
+        if not R > 0:
+            raise InputError("--R", f"got {args.R}", "a radius > 0 (mm)")
+    front = pareto_front(mech, R=R, p=p, **kw)
+    record.update(R_mm=R, p=p, axis=front.axis)
+    units = {"R": "mm", "cost": "the paper's cost units", "lower_bound": "the paper's cost units"}
+    rows = [{k: v for k, v in r.items() if k != "processes"} for r in front.rows]
+    if args.out:
+        write_out(make_frame(rows, "ParetoFront", record, {"axis": front.axis, "reference": front.reference,
+                                                          "wall_time_s": front.wall_time}, units), args, mech)
+    failed = [r for r in front.rows if not r["success"] and math.isfinite(r["cost"])]
+    if args.json:
+        emit_json({"axis": front.axis, "rows": front.rows, "reference": front.reference, "wall_time": front.wall_time,
+                   "inputs": inputs_record(args, mech, **record)})
+    else:
+        print(f"{mech.name}: optimal cost against {front.axis} "
+              + (f"at p = {p:g}" if front.axis == "R" else f"at R = {R:g} mm"))
+        print(f"{'R, mm':>12} {'p':>10} {'cost':>14} {'lower bound':>14}  status")
+        for r in front.rows:
+            status = "optimal" if r["success"] else ("infeasible" if not math.isfinite(r["cost"]) else "NOT certified")
+            print(f"{r['R']:>12.6g} {r['p']:>10.6g} {r['cost']:>14.8g} {r['lower_bound']:>14.8g}  {status}")
+        for ref in front.reference:
+            print(f"  the paper's {ref['table']} at R = {ref['R']:g}, p = {ref['p']:g}: printed tolerances cost "
+                  f"{ref['cost']:.8g}")
+        print(f"{len(front.rows)} solves in {front.wall_time:.2f} s")
+    if failed:
+        print(f"tolsynth pareto: {len(failed)} point(s) not certified; their numbers are not optima", file=sys.stderr)
+        return 1
+    return 0
+
+
+def register(sub) -> None:
+    """Add ``tolsynth pareto`` to the sub-command parser."""
+    p = sub.add_parser("pareto", help="optimal cost against R (or p): a Pareto front",
+                       description="Certified optima along a sweep of the radius R at a fixed p, or of p at a fixed "
+                                   "R (tolsynth.pareto_front); each solve starts from the previous point.")
+    add_design_arguments(p)
+    p.add_argument("--R", required=True, help="radius, mm: START:STOP:N (N evenly spaced values), comma-separated "
+                                              "values, or one value when --p is the range (suffixes allowed: 500um)")
+    p.add_argument("--p", required=True, help="probability, 0 < p < 1: one value, or START:STOP:N / comma-separated "
+                                              "values when R is fixed")
+    add_table_out_argument(p, "the front (one row per point)")
+    p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the table")
+    p.set_defaults(func=cmd_pareto, task="the Pareto sweep")
