@@ -1,12 +1,30 @@
 """Pages generated from the code at build time, so that they cannot drift from it:
 ``_generated/cli.md`` (every sub-command's ``--help``) and ``_generated/format_keys.md`` (every
-table and key of :data:`tolsynth.model.fields.FORMAT`)."""
+table and key of :data:`tolsynth.model.fields.FORMAT`); and the folder of the notebooks' executed
+outputs, shared with ``tests/test_notebooks.py`` (:func:`notebook_cache_dir`)."""
 
 from __future__ import annotations
 
+import hashlib
+import sys
 from pathlib import Path
 
 OUT = Path(__file__).resolve().parent / "_generated"
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def notebook_cache_dir() -> Path:
+    """The jupyter-cache folder of the executed notebooks for this package's source.
+
+    jupyter-cache keys each executed notebook by its code cells; the folder adds the package's
+    source, the model files and the Python version to the key, so a cached page always shows
+    what the current code computes. The test that executes a notebook stores it here, and the docs
+    build reads it back instead of executing the notebook a second time.
+    """
+    digest = hashlib.sha256(sys.version.encode())
+    for path in sorted([*(ROOT / "tolsynth").rglob("*.py"), *(ROOT / "models").glob("*.toml")]):
+        digest.update(path.relative_to(ROOT).as_posix().encode() + b"\0" + path.read_bytes())
+    return ROOT / "docs" / "_build" / ".jupyter_cache" / digest.hexdigest()[:16]
 
 
 def _write(name: str, text: str) -> None:

@@ -5,9 +5,10 @@ Build (from the repository root): ``pip install -e ".[docs]"`` then
 
 - API reference: autosummary + autodoc of ``tolsynth.__all__``, docstrings in numpydoc style;
 - notebooks: the jupytext ``py:percent`` files of ``notebooks/`` (linked into ``docs/notebooks/``),
-  executed by myst-nb on every build, outputs and plots included;
-- the model-file format: the README's section and the table of every key from
-  ``tolsynth.model.fields.FORMAT``; the command line: each sub-command's ``--help``.
+  executed by myst-nb unless the tests have executed the same notebook on the same code, outputs
+  and plots included;
+- the model-file format with the table of every key from ``tolsynth.model.fields.FORMAT``; the
+  command line: each sub-command's ``--help``.
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ sys.path.insert(0, str(HERE))  # _ext.py
 # the notebook kernels inherit this environment: the inline backend puts every figure into the page
 # (CI exports MPLBACKEND=Agg for the tests, under which plt.show() would show nothing)
 os.environ["MPLBACKEND"] = "module://matplotlib_inline.backend_inline"
+
+from _ext import notebook_cache_dir  # noqa: E402
 
 import tolsynth  # noqa: E402
 
@@ -43,9 +46,12 @@ nb_custom_formats = {".py": ["jupytext.reads", {"fmt": "py:percent"}]}
 exclude_patterns = ["_build", "_generated", "_templates", "conf.py", "_ext.py", "**/__pycache__", "jupyter_execute"]
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".py": "myst-nb"}
 
-# execute every notebook on every build: a page never shows stale numbers
-nb_execution_mode = "force"
-nb_execution_timeout = 600  # seconds per cell; the slowest notebook (03) takes ~35 s in all
+# a notebook is executed once per content: its outputs are cached under a folder keyed by the
+# package's source (_ext.notebook_cache_dir), where tests/test_notebooks.py also stores the notebooks
+# it has executed; a page never shows numbers of other code, and CI never runs a notebook twice
+nb_execution_mode = "cache"
+nb_execution_cache_path = str(notebook_cache_dir())
+nb_execution_timeout = 600  # seconds per cell
 nb_execution_raise_on_error = True  # a failing cell fails the build
 nb_execution_show_tb = True
 nb_merge_streams = True

@@ -55,7 +55,7 @@ print(textwrap.fill(m.source, 100))
 #
 # The text gives the dimensions, the joint ranges, the interference limit, the worst-error pose and
 # the cost factors, but not the frames (Figure 2) nor the nominal `h3`, `h4`.  The model file
-# `models/xu_zhang_1988.toml` implements the reconstruction of `shared/paper/RECONSTRUCTION.md` and
+# `models/xu_zhang_1988.toml` implements the reconstruction documented in `docs/reconstruction.md` and
 # lists each assumption it makes:
 
 # %%

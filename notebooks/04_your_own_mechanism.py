@@ -42,7 +42,7 @@ from tolsynth.kinematics.batch_stats import principal_std_batch
 # %% [markdown]
 # ## 1. The model file
 #
-# The format (see `models/planar_2r.toml`, the smallest bundled example, and the README):
+# The format (see `models/planar_2r.toml`, the smallest bundled example, and `docs/model_format.md`):
 #
 # * `[model]`: name, title, the **source** of the numbers and the **assumptions** the model makes;
 # * `[units]`: the units of the numbers in *this file*;

@@ -2,7 +2,7 @@
 
 Reference: the hand-written NumPy chain of ``test_kinematics.py`` (position), its central
 differences (sensitivity), the covariance ``sum_i a_i a_i^T eps_i^2 / 3`` in NumPy with the
-Figure 3 tolerances typed from DIGEST.md, ``numpy.linalg.eigvalsh`` (principal std),
+Figure 3 tolerances typed from the paper (docs/reconstruction.md), ``numpy.linalg.eigvalsh`` (principal std),
 ``scipy.stats.norm`` (components) and the SciPy double integral of ``test_stats.py`` (sphere).
 """
 
@@ -18,16 +18,15 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from tolsynth.cli import main
-
 from test_kinematics import XU_ORDER, fd_sensitivity, xu_fk
 from test_stats import ball_probability_scipy
+from tolsynth.cli import main
 
 ARGS = ["analyze", "--model", "xu_zhang_1988", "--pose", "worst", "--tolerances", "figure3",
         "--dist", "uniform", "--R", "0.2", "--json"]
 KEYS = {"position", "sensitivity", "covariance", "principal_std", "p_components", "p_sphere"}
 
-# Figure 3 (DIGEST.md section 5), in mm and rad, and the worst pose of the model file (deg)
+# Figure 3 (the paper's section 5, docs/reconstruction.md), in mm and rad, and the worst pose of the model file (deg)
 FIGURE3 = {"h2": 0.06, "hp2": 0.028, "hp3": 0.06, "hp4": 0.028, "h3": 0.08, "h4": 0.01, "s1": 0.01,
            "a": 0.015, "alpha1": 0.0005, "alpha3": 0.0005, "alpha4": 0.0005}
 WORST_DEG = [0.0, 157.6451903, 107.97116143, 22.3548097, 0.0]

@@ -71,14 +71,14 @@ TOL_UNIT = {"mm": 1.0, "1e-2 rad": 1e-2, "mrad": 1e-3}
 
 
 # ---------------------------------------------------------------------------------------------
-# the paper's robot (RECONSTRUCTION.md), by hand
+# the paper's robot (docs/reconstruction.md), by hand
 # ---------------------------------------------------------------------------------------------
 _XU = _toml("xu_zhang_1988")
 XU_SYM = {
     k: (math.radians(v) if (k.startswith("alpha") or k == "o1") else float(v))
     for k, v in _XU["symbols"].items()
 }
-XU_UNITS = {  # error parameter -> tolerance unit, as DIGEST.md section 5 states them
+XU_UNITS = {  # error parameter -> tolerance unit, as the paper's section 5 states them
     "h2": "mm", "h3": "mm", "h4": "mm", "hp2": "mm", "hp3": "mm", "hp4": "mm", "s1": "mm", "a": "mm",
     "alpha1": "1e-2 rad", "alpha3": "1e-2 rad", "alpha4": "1e-2 rad",
 }
@@ -372,7 +372,7 @@ def test_parallelogram_first_order_forearm_rotation(mechs):
     """First-order forearm rotation of the perturbed parallelogram (the loop dimensions only move
     the passive elbow, so their rotation columns lie along the shoulder axis z2).
 
-    RECONSTRUCTION.md prints dtheta = [-dh'1 + dh'3 + (dh'2 - dh'4) cos g] / (h'2 sin g); with the
+    docs/reconstruction.md prints dtheta = [-dh'1 + dh'3 + (dh'2 - dh'4) cos g] / (h'2 sin g); with the
     angles counter-clockwise about z2 (the D-H sense, and the sense of the circle-intersection
     reference above) the same expression carries the opposite overall sign:
     dtheta = [dh'1 - dh'3 - (dh'2 - dh'4) cos g] / (h'2 sin g).  Only the sign convention differs."""

@@ -1,9 +1,9 @@
 """The bundled model files against the numbers their sources state.
 
 The paper's robot (``xu_zhang_1988``): the worst-error pose puts the hand at (925, 0, 1225) mm
-(DIGEST.md section 5), and the position rows of the sensitivity match the table of
-RECONSTRUCTION.md ("What this gives"); the error parameters, cost factors and the Figure 3
-tolerances are those of DIGEST.md section 5.  ``puma560`` and ``planar_2r`` are checked against
+(the paper's section 5), and the position rows of the sensitivity match the table of
+docs/reconstruction.md ("The worst-error pose"); the error parameters, cost factors and the Figure 3
+tolerances are those of the paper's section 5.  ``puma560`` and ``planar_2r`` are checked against
 hand-derived poses.
 """
 
@@ -16,7 +16,7 @@ import pytest
 
 import tolsynth
 
-# RECONSTRUCTION.md, position sensitivities at the worst pose (mm per mm, mm per rad), as printed
+# docs/reconstruction.md, position sensitivities at the worst pose (mm per mm, mm per rad), as printed
 TABLE_COLUMNS = ["h2", "h3", "h4", "hp2", "hp3", "hp4", "s1", "a", "alpha1", "alpha3", "alpha4"]
 TABLE = {
     "x": ["2.437", "0.925", "1.000", "-1.377", "-2.128", "1.377", "0", "0", "0", "0", "0"],
@@ -54,7 +54,7 @@ def test_xu_worst_pose_hand_point(xz):
 
 
 def test_xu_worst_pose_sensitivity_table(xz):
-    """Position rows of the sensitivity vs the table of RECONSTRUCTION.md, to its rounding.
+    """Position rows of the sensitivity vs the table of docs/reconstruction.md, to its rounding.
 
     The package's columns are per tolerance unit (mm; 1e-2 rad for alpha1, alpha3, alpha4), the
     table's per mm and per rad: the angle columns are divided by 0.01.  The y row is compared in
@@ -78,7 +78,7 @@ def test_xu_worst_pose_sensitivity_table(xz):
 
 
 def test_xu_error_parameters_as_in_the_paper(xz):
-    """x1..x11 in the paper's order, the cost factors k and the tolerance units of DIGEST.md."""
+    """x1..x11 in the paper's order, the cost factors k and the tolerance units of the paper's section 5."""
     assert [xz.parameters[xz.index(f"x{i}")].name for i in range(1, 12)] == TABLE_COLUMNS
     assert xz.k.tolist() == [1.0] * 8 + [1.5] * 3
     assert list(xz.units) == ["mm"] * 8 + ["1e-2 rad"] * 3
@@ -87,7 +87,7 @@ def test_xu_error_parameters_as_in_the_paper(xz):
 
 
 def test_xu_figure3_tolerances(xz):
-    """Figure 3 half-tolerances (DIGEST.md section 5, printed in mm and rad, listed there in the
+    """Figure 3 half-tolerances (the paper's section 5, printed in mm and rad, listed there in the
     order dh'1(=dh2), dh'2, dh'3, dh'4, dh3, dh4, ds1, da, dalpha1, dalpha3, dalpha4), in the
     model's tolerance units: the angles 0.0005 rad = 0.05 x 1e-2 rad."""
     printed = dict(zip(["h2", "hp2", "hp3", "hp4", "h3", "h4", "s1", "a", "alpha1", "alpha3", "alpha4"],
@@ -97,7 +97,7 @@ def test_xu_figure3_tolerances(xz):
 
 
 def test_xu_joint_limits_as_printed(xz):
-    """Ranges of DIGEST.md section 5 (deg), and the interference limit 50 <= theta'2 - theta2 <= 130."""
+    """Ranges of the paper's section 5 (deg), and the interference limit 50 <= theta'2 - theta2 <= 130."""
     printed = {"theta1": (-150, 150), "thetap2": (140, 200), "theta2": (50, 130),
                "theta4": (-110, 110), "theta5": (-185, 185)}
     assert {j.name for j in xz.spec.joints} == set(printed)

@@ -1,6 +1,6 @@
 """Monte Carlo through the nonlinear kinematics (tolsynth.analysis.montecarlo), checked against an
 independent sampler written here: plain NumPy forward kinematics of the reconstructed robot
-(shared/paper/RECONSTRUCTION.md), including the parallelogram loop, with its own random numbers."""
+(docs/reconstruction.md), including the parallelogram loop, with its own random numbers."""
 
 from __future__ import annotations
 
@@ -14,16 +14,16 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
 from tolsynth.analysis.montecarlo import NumpyEvaluator, monte_carlo, wilson_interval
 from tolsynth.analysis.validation import validate
+from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
 
 Z999 = NormalDist().inv_cdf(0.9995)  # two-sided 99.9 %
 
 # ---------------------------------------------------------------------------------------------
 # the independent sampler: the paper's numbers, modified D-H, parallelogram loop, nothing from tolsynth
 # ---------------------------------------------------------------------------------------------
-# joint values of the worst pose as RECONSTRUCTION.md gives them (theta1 = 180 deg there)
+# joint values of the worst pose as docs/reconstruction.md gives them (theta1 = 180 deg there)
 WORST_DEG = (180.0, 157.6451903, 107.97116143, 22.3548097, 0.0)
 # Figure 3 half-tolerances (mm, rad), in the order h2(=h'1), h3, h4, h'2, h'3, h'4, s1, a, alpha1, alpha3, alpha4
 FIG3 = np.array([0.06, 0.08, 0.01, 0.028, 0.06, 0.028, 0.01, 0.015, 0.0005, 0.0005, 0.0005])

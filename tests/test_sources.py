@@ -55,7 +55,7 @@ PUMA = {
     "alpha": [math.pi / 2, 0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, 0.0],
     "limits_deg": [(-160, 160), (-45, 225), (-225, 45), (-110, 170), (-100, 100), (-266, 266)],
 }
-# Xu Weiliang, Zhang Qixian (1988), section 5 as in shared/paper/DIGEST.md: nominal parameters
+# Xu Weiliang, Zhang Qixian (1988), section 5 (restated in docs/reconstruction.md): nominal parameters
 # (mm, rad) "h'1 = h'3 = h2 = 600, h'2 = h'4 = 280, h5 = 800, s5 = a = 150, s0 = 200, s'i = 0,
 # alpha'i = 0, s1..s4 = 0, alpha1 = pi/2, alpha2 = alpha3 = 0, alpha4 = pi/2"; ranges (deg); the
 # interference limit 50..130 deg; k = 1 (lengths, mm) and 1.5 (angles, 1e-2 rad).
@@ -64,7 +64,7 @@ XU_NOMINAL = {"hp1": 600.0, "hp3": 600.0, "h2": 600.0, "hp2": 280.0, "hp4": 280.
               "alpha1": 90 * DEG, "alpha2": 0.0, "alpha3": 0.0, "alpha4": 90 * DEG}
 XU_RANGES = {"theta1": (-150, 150), "thetap2": (140, 200), "theta2": (50, 130),
              "theta4": (-110, 110), "theta5": (-185, 185)}
-# DIGEST.md section 6: Tables 1-3, optimal half-tolerances x1..x11 (mm and 1e-2 rad), as printed.
+# the paper's Tables 1-3, optimal half-tolerances x1..x11 (mm and 1e-2 rad), as printed.
 XU_TABLES = {
     # (table, R, p, alpha, distribution): x1..x11
     ("Table 1", 1.0, 0.99, 0.7, "uniform"): [0.109, 0.474, 0.273, 0.103, 0.067, 0.087, 0.337, 0.268, 0.035, 0.132, 0.124],
@@ -273,7 +273,7 @@ def test_ur5_fk_against_robotics_toolbox(rtb):
 
 
 # ---------------------------------------------------------------------------------------------
-# Xu & Zhang 1988 (DIGEST.md) and planar_2r
+# Xu & Zhang 1988 (docs/reconstruction.md) and planar_2r
 # ---------------------------------------------------------------------------------------------
 def test_xu_nominal_parameters_ranges_and_costs_as_printed():
     m = tolsynth.load_model("xu_zhang_1988")

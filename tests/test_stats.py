@@ -381,7 +381,7 @@ def test_p_components_vs_scipy_norm():
 def test_z_of_p_vs_scipy_and_the_paper():
     for p in (0.5, 0.7, 0.8, 0.9, 0.95, 0.99, 0.999, 1e-6, 1 - 1e-9):
         assert abs(z_of_p(p) - stats.norm.ppf(0.5 + p / 2)) <= 1e-9 * max(1.0, stats.norm.ppf(0.5 + p / 2))
-    # the values printed in the paper (DIGEST.md section 4), to their 4 decimals
+    # the values printed in the paper (its section 4), to their 4 decimals
     for p, printed in ((0.99, 2.5758), (0.90, 1.6449), (0.80, 1.2816), (0.70, 1.0364)):
         assert abs(z_of_p(p) - printed) < 5e-5
         # and it is a two-sided quantile: P(|Z| <= z) = p

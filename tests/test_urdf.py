@@ -528,15 +528,15 @@ def test_ur5_dh_errors_are_fixed_combinations_of_urdf_origin_errors():
 
 
 def test_readme_block_says_true_things():
-    """The README's "Your robot from a URDF" block: 42 parameters, and its hand point is the D-H
+    """The docs' "From a URDF" block (docs/robots.md): 42 parameters, and its hand point is the D-H
     chain of UR's table (NumPy, above) turned 180 deg about z."""
     import re
 
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    readme = (Path(__file__).resolve().parent.parent / "docs" / "robots.md").read_text()
     (block,) = [b for b in re.findall(r"```python\n(.*?)```", readme, flags=re.S) if "load_urdf" in b]
     _robots_dir()
     namespace: dict = {}
-    exec(compile(block, "README.md", "exec"), namespace)
+    exec(compile(block, "docs/robots.md", "exec"), namespace)
     m = namespace["ur5u"]
     assert len(m.error_parameters) == 42
     hand = RZ180 @ _dh_numpy([0, 0, 0, -math.pi / 2, 0, 0])[:3, 3]
@@ -545,11 +545,11 @@ def test_readme_block_says_true_things():
 
 
 def test_readme_model_file_block_loads(tmp_path):
-    """The README's model file pointing at a URDF loads, and its 'worst' pose is the D-H table's
+    """The docs' model file pointing at a URDF (docs/robots.md) loads, and its 'worst' pose is the D-H table's
     hand at (q4 = -90 deg) turned 180 deg about z."""
     import re
 
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    readme = (Path(__file__).resolve().parent.parent / "docs" / "robots.md").read_text()
     (block,) = [b for b in re.findall(r"```toml\n(.*?)```", readme, flags=re.S) if "urdf =" in b]
     (tmp_path / "ur5_robot.urdf").write_bytes(_file(UR5[0]).read_bytes())
     (tmp_path / "my_ur5.toml").write_text(block)

@@ -137,7 +137,7 @@ def principal_variances_cubic(V) -> ca.SX:
     """Principal variances (descending) of a symmetric 3x3 ``V`` by the closed-form cubic.
 
     The paper's appendix writes the characteristic polynomial ``lam^3 + b1 lam^2 + b2 lam + b3``
-    and its trigonometric roots with ``p = -b1^2/3 + b2`` (the DIGEST's fix).  Here ``p`` is
+    and its trigonometric roots with ``p = -b1^2/3 + b2`` (fixing the scan: docs/reconstruction.md).  Here ``p`` is
     evaluated as ``-tr(D^2)/2`` with ``D = V - tr(V)/3 I``, which is the same number without the
     cancellation, and ``q = -det(D)``; the roots are ``m + 2 s cos(phi - 2 pi k / 3)`` with
     ``s = sqrt(-p/3)`` and ``cos(3 phi) = -q / (2 s^3)``.

@@ -5,7 +5,7 @@ For every column (R, p, alpha; uniform and normal) of the model's ``reference_re
 * the printed tolerances, and what they give in this model: their cost and their largest
   ``sigma z / R`` (<= 1 means they meet the specification at the worst pose);
 * the optimum by IPOPT and by SUMT + Powell, their costs and their agreement;
-* both readings of the printed angle unit (RECONSTRUCTION.md): "1e-2 rad" as printed, and
+* both readings of the printed angle unit (docs/reconstruction.md): "1e-2 rad" as printed, and
   "deg", in which the paper's angular numbers are degrees and the cost is evaluated on them.
 """
 
