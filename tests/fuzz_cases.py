@@ -1,5 +1,5 @@
 """The fuzz cases, shared by ``tests/test_fuzz.py`` (hypothesis, the invariant as an
-assertion) and ``benchmarks/fuzz_counts.py`` (the same cases, outcomes counted per category).
+assertion) and ``tests/fuzz_counts.py`` (the same cases, outcomes counted per category).
 
 The invariant for every case: it either succeeds with finite, independently checked numbers, or
 raises a :class:`tolsynth.TolsynthError` naming the field.  Never an untyped exception, never a
@@ -26,9 +26,8 @@ import numpy as np
 from hypothesis import strategies as st
 
 import tolsynth
-from tolsynth.errors import TolsynthError
-
 from model_text import model_dict, toml_text
+from tolsynth.errors import TolsynthError
 
 MODELS = ("planar_2r", "puma560", "xu_zhang_1988")
 CASE_SECONDS = 60  # a case that takes longer is a hang (the slowest valid cases take ~12 s alone, 20+ s on a loaded machine)

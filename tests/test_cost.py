@@ -8,9 +8,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.model.cost import Chase, Exponential, PowerLaw, Tabulated, cost_model
 from tolsynth.model.cost_set import CostSet, cost_set
-from tolsynth.errors import InputError, OutOfRangeError
 
 scipy = pytest.importorskip("scipy")
 from scipy.interpolate import PchipInterpolator  # noqa: E402

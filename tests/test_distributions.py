@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth.probability.distributions import shape
 from tolsynth.errors import InputError, ModelFileError, OutOfRangeError
+from tolsynth.probability.distributions import shape
 
 MIXED = {"*": "uniform", "h2": "normal", "h3": "triangular", "a": "truncnormal", "alpha1": "truncnormal(3)"}
 

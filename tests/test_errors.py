@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import tolsynth
+from test_kinematics import planar_fk, xu_fk
 from tolsynth.errors import (
     InputError,
     LoopClosureError,
@@ -24,8 +25,6 @@ from tolsynth.errors import (
     UnknownNameError,
 )
 from tolsynth.probability.stats import p_ball, p_components, p_cone, z_of_p
-
-from test_kinematics import planar_fk, xu_fk
 
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 

@@ -8,11 +8,17 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.probability import stats
 from tolsynth.probability.distributions import divisors, shape, shapes_of
-from tolsynth.errors import InputError, OutOfRangeError
-from tolsynth.probability.exact import (ExactProbabilityError, ball_probability, components_probability, cone_probability,
-                            direction_probability, worst_direction)
+from tolsynth.probability.exact import (
+    ExactProbabilityError,
+    ball_probability,
+    components_probability,
+    cone_probability,
+    direction_probability,
+    worst_direction,
+)
 
 ALL = ["uniform", "normal", "triangular", "truncnormal", "truncnormal(3)", "truncnormal(0.5)"]
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import tolsynth
+from tolsynth.analysis.verify import sample_size
 from tolsynth.errors import InputError
 from tolsynth.probability.exact import ball_probability, direction_probability
-from tolsynth.analysis.verify import sample_size
 
 R = 0.5
 

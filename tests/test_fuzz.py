@@ -10,7 +10,7 @@ traceback on the command line, or a silent acceptance of a defect that must be r
 Profiles: the default run is derandomized with a few examples per category (seconds); the
 ``long`` profile (``@pytest.mark.slow``, run in CI with ``--runslow``) runs 10x as many.
 ``HYPOTHESIS_PROFILE=long`` selects the long numbers for the default-marked tests too.
-``benchmarks/fuzz_counts.py`` counts the outcomes of the same cases per category.
+``tests/fuzz_counts.py`` counts the outcomes of the same cases per category.
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ import subprocess
 import sys
 
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import fuzz_cases as fc
 

@@ -15,8 +15,8 @@ import pytest
 
 import tolsynth
 from tolsynth import cbuild
-from tolsynth.kinematics import ik, ik_compiled
 from tolsynth.analysis.workspace_map import probability_map
+from tolsynth.kinematics import ik, ik_compiled
 
 needs_cc = pytest.mark.skipif(cbuild.find_compiler() is None, reason="no C compiler")
 

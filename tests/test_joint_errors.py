@@ -21,9 +21,6 @@ import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth import JointError
-from tolsynth.errors import InfeasibleSpecificationError, InputError, ModelFileError, UnknownNameError
-
 from test_kinematics import (
     PUMA_SYM,
     TOL_UNIT,
@@ -37,6 +34,8 @@ from test_kinematics import (
     fd_sensitivity,
     random_q,
 )
+from tolsynth import JointError
+from tolsynth.errors import InfeasibleSpecificationError, InputError, ModelFileError, UnknownNameError
 
 UNIT = {**TOL_UNIT, "um": 1e-3}
 

@@ -14,10 +14,9 @@ import math
 import pytest
 
 import tolsynth
+from model_text import model_dict, toml_text
 from tolsynth.errors import ModelFileError
 from tolsynth.model.fields import FORMAT
-
-from model_text import model_dict, toml_text
 
 
 def _load(tmp_path, data, name="m.toml"):

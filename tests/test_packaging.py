@@ -21,7 +21,6 @@ from pathlib import Path
 import pytest
 
 import tolsynth
-
 from test_kinematics import planar_fk, puma_fk, xu_fk
 
 ROOT = Path(__file__).resolve().parent.parent

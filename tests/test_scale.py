@@ -21,8 +21,8 @@ import pytest
 
 import tolsynth
 from tolsynth.kinematics.joint_space import _feasible, _limits
-from tolsynth.problem.specification import make_specification
 from tolsynth.probability.stats import z_of_p
+from tolsynth.problem.specification import make_specification
 
 cp = pytest.importorskip("cvxpy")
 

@@ -16,8 +16,7 @@ import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth import synthesize
-from tolsynth import cbuild
+from tolsynth import cbuild, synthesize
 from tolsynth.solvers import cpowell
 from tolsynth.solvers.powell import powell
 

@@ -19,8 +19,8 @@ import pytest
 import tolsynth
 from tolsynth import synthesize
 from tolsynth.errors import InfeasibleSpecificationError, InputError
-from tolsynth.problem.result import Status
 from tolsynth.probability.stats import z_of_p
+from tolsynth.problem.result import Status
 
 TIGHT = {"tol": 1e-12, "constr_viol_tol": 1e-13, "max_iter": 1000}
 

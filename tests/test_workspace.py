@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
-from tolsynth.probability.stats import p_ball_batch
 from tolsynth import probability_map, worst_pose
+from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
 from tolsynth.kinematics.batch_stats import principal_std_batch
+from tolsynth.probability.stats import p_ball_batch
 
 
 # ---------------------------------------------------------------------------------------------
@@ -299,7 +299,6 @@ def test_map_seeds_together_as_one_at_a_time(model, kw, monkeypatch):
 def _chain_value(fk, mech, eps, q, R, p):
     """Largest sigma z / R at q from the hand-written NumPy kinematics (central differences)."""
     from test_kinematics import fd_sensitivity, fd_steps
-
     from tolsynth.probability.stats import z_of_p
 
     S = fd_sensitivity(fk, q, mech.error_parameters, fd_steps(mech))[:3]

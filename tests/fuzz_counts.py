@@ -1,6 +1,6 @@
 """Count the outcomes of the fuzz cases of ``tests/fuzz_cases.py``, per category.
 
-    python benchmarks/fuzz_counts.py [EXAMPLES_PER_CATEGORY] [--show]
+    python tests/fuzz_counts.py [EXAMPLES_PER_CATEGORY] [--show]
 
 Prints one row per category (model-file mutations by kind, API functions, CLI) with the number of
 cases and how many ended ok, with a typed error, untyped, hung, leaked a warning, returned bad
@@ -15,11 +15,10 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
-
-import fuzz_cases as fc  # noqa: E402
+import fuzz_cases as fc  # beside this file: run as a script, its folder is on sys.path
 
 SETTINGS = dict(derandomize=True, database=None, deadline=None,
                 suppress_health_check=list(HealthCheck))
