@@ -1,0 +1,349 @@
+"""Best-first branch and bound: a certified maximum of a function over a box in R^d.
+
+:func:`maximize` needs two vectorised callables: ``bound_fn(lo, hi)`` gives a rigorous upper
+bound of the objective on each box of a batch (from :mod:`tolsynth.analysis.intervals`), and
+``point_fn(x)`` the objective at points, whose best feasible value is the lower side.  The boxes
+are kept in a heap by their bound; each round takes the most promising ones, halves them along
+their widest (scaled) side, bounds the halves in one call, evaluates their centres and drops the
+halves that cannot beat the best value by more than the tolerance.  The result's ``upper_bound``
+is the largest bound still standing (open, dropped or at the resolution limit), so
+``best_value <= max <= upper_bound`` holds whether or not the gap closed.
+
+Constraints ``g(x) <= 0`` come as an interval function too: a box with some ``g`` proven positive
+everywhere holds no feasible point and is dropped; a box not proven feasible stays, and its points
+count only when they are proven feasible (``g`` bounded above by 0 on the point itself).
+
+Example
+-------
+>>> import numpy as np
+>>> f = lambda x: -((x - 0.3) ** 2).sum(axis=1)
+>>> def bound(lo, hi):  # minus the squared distance from (0.3, 0.3) to the box
+...     return -((np.clip(0.3, lo, hi) - 0.3) ** 2).sum(axis=1)
+>>> r = maximize(bound, f, [-1.0, -1.0], [2.0, 3.0], tol=1e-9)
+>>> bool(r.certified), abs(round(r.best_value, 6))
+(True, 0.0)
+"""
+
+from __future__ import annotations
+
+import heapq
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from tolsynth.errors import InputError
+
+__all__ = ["MaximizeResult", "maximize"]
+
+
+@dataclass(frozen=True)
+class MaximizeResult:
+    """Outcome of :func:`maximize`.
+
+    Attributes
+    ----------
+    upper_bound : float
+        Proven upper bound of the objective over the feasible part of the box (``-inf`` when every
+        part is proven infeasible).
+    best_value : float
+        Largest objective value at a proven-feasible point found (``-inf`` if none).
+    best_x : numpy.ndarray or None
+        That point.
+    boxes_processed : int
+        Boxes bounded (the root and every half).
+    certified : bool
+        ``upper_bound - best_value <= tol + rtol * |best_value|``, or every box proven infeasible.
+    reason : str
+        Why not certified ("" when certified).
+    open_boxes : int
+        Boxes still undecided at the end.
+    elapsed : float
+        Wall time (s).
+    """
+
+    upper_bound: float
+    best_value: float
+    best_x: np.ndarray | None
+    boxes_processed: int
+    certified: bool
+    reason: str
+    open_boxes: int
+    elapsed: float
+
+    @property
+    def gap(self) -> float:
+        return self.upper_bound - self.best_value
+
+
+def _vector(v, field: str) -> np.ndarray:
+    a = np.atleast_1d(np.asarray(v, dtype=float))
+    if a.ndim != 1 or not np.all(np.isfinite(a)):
+        raise InputError(field, f"expected a 1-D array of finite numbers, got {v!r}")
+    return a
+
+
+class _Search:
+    """State of one run: the best point, the heap and the bounds of the boxes set aside."""
+
+    def __init__(self, point_fn, constraint_fn, lo, hi, tol, rtol, scale):
+        self.point_fn, self.constraint_fn = point_fn, constraint_fn
+        self.lo, self.hi, self.tol, self.rtol, self.scale = lo, hi, tol, rtol, scale
+        self.best, self.best_x = -np.inf, None
+        self.heap: list = []
+        self.seq = 0
+        self.dropped = -np.inf  # largest bound of a box dropped as unable to beat the best
+        self.stuck = -np.inf  # largest bound of a box too small to split
+
+    def threshold(self) -> float:
+        return self.best + self.tol + self.rtol * abs(self.best) if np.isfinite(self.best) else -np.inf
+
+    def feasible_points(self, x):
+        if self.constraint_fn is None:
+            return np.ones(len(x), dtype=bool)
+        _, g_hi = self.constraint_fn(x, x)
+        g_hi = np.asarray(g_hi, dtype=float).reshape(len(x), -1)
+        return (g_hi <= 0.0).all(axis=1)  # NaN (no information) is not proof
+
+    def values(self, x):
+        if len(x) == 0:
+            return np.zeros(0)
+        v = np.asarray(self.point_fn(x), dtype=float).reshape(len(x))
+        v = np.where(np.isnan(v), -np.inf, v)
+        return np.where(self.feasible_points(x), v, -np.inf)
+
+    def consider(self, x) -> bool:
+        """Evaluate points; keep the best feasible one.  Returns whether the best improved."""
+        v = self.values(x)
+        if len(v) and v.max() > self.best:
+            j = int(np.argmax(v))
+            self.best, self.best_x = float(v[j]), x[j].copy()
+            return True
+        return False
+
+    def polish(self, steps: int) -> None:
+        """Compass search from the best point: +-h along each axis, h quartered on no progress."""
+        if self.best_x is None or steps <= 0:
+            return
+        d = len(self.lo)
+        h = 0.01 * self.scale
+        eye = np.eye(d)
+        for _ in range(steps):
+            cand = np.clip(np.concatenate([self.best_x + eye * h, self.best_x - eye * h]), self.lo, self.hi)
+            if not self.consider(cand):
+                h = h * 0.25
+                if np.all(h < 1e-12 * self.scale):
+                    break
+
+    def push(self, lo, hi, ub, feasible, min_width, g_lo=None, g_hi=None):
+        thr = self.threshold()
+        widths = (hi - lo) / self.scale
+        side = np.argmax(widths, axis=1)
+        if g_lo is not None:
+            # a box proven feasible is halved where the gradient makes the bound loosest (its
+            # smear); one across the constraints' boundary along its widest side, to settle it
+            with np.errstate(invalid="ignore"):
+                smear = np.maximum(np.abs(g_lo), np.abs(g_hi)) * (hi - lo)
+            ok = feasible & np.isfinite(smear).all(axis=1) & (smear.max(axis=1, initial=0.0) > 0.0)
+            side = np.where(ok, np.argmax(np.where(np.isfinite(smear), smear, 0.0), axis=1), side)
+        for k in range(len(ub)):
+            if ub[k] <= thr:
+                self.dropped = max(self.dropped, float(ub[k]))
+            elif widths[k].max() < min_width:
+                self.stuck = max(self.stuck, float(ub[k]))
+            else:
+                self.seq += 1
+                heapq.heappush(self.heap, (-float(ub[k]), self.seq, lo[k], hi[k], bool(feasible[k]), int(side[k])))
+
+    def upper(self) -> float:
+        top = -self.heap[0][0] if self.heap else -np.inf
+        return max(top, self.dropped, self.stuck, self.best)
+
+
+def _bounds(bound_fn, lo, hi):
+    """Upper bounds (NaN read as +inf) and, when bound_fn gives them, gradient bounds."""
+    r = bound_fn(lo, hi)
+    g_lo = g_hi = None
+    if isinstance(r, tuple):
+        r, g_lo, g_hi = r
+        g_lo = np.asarray(g_lo, dtype=float).reshape(lo.shape)
+        g_hi = np.asarray(g_hi, dtype=float).reshape(lo.shape)
+    ub = np.asarray(r, dtype=float).reshape(len(lo))
+    return np.where(np.isnan(ub), np.inf, ub), g_lo, g_hi
+
+
+def _monotone_faces(lo, hi, g_lo, g_hi, usable):
+    """Where the objective provably rises (falls) along a side of a box whose points are all
+    feasible, its maximum lies on the upper (lower) face: the box shrinks to that face."""
+    up = (g_lo > 0.0) & usable[:, None] & (hi > lo)
+    down = (g_hi < 0.0) & usable[:, None] & (hi > lo)
+    rows = np.flatnonzero((up | down).any(axis=1))
+    return np.where(up, hi, lo), np.where(down, lo, hi), rows
+
+
+def _infeasible(constraint_fn, lo, hi):
+    """Per box: proven infeasible (some g > 0 everywhere), proven feasible (every g <= 0)."""
+    g_lo, g_hi = constraint_fn(lo, hi)
+    g_lo = np.asarray(g_lo, dtype=float).reshape(len(lo), -1)
+    g_hi = np.asarray(g_hi, dtype=float).reshape(len(lo), -1)
+    return (g_lo > 0.0).any(axis=1), (g_hi <= 0.0).all(axis=1)
+
+
+def maximize(
+    bound_fn,
+    point_fn,
+    lo,
+    hi,
+    tol: float,
+    max_boxes: int = 200_000,
+    constraint_fn=None,
+    *,
+    rtol: float = 0.0,
+    scale=None,
+    batch: int = 256,
+    x0=None,
+    local_steps: int = 40,
+    min_width: float = 1e-12,
+    callback=None,
+) -> MaximizeResult:
+    """Certified maximum of an objective over the box ``lo <= x <= hi`` (and ``g(x) <= 0``).
+
+    Parameters
+    ----------
+    bound_fn : callable
+        ``bound_fn(lo, hi) -> ub``: ``lo, hi`` of shape (n, d), ``ub`` of shape (n,), a rigorous
+        upper bound of the objective on each box (NaN is read as ``+inf``).  It may return
+        ``(ub, g_lo, g_hi)`` with rigorous bounds (n, d) of the gradient on each box (NaN: none;
+        :meth:`tolsynth.analysis.intervals.BoxFunction.upper` does): boxes are then halved where
+        the gradient widens the bound most, and a box proven feasible shrinks to its upper (lower)
+        face along a side where the objective provably rises (falls).
+    point_fn : callable
+        ``point_fn(x) -> values``: ``x`` of shape (n, d), the objective at each point (NaN: none).
+    lo, hi : array_like
+        The box, shape (d,), finite, ``lo <= hi``.
+    tol : float
+        Absolute tolerance: boxes whose bound is within ``tol`` (plus ``rtol * |best|``) of the best
+        value are dropped, and the result is certified when the final gap is within it.
+    max_boxes : int
+        Boxes to bound (about: a round may pass it); past it the result is returned with
+        ``certified=False`` unless the gap has already closed.
+    constraint_fn : callable, optional
+        ``constraint_fn(lo, hi) -> (g_lo, g_hi)``, each of shape (n, m): interval bounds of the
+        constraints ``g(x) <= 0`` on each box (on points, called with ``lo == hi``).
+    rtol : float
+        Relative part of the tolerance.
+    scale : array_like, optional
+        Per-coordinate scale used to choose the side to halve (default: the box's widths).
+    batch : int
+        Boxes taken from the heap per round (their halves are bounded in one call).
+    x0 : array_like, optional
+        Points (k, d) or (d,) to evaluate first: a good start prunes sooner.
+    local_steps : int
+        Compass-search steps from each new best point (0: none).
+    min_width : float
+        Boxes narrower than this (relative to ``scale``) on every side are not split further.
+    callback : callable, optional
+        ``callback(boxes_processed, upper_bound, best_value)`` after every round.
+
+    Returns
+    -------
+    MaximizeResult
+    """
+    t0 = time.perf_counter()
+    lo, hi = _vector(lo, "lo"), _vector(hi, "hi")
+    if lo.shape != hi.shape or np.any(lo > hi):
+        raise InputError("lo, hi", "the box needs lo <= hi, of one length", f"lo {lo}, hi {hi}")
+    if not (np.isfinite(tol) and tol >= 0.0) or not (np.isfinite(rtol) and rtol >= 0.0):
+        raise InputError("tol", f"tol={tol}, rtol={rtol}", "finite numbers >= 0")
+    if int(max_boxes) < 1 or int(batch) < 1:
+        raise InputError("max_boxes", f"max_boxes={max_boxes}, batch={batch}", "integers >= 1")
+    d = len(lo)
+    width = hi - lo
+    scale = np.where(width > 0, width, 1.0) if scale is None else _vector(scale, "scale")
+    if scale.shape != lo.shape or np.any(scale <= 0):
+        raise InputError("scale", f"{scale}", f"{d} positive numbers")
+    s = _Search(point_fn, constraint_fn, lo, hi, float(tol), float(rtol), scale)
+
+    L, H = lo[None, :], hi[None, :]
+    feasible = np.array([constraint_fn is None])
+    processed = 1
+    if constraint_fn is not None:
+        bad, feasible = _infeasible(constraint_fn, L, H)
+        if bad[0]:
+            return MaximizeResult(-np.inf, -np.inf, None, 1, True, "", 0, time.perf_counter() - t0)
+    seeds = [0.5 * (lo + hi)]
+    if x0 is not None:
+        seeds.append(np.clip(np.atleast_2d(np.asarray(x0, dtype=float)).reshape(-1, d), lo, hi))
+    if s.consider(np.vstack(seeds)):
+        s.polish(local_steps)
+    ub, g_lo, g_hi = _bounds(bound_fn, L, H)
+    s.push(L, H, ub, feasible, min_width, g_lo, g_hi)
+
+    while s.heap and processed < max_boxes:
+        thr = s.threshold()
+        if -s.heap[0][0] <= thr:  # nothing left can beat the best by more than the tolerance
+            s.dropped = max(s.dropped, -s.heap[0][0])
+            s.heap.clear()
+            break
+        take = []
+        while s.heap and len(take) < batch and -s.heap[0][0] > thr:
+            take.append(heapq.heappop(s.heap))
+        P_ub = np.array([-t[0] for t in take])
+        P_lo = np.array([t[2] for t in take])
+        P_hi = np.array([t[3] for t in take])
+        P_feas = np.array([t[4] for t in take])
+        k = np.array([t[5] for t in take])  # the side chosen when the box was pushed
+        rows = np.arange(len(take))
+        mid = 0.5 * (P_lo[rows, k] + P_hi[rows, k])
+        A_hi, B_lo = P_hi.copy(), P_lo.copy()
+        A_hi[rows, k] = mid
+        B_lo[rows, k] = mid
+        C_lo, C_hi = np.concatenate([P_lo, B_lo]), np.concatenate([A_hi, P_hi])
+        C_feas = np.concatenate([P_feas, P_feas])
+        ub, g_lo, g_hi = _bounds(bound_fn, C_lo, C_hi)
+        ub = np.minimum(ub, np.concatenate([P_ub, P_ub]))  # a parent's bound holds on its halves
+        processed += len(C_lo)
+        keep = np.ones(len(C_lo), dtype=bool)
+        if constraint_fn is not None and not C_feas.all():
+            todo = np.flatnonzero(~C_feas)
+            bad, ok = _infeasible(constraint_fn, C_lo[todo], C_hi[todo])
+            keep[todo[bad]] = False
+            C_feas[todo[ok]] = True
+        if g_lo is not None:
+            C_lo, C_hi, red = _monotone_faces(C_lo, C_hi, g_lo, g_hi, keep & C_feas)
+            if len(red):  # bound the shrunken boxes again: a thinner box has a tighter bound
+                ub2, g_lo[red], g_hi[red] = _bounds(bound_fn, C_lo[red], C_hi[red])
+                ub[red] = np.minimum(ub[red], ub2)
+                processed += len(red)
+        if s.consider(0.5 * (C_lo[keep] + C_hi[keep])):
+            s.polish(local_steps)
+        s.push(
+            C_lo[keep],
+            C_hi[keep],
+            ub[keep],
+            C_feas[keep],
+            min_width,
+            None if g_lo is None else g_lo[keep],
+            None if g_hi is None else g_hi[keep],
+        )
+        if callback is not None:
+            callback(processed, s.upper(), s.best)
+
+    upper = s.upper()
+    slack = s.tol + s.rtol * abs(s.best) if np.isfinite(s.best) else 0.0
+    if upper == -np.inf:
+        certified, reason = True, ""  # every box proven infeasible
+    elif not np.isfinite(s.best):
+        certified, reason = False, "no feasible point found"
+    else:
+        certified = upper - s.best <= slack
+        reason = ""
+        if not certified:
+            reason = (
+                f"box limit reached ({processed} boxes, {len(s.heap)} open)"
+                if s.heap
+                else f"boxes at the resolution limit (min_width={min_width}) still bound above the best"
+            )
+    return MaximizeResult(
+        float(upper), float(s.best), s.best_x, processed, bool(certified), reason, len(s.heap), time.perf_counter() - t0
+    )
