@@ -48,7 +48,7 @@ def test_index_block_runs():
 
 def test_guide_runs_and_its_comments_hold():
     ns = run_blocks("guide.md")
-    m, res, a, b = ns["m"], ns["res"], ns["a"], ns["b"]
+    m, res, base, wide = ns["m"], ns["res"], ns["base"], ns["wide"]
     np.testing.assert_allclose(m.fk("worst")[:3, 3], [925.0, 0.0, 1225.0], atol=0.01)  # the paper's point
     assert ns["S"].shape == (6, 11)
     assert res.gap <= 1e-8 * res.cost
@@ -56,9 +56,9 @@ def test_guide_runs_and_its_comments_hold():
     assert ns["c"].cost_rel_diff < 1e-4
     # the grouped options give the same optimum, and doubling R scales it by the exact law:
     # every tolerance doubles (bounds inactive), so the cost is multiplied by 2**-alpha
-    assert a.cost == pytest.approx(res.cost, rel=1e-9)
-    assert b.cost == pytest.approx(a.cost * 2**-0.7, rel=1e-7)
-    np.testing.assert_allclose(b.x, 2 * a.x, rtol=1e-6)
+    assert base.cost == pytest.approx(res.cost, rel=1e-9)
+    assert wide.cost == pytest.approx(base.cost * 2**-0.7, rel=1e-7)
+    np.testing.assert_allclose(wide.x, 2 * base.x, rtol=1e-6)
     # beyond the paper: the workspace optimum costs more and is met everywhere the search looked
     ws, mc, w = ns["ws"], ns["mc"], ns["w"]
     assert ws.converged and ws.rounds[0]["worst_value"] > 1.1 and ws.result.cost > res.cost
