@@ -49,7 +49,7 @@ from tolsynth.problem.nlp import cost_graph
 from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult
 from tolsynth.solvers.common import ACTIVE_TOL, FEAS_TOL, GAP_TOL
 from tolsynth.solvers.ipopt import IPOPT_STATUS
-from tolsynth.solvers.worst_case_zonotope import zonotope_max, zonotope_patterns
+from tolsynth.solvers.worst_case_zonotope import candidate_patterns, zonotope_max, zonotope_patterns
 
 __all__ = ["DEFAULT_OPTIONS", "WorstCaseResult", "solve_worst_case", "worst_case_values"]
 
@@ -120,13 +120,17 @@ class _Block:
     kind: str  # "position" or "orientation"
     A: np.ndarray  # 3 x n, per tolerance unit
     R: float  # mm or rad
+    #: the candidate sign patterns of the block's zonotope: they depend on the directions of its
+    #: columns only, not on the tolerances, so they are found once per block
+    S: np.ndarray
 
 
 def _blocks(spec) -> list[_Block]:
     out = []
     for b in spec.blocks:
         R = spec.R if b.kind == "position" else spec.Phi
-        out.append(_Block(f"{b.kind} at pose {b.pose!r}", b.pose, b.kind, np.asarray(b.A) / spec.col_scale, float(R)))
+        A = np.asarray(b.A) / spec.col_scale
+        out.append(_Block(f"{b.kind} at pose {b.pose!r}", b.pose, b.kind, A, float(R), candidate_patterns(A, unique=True)))
     return out
 
 
@@ -134,7 +138,7 @@ def worst_case_values(blocks, eps) -> list[tuple[float, np.ndarray, np.ndarray]]
     """Per block: ``(h / R, s, d)``: the exact worst-case value, its sign pattern and direction."""
     out = []
     for b in blocks:
-        h, s, d = zonotope_max(b.A * eps)
+        h, s, d = zonotope_max(b.A * eps, b.S)
         out.append((h / b.R, s, d))
     return out
 
@@ -280,7 +284,7 @@ def solve_worst_case(spec, eps0=None, options=None) -> WorstCaseResult:
         added = 0
         worst_all = 0.0
         for bi, b in enumerate(blocks):
-            vals, S = zonotope_patterns(b.A * eps, top=int(opts["cuts_per_round"]))
+            vals, S = zonotope_patterns(b.A * eps, top=int(opts["cuts_per_round"]), patterns=b.S)
             worst_all = max(worst_all, float(vals[0]) / b.R)
             for v, s in zip(vals, S):
                 if v / b.R > 1.0 + CUT_TOL and (bi, s.tobytes()) not in keys:

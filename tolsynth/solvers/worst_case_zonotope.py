@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-__all__ = ["zonotope_max", "zonotope_patterns"]
+__all__ = ["candidate_patterns", "zonotope_max", "zonotope_patterns"]
 
 #: a column is zero when its norm is below this fraction of the largest column's
 ZERO = 1e-14
@@ -41,13 +41,45 @@ def _signs(x: np.ndarray) -> np.ndarray:
     return np.where(x >= 0.0, 1.0, -1.0)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` of two 3-vectors (np.cross's checks cost more than the product here)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _pair_cross(U: np.ndarray):
+    """The cross products of every pair of columns of ``U`` (i < j), their norms and the pairs."""
+    i, j = np.triu_indices(U.shape[1], 1)
+    a, b = U[:, i], U[:, j]
+    X = np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]], axis=1)
+    return X, np.sqrt(np.einsum("ij,ij->i", X, X)), i, j
+
+
+def _merge_parallel(U: np.ndarray, xn, i, j) -> tuple[np.ndarray, np.ndarray]:
+    """Parallel columns give one circle: each column's group (a representative) and its sign
+    relative to the representative (the worst case aligns a group: one generator)."""
+    parent = np.arange(U.shape[1])
+
+    def root(k):
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    for a, b in zip(i[xn <= PARALLEL].tolist(), j[xn <= PARALLEL].tolist()):
+        ra, rb = root(a), root(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    rep = np.array([root(k) for k in range(U.shape[1])])
+    sign = _signs(np.einsum("ij,ij->j", U, U[:, rep]))
+    return rep, sign
+
+
 def _sector_patterns(w0: np.ndarray, U: np.ndarray, tight: np.ndarray, base: np.ndarray) -> np.ndarray:
     """The sign patterns of the cells around the vertex ``w0``: ``base`` outside ``tight``, and
     inside it one pattern per sector of the tangent plane between the circles through ``w0``."""
-    h = np.eye(3)[int(np.argmin(np.abs(w0)))]
-    e1 = np.cross(w0, h)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(w0, e1)
+    e1 = _cross(w0, np.eye(3)[int(np.argmin(np.abs(w0)))])
+    e1 /= math.sqrt(e1 @ e1)
+    e2 = _cross(w0, e1)
     idx = np.nonzero(tight)[0]
     P = np.stack([e1 @ U[:, idx], e2 @ U[:, idx]])  # 2 x t projections
     phi = np.arctan2(P[1], P[0])
@@ -60,97 +92,88 @@ def _sector_patterns(w0: np.ndarray, U: np.ndarray, tight: np.ndarray, base: np.
     return out
 
 
-def _candidates(C: np.ndarray) -> tuple[np.ndarray, list]:
-    """Values ``|C s|^2`` of every candidate pattern and a way to rebuild each pattern: rows of
-    ``(base, columns set, their signs)`` kept compact (the four cells around a simple vertex
-    differ from the vertex's own signs in two entries only)."""
+def candidate_patterns(C: np.ndarray, unique: bool = False) -> np.ndarray:
+    """Every candidate sign pattern (rows, +-1) of the zonotope ``{C s : |s| <= 1}``, ``C`` 3 x n:
+    those of the cells of the arrangement of great circles (module docstring), O(n^2) rows
+    (``unique``: without repeats).  They depend on the columns' directions only, so one set
+    serves every positive scaling of the columns (every tolerance vector)."""
+    C = np.asarray(C, dtype=float)
     n = C.shape[1]
-    norms = np.linalg.norm(C, axis=0)
+    norms = np.sqrt(np.einsum("ij,ij->j", C, C))
     big = float(norms.max()) if n else 0.0
     live = np.nonzero(norms > ZERO * big)[0] if big > 0 else np.zeros(0, dtype=int)
     if len(live) == 0:
-        return np.zeros(1), lambda k: np.ones(n)
-    Cl = C[:, live]
-    U = Cl / norms[live]
-    i, j = np.triu_indices(len(live), 1)
-    X = np.cross(U[:, i].T, U[:, j].T)
-    xn = np.linalg.norm(X, axis=1)
+        return np.ones((1, n))
+    U = C[:, live] / norms[live]
+    X, xn, i, j = _pair_cross(U)
+    rep, sign = _merge_parallel(U, xn, i, j)
+    reps, group = np.unique(rep, return_inverse=True)
+    S = _distinct(U[:, reps])  # one generator per group of parallel columns
+    out = np.ones((len(S), n))
+    out[:, live] = S[:, group] * sign
+    return np.unique(out, axis=0) if unique else out
+
+
+def _distinct(U: np.ndarray) -> np.ndarray:
+    """:func:`candidate_patterns` on unit columns no two of which are parallel."""
+    X, xn, i, j = _pair_cross(U)
     keep = xn > PARALLEL
-    groups = []  # (values, function index -> pattern on the live columns)
-    if not keep.any():  # every column on one line: the vertex is the columns aligned
-        s = _signs(U[:, 0] @ U)
-        v = Cl @ s
-        groups.append((np.array([v @ v]), lambda k, s=s: s))
-    else:
-        W = X[keep] / xn[keep, None]
-        W = np.concatenate([W, -W])
-        pi, pj = np.concatenate([i[keep], i[keep]]), np.concatenate([j[keep], j[keep]])
-        D = W @ U
-        tight = np.abs(D) <= TIGHT
-        base = _signs(D)
-        simple = tight.sum(axis=1) <= 2
-        if simple.any():  # two circles cross: the four cells around the vertex
-            B, a, b = base[simple], pi[simple], pj[simple]
-            V0 = B @ Cl.T - B[np.arange(len(B)), a, None] * Cl[:, a].T - B[np.arange(len(B)), b, None] * Cl[:, b].T
-            combos = ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0))
-            V = np.stack([V0 + sa * Cl[:, a].T + sb * Cl[:, b].T for sa, sb in combos], axis=1)  # m x 4 x 3
-            vals = np.einsum("mkd,mkd->mk", V, V).ravel()
-
-            def simple_pattern(k, B=B, a=a, b=b):
-                m, c = divmod(int(k), 4)
-                s = B[m].copy()
-                s[a[m]], s[b[m]] = combos[c]
-                return s
-
-            groups.append((vals, simple_pattern))
-        if (~simple).any():  # several circles through one vertex: the sectors between them
-            multi = np.nonzero(~simple)[0]
-            _, first = np.unique(np.round(W[multi], 9), axis=0, return_index=True)
-            S = np.concatenate([_sector_patterns(W[v], U, tight[v], base[v]) for v in multi[first]])
-            V = S @ Cl.T
-            groups.append((np.einsum("ij,ij->i", V, V), lambda k, S=S: S[int(k)].copy()))
-    vals = np.concatenate([g[0] for g in groups])
-    offsets = np.cumsum([0] + [len(g[0]) for g in groups])
-
-    def pattern(k):
-        gi = int(np.searchsorted(offsets, k, side="right")) - 1
-        s = np.ones(n)
-        s[live] = groups[gi][1](k - offsets[gi])
-        return s
-
-    return vals, pattern
+    if not keep.any():  # one column: the vertex is the column itself
+        return np.ones((1, U.shape[1]))
+    W = X[keep] / xn[keep, None]
+    W = np.concatenate([W, -W])
+    pi, pj = np.concatenate([i[keep], i[keep]]), np.concatenate([j[keep], j[keep]])
+    D = W @ U
+    tight = np.abs(D) <= TIGHT
+    base = _signs(D)
+    simple = tight.sum(axis=1) <= 2
+    rows = []
+    if simple.any():  # two circles cross: the four cells around the vertex
+        B, a, b = base[simple], pi[simple], pj[simple]
+        r = np.arange(len(B))
+        for sa in (1.0, -1.0):
+            for sb in (1.0, -1.0):
+                S = B.copy()
+                S[r, a], S[r, b] = sa, sb
+                rows.append(S)
+    if (~simple).any():  # several circles through one vertex: the sectors between them
+        multi = np.nonzero(~simple)[0]
+        _, first = np.unique(np.round(W[multi], 9), axis=0, return_index=True)
+        rows += [_sector_patterns(W[v], U, tight[v], base[v]) for v in multi[first]]
+    return np.concatenate(rows)
 
 
-def zonotope_patterns(C: np.ndarray, top: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """``(values, patterns)``: candidate sign patterns (rows, +-1) of the zonotope ``{C s : |s| <= 1}``,
-    ``C`` 3 x n, those of the cells of the arrangement of great circles (module docstring; O(n^2)
-    of them), with ``|C s|``; the ``top`` largest distinct ones, largest first (None: all)."""
+def zonotope_patterns(C: np.ndarray, top: int | None = None, patterns: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """``(values, patterns)``: the candidate patterns (``patterns`` if given, else
+    :func:`candidate_patterns`) with ``|C s|``, distinct, largest first; the ``top`` largest."""
     C = np.asarray(C, dtype=float)
-    vals, pattern = _candidates(C)
+    S = candidate_patterns(C) if patterns is None else patterns
+    V = S @ C.T
+    vals = np.sqrt(np.einsum("ij,ij->i", V, V))
     order = np.argsort(-vals, kind="stable")
     out, seen = [], set()
-    for k in order:
-        s = pattern(k)
-        key = s.tobytes()
+    for k in order.tolist():
+        key = S[k].tobytes()
         if key in seen:
             continue
         seen.add(key)
-        out.append(s)
+        out.append(k)
         if top is not None and len(out) >= top:
             break
-    S = np.array(out)
-    V = S @ C.T
-    return np.sqrt(np.einsum("ij,ij->i", V, V)), S
+    return vals[out], S[out]
 
 
-def zonotope_max(C: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+def zonotope_max(C: np.ndarray, patterns: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
     """``(h, s, w)``: the farthest point's distance ``h = max |C s|`` over ``|s_i| <= 1``, its sign
-    pattern ``s`` and its direction ``w = C s / h`` (any unit vector when h = 0); ``C`` 3 x n."""
+    pattern ``s`` and its direction ``w = C s / h`` (any unit vector when h = 0); ``C`` 3 x n,
+    ``patterns`` the candidates of its columns' directions if known (:func:`candidate_patterns`)."""
     C = np.asarray(C, dtype=float)
-    vals, pattern = _candidates(C)
+    S = candidate_patterns(C) if patterns is None else patterns
+    V = S @ C.T
+    vals = np.einsum("ij,ij->i", V, V)
     k = int(np.argmax(vals))
-    s = pattern(k)
-    best = float((C @ s) @ (C @ s))
+    s, best = S[k].copy(), float(vals[k])
     for _ in range(ASCENT):  # s <- sign(C^T v) maximises v . C s', so |C s'| >= |v|
         t = C.T @ (C @ s)
         s_new = np.where(t > 0, 1.0, np.where(t < 0, -1.0, s))
