@@ -181,3 +181,30 @@ def test_grade_errors_are_typed():
     res = tolsynth.synthesize(xz, R=0.8, p=0.99, probability="gaussian")
     with pytest.raises(InputError, match="sizes\\[h4\\]"):  # h4 has nominal size 0
         round_to_grades(xz, res, table={"alpha*": {"A": 0.01}})
+
+
+@pytest.mark.parametrize("probability", ["gaussian", "worst_case"])
+def test_lagrangian_bound_holds_at_every_feasible_point(probability):
+    # weak duality, checked on random points that meet the specification (independent checks)
+    from tolsynth.synthesis.grades import _Search, grade_candidates
+
+    m = tolsynth.load_model("planar_2r")
+    kw = {"p": 0.99, "probability": "gaussian", "distribution": "uniform"} if probability == "gaussian" \
+        else {"probability": "worst_case"}
+    res = tolsynth.synthesize(m, R=0.5, **kw)
+    search = _Search(m, res, res.spec, probability, grade_candidates(m, None, {"o1": ANGLES["o*"], "o2": ANGLES["o*"]}))
+    w, q, T = search.lagrangian(res.x)
+    assert np.all(w >= 0)
+    ok = _gaussian_ok if probability == "gaussian" else _worst_ok
+    rng = np.random.default_rng(5)
+    hits = 0
+    for _ in range(300):
+        eps = res.x * np.exp(rng.normal(scale=0.4, size=4))
+        if not ok(res.spec, eps):
+            continue
+        hits += 1
+        lagr = float(np.sum(res.spec.k * eps ** -res.spec.alpha + w * eps**q) - T)
+        assert float(np.sum(res.spec.k * eps ** -res.spec.alpha)) >= lagr - 1e-9
+    assert hits > 30
+    # at the continuous optimum the bound is tight (the multipliers are its own)
+    assert float(np.sum(res.spec.k * res.x ** -res.spec.alpha + w * res.x**q) - T) == pytest.approx(res.cost, rel=1e-6)

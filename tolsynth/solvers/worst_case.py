@@ -51,7 +51,7 @@ from tolsynth.solvers.common import ACTIVE_TOL, FEAS_TOL, GAP_TOL
 from tolsynth.solvers.ipopt import IPOPT_STATUS
 from tolsynth.solvers.worst_case_zonotope import candidate_patterns, zonotope_max, zonotope_patterns
 
-__all__ = ["DEFAULT_OPTIONS", "WorstCaseResult", "solve_worst_case", "worst_case_values"]
+__all__ = ["DEFAULT_OPTIONS", "WorstCaseResult", "lagrangian_weights", "solve_worst_case", "worst_case_values"]
 
 #: IPOPT's tolerances and iteration limit per cut NLP; the exchange's round limit; new cuts per
 #: violated block and round (its largest violated patterns)
@@ -217,6 +217,21 @@ def _stationary_multipliers(costs, eps, lower, upper, B) -> np.ndarray:
     grad = costs.du(np.log(eps)) / eps
     lam, *_ = np.linalg.lstsq(B[:, free].T, -grad[free], rcond=None)
     return np.maximum(lam, 0.0)
+
+
+def lagrangian_weights(spec, eps) -> tuple[np.ndarray, float]:
+    """``(w, T)`` with ``cost(e) >= sum_i [c_i(e_i) + w_i e_i] - T`` for every tolerance vector e
+    meeting the worst case (weak duality on the direction cuts through the exact worst directions
+    at ``eps``, multipliers from stationarity there): a separable lower bound for discrete choices."""
+    blocks = _blocks(spec)
+    lower, upper = np.asarray(spec.lower, dtype=float), np.asarray(spec.upper, dtype=float)
+    rows = [np.abs(b.A.T @ d) / b.R for b, (v, _, d) in zip(blocks, worst_case_values(blocks, eps))
+            if v >= 1.0 - ACTIVE_TOL]
+    if not rows:
+        return np.zeros(spec.n), 0.0
+    B = np.array(rows)
+    lam = _stationary_multipliers(spec.costs, np.asarray(eps, dtype=float), lower, upper, B)
+    return B.T @ lam, float(lam.sum())
 
 
 def check_feasible(blocks, lower) -> None:

@@ -374,8 +374,10 @@ class _Search:
             lo[i], hi[i] = self.values[i][a], self.values[i][b]
         trivial = self.costs.cost(hi)  # every cost falls with its tolerance
         spec = self.spec
+        # the paper's power law as k and alpha: the solvers' closed forms and warm starts serve it
+        cost = None if spec.costs.power_law() is not None else list(spec.costs.models)
         kw = dict(bounds=(lo, hi), poses=list(spec.poses.values()), Phi=spec.Phi, alpha=spec.alpha, k=spec.k,
-                  cost=list(spec.costs.models), probability=self.prob, x0=np.clip(x0, lo, hi))
+                  cost=cost, probability=self.prob, x0=np.clip(x0, lo, hi))
         if self.prob != "worst_case":
             kw.update(p=spec.p, distribution=spec.distribution, p_orientation=spec.p_orientation,
                       criterion=spec.criterion)
@@ -386,6 +388,40 @@ class _Search:
             return math.inf, None
         bound = max(trivial, res.lower_bound) if math.isfinite(res.lower_bound) else trivial
         return bound, (res.x if res.success else None)
+
+    def lagrangian(self, eps):
+        """Separable weights ``(w, q, T)`` of a Lagrangian at a relaxation's optimum:
+        ``cost(e) >= sum_i [c_i(e_i) + w_i e_i^q] - T`` wherever the specification holds (weak
+        duality; any multipliers give a valid bound), or None where none is at hand (the exact
+        probabilities, the sphere)."""
+        spec = self.spec
+        if self.prob == "worst_case":
+            from tolsynth.solvers.worst_case import lagrangian_weights
+
+            w, T = lagrangian_weights(spec, eps)
+            return w, 1.0, T
+        if self.prob == "gaussian" and not spec.sphere_blocks:
+            from tolsynth.problem.nlp import ToleranceNLP
+
+            nlp = ToleranceNLP(spec)
+            w, T = nlp.dual_weights(nlp.kkt_multipliers(np.asarray(eps, dtype=float)))
+            return w, 2.0, T
+        return None
+
+    def lagrangian_bound(self, node, lag) -> float:
+        """``min over the node's grades of the Lagrangian``: separable, one small minimum per parameter."""
+        if lag is None:
+            return -math.inf
+        w, q, T = lag
+        total = -T
+        fixed = np.ones(len(self.eps_c), dtype=bool)
+        for (a, b), i in zip(node, self.free):
+            vals = self.values[i][a : b + 1]
+            total += float(np.min(self.costs.models[i].cost(vals) + w[i] * vals**q))
+            fixed[i] = False
+        for i in np.nonzero(fixed)[0]:  # locked parameters: their value
+            total += float(self.costs.models[i].cost(self.eps_c[i]) + w[i] * self.eps_c[i] ** q)
+        return total
 
     # -- branch and bound ----------------------------------------------------------------------
     def run(self, rel_gap, max_nodes, t0, sizes) -> GradeChoice:
@@ -400,17 +436,17 @@ class _Search:
         inc = self.improve(down)
         inc_cost = self.cost(inc)
         root = tuple((0, len(self.values[i]) - 1) for i in self.free)
-        heap = [(-math.inf, 0, root, self.eps_c)]
+        heap = [(-math.inf, 0, root, self.eps_c, self.lagrangian(self.eps_c))]
         counter = itertools.count(1)
         closed: list[float] = []
         log = []
         while heap:
-            bound, _, node, x0 = heapq.heappop(heap)
+            bound, _, node, x0, lag = heapq.heappop(heap)
             if bound >= inc_cost * (1 - rel_gap):
                 closed.append(bound)
                 continue
             if self.solves + self.checks >= max_nodes:
-                heapq.heappush(heap, (bound, next(counter), node, x0))
+                heapq.heappush(heap, (bound, next(counter), node, x0, lag))
                 break
             if all(a == b for a, b in node):
                 choice = tuple(a for a, _ in node)
@@ -421,6 +457,7 @@ class _Search:
                 continue
             nb, eps = self.relax(node, x0)
             nb = max(nb, bound)
+            lag = self.lagrangian(eps) if eps is not None else lag
             log.append({"node": [b - a + 1 for a, b in node], "bound": nb})
             if eps is None or nb >= inc_cost * (1 - rel_gap):
                 closed.append(nb)
@@ -432,7 +469,11 @@ class _Search:
             a, b = node[k]
             for part in ((a, split - 1), (split, b)):
                 child = node[:k] + (part,) + node[k + 1 :]
-                heapq.heappush(heap, (nb, next(counter), child, eps))
+                cb = max(nb, self.lagrangian_bound(child, lag))  # a child's grades are a subset
+                if cb >= inc_cost * (1 - rel_gap):
+                    closed.append(cb)
+                    continue
+                heapq.heappush(heap, (cb, next(counter), child, eps, lag))
         lower = min([inc_cost] + closed + [b for b, *_ in heap])
         gap = inc_cost - lower
         eps = self.point(inc)
