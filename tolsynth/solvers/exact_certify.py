@@ -1,0 +1,286 @@
+"""The exact solver's certificate: every direction proven to meet p, and a rigorous lower bound.
+
+**Every direction** (:func:`cover`).  At one pose, ``P(w) = P(|w . dr| <= R)`` with
+``w . dr = x . Y``, ``x = M^T w`` (``M = A diag(eps)``).  The directions are covered by patches of
+the cube's faces (``w`` and ``-w`` give the same P, so three faces suffice), each patch the cone
+over four unit vertices ``v_k``; ``d = min_k c . v_k`` for a unit ``c`` inside it.  Every unit
+``w`` of the patch is ``sum_k mu_k v_k / |sum_k mu_k v_k|`` with ``mu`` in the simplex, and
+``|sum mu v| >= d``.  Two lower bounds on P over the patch follow, each an ordinary probability:
+
+* *monotone*: ``|w . a_i| <= max_k |v_k . a_i| / d``, and P does not increase when any
+  ``|x_i|`` grows (for independent symmetric unimodal errors: condition on the others and use
+  Anderson's theorem in one dimension), so P over the patch is at least P at those coefficients;
+* *gauge*: for symmetric log-concave errors the set ``K = {w in R^3 : P(w) >= q}`` is convex for
+  every level q (the preimage under ``x = M^T w`` of the convex set of Lagoa, Li & Sznaier 2005)
+  and symmetric, so its gauge ``N`` is a norm and ``N(w) <= max_k N(v_k) / d``; hence
+  ``min_k P(|v_k . dr| <= R d)`` bounds P over the patch.  Its loss is second order in the
+  patch's size (``1 - d``), which is what lets the search close on a minimum that sits exactly at p.
+
+A patch whose bound (the larger, less the evaluator's error bound) is below ``p - tol`` is split
+in four; a patch centre whose own P is below ``p - cut_tol`` is a violated direction (a new cut).
+
+**Lower bound** (:func:`half_space_bound`).  In ``u = ln eps`` the feasible set of each cut is
+convex (the image under ``ln`` of a convex set that is closed downwards: the geometric mean of two
+points lies below their arithmetic mean).  At the solution ``u*`` each active cut's set lies in
+its supporting half-space ``h . (u - u') <= 0``, ``h = -grad P(u') >= 0``, taken at the point
+``u' = u* + s`` (every tolerance scaled by ``e^s``) where P is at p or just below it (proven with
+the evaluator's error bound): the set of level ``P(u') <= p`` contains the cut's own and is
+supported there.  The gradient comes from the series with its own truncation bound ``e``; the
+half-space is widened by ``sum_i e_i max |u_i - u'_i|`` over the box.  The cheapest point of the box in those
+half-spaces is separable: ``L(lam) = sum_i min_u [c_i(u) + w_i u] - sum_j lam_j c_j``,
+``w = sum_j lam_j h_j``, a valid bound for every ``lam >= 0`` (weak duality), maximised by Newton's
+method from the interior-point multipliers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from tolsynth.solvers.exact_series import derivatives, probability
+
+__all__ = ["cover", "Cover", "half_space_bound", "LOG_CONCAVE"]
+
+#: shapes with a symmetric log-concave density (the convexity and the gauge bound need it)
+LOG_CONCAVE = frozenset({"uniform", "normal", "triangular", "truncnormal"})
+#: the cube's faces split G x G at the start
+START_GRID = 4
+#: series tolerance of the patch evaluations: loose first, tight where the bound is near p
+EVAL_TOL = 1e-10
+LOOSE_TOL = 1e-6
+#: a patch smaller than this (1 - d) that still fails is reported as not certified
+MIN_SIZE = 1e-15
+
+
+@dataclass
+class Cover:
+    """The outcome of :func:`cover` at one pose."""
+
+    certified: bool  # every direction proven to have P >= p - tol
+    proven: float  # the least lower bound over the final cover (P >= proven everywhere)
+    violations: list  # [(w (3,), P)] directions with P < p - cut_tol, worst first
+    patches: int  # patches examined
+    evaluations: int  # probability evaluations
+
+
+def _frames():
+    e = np.eye(3)
+    return [(e[a], e[(a + 1) % 3], e[(a + 2) % 3]) for a in range(3)]
+
+
+_FRAMES = np.array(_frames())  # (3 faces, 3 vectors, 3)
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _lower(rows: np.ndarray, shapes: tuple, R: float, q: float) -> np.ndarray:
+    """``P - error`` per row: to a loose tolerance, then tightly where that is not clear of ``q``."""
+    P, e = probability(rows, shapes, R, LOOSE_TOL)
+    out = P - e
+    near = np.flatnonzero(np.abs(out - q) < 2 * LOOSE_TOL)
+    if near.size:
+        P2, e2 = probability(rows[near], shapes, R, EVAL_TOL)
+        out[near] = P2 - e2
+    return out
+
+
+def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, cut_tol: float = 1e-8,
+          max_patches: int = 200_000, gauge: bool = True) -> Cover:
+    """Branch and bound over direction patches (see the module docstring): is ``P(|w . dr| <= R)
+    >= p - tol`` proven for every unit w, with ``dr = M Y`` (M 3 x n)?"""
+    q = p - tol
+    g = np.linspace(-1.0, 1.0, START_GRID + 1)
+    S0, T0 = np.meshgrid(g[:-1], g[:-1], indexing="ij")
+    face = np.repeat(np.arange(3), S0.size)
+    s0 = np.tile(S0.ravel(), 3)
+    t0 = np.tile(T0.ravel(), 3)
+    h = np.full(face.size, 2.0 / START_GRID)
+    proven = math.inf
+    violations: list = []
+    patches = evaluations = 0
+    while face.size:
+        patches += face.size
+        if patches > max_patches:
+            return Cover(False, -math.inf, violations, patches, evaluations)
+        F = _FRAMES[face]  # (N, 3, 3)
+        corners = []
+        for ds, dt in ((0, 0), (1, 0), (0, 1), (1, 1)):
+            v = F[:, 0] + (s0 + ds * h)[:, None] * F[:, 1] + (t0 + dt * h)[:, None] * F[:, 2]
+            corners.append(_unit(v))
+        V = np.stack(corners, axis=1)  # (N, 4, 3)
+        c = _unit(V.sum(axis=1))
+        d = np.min(np.einsum("nkx,nx->nk", V, c), axis=1)  # (N,)
+        X = np.abs(V @ M)  # (N, 4, n): |v_k . a_i| eps_i
+        mono = X.max(axis=1) / d[:, None]
+        bound = _lower(mono, shapes, R, q)
+        evaluations += face.size
+        fail = bound < q
+        if gauge and fail.any():
+            idx = np.flatnonzero(fail)
+            rows = (X[idx] / d[idx, None, None]).reshape(-1, M.shape[1])
+            gb = _lower(rows, shapes, R, q).reshape(-1, 4).min(axis=1)
+            evaluations += rows.shape[0]
+            bound[idx] = np.maximum(bound[idx], gb)
+            fail = bound < q
+        proven = min(proven, float(np.min(bound[~fail], initial=math.inf)))
+        if not fail.any():
+            break
+        idx = np.flatnonzero(fail)
+        Pc, ec = probability(np.abs(c[idx] @ M), shapes, R, LOOSE_TOL)
+        evaluations += idx.size
+        bad = Pc + ec < p - cut_tol
+        if bad.any():
+            for j in np.flatnonzero(bad)[np.argsort(Pc[bad])]:
+                violations.append((c[idx[j]], float(Pc[j])))
+            return Cover(False, min(proven, float(np.min(Pc[bad]))), violations, patches, evaluations)
+        tiny = (1.0 - d[idx]) < MIN_SIZE
+        if tiny.any():
+            return Cover(False, min(proven, float(np.min(bound[idx[tiny]]))), violations, patches, evaluations)
+        # split each failing patch in four
+        hh = 0.5 * h[idx]
+        face = np.repeat(face[idx], 4)
+        s0 = np.concatenate([s0[idx], s0[idx] + hh, s0[idx], s0[idx] + hh]).reshape(4, -1).T.ravel()
+        t0 = np.concatenate([t0[idx], t0[idx], t0[idx] + hh, t0[idx] + hh]).reshape(4, -1).T.ravel()
+        h = np.repeat(hh, 4)
+    return Cover(True, proven, violations, patches, evaluations)
+
+
+def refine_direction(M: np.ndarray, shapes: tuple, R: float, w: np.ndarray, steps: int = 12) -> tuple[np.ndarray, float]:
+    """A local minimum of P over unit directions near ``w``: a pattern search in the tangent plane
+    (steps halved from 0.05 rad), each step one batch of eight neighbours."""
+    w = _unit(np.asarray(w, dtype=float))
+    P = float(probability(np.abs(w @ M)[None, :], shapes, R, EVAL_TOL)[0][0])
+    step = 0.05
+    ang = np.linspace(0.0, 2 * np.pi, 9)[:-1]
+    while step > 1e-7 and steps > 0:
+        e1 = np.cross(w, np.eye(3)[int(np.argmin(np.abs(w)))])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(w, e1)
+        trial = _unit(w[None, :] + step * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2))
+        Pt = probability(np.abs(trial @ M), shapes, R, EVAL_TOL)[0]
+        k = int(np.argmin(Pt))
+        if Pt[k] < P:
+            w, P = trial[k], float(Pt[k])
+            steps -= 1
+        else:
+            step *= 0.5
+    return w, P
+
+
+# ---------------------------------------------------------------------------------------------
+# the lower bound
+# ---------------------------------------------------------------------------------------------
+def _one_dim_min(costs, w: np.ndarray, lu: np.ndarray, uu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per parameter ``min over [lu_i, uu_i] of c_i(u) + w_i u`` (w >= 0): the value (a rigorous
+    lower bound where the cost is not convex in u), the argmin, and ``1 / c_i''`` at an interior
+    argmin (0 at a bound: the dual's Hessian)."""
+    pl = costs.power_law()
+    if pl is not None:
+        k, a = pl
+        with np.errstate(divide="ignore"):
+            u = np.where(w > 0, np.log(np.maximum(a * k, 1e-300) / np.maximum(w, 1e-300)) / a, uu)
+        inside = (u > lu) & (u < uu)
+        u = np.clip(u, lu, uu)
+        val = k * np.exp(-a * u) + w * u
+        curv = np.where(inside, 1.0 / (a * a * k * np.exp(-a * u)), 0.0)
+        return val, u, curv
+    vals, us, curvs = [], [], []
+    for m, wi, a, b in zip(costs.models, w, lu, uu):
+        if b - a <= 1e-12:
+            vals.append(float(m.value(a)) + wi * a)
+            us.append(a)
+            curvs.append(0.0)
+            continue
+        if m.convex_in_u(math.exp(a), math.exp(b)):
+            lo, hi = a, b
+            for _ in range(80):
+                mid = 0.5 * (lo + hi)
+                if float(m.du(mid)) + wi > 0:
+                    hi = mid
+                else:
+                    lo = mid
+            cand = [0.5 * (lo + hi), a, b]
+            v = [float(m.value(x)) + wi * x for x in cand]
+            j = int(np.argmin(v))
+            vals.append(v[j])
+            us.append(cand[j])
+            c2 = float(m.d2u(cand[j])) if j == 0 else 0.0
+            curvs.append(1.0 / c2 if c2 > 0 else 0.0)
+        else:  # a rigorous lower bound on a grid: c non-increasing, w u increasing
+            grid = np.linspace(a, b, 2001)
+            cv = m.value(grid)
+            lower = np.min(cv[1:] + wi * grid[:-1])
+            exact = cv + wi * grid
+            vals.append(min(float(lower), float(exact.min())))
+            us.append(float(grid[np.argmin(exact)]))
+            curvs.append(0.0)
+    return np.array(vals), np.array(us), np.array(curvs)
+
+
+def half_space_bound(costs, lu, uu, u_star, c_rows, R_rows, p_rows, shapes, lam0) -> tuple[float, np.ndarray]:
+    """The rigorous lower bound of the module docstring from the cuts ``c_rows`` (m, n) active at
+    ``u_star`` (with their R and p), maximised over the multipliers from ``lam0``; returns
+    ``(bound, lam)``."""
+    lu, uu, u_star = (np.asarray(x, dtype=float) for x in (lu, uu, u_star))
+    c_rows = np.atleast_2d(c_rows)
+    m = c_rows.shape[0]
+    if m == 0:
+        val, _, _ = _one_dim_min(costs, np.zeros(lu.size), lu, uu)
+        return math.fsum(val.tolist()), np.zeros(0)
+    # each cut's half-space is taken where P = p (or just below): every tolerance scaled up by e^s
+    P0, G0, _, _, _ = derivatives(c_rows, u_star, shapes, R_rows, tol=1e-12, hessian=False)
+    slope = np.maximum(-G0.sum(axis=1), 1e-300)  # -dP/ds
+    s = np.maximum(P0 - p_rows, 0.0) / slope
+    for _ in range(8):
+        Ps, es_ = probability(c_rows * np.exp(u_star + s[:, None]), shapes, R_rows, 1e-12)
+        over = Ps + es_ - p_rows
+        if np.all(over <= 0):
+            break
+        s = s + np.maximum(over, 0.0) / slope * 1.5 + 1e-15
+    P, G, _, eP, eG = derivatives(c_rows * np.exp(s)[:, None], u_star, shapes, R_rows, tol=1e-11, hessian=False,
+                                  rigorous=True)
+    hs = np.maximum(-G, 0.0)  # the true gradient is <= 0: clipping only moves the estimate closer
+    reach = np.maximum(np.abs(lu - u_star - s[:, None]), np.abs(uu - u_star - s[:, None]))
+    delta = (eG * reach).sum(axis=1)
+    cj = hs @ u_star + s * hs.sum(axis=1) + delta
+    if not np.all(P + eP <= p_rows):  # still above p after the search: that cut gives no half-space
+        keep = P + eP <= p_rows
+        hs, cj = hs[keep], cj[keep]
+        lam0 = np.asarray(lam0, dtype=float)[keep]
+        m = int(keep.sum())
+        if m == 0:
+            val, _, _ = _one_dim_min(costs, np.zeros(lu.size), lu, uu)
+            return math.fsum(val.tolist()), np.zeros(0)
+
+    def dual(lam):
+        w = lam @ hs
+        val, u, curv = _one_dim_min(costs, w, lu, uu)
+        return math.fsum(val.tolist()) - float(lam @ cj), hs @ u - cj, -(hs * curv[None, :]) @ hs.T
+
+    lam = np.maximum(np.asarray(lam0, dtype=float), 0.0)
+    best, grad, Hd = dual(lam)
+    best_lam = lam
+    for _ in range(30):  # projected Newton on the concave dual
+        step = -np.linalg.lstsq(Hd - 1e-14 * np.abs(np.diag(Hd)).max() * np.eye(m), grad, rcond=None)[0]
+        if not np.all(np.isfinite(step)):
+            step = grad
+        improved = False
+        a = 1.0
+        for _ in range(30):
+            trial = np.maximum(lam + a * step, 0.0)
+            v, gr, Hn = dual(trial)
+            if v > best:
+                improved = True
+                break
+            a *= 0.5
+        if not improved:
+            break
+        gain = v - best
+        lam, best, grad, Hd, best_lam = trial, v, gr, Hn, trial
+        if gain <= 1e-15 * abs(best):
+            break
+    return best, best_lam
