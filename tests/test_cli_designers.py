@@ -117,7 +117,8 @@ def test_processes_from_a_table_file(capsys, tmp_path):
     assert "cannot be read" in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("name", tolsynth.bundled_models())
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[] if n == "planar_2r" else pytest.mark.slow)
+                                  for n in tolsynth.bundled_models()])
 def test_every_bundled_model_with_the_default_probability(capsys, name):
     from tolsynth.kinematics.joint_space import model_reference
 

@@ -92,8 +92,8 @@ class WorstCaseResult(SynthesisResult):
         if st:
             if st.get("cost") is not None and math.isfinite(st["cost"]):
                 lines.append(f"statistical design ({st['probability']} probability, p = {st['p']:g}) at the same R: "
-                             f"cost {st['cost']:.8g}; the worst case costs {100 * (self.cost_ratio - 1):+.1f} % "
-                             + ("" if st.get("success") else "(the statistical solve is not certified)"))
+                             f"cost {st['cost']:.8g}; the worst case costs {100 * (self.cost_ratio - 1):+.1f} %"
+                             + ("" if st.get("success") else " (the statistical solve is not certified)"))
             else:
                 lines.append(f"statistical design at p = {st['p']:g}: {st.get('message', 'none')}")
         lines.append(f"iterations {self.iterations}, evaluations {self.function_evaluations}, "
