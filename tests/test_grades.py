@@ -155,15 +155,17 @@ def test_grade_choice_matches_brute_force(probability):
 
 
 def test_grades_with_sizes_and_default_probability():
+    pytest.importorskip("pandas")
     m = tolsynth.load_model("planar_2r")
     res = tolsynth.synthesize(m, R=0.5, p=0.95)
     g = round_to_grades(m, res, sizes={"l1": 120.0, "l2": 80.0}, table=ANGLES)
     assert g.proven and g.sizes == {"l1": 120.0, "l2": 80.0}
     assert g.grades["l1"].startswith("IT") and g.grades["o1"] in ANGLES["o*"]
     assert max(g.values) <= 1 + 1e-6 and res.cost <= g.cost <= g.rounded_down["cost"]
-    frame = g.to_frame() if hasattr(g, "to_frame") else None
-    if frame is not None and not isinstance(frame, list):
-        assert list(frame["grade"]) == list(g.grades.values())
+    frame = g.to_frame()
+    assert list(frame["grade"]) == list(g.grades.values())
+    np.testing.assert_array_equal(frame["tolerance"].to_numpy(), list(g.tolerances.values()))
+    assert frame.attrs["summary"]["proven"] and frame.attrs["kind"] == "GradeChoice"
 
 
 def test_grade_errors_are_typed():
@@ -177,6 +179,10 @@ def test_grade_errors_are_typed():
         round_to_grades(m, res, table={"*": {"A": -1.0}})
     with pytest.raises(InputError, match="result"):
         round_to_grades(m, "not a result", table=ANGLES)
+    with pytest.raises(UnknownNameError, match="l3"):
+        round_to_grades(m, res, sizes={"l3": 50.0}, table=ANGLES)
+    with pytest.raises(OutOfRangeError, match="3150"):
+        round_to_grades(m, res, sizes={"l1": 5000.0}, table=ANGLES)
     xz = tolsynth.load_model("xu_zhang_1988")
     res = tolsynth.synthesize(xz, R=0.8, p=0.99, probability="gaussian")
     with pytest.raises(InputError, match="sizes\\[h4\\]"):  # h4 has nominal size 0

@@ -152,8 +152,11 @@ def grade_candidates(mechanism, sizes=None, table=None) -> dict[str, dict[str, f
     ``table`` where it names the parameter (or ``"*"``), else ISO 286-1 at ``sizes[name]`` (mm;
     default: the nominal value of the dimension the parameter perturbs)."""
     out = {}
-    if sizes is not None and not isinstance(sizes, (Mapping, int, float)):
+    if sizes is not None and (isinstance(sizes, bool) or not isinstance(sizes, (Mapping, int, float))):
         raise InputError("sizes", f"got {sizes!r}", "a dict parameter name -> nominal size in mm, or one size")
+    if isinstance(sizes, Mapping):
+        for key in sizes:
+            mechanism.index(key)  # UnknownNameError naming the parameters for a name that is none
     for par in mechanism.parameters:
         own = _table_for(table, par.name)
         if own is not None:
@@ -173,7 +176,7 @@ def _size_of(mechanism, par, sizes) -> float:
     if isinstance(sizes, (int, float)) and not isinstance(sizes, bool):
         return float(sizes)
     if isinstance(sizes, Mapping) and par.name in sizes:
-        return float(sizes[par.name]) if isinstance(sizes[par.name], (int, float)) else sizes[par.name]
+        return sizes[par.name]  # iso286.size_range checks it
     nominal = [abs(mechanism.spec.symbols.get(s, 0.0)) for s in par.perturbs]
     nominal = [v for v in nominal if v > 0]
     if not nominal:
