@@ -66,6 +66,8 @@ DEFAULT_OPTIONS = {"max_rounds": 30, "max_iter": 200, "max_patches": 200_000}
 START_CUTS = 0.9
 #: violated directions added per pose and round (the worst ones)
 NEW_CUTS = 3
+#: a new cut this close (rad) to one of its pose's is not added
+SAME_CUT = 1e-5
 
 
 @dataclass
@@ -116,9 +118,9 @@ class _Cuts:
         self.w: list = []
 
     def add(self, blk_index: int, blk: _Block, w: np.ndarray) -> bool:
-        """Add the cut unless the block has it already (up to sign); True if added."""
+        """Add the cut unless its pose has one within :data:`SAME_CUT` rad (up to sign); True if added."""
         w = np.asarray(w, dtype=float) / np.linalg.norm(w)
-        if any(b == blk_index and abs(float(v @ w)) > 1.0 - 1e-10 for b, v in zip(self.block, self.w)):
+        if any(b == blk_index and abs(float(v @ w)) > math.cos(SAME_CUT) for b, v in zip(self.block, self.w)):
             return False
         self.c.append(np.abs(w @ blk.A))
         self.R.append(blk.R)
@@ -141,6 +143,31 @@ class _Cuts:
         P, G, H, _, _ = derivatives(C, u, self.shapes, R, tol=1e-11)
         s = 1.0 / (1 - p)
         return (P - p) * s, G * s[:, None], H * s[:, None, None]
+
+
+def _lattice(m: int) -> np.ndarray:
+    """m nearly uniform unit vectors on the upper hemisphere (a Fibonacci lattice)."""
+    i = np.arange(m) + 0.5
+    z = 1.0 - i / m
+    phi = i * math.pi * (3.0 - math.sqrt(5.0))
+    return np.column_stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z])
+
+
+def _local_minima(M: np.ndarray, shapes, R: float, p: float, count: int = 3) -> list:
+    """The lowest few local minima of P over directions (a lattice, then a local search from the
+    best points at least 0.3 rad apart)."""
+    D = _lattice(300)
+    P, _ = probability(np.abs(D @ M), shapes, R, 1e-6)
+    starts: list = []
+    for j in np.argsort(P):
+        if all(abs(float(D[j] @ D[k])) < math.cos(0.3) for k in starts):
+            starts.append(j)
+        if len(starts) >= count:
+            break
+    out = []
+    for j in starts:
+        out.append(refine_direction(M, shapes, R, D[j])[0])
+    return out
 
 
 def _deadline(what: str) -> None:
@@ -224,9 +251,11 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
     cuts = _Cuts(shapes)
     vals, dirs = nlp.block_values(eps_g)
     for i, blk in enumerate(blocks):
-        if vals[i, 0] >= START_CUTS:  # all three axes: a free axis would let its errors grow far
-            for j in range(3):
+        if vals[i, 0] >= START_CUTS:  # all three axes (a free axis would let its errors grow far) and
+            for j in range(3):        # the exact worst directions at the Gaussian design
                 cuts.add(i, blk, dirs[i][:, j])
+            for w in _local_minima(blk.A * eps_g, shapes, blk.R, blk.p):
+                cuts.add(i, blk, w)
     if not cuts.c:  # nothing near its limit: the worst block still starts the cut set
         i = int(np.argmax(vals[:, 0]))
         cuts.add(i, blocks[i], dirs[i][:, 0])
@@ -240,7 +269,7 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
         u_start = _feasible_start(cuts, u, lu, uu, blocks)
         lam0 = None if lam is None else np.concatenate([lam, np.zeros(len(cuts.c) - lam.size)])
         res = Barrier(cost_fn, cuts, lu, uu).solve(u_start, lam0, max_iter=int(opts["max_iter"]),
-                                                   tau0=None if rnd == 0 else 1e-7 * cost_fn(u_start)[0])
+                                                   tau0=None if rnd == 0 else 1e-3 * cost_fn(u_start)[0] / (len(cuts.c) + spec.n))
         iters += res.iterations
         u, lam, zb, ok, message = res.u, res.lam, res.z, res.ok, res.message
         eps = np.exp(u)
@@ -249,6 +278,8 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
             cv = cover(blk.A * eps, shapes, blk.R, blk.p, EXACT_TOL, CUT_TOL, int(opts["max_patches"]))
             evals += cv.evaluations
             covers.append(cv)
+            if cv.certified:  # proven to p - EXACT_TOL: what the result claims, whatever is short of p itself
+                continue
             for w, _ in cv.violations[:NEW_CUTS]:
                 w2, _ = refine_direction(blk.A * eps, shapes, blk.R, w)
                 added += cuts.add(i, blk, w2)
@@ -344,10 +375,7 @@ def exact_margin(mechanism, q, eps, distribution, R: float, p: float, criterion:
         P = ex.ball_probability(A, eps, shapes, R, tol=1e-6, max_nodes=128, return_error=True)[0]
         return (1.0 - P) / (1.0 - p)
     M = A * eps
-    i = np.arange(400) + 0.5
-    z = 1.0 - i / 400
-    phi = i * math.pi * (3.0 - math.sqrt(5.0))
-    D = np.column_stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z])
+    D = _lattice(400)
     P, _ = probability(np.abs(D @ M), shapes, R, 1e-10)
     best = min((refine_direction(M, shapes, R, D[j])[1] for j in np.argsort(P)[:3]), default=1.0)
     return (1.0 - best) / (1.0 - p)

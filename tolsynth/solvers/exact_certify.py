@@ -17,7 +17,8 @@ over four unit vertices ``v_k``; ``d = min_k c . v_k`` for a unit ``c`` inside i
   patch's size (``1 - d``), which is what lets the search close on a minimum that sits exactly at p.
 
 A patch whose bound (the larger, less the evaluator's error bound) is below ``p - tol`` is split
-in four; a patch centre whose own P is below ``p - cut_tol`` is a violated direction (a new cut).
+in four; a patch centre whose own P is below ``p - cut_tol`` is a violated direction (a new cut
+for the exchange), and one below ``p - tol`` ends the search: no cover can exist.
 
 **Lower bound** (:func:`half_space_bound`).  In ``u = ln eps`` the feasible set of each cut is
 convex (the image under ``ln`` of a convex set that is closed downwards: the geometric mean of two
@@ -60,7 +61,7 @@ class Cover:
 
     certified: bool  # every direction proven to have P >= p - tol
     proven: float  # the least lower bound over the final cover (P >= proven everywhere)
-    violations: list  # [(w (3,), P)] directions with P < p - cut_tol, worst first
+    violations: list  # [(w (3,), P)] directions found with P < p - cut_tol, worst first
     patches: int  # patches examined
     evaluations: int  # probability evaluations
 
@@ -132,10 +133,12 @@ def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, c
         idx = np.flatnonzero(fail)
         Pc, ec = probability(np.abs(c[idx] @ M), shapes, R, LOOSE_TOL)
         evaluations += idx.size
-        bad = Pc + ec < p - cut_tol
+        short = Pc + ec < p - cut_tol
+        for j in np.flatnonzero(short):
+            violations.append((c[idx[j]], float(Pc[j])))
+        bad = Pc + ec < q  # below what the certificate asks: no cover can exist
         if bad.any():
-            for j in np.flatnonzero(bad)[np.argsort(Pc[bad])]:
-                violations.append((c[idx[j]], float(Pc[j])))
+            violations.sort(key=lambda v: v[1])
             return Cover(False, min(proven, float(np.min(Pc[bad]))), violations, patches, evaluations)
         tiny = (1.0 - d[idx]) < MIN_SIZE
         if tiny.any():
@@ -146,6 +149,7 @@ def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, c
         s0 = np.concatenate([s0[idx], s0[idx] + hh, s0[idx], s0[idx] + hh]).reshape(4, -1).T.ravel()
         t0 = np.concatenate([t0[idx], t0[idx], t0[idx] + hh, t0[idx] + hh]).reshape(4, -1).T.ravel()
         h = np.repeat(hh, 4)
+    violations.sort(key=lambda v: v[1])
     return Cover(True, proven, violations, patches, evaluations)
 
 

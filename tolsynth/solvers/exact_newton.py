@@ -29,6 +29,7 @@ TAU_END = 1e-8
 FTB = 0.995
 #: multipliers stay within this factor of tau / slack
 KAPPA = 100.0
+DEBUG = False
 #: the barrier parameter falls once the Newton decrement squared of phi / tau is below this
 DECREMENT = 1e-3
 
@@ -63,7 +64,7 @@ class Barrier:
             return BarrierResult(u, np.zeros(g.size), np.zeros(u.size), 0, False, "start not strictly feasible")
         f, df, d2f = self.cost(u)
         scale = max(abs(f), 1e-300)
-        tau = tau0 if tau0 is not None else 1e-4 * scale / max(1, g.size + free.sum())
+        tau = tau0 if tau0 is not None else 1e-1 * scale / max(1, g.size + free.sum())
         tau_end = TAU_END * scale / max(1, g.size + free.sum())
         sl, su = u - lu, uu - u
         lam = tau / g if g.size else np.zeros(0)
@@ -119,6 +120,8 @@ class Barrier:
                         accepted = True
                         break
                 a *= 0.5
+            if DEBUG:
+                print(f"    it {it} tau {tau:.1e} a {a:.1e} dec {-slope / tau:.2e} g {gn if accepted else None}")
             if not accepted:
                 return BarrierResult(u, lam, zu - zl, it, tau <= 1e3 * tau_end,
                                      f"line search failed at tau {tau:.1e} (Newton decrement {-slope / tau:.1e})")
