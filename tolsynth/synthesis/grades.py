@@ -368,7 +368,7 @@ class _Search:
             choice[best_k] += 1
 
     # -- relaxations --------------------------------------------------------------------------
-    def relax(self, node, x0):
+    def relax(self, node):
         """The continuous problem on the node's box: (certified bound, optimum or None)."""
         from tolsynth.synthesis.single import synthesize
 
@@ -377,10 +377,12 @@ class _Search:
             lo[i], hi[i] = self.values[i][a], self.values[i][b]
         trivial = self.costs.cost(hi)  # every cost falls with its tolerance
         spec = self.spec
-        # the paper's power law as k and alpha: the solvers' closed forms and warm starts serve it
+        # the paper's power law as k and alpha: the solvers' closed forms and warm starts serve it;
+        # no x0: the parent's optimum clipped to the box breaks the specification and costs IPOPT
+        # 40-80 iterations, where the solver's own warm start (its remembered cuts) needs about one
         cost = None if spec.costs.power_law() is not None else list(spec.costs.models)
         kw = dict(bounds=(lo, hi), poses=list(spec.poses.values()), Phi=spec.Phi, alpha=spec.alpha, k=spec.k,
-                  cost=cost, probability=self.prob, x0=np.clip(x0, lo, hi))
+                  cost=cost, probability=self.prob)
         if self.prob != "worst_case":
             kw.update(p=spec.p, distribution=spec.distribution, p_orientation=spec.p_orientation,
                       criterion=spec.criterion)
@@ -439,17 +441,17 @@ class _Search:
         inc = self.improve(down)
         inc_cost = self.cost(inc)
         root = tuple((0, len(self.values[i]) - 1) for i in self.free)
-        heap = [(-math.inf, 0, root, self.eps_c, self.lagrangian(self.eps_c))]
+        heap = [(-math.inf, 0, root, self.lagrangian(self.eps_c))]
         counter = itertools.count(1)
         closed: list[float] = []
         log = []
         while heap:
-            bound, _, node, x0, lag = heapq.heappop(heap)
+            bound, _, node, lag = heapq.heappop(heap)
             if bound >= inc_cost * (1 - rel_gap):
                 closed.append(bound)
                 continue
             if self.solves + self.checks >= max_nodes:
-                heapq.heappush(heap, (bound, next(counter), node, x0, lag))
+                heapq.heappush(heap, (bound, next(counter), node, lag))
                 break
             if all(a == b for a, b in node):
                 choice = tuple(a for a, _ in node)
@@ -458,7 +460,7 @@ class _Search:
                     inc, inc_cost = choice, c
                 closed.append(c if self.feasible(choice) else math.inf)
                 continue
-            nb, eps = self.relax(node, x0)
+            nb, eps = self.relax(node)
             nb = max(nb, bound)
             lag = self.lagrangian(eps) if eps is not None else lag
             log.append({"node": [b - a + 1 for a, b in node], "bound": nb})
@@ -476,7 +478,7 @@ class _Search:
                 if cb >= inc_cost * (1 - rel_gap):
                     closed.append(cb)
                     continue
-                heapq.heappush(heap, (cb, next(counter), child, eps, lag))
+                heapq.heappush(heap, (cb, next(counter), child, lag))
         lower = min([inc_cost] + closed + [b for b, *_ in heap])
         gap = inc_cost - lower
         eps = self.point(inc)
