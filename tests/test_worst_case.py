@@ -69,6 +69,17 @@ def test_pattern_count_grows_as_n_squared_not_2_to_the_n():
         assert np.linalg.norm(C @ s) <= h * (1 + 1e-12)
 
 
+def _cvxpy_cost(model, e):
+    from tolsynth.model.cost import Chase, Exponential, PowerLaw
+
+    if isinstance(model, PowerLaw):
+        return model.k * cp.power(e, -model.alpha, approx=False)
+    if isinstance(model, Chase):
+        return model.A + model.B * cp.power(e, -model.k, approx=False)
+    assert isinstance(model, Exponential)
+    return model.A * cp.exp(-model.B * e)
+
+
 def _cvxpy_worst_case(spec):
     """The same problem with every sign pattern of every block as a second-order cone."""
     n = spec.n
@@ -78,7 +89,7 @@ def _cvxpy_worst_case(spec):
         limit = spec.R if b.kind == "position" else spec.Phi
         for s in itertools.product([-1.0, 1.0], repeat=n):
             cons.append(cp.norm(b.A @ cp.multiply(np.array(s), eps)) <= limit)
-    cost = sum(float(k) * cp.power(eps[i], -float(a), approx=False) for i, (k, a) in enumerate(zip(spec.k, spec.alpha)))
+    cost = sum(_cvxpy_cost(model, eps[i]) for i, model in enumerate(spec.costs.models))
     prob = cp.Problem(cp.Minimize(cost), cons)
     prob.solve(solver="CLARABEL", tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10)
     assert prob.status == "optimal"
@@ -89,9 +100,14 @@ def _cvxpy_worst_case(spec):
     ("planar_2r", {"R": 0.5}),
     ("planar_2r", {"R": 0.5, "Phi": 0.0006}),  # the orientation block active as well
     ("planar_2r", {"R": 0.3, "poses": [[0.3, 1.2], [1.0, -2.0], [2.5, 0.4]]}),
+    ("planar_2r", {"R": 0.5, "cost": "mixed"}),  # Chase's and the exponential model beside the power law
     pytest.param("xu_zhang_1988", {"R": 0.8}, marks=pytest.mark.slow),  # 11 parameters: 2048 cones, ~20 s
 ])
 def test_design_matches_cvxpy_with_every_sign_pattern(model, kw):
+    if kw.get("cost") == "mixed":
+        from tolsynth.model.cost import Chase, Exponential
+
+        kw = dict(kw, cost={"l1": Chase(0.5, 2.0, 1.0), "o1": Exponential(5.0, 2.0)})
     res = tolsynth.synthesize(model, probability="worst_case", **kw)
     assert res.success, res.message
     ref, eps_ref = _cvxpy_worst_case(res.spec)
@@ -150,6 +166,11 @@ def test_bad_inputs_are_typed():
         tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case", options={"bogus": 1})
     with pytest.raises(InfeasibleSpecificationError, match="worst case"):
         tolsynth.synthesize("planar_2r", R=1e-4, probability="worst_case")
+    for bad in ({"time_limit": "a"}, {"max_rounds": 0}, {"tol": -1.0}, {"cuts_per_round": 1.5}):
+        with pytest.raises(InputError, match=list(bad)[0]):
+            tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case", options=bad)
+    res = tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case", options={"time_limit": 1e-9})
+    assert not res.success and "time limit" in res.message  # out of time: never an optimum
 
 
 def test_table_of_a_worst_case_design():

@@ -7,8 +7,8 @@ Every error anywhere in its band, the hand stays within R: at each pose the erro
 
 and likewise for the orientation rows against Phi.  No probability and no distribution enter.
 ``h`` is a maximum of norms of linear maps of eps, so the feasible set is convex in eps; every cost
-model here is non-increasing and convex in ``u = ln eps`` (hence convex in eps), so the problem is
-convex (a tabulated cost may not be: then only a closed gap certifies, as for the other solvers).
+model here but a tabulated one is convex in eps, so the problem is convex (a tabulated cost may not
+be: then only a closed gap certifies, as for the other solvers).
 
 Method: an exchange over sign patterns.  IPOPT (exact Hessian) solves the problem restricted to a
 finite set of pattern cuts ``|A diag(s) eps|^2 <= R^2`` (one second-order cone each, smooth when
@@ -44,7 +44,7 @@ import casadi as ca
 import numpy as np
 
 from tolsynth.errors import InfeasibleSpecificationError
-from tolsynth.model.cost import PowerLaw
+from tolsynth.model.cost import Chase, Exponential, Given, PowerLaw
 from tolsynth.problem.nlp import cost_graph
 from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult
 from tolsynth.solvers.common import ACTIVE_TOL, FEAS_TOL, GAP_TOL
@@ -54,8 +54,11 @@ from tolsynth.solvers.worst_case_zonotope import candidate_patterns, zonotope_ma
 __all__ = ["DEFAULT_OPTIONS", "WorstCaseResult", "lagrangian_weights", "solve_worst_case", "worst_case_values"]
 
 #: IPOPT's tolerances and iteration limit per cut NLP; the exchange's round limit; new cuts per
-#: violated block and round (its largest violated patterns)
-DEFAULT_OPTIONS = {"tol": 1e-11, "constr_viol_tol": 1e-12, "max_iter": 1000, "max_rounds": 60, "cuts_per_round": 3}
+#: violated block and round (its largest violated patterns); seconds the whole solve may take
+#: (IPOPT's wall-time limit per cut NLP, and checked before each round: a solve that runs out is
+#: reported as stopped by a limit, never as an optimum)
+DEFAULT_OPTIONS = {"tol": 1e-11, "constr_viol_tol": 1e-12, "max_iter": 1000, "max_rounds": 60, "cuts_per_round": 3,
+                   "time_limit": 600.0}
 #: a pattern is cut when its |dr| / R exceeds 1 by more than this
 CUT_TOL = 1e-10
 #: cut slots come in these sizes (unused slots are free constraints): one compiled NLP per size
@@ -144,7 +147,8 @@ def worst_case_values(blocks, eps) -> list[tuple[float, np.ndarray, np.ndarray]]
 
 
 @lru_cache(maxsize=32)
-def _cut_solver(n: int, K: int, signature: tuple, tol: float, constr_viol_tol: float, max_iter: int):
+def _cut_solver(n: int, K: int, signature: tuple, tol: float, constr_viol_tol: float, max_iter: int,
+                max_wall_time: float = DEFAULT_OPTIONS["time_limit"]):
     """``min c(ln(ref x)) / f0  s.t.  |M_k x|^2 <= 1`` for K cut slots (x = eps / ref)."""
     cost = cost_graph(n, signature)
     nt = cost.size1_in(1)
@@ -159,7 +163,8 @@ def _cut_solver(n: int, K: int, signature: tuple, tol: float, constr_viol_tol: f
     nlp = {"x": x, "p": p, "f": cost(ca.log(ref * x), theta) / f0, "g": g}
     opts = {"print_time": False, "show_eval_warnings": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
             "ipopt.tol": tol, "ipopt.constr_viol_tol": constr_viol_tol, "ipopt.max_iter": max_iter,
-            "ipopt.acceptable_iter": 0, "ipopt.hessian_approximation": "exact", "ipopt.mu_strategy": "adaptive"}
+            "ipopt.acceptable_iter": 0, "ipopt.hessian_approximation": "exact", "ipopt.mu_strategy": "adaptive",
+            "ipopt.max_wall_time": max_wall_time}
     return ca.nlpsol("worst_case_cuts", "ipopt", nlp, opts)
 
 
@@ -170,16 +175,24 @@ def _slots(k: int) -> int:
     raise InfeasibleSpecificationError("worst case", float(k), f"more than {_SLOTS[-1]} pattern cuts needed")
 
 
+def convex_in_eps(model, lo: float, hi: float) -> bool:
+    """True if the cost is convex in eps on ``[lo, hi]`` (then the worst-case problem is convex):
+    the power law, Chase's model, the exponential and a given error everywhere; any model convex in
+    ``u = ln eps`` (non-increasing and convex in u is convex in eps)."""
+    return isinstance(model, (PowerLaw, Chase, Exponential, Given)) or model.convex_in_u(lo, hi)
+
+
 def _linear_min(model, w: float, lu: float, uu: float) -> tuple[float, float]:
     """``(min, argmin u)`` over ``u`` in ``[lu, uu]`` of ``c(u) + w e^u`` (``w >= 0``), global: closed
-    form for the power law, bisection where c is convex in u (the sum is then convex), else a
+    form for the power law, bisection where c is convex in eps (the sign of ``c'(eps) + w`` then
+    changes once), else a
     rigorous grid bound (c non-increasing: on ``[a, b]`` the sum is at least ``c(b) + w e^a``)."""
     if isinstance(model, PowerLaw):
         k, a = model.k, model.alpha
         u = math.log(a * k / w) / (1.0 + a) if w > 0 else uu
         u = min(max(u, lu), uu)
         return k * math.exp(-a * u) + w * math.exp(u), u
-    if model.convex_in_u(math.exp(lu), math.exp(uu)):
+    if convex_in_eps(model, math.exp(lu), math.exp(uu)):
         lo, hi = lu, uu
         for _ in range(_BISECT):
             m = 0.5 * (lo + hi)
@@ -246,10 +259,22 @@ def check_feasible(blocks, lower) -> None:
                             f"bounds, or relax {limit}.")
 
 
+def _checked_options(opts: dict) -> dict:
+    """The options as numbers of the right kind, or a typed error naming the option."""
+    from tolsynth.checks import check_count, check_positive
+
+    out = dict(opts)
+    for key in ("tol", "constr_viol_tol", "time_limit"):
+        out[key] = check_positive(opts[key], f"options['{key}']")
+    for key in ("max_iter", "max_rounds", "cuts_per_round"):
+        out[key] = check_count(opts[key], f"options['{key}']", lower=1)
+    return out
+
+
 def solve_worst_case(spec, eps0=None, options=None) -> WorstCaseResult:
     """The exchange method of the module docstring on a :class:`~tolsynth.problem.specification.Specification`
     (its blocks' rows, R, Phi, bounds and cost models; its p and distribution are not read)."""
-    opts = {**DEFAULT_OPTIONS, **(options or {})}
+    opts = _checked_options({**DEFAULT_OPTIONS, **(options or {})})
     t0 = time.perf_counter()
     blocks = _blocks(spec)
     lower, upper = np.asarray(spec.lower, dtype=float), np.asarray(spec.upper, dtype=float)
@@ -276,13 +301,18 @@ def solve_worst_case(spec, eps0=None, options=None) -> WorstCaseResult:
     history, iters, evals = [], 0, 0
     status, message, lam_g, ok = Status.SOLVER_ERROR, "not run", np.zeros(0), False
     f0 = max(costs.cost(eps), 1e-300)
+    limit = opts["time_limit"]
     for rnd in range(int(opts["max_rounds"])):
+        if time.perf_counter() - t0 > limit:
+            ok, status = False, getattr(Status, "TIME_LIMIT", Status.ITERATION_LIMIT)
+            message += f"; stopped by the time limit ({limit:g} s) after {rnd} exchange rounds"
+            break
         K = _slots(len(cuts))
         M = np.zeros((3 * K, n))
         for k, (bi, s) in enumerate(cuts):
             M[3 * k : 3 * k + 3] = blocks[bi].A * (s * ref) / blocks[bi].R
         solver = _cut_solver(n, K, costs.signature, float(opts["tol"]), float(opts["constr_viol_tol"]),
-                             int(opts["max_iter"]))
+                             int(opts["max_iter"]), limit)
         p = np.concatenate([M.ravel(order="F"), ref, costs.theta, [f0]])
         ubg = np.full(K, np.inf)
         ubg[: len(cuts)] = 1.0
@@ -354,14 +384,14 @@ def _assemble(spec, blocks, costs, eps, cuts, lam_g, status, message, ok, iters,
     lower_bound = min(lower_bound, cost) if math.isfinite(lower_bound) else lower_bound
     gap = cost - lower_bound
     worst = max(v for v, _, _ in vals)
-    convex = all(m.convex_in_u(a, b) for m, a, b in zip(costs.models, lower, upper))
+    convex = all(convex_in_eps(m, a, b) for m, a, b in zip(costs.models, lower, upper))
     if ok:
         if not worst <= 1.0 + FEAS_TOL:
             status, message = Status.NUMERICAL_ERROR, f"{message}; rejected: max |error| / limit {worst:.9g} > 1"
         elif not gap <= GAP_TOL * abs(cost):
             status = Status.OPTIMAL_INACCURATE
             message = (f"{message}; not certified: gap {gap:.3g} ({gap / abs(cost):.2e} of the cost) > {GAP_TOL:g}"
-                       + ("" if convex else "; a cost is not convex in ln eps: possibly a local optimum"))
+                       + ("" if convex else "; a cost is not convex in eps: possibly a local optimum"))
         else:
             message = (f"{message}; {len(cuts)} pattern cuts, every pose's exact worst case within the limit "
                        f"(largest {worst:.9f}), gap {gap / abs(cost):.1e} of the cost")
