@@ -105,3 +105,122 @@ def test_hand_axis_message_quotes_the_cli_value(capsys):
     assert main(["map", "--model", "xu_zhang_1988", "--hand-axis", "1,2"]) == 2
     err = capsys.readouterr().err
     assert "--hand-axis" in err and "'free'" in err and "None" not in err, err
+
+
+# ---------------------------------------------------------------------------------------------
+# no traceback ever: Ctrl-C wherever it lands, output files that cannot be written, any failure
+# ---------------------------------------------------------------------------------------------
+def _command_interrupted(argv: list[str], after: float) -> tuple[int | None, str]:
+    """``python -m tolsynth ARGV`` as a user starts it, SIGINT after ``after`` s (maybe while the
+    package is still being imported); (exit status, stderr), or (None, ...) if it ended first."""
+    proc = subprocess.Popen([sys.executable, "-m", "tolsynth", *argv], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        time.sleep(after)
+        if proc.poll() is not None:
+            return None, proc.communicate()[1]
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+        return proc.returncode, err
+    finally:
+        if proc.poll() is None:  # pragma: no cover
+            proc.kill()
+            proc.communicate()
+
+
+@pytest.mark.parametrize("after", [0.4, 1.0, 2.2, 3.0])
+def test_ctrl_c_anywhere_in_reproduce_is_one_line(after):
+    """During the import (the first second or so), inside IPOPT (CasADi turns the interrupt into
+    a RuntimeError / SystemError in its callback and prints its own warning) and between solves:
+    status 130 and one line, never a traceback."""
+    rc, err = _command_interrupted(["reproduce", "--model", "xu_zhang_1988"], after)
+    if rc is None:  # finished before the signal (a fast machine): nothing to check
+        return
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert rc == 130, err
+    assert len(lines) == 1 and "interrupted (Ctrl-C)" in lines[0], err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err and "CasADi" not in err
+
+
+@pytest.mark.slow
+def test_ctrl_c_many_times_in_reproduce():
+    """17 interrupts spread over a whole run (the count the report found failing): all 130, one line."""
+    outcomes = []
+    for after in [0.1 + 0.3 * i for i in range(17)]:
+        rc, err = _command_interrupted(["reproduce", "--model", "xu_zhang_1988"], after)
+        if rc is not None:
+            lines = [line for line in err.splitlines() if line.strip()]
+            outcomes.append((after, rc, len(lines), "Traceback" in err))
+    assert outcomes and all(rc == 130 and n == 1 and not tb for _, rc, n, tb in outcomes), outcomes
+
+
+LONG_NAME = "x" * 300
+
+
+@pytest.mark.parametrize("argv", [
+    ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", ""],
+    ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", "/proc/r.html"],
+    ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", LONG_NAME + ".html"],
+    ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", "r.pdf"],
+    ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", "/dev/full"],
+    ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--workers", "1", "--out", ""],
+    ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--workers", "1", "--out", "/proc/s.csv"],
+    ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--workers", "1", "--out", LONG_NAME + ".csv"],
+    ["map", "--model", "planar_2r", "--tolerances", "coarse", "--out", "/proc/f.png"],
+    ["map", "--model", "planar_2r", "--tolerances", "coarse", "--out", ""],
+    ["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--out", "/proc/t.json"],
+], ids=lambda a: f"{a[0]} --out {a[-1][:20]!r}")
+def test_bad_output_paths_are_one_line_before_any_work(argv, capsys, monkeypatch):
+    """An output file that cannot be written is found before the work starts: status 2 and one
+    line naming --out, never a traceback, and no solve runs."""
+    import tolsynth.synthesis.single as single
+
+    def no_work(*a, **k):  # pragma: no cover - reaching it is the failure
+        raise AssertionError("work started before the output path was checked")
+
+    monkeypatch.setattr(single, "synthesize", no_work)
+    import tolsynth.cli.workspace as w
+
+    monkeypatch.setattr(w, "probability_map", no_work)
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--out" in err and "Traceback" not in err, err
+
+
+def test_a_full_device_at_write_time_is_one_line(tmp_path):
+    """/dev/full accepts the open and fails the write (no space): one line, status 2."""
+    link = tmp_path / "full.csv"
+    link.symlink_to("/dev/full")
+    out = subprocess.run([sys.executable, "-m", "tolsynth", "sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.99",
+                          "--workers", "1", "--quiet", "--out", str(link)], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert out.returncode == 2, out.stderr
+    lines = [line for line in out.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "No space left on device" in lines[0] and "Traceback" not in out.stderr
+
+
+def test_unexpected_failure_is_one_line(capsys, monkeypatch):
+    """A bug (any exception that is not a typed error) is one line naming it, status 1; with
+    TOLSYNTH_DEBUG set the traceback is shown for a bug report."""
+    import tolsynth.cli.analyze as analyze
+
+    def broken(args):
+        return 1 / 0
+
+    monkeypatch.setattr(analyze, "cmd_analyze", broken)  # register() reads it when main builds the parser
+    argv = ["analyze", "--model", "planar_2r", "--tolerances", "coarse", "--R", "0.5"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "internal error: ZeroDivisionError" in err and "TOLSYNTH_DEBUG" in err
+    monkeypatch.setenv("TOLSYNTH_DEBUG", "1")
+    with pytest.raises(ZeroDivisionError):
+        main(argv)
+
+
+def test_report_refuses_a_format_it_cannot_write(tmp_path):
+    """``report --out x.pdf`` (or .docx, or no suffix) wrote HTML under that name: now refused
+    before any work, naming the formats it writes; the API's DesignReport.write likewise."""
+    for name in ("x.pdf", "x.docx", "noext"):
+        out = subprocess.run([sys.executable, "-m", "tolsynth", "report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99",
+                              "--out", str(tmp_path / name)], capture_output=True, text=True, timeout=120, cwd=ROOT)
+        assert out.returncode == 2 and ".html" in out.stderr and ".md" in out.stderr, out.stderr
+        assert not (tmp_path / name).exists()

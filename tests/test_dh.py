@@ -35,7 +35,7 @@ UR5_ALPHA = [PI2, 0.0, 0.0, PI2, -PI2, 0.0]
 
 
 def puma():
-    return tolsynth.Mechanism.from_dh(PUMA_LINKS, "standard", name="puma560", configurations=PUMA_CONFIGS)
+    return tolsynth.Mechanism.from_dh(PUMA_LINKS, "standard", name="puma560", configurations=PUMA_CONFIGS, angle_unit="deg")
 
 
 def ur5_in_si():
@@ -51,7 +51,7 @@ def ur5_in_mm():
     d = [89.159, 0.0, 0.0, 109.15, 94.65, 82.3]
     alpha = [90.0, 0.0, 0.0, 90.0, -90.0, 0.0]
     links = [{"a": a[i], "d": d[i], "alpha": alpha[i], "limits": (-360, 360)} for i in range(6)]
-    return tolsynth.Mechanism.from_dh(links, name="ur5", configurations={"worst": [0, 0, 0, -90, 0, 0]})
+    return tolsynth.Mechanism.from_dh(links, name="ur5", configurations={"worst": [0, 0, 0, -90, 0, 0]}, angle_unit="deg")
 
 
 def panda():
@@ -157,7 +157,8 @@ def test_sensitivity_of_from_dh_against_central_differences():
         [{"d": 100.0, "a": 50.0, "alpha": 90.0, "offset": 10.0, "limits": (-180, 180)},
          {"a": 300.0, "limits": (-180, 180)}, {"a": 200.0, "alpha": -90.0, "limits": (-180, 180)}],
         base=[("Tz", 400.0), ("Rx", 5.0)], tool=[("Tx", 30.0)],
-        tolerance_units={"length": "um", "angle": "deg"}, bounds={"length": (1, 5000), "angle": (0.001, 3)})
+        tolerance_units={"length": "um", "angle": "deg"}, bounds={"length": (1, 5000), "angle": (0.001, 3)},
+        angle_unit="deg")
     assert m.error_parameters[:2] == ("base1", "base2") and m.error_parameters[-1] == "tool1"
     q = np.radians([20.0, -35.0, 50.0])
     S = m.sensitivity(q)
@@ -207,7 +208,7 @@ def _links(i, **change):
 ])
 def test_bad_input_is_a_typed_error_naming_the_field(kwargs, error, field):
     with pytest.raises(error) as info:
-        tolsynth.Mechanism.from_dh(**kwargs)
+        tolsynth.Mechanism.from_dh(**{"angle_unit": "deg", **kwargs})
     assert info.value.field.startswith(field), (info.value.field, str(info.value))
     assert field in str(info.value)
 

@@ -36,7 +36,12 @@ def run_blocks(page: str, skip: str | None = None) -> dict:
 
 def test_every_page_with_code_is_tested_here():
     pages = {p.name for p in DOCS.glob("*.md") if code_blocks(p.name)}
-    assert pages == {"index.md", "guide.md", "robots.md"}, "a new page with Python blocks needs a test here"
+    assert pages == {"index.md", "guide.md", "robots.md", "units.md"}, "a new page with Python blocks needs a test here"
+
+
+def test_units_block_runs():
+    ns = run_blocks("units.md")
+    assert ns["b"].cost == pytest.approx(ns["a"].cost, rel=1e-8)
 
 
 def test_index_block_runs():

@@ -135,9 +135,49 @@ def test_format_table_lists_every_key_the_bundled_models_use():
     """FORMAT is the one list of allowed keys: every key of every bundled table is in it."""
     for name in tolsynth.bundled_models():
         d = model_dict(name)
-        assert set(d) <= set(FORMAT[""])
-        for section in ("model", "units", "chain"):
+        parallel = "leg" in d  # a parallel robot's file (tolsynth.model.parallel)
+        assert set(d) <= set(FORMAT["parallel" if parallel else ""])
+        for section in ("model", "units", "platform") if parallel else ("model", "units", "chain"):
             assert set(d[section]) <= set(FORMAT[section])
-        for section in ("joints", "loops", "joint_constraints", "error_parameters", "reference_results"):
+        assert set(d.get("errors", {})) <= set(FORMAT["leg_errors"])
+        for section in ("joints", "loops", "joint_constraints", "error_parameters", "reference_results", "leg"):
             for item in d.get(section, []):
                 assert set(item) <= set(FORMAT[section]), (name, section)
+
+
+def _set(path_keys, value):
+    def fn(d):
+        t = d
+        for k in path_keys[:-1]:
+            t = t[k]
+        t[path_keys[-1]] = value
+    return fn
+
+
+@pytest.mark.parametrize("model, edit, field, fragment", [
+    ("planar_2r", _set(("configurations", "elbow90", "q2"), 160.0), "configurations.elbow90.q2",
+     "160 deg is outside the joint limits -150 to 150 deg"),
+    ("planar_2r", _set(("configurations", "stretched", "q1"), -171.0), "configurations.stretched.q1", "outside the joint limits"),
+    ("xu_zhang_1988", _set(("configurations", "home", "waive"), []), "configurations.home", None),
+])
+def test_configurations_outside_the_limits_fail_at_load(tmp_path, model, edit, field, fragment):
+    """A model file whose own named pose lies outside a joint limit (or breaks a joint constraint
+    it does not waive) is refused when read, naming the configuration and joint, not at its
+    first use."""
+    data = _edit(model, edit)
+    if fragment is None:  # the home pose of the paper's arm: inside every limit already
+        _load(tmp_path, data)
+        return
+    with pytest.raises(ModelFileError) as info:
+        _load(tmp_path, data)
+    assert info.value.field == field and fragment in str(info.value)
+
+
+def test_a_waived_limit_still_loads(tmp_path):
+    """The paper's 'worst' pose lies 0.33 deg past the interference limit and says so ('waive' and a
+    note): it loads; the same pose without the waiver is refused naming the constraint."""
+    tolsynth.load_model("xu_zhang_1988")
+    data = _edit("xu_zhang_1988", lambda d: d["configurations"]["worst"].pop("waive", None))
+    with pytest.raises(ModelFileError) as info:
+        _load(tmp_path, data)
+    assert info.value.field == "configurations.worst" and "interference" in str(info.value)

@@ -568,3 +568,78 @@ def test_cli_solves_a_model_file_with_a_urdf_chain(tmp_path, capsys):
                "--k", "elbow_joint.z=2"])
     out = capsys.readouterr().out
     assert rc == 0 and "elbow_joint.z = " in out and "wrist_3_link-tool0_fixed_joint.yaw" in out
+
+
+# ---------------------------------------------------------------------------------------------
+# bad input: every defect a typed error naming its field, before any use
+# ---------------------------------------------------------------------------------------------
+TWO = """
+<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+  <origin xyz="0 0 0.5" rpy="0 0 0"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+<joint name="j2" type="revolute"><parent link="l1"/><child link="tip"/>
+  <origin xyz="0.3 0 0" rpy="0 0 0"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+"""
+
+
+@pytest.mark.parametrize("joints, extra_links, fragment", [
+    (TWO.replace('<axis xyz="0 0 1"/>', '<axis xyz="1 0"/>', 1), "", r"joint 'j1': axis xyz='1 0': expected three finite numbers"),
+    (TWO.replace('<axis xyz="0 0 1"/>', '<axis xyz="1e308 1e308 0"/>', 1), "", r"joint 'j1': axis xyz="),
+    (TWO.replace('<axis xyz="0 0 1"/>', '<axis xyz="0 0 0"/>', 1), "", r"joint 'j1': axis \[0.0, 0.0, 0.0\] has no direction"),
+    (TWO.replace('xyz="0.3 0 0"', 'xyz="1e308 0 0"'), "", r"joint 'j2': origin xyz='1e308 0 0'"),
+    (TWO.replace('xyz="0.3 0 0"', 'xyz="nan 0 0"'), "", r"joint 'j2': origin xyz"),
+    (TWO + '<joint name="j3" type="fixed"><parent link="tip"/><child link="l1"/></joint>', "",
+     r"link 'l1' is also the child of joint 'j1': a closed loop"),
+    (TWO, '<link name="l1"/>', r"link 'l1': declared twice"),
+    (TWO + '<joint name="j2" type="fixed"><parent link="tip"/><child link="t2"/></joint>', "", r"joint 'j2': declared twice"),
+], ids=["axis-2-numbers", "axis-overflow", "axis-zero", "xyz-1e308", "xyz-nan", "closed-loop", "duplicate-link",
+        "duplicate-joint"])
+def test_malformed_urdf_is_a_typed_error(tmp_path, joints, extra_links, fragment):
+    import re
+
+    links = sorted(set(re.findall(r'link="([^"]+)"', joints)))
+    path = tmp_path / "bad.urdf"
+    path.write_text('<robot name="bad">' + "".join(f'<link name="{n}"/>' for n in links) + extra_links + joints + "</robot>")
+    with pytest.raises(ModelFileError, match=fragment):
+        tolsynth.load_urdf(path, "base", "tip")
+
+
+@pytest.mark.parametrize("kw, field", [
+    (dict(errors=5), "errors"), (dict(errors=[5]), "errors"), (dict(configurations="abc"), "configurations"),
+    (dict(configurations={"a": "x"}), "configurations[a]"), (dict(tolerance_sets="x"), "tolerance_sets"),
+    (dict(tolerance_sets={"s": 3}), "tolerance_sets[s]"), (dict(assumptions=5), "assumptions"), (dict(name=5), "name"),
+])
+def test_bad_load_urdf_arguments_are_typed_errors(tmp_path, kw, field):
+    from tolsynth.errors import InputError
+
+    with pytest.raises(InputError) as info:
+        tolsynth.load_urdf(_urdf(tmp_path, TWO, "two"), "base", "tip", **kw)
+    assert info.value.field == field and "allowed" in str(info.value)
+    with pytest.raises(InputError) as info:
+        tolsynth.load_urdf(5, "base", "tip")
+    assert info.value.field == "path"
+
+
+def test_configurations_outside_the_limits_fail_at_load(tmp_path):
+    """A pose outside its joint's limits is an error naming the configuration when the robot is
+    built (not at its first use); the same pose in degrees, with the unit stated, loads and is
+    the pose of the same joint values in radians."""
+    path = _urdf(tmp_path, TWO, "two")
+    with pytest.raises(ModelFileError, match=r"configurations\.a\.j1: 190 deg is outside the joint limits"):
+        tolsynth.load_urdf(path, "base", "tip", configurations={"a": [190.0, 0.0]}, angle_unit="deg")
+    with pytest.raises(ModelFileError, match=r"configurations\.b\.j2"):
+        tolsynth.load_urdf(path, "base", "tip", configurations={"b": [0.0, 3.5]})
+    m = tolsynth.load_urdf(path, "base", "tip", configurations={"a": [90.0, -45.0]}, angle_unit="deg")
+    assert m.configurations["a"] == pytest.approx([math.pi / 2, -math.pi / 4], rel=1e-15)
+
+
+def test_angles_are_radians_unless_the_unit_is_given(tmp_path):
+    """One rule (docs/units.md): numbers in rad unless angle_unit says otherwise; a value beyond
+    2 pi without a stated unit reads like degrees and is refused instead of being taken as radians."""
+    from tolsynth.errors import InputError
+
+    path = _urdf(tmp_path, TWO, "two")
+    with pytest.raises(InputError) as info:
+        tolsynth.load_urdf(path, "base", "tip", configurations={"a": [90.0, 0.0]})
+    assert info.value.field == "angle_unit" and "angle_unit='deg'" in str(info.value)
+    m = tolsynth.load_urdf(path, "base", "tip", configurations={"a": [1.0, 0.5]})
+    assert m.configurations["a"] == pytest.approx([1.0, 0.5], rel=0, abs=0)

@@ -9,6 +9,7 @@ Units: mm and rad throughout the API; tolerances in each error parameter's own u
 mm and 1e-2 rad); cost in the paper's units (sum of k * eps**-alpha on those numbers).
 """
 
+from tolsynth.interrupts import guard_start as _guard_start; _guard_start()  # noqa: E702,I001  (Ctrl-C while the command starts: one line)
 from tolsynth.errors import (
     InfeasibleSpecificationError,
     InputError,

@@ -10,7 +10,9 @@ input never reaches a formula that would overflow, divide by zero or loop foreve
   :data:`TINY` (1e-12 of its unit);
 * a probability lies in ``[P_MIN, P_MAX]`` = [1e-12, 1 - 1e-12] (beyond, the normal quantile is
   not representable in double precision: ``z(1 - 1e-16)`` is infinite);
-* a count is an integer (an integral float such as ``1e4`` is accepted) inside stated limits.
+* a count is an integer (an integral float such as ``1e4`` is accepted) inside stated limits;
+* a length or an angle may be a string with a unit suffix (``"500um"``, ``"2mrad"``), converted
+  to the argument's unit (:mod:`tolsynth.units`: one rule for the API and the command line).
 
 The model-file reader (:mod:`tolsynth.model.reader`) applies the same limits to the numbers in a file.
 """
@@ -24,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from tolsynth.errors import InputError, OutOfRangeError
+from tolsynth.units import convert_quantity, suffixes, unit_kind
 
 __all__ = [
     "HUGE",
@@ -37,6 +40,10 @@ __all__ = [
     "check_count",
     "check_seed",
     "check_vector",
+    "check_progress",
+    "check_time_limit",
+    "check_writable_path",
+    "DEFAULT_TIME_LIMIT",
 ]
 
 #: largest magnitude of any number given, in its own unit (mm, rad, tolerance unit, ...)
@@ -53,9 +60,25 @@ def is_real(x: Any) -> bool:
     return not isinstance(x, (bool, np.bool_)) and isinstance(x, (int, float, np.integer, np.floating))
 
 
-def _as_float(x: Any, field: str, allowed: str) -> float:
+#: seconds a solve may take by default before it stops with Status.TIME_LIMIT: far beyond any
+#: solve of the bundled models (milliseconds; an exact or workspace design, tens of seconds), so
+#: it only ends a run that would otherwise not end
+DEFAULT_TIME_LIMIT = 600.0
+
+
+def _with_units(allowed: str, unit: str) -> str:
+    kind = unit_kind(unit)
+    return f"{allowed}; or a string with a{'n' if kind == 'angle' else ''} {kind} unit ({suffixes(kind)})" if kind else allowed
+
+
+def _as_float(x: Any, field: str, allowed: str, unit: str = "") -> float:
+    if isinstance(x, str) and unit_kind(unit):  # "500um": the same rule as the command line's
+        v = convert_quantity(x, unit)
+        if v is None:
+            raise InputError(field, f"{x!r} is not a number with a {unit_kind(unit)} unit", _with_units(allowed, unit))
+        return v
     if not is_real(x):
-        raise InputError(field, f"expected a number, got {x!r}", allowed)
+        raise InputError(field, f"expected a number, got {x!r}", _with_units(allowed, unit))
     try:
         v = float(x)
     except OverflowError:  # a Python int beyond double range
@@ -69,7 +92,7 @@ def check_real(x: Any, field: str, unit: str = "", lower: float = -HUGE, upper: 
     """``x`` as a float, or a typed error unless it is a finite number in ``[lower, upper]``."""
     u = f" {unit}" if unit else ""
     allowed = f"a finite number >= {lower:g} and <= {upper:g}{u}"
-    v = _as_float(x, field, allowed)
+    v = _as_float(x, field, allowed, unit)
     if not lower <= v <= upper:
         raise OutOfRangeError(field, f"got {x!r}", allowed)
     return v
@@ -80,7 +103,7 @@ def check_positive(x: Any, field: str, unit: str = "mm", upper: float = HUGE, lo
     if type(x) is float and x > 0 and lower <= x <= upper:  # the common case (NaN and inf fail here)
         return x
     allowed = f"a finite number > 0, from {lower:g} to {upper:g}" + (f" ({unit})" if unit else "")
-    v = _as_float(x, field, allowed)
+    v = _as_float(x, field, allowed, unit)
     if not (v > 0 and lower <= v <= upper):
         raise OutOfRangeError(field, f"got {x!r}", allowed)
     return v
@@ -179,3 +202,51 @@ def check_options(options: Any, defaults: dict, field: str = "options") -> dict:
         elif isinstance(default, str) and not isinstance(value, str):
             raise InputError(where, f"got {value!r}", "a string")
     return options
+
+
+def check_progress(progress: Any, field: str = "progress"):
+    """A ``progress`` argument: None (a bar on a terminal, for runs over a couple of seconds), True,
+    False, or a callable ``progress(done, total)``."""
+    if progress is None or isinstance(progress, (bool, np.bool_)) or callable(progress):
+        return progress
+    raise InputError(field, f"got {progress!r}", "None (automatic), True, False, or a callable progress(done, total)")
+
+
+def check_time_limit(limit: Any, field: str = "time_limit") -> float:
+    """Seconds a run may take (a positive number; ``None``: :data:`DEFAULT_TIME_LIMIT`)."""
+    if limit is None:
+        return DEFAULT_TIME_LIMIT
+    return check_positive(limit, field, "s", upper=1e7, lower=1e-3)
+
+
+def check_writable_path(path: Any, field: str = "path") -> str:
+    """A file path that can be written, checked before any work: not empty, a name the file
+    system accepts, in an existing folder, not a folder itself, and openable for writing (tried:
+    a file that did not exist is removed again; a place such as /proc fails here, not after the
+    work).  A full device (``/dev/full``) still fails only when written."""
+    import errno
+    import os
+
+    if not isinstance(path, (str, os.PathLike)):
+        raise InputError(field, f"got {type(path).__name__}", "a file path (str or os.PathLike)")
+    path = os.fspath(path)
+    if not isinstance(path, str) or not path.strip():
+        raise InputError(field, f"empty path {path!r}", "a file path")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise InputError(field, f"{path!r}: the folder {folder} does not exist", "a path in an existing folder")
+    if os.path.isdir(path):
+        raise InputError(field, f"{path!r} is a folder", "a file path")
+    existed = os.path.exists(path)
+    try:
+        with open(path, "ab"):
+            pass
+    except OSError as exc:
+        why = "the name is too long" if exc.errno == errno.ENAMETOOLONG else (exc.strerror or type(exc).__name__)
+        raise InputError(field, f"{path!r} cannot be written: {why}", "a writable file path in an existing folder") from None
+    if not existed:
+        try:
+            os.remove(path)
+        except OSError:  # pragma: no cover - created but not removable: left empty
+            pass
+    return path

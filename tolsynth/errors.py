@@ -19,6 +19,7 @@ __all__ = [
     "SolverError",
     "MissingDependencyError",
     "UnsupportedJointError",
+    "TimeLimitError",
 ]
 
 
@@ -90,6 +91,25 @@ class InfeasibleSpecificationError(TolsynthError):
 class SolverError(TolsynthError):
     """A solver failed in a way that leaves no result to report (not used for non-convergence,
     which is reported as ``success == False`` on the result)."""
+
+
+class TimeLimitError(TolsynthError):
+    """A run passed its time limit (``synthesize(..., time_limit=...)``) inside a long evaluation.
+    The solvers catch it and return a result with ``Status.TIME_LIMIT``; it reaches a caller only
+    from a computation that has no result to return.
+
+    Attributes
+    ----------
+    what : str
+        The computation that was stopped.
+    limit : float
+        The limit, seconds.
+    """
+
+    def __init__(self, what: str, limit: float):
+        self.what = what
+        self.limit = limit
+        super().__init__(f"{what}: stopped at the time limit of {limit:g} s (time_limit)")
 
 
 class MissingDependencyError(TolsynthError, ImportError):

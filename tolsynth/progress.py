@@ -1,4 +1,5 @@
-"""Progress reports on stderr for long runs (Monte Carlo, the workspace map, Tables 1-3).
+"""Long runs: progress reports on stderr (Monte Carlo, the workspace map, Tables 1-3, solves),
+and the time limit every solve runs under (:func:`time_limit`, :func:`remaining`).
 
 A tqdm bar where the optional extra ``progress`` (tqdm) is installed; without it, plain lines
 (:class:`LineProgress`: one line every few seconds, then one when done), so that a long run is
@@ -8,10 +9,14 @@ the plain lines carry the same information (done, total, elapsed, estimated time
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import math
 import sys
 import time
 
-__all__ = ["make_bar", "Progress", "LineProgress", "AUTO_PROGRESS_DELAY"]
+__all__ = ["make_bar", "Progress", "LineProgress", "AUTO_PROGRESS_DELAY", "time_limit", "remaining",
+           "limit_seconds", "check_deadline"]
 
 AUTO_PROGRESS_DELAY = 2.0  # s: with progress=None the bar appears only on runs longer than this
 
@@ -71,6 +76,9 @@ class Progress:
     """tqdm (or plain lines) on stderr if wanted; a callable ``progress(done, total)`` also works."""
 
     def __init__(self, progress, total: int, desc: str, unit: str = "sample"):
+        from tolsynth.checks import check_progress
+
+        check_progress(progress)
         self.bar = None
         self.callback = None
         self.total = total
@@ -90,3 +98,42 @@ class Progress:
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# time limits
+# ---------------------------------------------------------------------------------------------
+#: (deadline on time.monotonic(), the limit in seconds) of the innermost time_limit block
+_DEADLINE: contextvars.ContextVar = contextvars.ContextVar("tolsynth_deadline", default=(math.inf, math.inf))
+
+
+@contextlib.contextmanager
+def time_limit(seconds: float):
+    """Code in the block may run ``seconds`` (an enclosing block's earlier deadline stays in force):
+    the solvers' loops read :func:`remaining` and stop with ``Status.TIME_LIMIT`` once it is 0."""
+    outer = _DEADLINE.get()
+    token = _DEADLINE.set((min(outer[0], time.monotonic() + seconds), min(outer[1], seconds)))
+    try:
+        yield
+    finally:
+        _DEADLINE.reset(token)
+
+
+def remaining() -> float:
+    """Seconds left before the innermost deadline (inf outside any :func:`time_limit` block)."""
+    return _DEADLINE.get()[0] - time.monotonic()
+
+
+def limit_seconds() -> float:
+    """The innermost block's limit in seconds (inf outside any): a constant of the run, for
+    solver settings that are compiled once (IPOPT's max_wall_time)."""
+    return _DEADLINE.get()[1]
+
+
+def check_deadline(what: str) -> None:
+    """Raise :class:`tolsynth.errors.TimeLimitError` if the deadline has passed (for long loops
+    inside one evaluation; a solver turns it into a result with ``Status.TIME_LIMIT``)."""
+    if _DEADLINE.get()[0] <= time.monotonic():
+        from tolsynth.errors import TimeLimitError
+
+        raise TimeLimitError(what, _DEADLINE.get()[1])

@@ -1,15 +1,28 @@
-"""Units of length and angle, and their factors to the package's base units (mm and rad).
+"""Units of length and angle, their factors to the package's base units (mm and rad), and the
+one reader of a number written with a unit (``"500um"``, ``"2mrad"``, ``"0.1deg"``).
 
-The package computes in millimetres and radians.  Tolerances are *stated* in each error
-parameter's own tolerance unit (the paper: mm for lengths, 1e-2 rad for angles), and the cost
-``k * eps**(-alpha)`` is evaluated on the number in that unit, as the paper does.
+The package computes in millimetres and radians.  The rule, the same in the Python API, the
+model builders and the command line (docs/units.md):
+
+* a bare number is in the unit its argument states: mm for lengths (``R``, offsets), rad for
+  angles (``Phi``, joint values), each error parameter's own tolerance unit for tolerances, locks
+  and bounds (the paper: mm for lengths, 1e-2 rad for angles);
+* a string with a unit suffix (``"500um"``, ``"0.5 mm"``, ``"2mrad"``, ``"0.1deg"``) is accepted
+  wherever such a number is, and converted to the argument's unit;
+* the model builders (:func:`tolsynth.Mechanism.from_dh`, :func:`tolsynth.load_urdf`) read the
+  numbers of their tables in ``length_unit`` / ``angle_unit`` (default mm and rad, as a model
+  file's ``[units]`` table states them).
+
+The cost ``k * eps**(-alpha)`` is evaluated on the number in the tolerance unit, as the paper does.
 """
 
 from __future__ import annotations
 
 import math
+import re
 
-__all__ = ["LENGTH_UNITS", "ANGLE_UNITS", "unit_kind", "to_base", "BASE_UNIT"]
+__all__ = ["LENGTH_UNITS", "ANGLE_UNITS", "unit_kind", "to_base", "BASE_UNIT", "SUFFIXES", "QUANTITY", "split_quantity",
+           "convert_quantity", "suffixes"]
 
 #: factor from the unit to mm
 LENGTH_UNITS: dict[str, float] = {
@@ -29,6 +42,12 @@ ANGLE_UNITS: dict[str, float] = {
     "arcsec": math.pi / (180.0 * 3600.0),
 }
 BASE_UNIT = {"length": "mm", "angle": "rad"}
+
+#: unit suffixes accepted after a number (the model files' units, less the spaced "1e-2 rad")
+SUFFIXES = {u: u for u in list(LENGTH_UNITS) + list(ANGLE_UNITS) if " " not in u}
+SUFFIXES.update({"µm": "um", "μm": "um", "°": "deg"})
+#: a number and an optional suffix (known or not: the caller says which is wrong)
+QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(\S*)\s*$")
 
 
 def unit_kind(unit: str) -> str | None:
@@ -51,3 +70,36 @@ def to_base(unit: str) -> float:
 
 def allowed_units() -> str:
     return ", ".join(list(LENGTH_UNITS) + list(ANGLE_UNITS))
+
+
+def suffixes(kind: str) -> str:
+    """The suffixes of one kind (``"length"`` or ``"angle"``), for messages."""
+    table = LENGTH_UNITS if kind == "length" else ANGLE_UNITS
+    return ", ".join(u for u in table if " " not in u)
+
+
+def split_quantity(text: str) -> tuple[float, str | None] | None:
+    """``"500um"`` -> ``(500.0, "um")``, ``"0.5"`` -> ``(0.5, None)``; None if ``text`` is not a
+    finite number with an optional known suffix (the caller raises its own typed error)."""
+    m = QUANTITY.match(str(text))
+    if not m:
+        return None
+    value = float(m.group(1))
+    suffix = m.group(2)
+    if not math.isfinite(value) or (suffix and suffix not in SUFFIXES):
+        return None
+    return value, (SUFFIXES[suffix] if suffix else None)
+
+
+def convert_quantity(text: str, unit: str) -> float | None:
+    """A string such as ``"500um"`` in ``unit`` (a bare number is taken to be in ``unit``), or None
+    if it is not a number, has an unknown suffix, or a suffix of the other kind."""
+    parsed = split_quantity(text)
+    if parsed is None:
+        return None
+    value, suffix = parsed
+    if suffix is None:
+        return value
+    if unit_kind(suffix) != unit_kind(unit):
+        return None
+    return value * to_base(suffix) / to_base(unit)

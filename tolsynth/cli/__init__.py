@@ -3,7 +3,9 @@
 Every sub-command prints a readable report, or one JSON object with --json (its inputs and the
 package version recorded).  Exit status: 0 done; 1 a solver did not converge (the numbers are not
 an optimum); 2 bad input or nothing to do (a one-line message naming the option and the allowed
-range); 130 interrupted (Ctrl-C); 141 the output pipe was closed.
+range); 130 interrupted (Ctrl-C, wherever it lands); 141 the output pipe was closed.  No command prints a
+traceback: an output file that cannot be written is a one-line error (2), and an unexpected
+failure one line naming it (1).
 
 Layout: one module per command family (``analyze``, ``solve``, ``report``, ``sweep``, ``reproduce``, ``montecarlo``,
 ``workspace``: map and worst-pose), each with ``register(subparsers)``; the argument helpers in
@@ -15,9 +17,11 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 
 from tolsynth.errors import TolsynthError
+from tolsynth.interrupts import Interrupts, QuietCasadiInterrupt, started_as_command
 from tolsynth.cli import analyze, montecarlo, report, reproduce, solve, sweep, workspace
 from tolsynth.cli import budget, models, pareto, processes
 from tolsynth.cli.args import HelpFormatter, add_pose_arguments, emit_json, parse_pose, parse_tolerances, version
@@ -57,24 +61,69 @@ def _quiet_stdout() -> None:
         pass
 
 
+def _os_error(exc: OSError) -> str:
+    """An OSError as one line: what could not be done to which file, and why."""
+    name = exc.filename if exc.filename is not None else ""
+    why = exc.strerror or type(exc).__name__
+    return f"cannot write or read {name!r}: {why}" if name != "" else f"{why}"
+
+
 def main(argv=None) -> int:
-    """Run the command line; returns the exit status (see the module docstring)."""
-    command = "tolsynth"
-    try:
-        parser = build_parser()
-        args = parser.parse_args(argv)  # a usage error exits 2 (SystemExit) with argparse's message
-        command = f"tolsynth {args.command}"
-        try:
-            rc = args.func(args)
-        except TolsynthError as exc:
-            print(f"{command}: error: {exc}", file=sys.stderr)
-            rc = EXIT_INPUT
-        sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's final flush
+    """Run the command line; returns the exit status (see the module docstring).
+
+    No traceback reaches the user: a typed error is one line (status 2), a file that cannot be
+    written one line (2), Ctrl-C one line (130) whatever exception it became inside CasADi, and an
+    unexpected exception one line naming it (1; ``TOLSYNTH_DEBUG=1`` shows its traceback)."""
+    if started_as_command():  # the command's own process: CasADi's C++ interrupt warning filtered out
+        with QuietCasadiInterrupt():
+            rc = _main(argv)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # done: a late Ctrl-C has nothing left to stop
         return rc
-    except KeyboardInterrupt:
-        task = getattr(locals().get("args"), "task", None) or "the command"
+    return _main(argv)
+
+
+def _main(argv) -> int:
+    command = "tolsynth"
+    args = None
+    with Interrupts() as interrupts:
+        try:
+            parser = build_parser()
+            args = parser.parse_args(argv)  # a usage error exits 2 (SystemExit) with argparse's message
+            command = f"tolsynth {args.command}"
+            try:
+                rc = args.func(args)
+            except TolsynthError as exc:
+                if interrupts.seen:
+                    raise KeyboardInterrupt from None
+                print(f"{command}: error: {exc}", file=sys.stderr)
+                rc = EXIT_INPUT
+            sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's final flush
+            return rc
+        except KeyboardInterrupt:
+            return _interrupted(command, args)
+        except BrokenPipeError:
+            _quiet_stdout()
+            return EXIT_PIPE
+        except OSError as exc:  # an output file that cannot be written (a full disk, /proc, a long name)
+            if interrupts.seen:
+                return _interrupted(command, args)
+            print(f"{command}: error: {_os_error(exc)}", file=sys.stderr)
+            return EXIT_INPUT
+        except Exception as exc:  # noqa: BLE001 - the one place that turns any failure into one line
+            if interrupts.seen:  # CasADi wraps a KeyboardInterrupt raised in a callback
+                return _interrupted(command, args)
+            if os.environ.get("TOLSYNTH_DEBUG"):
+                raise
+            text = " ".join(str(exc).split())[:300]
+            print(f"{command}: internal error: {type(exc).__name__}: {text} (a bug: please report it with the "
+                  "command line; TOLSYNTH_DEBUG=1 shows the traceback)", file=sys.stderr)
+            return EXIT_NOT_CONVERGED
+
+
+def _interrupted(command: str, args) -> int:
+    task = getattr(args, "task", None) or "the command"
+    try:
         print(f"\n{command}: interrupted (Ctrl-C): {task} was not finished; nothing was written.", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except BrokenPipeError:
-        _quiet_stdout()
-        return EXIT_PIPE
+    except (OSError, ValueError):  # pragma: no cover - stderr gone
+        pass
+    return EXIT_INTERRUPTED

@@ -19,10 +19,11 @@ from typing import Callable
 
 import numpy as np
 
+from tolsynth.checks import check_writable_path
 from tolsynth.errors import InputError, UnknownNameError
 from tolsynth.kinematics.mechanism import Mechanism
 from tolsynth.io.tables import jsonable
-from tolsynth.units import ANGLE_UNITS, LENGTH_UNITS, to_base, unit_kind
+from tolsynth.units import QUANTITY as _QTY, SUFFIXES, split_quantity, suffixes as _suffixes, to_base, unit_kind
 
 __all__ = [
     "dist_for",
@@ -48,10 +49,6 @@ __all__ = [
     "write_out",
 ]
 
-#: unit suffixes accepted after a number (the model files' units, less the spaced "1e-2 rad")
-SUFFIXES = {u: u for u in list(LENGTH_UNITS) + list(ANGLE_UNITS) if " " not in u}
-SUFFIXES.update({"µm": "um", "μm": "um", "°": "deg"})
-_QTY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(\S*)\s*$")
 _WILDCARD = re.compile(r"[*?\[]")
 
 
@@ -86,24 +83,14 @@ class HelpFormatter(argparse.HelpFormatter):
 # ---------------------------------------------------------------------------------------------
 # numbers with units
 # ---------------------------------------------------------------------------------------------
-def _suffixes(kind: str) -> str:
-    table = LENGTH_UNITS if kind == "length" else ANGLE_UNITS
-    return ", ".join(u for u in table if " " not in u)
-
-
 def _split_quantity(text: str, field: str, allowed: str) -> tuple[float, str | None]:
+    parsed = split_quantity(text)
+    if parsed is not None:
+        return parsed
     m = _QTY.match(str(text))
-    if not m:
-        raise InputError(field, f"{text!r} is not a number", allowed)
-    value = float(m.group(1))
-    if not math.isfinite(value):  # pragma: no cover - the pattern admits finite numbers only
-        raise InputError(field, f"{text!r} is not finite", allowed)
-    suffix = m.group(2)
-    if not suffix:
-        return value, None
-    if suffix not in SUFFIXES:
-        raise InputError(field, f"{text!r}: unknown unit {suffix!r}", allowed)
-    return value, SUFFIXES[suffix]
+    if m and m.group(2) and m.group(2) not in SUFFIXES:
+        raise InputError(field, f"{text!r}: unknown unit {m.group(2)!r}", allowed)
+    raise InputError(field, f"{text!r} is not a number", allowed)
 
 
 def quantity(text: str, field: str, kind: str, unit: str) -> float:
@@ -414,11 +401,7 @@ def check_figure_path(path: str | None, field: str = "--out") -> None:
     if ext not in types:
         raise InputError(field, f"{path!r}: unsupported figure format {('.' + ext) if ext else '(no suffix)'}",
                          "a file name ending in " + ", ".join("." + t for t in sorted(types)))
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise InputError(field, f"{path!r}: the folder {folder} does not exist", "a path in an existing folder")
-    if os.path.isdir(path) or not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
-        raise InputError(field, f"{path!r} cannot be written", "a writable file path")
+    check_writable_path(path, field)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -458,6 +441,7 @@ def check_table_out(args, option: str = "--out") -> None:
         from tolsynth.io.tables import check_table_path
 
         check_table_path(path, option)
+        check_writable_path(path, option)
 
 
 def write_out(frame, args, mech: Mechanism | None = None, option: str = "--out", **resolved) -> None:

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from tolsynth.checks import check_writable_path
 from tolsynth.errors import InputError, MissingDependencyError, TolsynthError
 from tolsynth.io.report_layout import PLOT_INSTALL, _figures, _layout
 from tolsynth.io.report_render import _render_html, _render_markdown
@@ -138,22 +139,23 @@ class DesignReport:
 
 def check_report_path(path, format: str | None = None, field: str = "path") -> str:
     """The report's format (from ``format`` or the suffix) after checking that the file can be
-    written and matplotlib is installed; raises :class:`InputError` / :class:`MissingDependencyError`."""
-    path = os.fspath(path)
+    written and matplotlib is installed; raises :class:`InputError` / :class:`MissingDependencyError`.
+    A report is HTML (``.html``, ``.htm``) or Markdown (``.md``, ``.markdown``); any other suffix
+    (``.pdf``, ``.docx``, none) is refused rather than written as HTML under a misleading name."""
+    path = check_writable_path(path, field)
     suffix = os.path.splitext(path)[1].lower()
     implied = "md" if suffix in (".md", ".markdown") else "html" if suffix in (".html", ".htm") else None
-    if format is None:
-        format = implied or "html"
-    if format not in FORMATS:
+    if format is not None and format not in FORMATS:
         raise InputError("format", f"{format!r}", " or ".join(repr(f) for f in FORMATS))
-    if implied is not None and implied != format:  # a Markdown file named .html (or the reverse) misleads
+    if implied is None:
+        raise InputError(field, f"{path!r}: a report cannot be written as {suffix or '(no suffix)'}",
+                         "a file name ending in .html or .htm (HTML, figures embedded; print it to PDF from a "
+                         "browser) or .md or .markdown (Markdown, figures as PNG beside it)")
+    if format is None:
+        format = implied
+    if implied != format:  # a Markdown file named .html (or the reverse) misleads
         raise InputError(field, f"{path!r} is named as {implied} but the format asked is {format}",
                          f"a file ending in .{'md' if format == 'md' else 'html'} for format {format!r}")
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise InputError(field, f"{path!r}: the folder {folder} does not exist", "a path in an existing folder")
-    if os.path.isdir(path) or not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
-        raise InputError(field, f"{path!r} cannot be written", "a writable file path")
     try:
         import matplotlib  # noqa: F401
     except ImportError:

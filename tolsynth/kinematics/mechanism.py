@@ -21,9 +21,11 @@ import numpy as np
 from tolsynth.checks import HUGE, check_mapping, check_real, check_vector
 from tolsynth.errors import InputError, LoopClosureError, OutOfRangeError, UnknownNameError
 from tolsynth.kinematics.graphs import Graphs, build_graphs
+from tolsynth.kinematics.parallel import ParallelGraphs, build_parallel_graphs
 from tolsynth.model.dh import dh_spec
 from tolsynth.model.urdf import urdf_spec
 from tolsynth.model.reader import model_path, read_model_file
+from tolsynth.model.parallel import is_parallel
 from tolsynth.model.spec import ErrorParameter, MechanismSpec
 from tolsynth.probability.stats import (
     check_positive,
@@ -41,7 +43,7 @@ __all__ = ["Mechanism", "load_model", "load_urdf", "Analysis"]
 JointInput = Union[str, Sequence[float], np.ndarray]
 ToleranceInput = Union[str, Mapping[str, float], Sequence[float], np.ndarray]
 #: rad; tolerance of the (inclusive) joint-limit checks against rounding, far below any physical angle
-LIMIT_SLACK = 1e-12
+from tolsynth.model.fields import LIMIT_SLACK  # noqa: E402  (one copy: the reader checks a file's own poses with it)
 
 
 def load_model(name_or_path: str | os.PathLike) -> "Mechanism":
@@ -171,9 +173,10 @@ class Mechanism:
         return state
 
     @cached_property
-    def graphs(self) -> Graphs:
-        """The named CasADi Functions ``fk``, ``sensitivity``, ``closure``, ``position``."""
-        return build_graphs(self.spec)
+    def graphs(self) -> Graphs | ParallelGraphs:
+        """The named CasADi Functions ``fk``, ``sensitivity``, ``closure``, ``position`` (a parallel
+        robot's also ``pose``, ``ik``, ``jacobian``: :mod:`tolsynth.kinematics.parallel`)."""
+        return build_parallel_graphs(self.spec) if is_parallel(self.spec) else build_graphs(self.spec)
 
     @property
     def n(self) -> int:
@@ -329,8 +332,12 @@ class Mechanism:
             # limits are inclusive; LIMIT_SLACK only absorbs the rounding of deg -> rad conversions
             # and of the constraint sums (a pose given exactly on a limit in degrees is accepted)
             eps = LIMIT_SLACK
+            lengths = getattr(self.spec, "length_joints", ())  # a parallel robot's struts, in mm
             for j, v in zip(self.spec.joints, qv):
                 if j.name not in waive and not (j.lower - eps <= v <= j.upper + eps):
+                    if j.name in lengths:
+                        raise OutOfRangeError(f"q[{j.name}]", f"{v:.4f} mm is outside the joint limits",
+                                              f"{j.lower:g} to {j.upper:g} mm")
                     raise OutOfRangeError(
                         f"q[{j.name}]", f"{math.degrees(v):.4f} deg is outside the joint limits",
                         f"{math.degrees(j.lower):g} to {math.degrees(j.upper):g} deg",
@@ -392,6 +399,9 @@ class Mechanism:
 
     # ------------------------------------------------------------------ kinematics
     def _check_closure(self, qv: np.ndarray, dv: np.ndarray) -> None:
+        if is_parallel(self.spec):  # assembled, on the home pose's branch, away from singularities
+            self.graphs.check(qv, dv)
+            return
         if not self.spec.loops:
             return
         c = np.array(self.graphs.closure(qv, dv)).ravel()
@@ -447,9 +457,16 @@ class Mechanism:
         """A model whose loops do not close at its named configurations is malformed."""
         from tolsynth.errors import ModelFileError
 
+        zero = np.zeros(self.n)
+        if is_parallel(self.spec):
+            for name, q in self.configurations.items():
+                try:
+                    self.graphs.check(q, zero)
+                except LoopClosureError as err:
+                    raise ModelFileError(self.spec.path, f"configurations.{name}", str(err)) from None
+            return
         if not self.spec.loops:
             return
-        zero = np.zeros(self.n)
         for name, q in self.configurations.items():
             c = np.array(self.graphs.closure(q, zero)).ravel()
             for loop, value in zip(self.spec.loops, c):

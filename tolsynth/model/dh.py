@@ -10,7 +10,7 @@ names a pattern selects) is checked here.
 >>> import tolsynth
 >>> arm = tolsynth.Mechanism.from_dh(
 ...     links=[{"a": 500.0, "limits": (-170, 170)}, {"a": 300.0, "limits": (-150, 150)}],
-...     name="two_link", configurations={"bent": [30.0, 90.0]})
+...     name="two_link", configurations={"bent": [30.0, 90.0]}, angle_unit="deg")
 >>> arm.fk("bent")[:3, 3].round(3)
 array([283.013, 509.808,   0.   ])
 >>> arm.error_parameters
@@ -66,7 +66,7 @@ def dh_spec(
     name: str = "dh_robot",
     title: str | None = None,
     length_unit: str = "mm",
-    angle_unit: str = "deg",
+    angle_unit: str | None = None,
     base: Sequence[tuple[str, float]] = (),
     tool: Sequence[tuple[str, float]] = (),
     errors: str | Sequence[str] = "all",
@@ -95,7 +95,11 @@ def dh_spec(
         hand point and the error parameters is appended to ``assumptions``.
     length_unit, angle_unit : str
         Units of the numbers given here (D-H values, base/tool, limits, configurations): ``"mm"``,
-        ``"m"``, ... and ``"deg"``, ``"rad"``, ...  The mechanism works in mm and rad.
+        ``"m"``, ... and ``"deg"``, ``"rad"``, ...; default mm and rad, the package's units (one
+        rule for the API, the model builders and the command line: docs/units.md).  Without
+        ``angle_unit``, an angle beyond 2 pi (a twist of 90, limits of 170) reads like degrees
+        and is an error asking for ``angle_unit="deg"`` (or ``"rad"`` to confirm) instead of
+        being taken as that many radians.
     base, tool : list of (transform, value) or (transform, value, name)
         Elementary transforms before the first and after the last link, e.g.
         ``[("Tz", 107.0, "flange")]``; transforms ``Tx Ty Tz Rx Ry Rz``.  Their symbols are the
@@ -124,6 +128,8 @@ def dh_spec(
         A bad value, found by the model-file parser; its field names the argument
         (``links[1].a``, ``links[0].limits``, ``k[a2]``, ``configurations[home]``).
     """
+    angle_given = angle_unit is not None
+    angle_unit = "rad" if angle_unit is None else angle_unit
     if not isinstance(convention, str) or convention not in CONVENTIONS:
         raise InputError("convention", f"unknown convention {convention!r}{_nearest(str(convention), CONVENTIONS)}",
                          " or ".join(CONVENTIONS))
@@ -243,6 +249,8 @@ def dh_spec(
             raise InputError(f"configurations[{cname}]", f"expected {len(joint_names)} joint values, got {value!r:.60}",
                              f"a list of {len(joint_names)} values in {angle_unit} or a dict joint -> value")
 
+    if not angle_given:
+        _degrees_guard(symbols, kinds, joints, raw_configs, joint_names)
     lines = [
         f"{convention.capitalize()} D-H chain {CONVENTIONS[convention][1]} for each of the {len(links)} links"
         + (", with a base transform" if base else "") + (", with a tool transform" if tool else "")
@@ -271,6 +279,26 @@ def dh_spec(
     return spec
 
 
+
+
+def _degrees_guard(symbols, kinds, joints, raw_configs, joint_names) -> None:
+    """Without an explicit ``angle_unit`` the angles are radians; one beyond 2 pi (a twist of 90,
+    limits of 170) reads like a degree and would otherwise be taken silently as radians."""
+    import math
+
+    def big(v) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and abs(v) > 2 * math.pi * (1 + 1e-9)
+
+    found = [f"{s} = {v:g}" for s, v in symbols.items() if kinds[s] == "angle" and big(v)]
+    for jt in joints:
+        lim = jt["limits"]
+        if isinstance(lim, list) and any(big(v) for v in lim):
+            found.append(f"{jt['name']} limits {tuple(lim)}")
+    for cname, raw in raw_configs.items():
+        found += [f"configurations[{cname}][{j}] = {raw[j]:g}" for j in joint_names if j in raw and big(raw[j])]
+    if found:
+        raise InputError("angle_unit", f"not given, and {found[0]} is beyond 2 pi rad (degrees meant?)",
+                         "angle_unit='deg' for a table in degrees, or angle_unit='rad' to read these numbers as radians")
 
 
 def _rename(field: str, origin: dict[str, str]) -> str:

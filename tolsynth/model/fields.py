@@ -88,6 +88,31 @@ FORMAT: dict[str, dict[str, bool]] = {
         "cost": False,
         "note": False,
     },
+    # parallel robots (tolsynth.model.parallel): the top level of a [[leg]] file and its own tables
+    "parallel": {
+        "model": True,
+        "units": True,
+        "platform": True,
+        "leg": True,
+        "configurations": True,
+        "errors": False,
+        "tolerance_sets": False,
+    },
+    "platform": {"dof": True, "assembly": True, "tool": False},
+    "leg": {
+        "name": True,
+        "joint": True,
+        "actuation": True,  # "prismatic" (strut length) or "revolute" (arm + distal link)
+        "limits": True,
+        "base": True,
+        "platform": True,
+        "offset": False,
+        "arm": False,  # revolute legs: arm and link lengths, the arm's axis and zero direction
+        "link": False,
+        "axis": False,
+        "zero": False,
+    },
+    "leg_errors": {"select": False, "k": False, "bounds": False, "tolerance_units": False, "distribution": False},
     "reference_results": {
         "table": True,
         "R": True,
@@ -298,3 +323,34 @@ def _by_kind(arg: Any, argname: str, default: dict, selectable: dict[str, str]) 
         if name in arg:
             out[name] = arg[name]
     return out
+
+
+#: joint limits are inclusive; this slack only absorbs the rounding of deg -> rad conversions and
+#: of the constraint sums (a pose written exactly on a limit in degrees is inside)
+LIMIT_SLACK = 1e-12
+
+
+def _check_configurations(r: _Reader, configurations: dict, joints, constraints=(), length_joints=()) -> None:
+    """Every named configuration inside the joint limits and the joint constraints (those it
+    waives excepted): a model whose own poses cannot be used fails when it is read, naming the
+    configuration, not later at its first use."""
+    names = [j.name for j in joints]
+    for cname, cfg in configurations.items():
+        waive = set(getattr(cfg, "waive", ()) or ())
+        for j, v in zip(joints, cfg.q):
+            if j.name in waive or j.lower - LIMIT_SLACK <= v <= j.upper + LIMIT_SLACK:
+                continue
+            if j.name in length_joints:
+                what = f"{v:.6g} mm is outside the joint limits {j.lower:g} to {j.upper:g} mm"
+            else:
+                what = (f"{math.degrees(v):.6g} deg is outside the joint limits {math.degrees(j.lower):g} to "
+                        f"{math.degrees(j.upper):g} deg")
+            raise r.fail(f"configurations.{cname}.{j.name}", what + " (or waive the limit with 'waive' and say why in 'note')")
+        for c in constraints:
+            if c.name in waive:
+                continue
+            v = sum(coef * cfg.q[names.index(jn)] for jn, coef in c.terms.items())
+            if not c.lower - LIMIT_SLACK <= v <= c.upper + LIMIT_SLACK:
+                raise r.fail(f"configurations.{cname}", f"{math.degrees(v):.6g} deg breaks joint constraint {c.name!r} "
+                                                        f"({math.degrees(c.lower):g} to {math.degrees(c.upper):g} deg; "
+                                                        "or waive it with 'waive' and say why in 'note')")

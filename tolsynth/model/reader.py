@@ -5,7 +5,7 @@ tolerance sets of one mechanism, with its source and assumptions.  This module t
 :class:`MechanismSpec` (plain, validated numbers in mm and rad), and :func:`load_model` wraps that
 in a :class:`tolsynth.kinematics.mechanism.Mechanism`, which owns the CasADi graphs.
 
-The format is documented in ``README.md`` ("Model file format") and in the header of each model
+The format is documented in ``docs/model_format.md`` and in the header of each model
 file; ``models/planar_2r.toml`` is the smallest complete example.
 """
 
@@ -30,7 +30,8 @@ from tolsynth.model.spec import (
     JointConstraint, Link, MechanismSpec, ReferenceResult,
 )
 from tolsynth.model.urdf import _parse_urdf_model
-from tolsynth.model.fields import _nearest, _Reader, _tolerance_sets, _type_name, _unique
+from tolsynth.model.parallel import _parse_parallel_model
+from tolsynth.model.fields import _check_configurations, _nearest, _Reader, _tolerance_sets, _type_name, _unique
 
 __all__ = ["bundled_models", "model_path", "read_model_file"]
 
@@ -95,6 +96,8 @@ def read_model_file(path: str | os.PathLike) -> MechanismSpec:
 def _parse(data: dict, r: _Reader) -> MechanismSpec:
     if isinstance(data, dict) and isinstance(data.get("chain"), dict) and "urdf" in data["chain"]:
         return _parse_urdf_model(data, r)
+    if isinstance(data, dict) and "leg" in data and "chain" not in data:  # a parallel robot
+        return _parse_parallel_model(data, r)
     r.table(data, "", "")
     meta = r.table(data["model"], "model", "model")
     name = r.get(meta, "name", "model", str)
@@ -280,6 +283,7 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
         if waive and not note.strip():
             raise r.fail(f"{where}.note", "a configuration that waives a limit must say why in 'note'")
         configurations[cname] = Configuration(cname, q, note, tuple(waive))
+    _check_configurations(r, configurations, joints, jcons)
 
     # ---- error parameters -------------------------------------------------------------------
     eparams = []

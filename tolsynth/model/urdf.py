@@ -68,12 +68,14 @@ from typing import Any
 
 import numpy as np
 
+from tolsynth.checks import HUGE, is_real
 from tolsynth.errors import InputError, MissingDependencyError, ModelFileError, UnsupportedJointError
 from tolsynth.model.fields import (
     DEFAULT_BOUNDS,
     DEFAULT_K,
     DEFAULT_TOLERANCE_UNITS,
     _by_kind,
+    _check_configurations,
     _nearest,
     _Reader,
     _tolerance_sets,
@@ -147,7 +149,7 @@ def urdf_spec(
     configurations: Mapping[str, Any] | None = None,
     tolerance_sets: Mapping[str, Mapping[str, Any]] | None = None,
     length_unit: str = "mm",
-    angle_unit: str = "rad",
+    angle_unit: str | None = None,
     name: str | None = None,
     title: str | None = None,
     source: str | None = None,
@@ -172,11 +174,17 @@ def urdf_spec(
         0.001-5 mm and 0.001-50 mrad.
     configurations : dict, optional
         Name -> joint values: a list in joint order or a dict joint name -> value (with optional
-        ``note``); revolute joints in ``angle_unit`` (default rad), prismatic in ``length_unit``.
+        ``note``); revolute joints in ``angle_unit``, prismatic in ``length_unit``.  Each must lie
+        inside the joint limits (a configuration outside them is an error naming it).
         A configuration ``"zero"`` (every joint at 0, or at the middle of its range when 0 is
         outside it) is added unless given.
     tolerance_sets : dict, optional
         Name -> {parameter: tolerance in its unit}.
+    length_unit, angle_unit : str
+        Units of the numbers given here (the configurations), as a model file's ``[units]``:
+        default mm and rad, the package's units (docs/units.md).  The URDF itself is read in its
+        own units (m, rad).  Without ``angle_unit``, a configuration angle beyond 2 pi is an error
+        (degrees meant?): say ``angle_unit="deg"``, or ``"rad"`` to confirm.
     name, title, source, assumptions : str
         Recorded on the mechanism; by default the robot's name and the file.
 
@@ -190,6 +198,9 @@ def urdf_spec(
     UnsupportedJointError
         A floating, planar or mimic joint on the chain (names the joint).
     """
+    _check_arguments(path, errors, configurations, tolerance_sets, assumptions, name, title, source)
+    angle_given = angle_unit is not None
+    angle_unit = "rad" if angle_unit is None else angle_unit
     chain: dict[str, Any] = {"urdf": os.fspath(Path(path).resolve()), "base_link": base_link, "tip_link": tip_link}
     chain["errors"] = [errors] if isinstance(errors, str) else list(errors)
     for key, value in (("k", k), ("bounds", bounds), ("tolerance_units", tolerance_units)):
@@ -197,13 +208,14 @@ def urdf_spec(
             chain[key] = dict(value) if isinstance(value, Mapping) else value
     raw_conf: dict[str, Any] = {}
     for cname, value in (configurations or {}).items():
-        raw_conf[cname] = dict(value) if isinstance(value, Mapping) else {"__list__": list(np.asarray(value, float).ravel())}
+        raw_conf[cname] = dict(value) if isinstance(value, Mapping) else {"__list__": list(value)}
     data = {
         "model": {"name": name, "title": title, "source": source, "assumptions": list(assumptions)},
         "units": {"length": length_unit, "angle": angle_unit},
         "chain": chain,
         "configurations": raw_conf,
         "tolerance_sets": {s: dict(v) for s, v in (tolerance_sets or {}).items()},
+        "angle_unit_given": angle_given,
     }
     r = _Reader(os.fspath(path))
     try:
@@ -214,6 +226,46 @@ def urdf_spec(
         field = err.field[len("chain."):] if err.field.startswith("chain.") else err.field
         raise ModelFileError(err.path, field, str(err).split(": ", 2)[-1]) from None
     return spec
+
+
+def _check_arguments(path, errors, configurations, tolerance_sets, assumptions, name, title, source) -> None:
+    """The shape of load_urdf's arguments (their values are checked by the model-file reader)."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise InputError("path", f"got {type(path).__name__}: {path!r:.60}", "the path of a .urdf file (str or os.PathLike)")
+    if not isinstance(errors, str) and (isinstance(errors, (bytes, Mapping)) or not isinstance(errors, Sequence)
+                                        or not all(isinstance(e, str) for e in errors)):
+        raise InputError("errors", f"got {errors!r:.60}", "a pattern or a list of patterns such as ['*.xyz', '*.rpy'] or 'all'")
+    for argname, value in (("configurations", configurations), ("tolerance_sets", tolerance_sets)):
+        if value is not None and not isinstance(value, Mapping):
+            raise InputError(argname, f"expected a dict, got {type(value).__name__}: {value!r:.60}",
+                             "a dict name -> " + ("joint values (a list in joint order, or a dict joint -> value)"
+                                                  if argname == "configurations" else "{parameter: tolerance}"))
+    for cname, value in (configurations or {}).items():
+        ok = isinstance(value, Mapping) or (isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, (str, bytes))
+                                            and all(is_real(v) for v in np.asarray(value, dtype=object).ravel()))
+        if not ok:
+            raise InputError(f"configurations[{cname}]", f"got {value!r:.60}",
+                             "a list of joint values in joint order, or a dict joint name -> value")
+    for sname, value in (tolerance_sets or {}).items():
+        if not isinstance(value, Mapping):
+            raise InputError(f"tolerance_sets[{sname}]", f"got {value!r:.60}", "a dict parameter name -> tolerance")
+    if isinstance(assumptions, (str, bytes)) or not isinstance(assumptions, Sequence) or \
+            not all(isinstance(a, str) for a in assumptions):
+        raise InputError("assumptions", f"got {assumptions!r:.60}", "a list of strings")
+    for argname, value in (("name", name), ("title", title), ("source", source)):
+        if value is not None and not isinstance(value, str):
+            raise InputError(argname, f"got {value!r:.60}", "a string")
+
+
+def _angle_unit_guard(configurations: dict, motions: dict, joint_names: list) -> None:
+    """Without an explicit ``angle_unit`` the numbers are radians; one beyond 2 pi reads like a
+    degree, which would otherwise be taken silently as that many radians."""
+    for cname, cfg in configurations.items():
+        for jn, v in zip(joint_names, cfg.q):
+            if motions[jn] == "revolute" and abs(v) > 2 * math.pi * (1 + 1e-9):
+                raise InputError("angle_unit", f"not given, and configurations[{cname}][{jn}] = {v:g} is beyond 2 pi rad "
+                                               "(degrees meant?)",
+                                 "angle_unit='deg' for values in degrees, or angle_unit='rad' to read them as radians")
 
 
 # --------------------------------------------------------------------------------------------
@@ -230,26 +282,70 @@ def _rpy_matrix(xyz, rpy) -> np.ndarray:
     return T
 
 
-def _origins(file: str, r: _Reader) -> dict[str, tuple[tuple[float, ...], tuple[float, ...]]]:
-    """Each joint's ``<origin xyz rpy>`` as the file writes them (m, rad).  yourdfpy keeps only
-    the composed 4x4 matrix, from which rpy cannot be recovered uniquely at pitch = +-90 deg; the
-    error parameters are the file's own numbers, so they are read here (and checked against
-    yourdfpy's matrices by the caller)."""
+def _numbers(text: str, r: _Reader, where: str, what: str, scale: float = 1.0) -> tuple[float, ...]:
+    """Three finite numbers of an ``xyz`` / ``rpy`` attribute, each at most HUGE (in mm or rad)
+    after ``scale``; a typed error naming the joint otherwise."""
+    try:
+        v = tuple(float(t) for t in text.split())
+    except ValueError:
+        v = ()
+    if len(v) != 3 or not all(math.isfinite(t) and abs(t * scale) <= HUGE for t in v):
+        limit = f"|value| <= {HUGE / scale:g}" + (" m" if scale == 1000.0 else "")
+        raise r.fail(where, f"{what}={text!r}: expected three finite numbers, {limit}")
+    return v
+
+
+def _origins(file: str, r: _Reader) -> dict[str, tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]]:
+    """Each joint's ``<origin xyz rpy>`` as the file writes them (m, rad) and its ``<axis xyz>``.
+    yourdfpy keeps only the composed 4x4 matrix, from which rpy cannot be recovered uniquely at
+    pitch = +-90 deg; the error parameters are the file's own numbers, so they are read here (and
+    checked against yourdfpy's matrices by the caller).  The tree is checked here too: a link or
+    joint declared twice, a link with two parent joints (a closed loop) and a cycle are errors
+    naming them (a URDF describes a tree; tolsynth reads a serial chain of it)."""
+    root = ET.parse(file).getroot()
+    links = [link.get("name") for link in root.findall("link")]
+    joints = root.findall("joint")  # not <transmission><joint>
+    _unique_names(r, links, "link")
+    _unique_names(r, [j.get("name") for j in joints], "joint")
+    parent_of: dict[str, str] = {}
+    for joint in joints:
+        child, parent = joint.find("child"), joint.find("parent")
+        child = child.get("link") if child is not None else None
+        if child in parent_of:
+            raise r.fail(f"joint {joint.get('name')!r}", f"link {child!r} is also the child of joint {parent_of[child]!r}: "
+                                                         "a closed loop (not supported: a URDF chain must be a tree)")
+        parent_of[child] = joint.get("name")
+        parent_link = parent.get("link") if parent is not None else None
+        parent_of.setdefault(f"link:{child}", parent_link)
+    for link in links:  # a cycle: following the parents never reaches a root
+        seen, at = set(), link
+        while at is not None:
+            if at in seen:
+                raise r.fail(f"link {link!r}", "its parent joints form a cycle (not supported: a URDF chain must be a tree)")
+            seen.add(at)
+            at = parent_of.get(f"link:{at}")
     out = {}
-    for joint in ET.parse(file).getroot().findall("joint"):  # not <transmission><joint>
+    for joint in joints:
+        name = joint.get("name")
         origin = joint.find("origin")
-        values = []
-        for attr in ("xyz", "rpy"):
-            text = origin.get(attr, "0 0 0") if origin is not None else "0 0 0"
-            try:
-                v = tuple(float(t) for t in text.split())
-            except ValueError:
-                v = ()
-            if len(v) != 3 or not all(math.isfinite(t) for t in v):
-                raise r.fail(f"joint {joint.get('name')!r}", f"origin {attr}={text!r}: expected three finite numbers")
-            values.append(v)
-        out[joint.get("name")] = (values[0], values[1])
+        xyz = _numbers(origin.get("xyz", "0 0 0") if origin is not None else "0 0 0", r, f"joint {name!r}",
+                       "origin xyz", 1000.0)
+        rpy = _numbers(origin.get("rpy", "0 0 0") if origin is not None else "0 0 0", r, f"joint {name!r}",
+                       "origin rpy")
+        axis_el = joint.find("axis")
+        axis = _numbers(axis_el.get("xyz", "1 0 0") if axis_el is not None else "1 0 0", r, f"joint {name!r}", "axis xyz")
+        out[name] = (xyz, rpy, axis)
     return out
+
+
+def _unique_names(r: _Reader, names: list, what: str) -> None:
+    seen = set()
+    for n in names:
+        if n is None or not str(n).strip():
+            raise r.fail(f"{what} {n!r}", f"a {what} without a name")
+        if n in seen:
+            raise r.fail(f"{what} {n!r}", f"declared twice (each {what} name once)")
+        seen.add(n)
 
 
 def _chain(robot, base: str, tip: str, r: _Reader, where: str) -> list:
@@ -281,6 +377,7 @@ def _axis_angles(axis: np.ndarray) -> tuple[float, float]:
 
 def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> MechanismSpec:
     """A model file (or :func:`load_urdf`'s arguments) whose ``[chain]`` names a URDF."""
+    angle_given = data.pop("angle_unit_given", True) if python else True
     for key in data:
         if key in _NOT_WITH_URDF:
             raise r.fail(key, f"not allowed with chain.urdf: {_NOT_WITH_URDF[key]}")
@@ -306,9 +403,9 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
     yourdfpy = _yourdfpy()
     rr = _Reader(file)  # defects of the URDF itself name the URDF file
     try:
+        raw_origins = _origins(file, rr)  # the tree checked before yourdfpy reads it
         urdf = yourdfpy.URDF.load(file, build_scene_graph=False, build_collision_scene_graph=False,
                                   load_meshes=False, load_collision_meshes=False)
-        raw_origins = _origins(file, rr)
     except ModelFileError:
         raise
     except Exception as exc:  # yourdfpy/lxml raise many kinds on a malformed file
@@ -332,7 +429,7 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
                 f"type {joint.type!r} is not supported on the chain (supported: fixed, {', '.join(_MOVABLE)})")
         if joint.mimic is not None and joint.type != "fixed":
             raise UnsupportedJointError(file, jn, joint.type, "a mimic joint is not supported (its value follows another joint)")
-        xyz, rpy = raw_origins[jn]
+        xyz, rpy, raw_axis = raw_origins[jn]
         composed = _rpy_matrix(xyz, rpy)
         reference = np.asarray(joint.origin if joint.origin is not None else np.eye(4), float)
         if not np.allclose(composed, reference, rtol=0, atol=1e-9):  # the file's numbers are yourdfpy's
@@ -350,11 +447,12 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
         pending.extend(origin)
         if joint.type == "fixed":
             continue
-        axis = np.asarray(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), float)
-        norm = float(np.linalg.norm(axis))
+        axis = np.asarray(raw_axis, float)
+        big = float(np.max(np.abs(axis)))
+        norm = big * float(np.linalg.norm(axis / big)) if big > 0 else 0.0  # no overflow at 1e308
         if not (math.isfinite(norm) and norm > 1e-12):
-            raise rr.fail(f"joint {jn!r}", f"axis {axis.tolist()} has no direction")
-        phi, theta = _axis_angles(axis / norm)
+            raise rr.fail(f"joint {jn!r}", f"axis {list(raw_axis)} has no direction")
+        phi, theta = _axis_angles(axis / big / (norm / big))
         axis_ops = []
         for fname, value in (("axis_phi", phi), ("axis_theta", theta)):
             sym = f"{jn}.{fname}"
@@ -445,6 +543,9 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
             raise r.fail(where, f"missing joint value(s) {missing}")
         q = tuple(r.number(raw[j], f"{where}.{j}") * (lf if motions[j] == "prismatic" else af) for j in joint_names)
         configurations[cname] = Configuration(cname, q, note)
+    if not angle_given:
+        _angle_unit_guard(configurations, motions, joint_names)
+    _check_configurations(r, configurations, joints)
     if "zero" not in configurations:
         q0 = tuple(0.0 if j.lower <= 0.0 <= j.upper else 0.5 * (j.lower + j.upper) for j in joints)
         configurations["zero"] = Configuration("zero", q0, "every joint at 0 (at mid-range where 0 is outside its limits)")

@@ -26,6 +26,7 @@ class Status(str, enum.Enum):
     INFEASIBLE = "infeasible"  # the solver concluded that no feasible point exists
     ITERATION_LIMIT = "iteration_limit"  # stopped by an iteration / evaluation limit
     NUMERICAL_ERROR = "numerical_error"  # stopped by a numerical difficulty
+    TIME_LIMIT = "time_limit"  # stopped by the time limit (synthesize(..., time_limit=...))
     SOLVER_ERROR = "solver_error"  # any other failure
 
     def __str__(self) -> str:

@@ -45,6 +45,7 @@ import numpy as np
 
 from tolsynth.problem.nlp import ToleranceNLP, cost_graph, sphere_graph
 from tolsynth.problem.result import Status
+from tolsynth.progress import limit_seconds, remaining
 from tolsynth.solvers.common import assemble
 
 __all__ = ["solve_ipopt", "IPOPT_STATUS", "DEFAULT_OPTIONS"]
@@ -54,8 +55,8 @@ IPOPT_STATUS = {
     "Solved_To_Acceptable_Level": Status.OPTIMAL_INACCURATE,
     "Infeasible_Problem_Detected": Status.INFEASIBLE,
     "Maximum_Iterations_Exceeded": Status.ITERATION_LIMIT,
-    "Maximum_CpuTime_Exceeded": Status.ITERATION_LIMIT,
-    "Maximum_WallTime_Exceeded": Status.ITERATION_LIMIT,
+    "Maximum_CpuTime_Exceeded": Status.TIME_LIMIT,
+    "Maximum_WallTime_Exceeded": Status.TIME_LIMIT,
     "Restoration_Failed": Status.NUMERICAL_ERROR,
     "Error_In_Step_Computation": Status.NUMERICAL_ERROR,
     "Search_Direction_Becomes_Too_Small": Status.NUMERICAL_ERROR,
@@ -157,7 +158,8 @@ class _CallNLP(CutNLP):
 
 @lru_cache(maxsize=64)
 def _solver(n: int, K: int, tol: float, constr_viol_tol: float, max_iter: int, mu_strategy: str,
-            m_sphere: int = 0, sphere_nodes: int = 0, cost_signature: tuple | None = None) -> CutNLP:
+            m_sphere: int = 0, sphere_nodes: int = 0, cost_signature: tuple | None = None,
+            max_wall_time: float = 1e20) -> CutNLP:
     """The cut NLP for n parameters and K cut slots: ``min f(u)/f0  s.t.  C exp(2u) <= 1``."""
     n_ps = 1 + m_sphere + 3 * n * m_sphere if m_sphere else 0
     cost = cost_graph(n, cost_signature)
@@ -181,6 +183,7 @@ def _solver(n: int, K: int, tol: float, constr_viol_tol: float, max_iter: int, m
         "ipopt.tol": tol,
         "ipopt.constr_viol_tol": constr_viol_tol,
         "ipopt.max_iter": max_iter,
+        "ipopt.max_wall_time": max_wall_time,  # the run's time limit (tolsynth.progress.time_limit)
         # never stop at the "acceptable" level silently: only Solve_Succeeded is success
         "ipopt.acceptable_iter": 0,
         "ipopt.hessian_approximation": "exact",
@@ -330,6 +333,9 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     sphere = (ms, nlp.sphere_nodes if ms else 0, nlp.costs.signature)
     t_start = time.perf_counter()
     while rounds < int(opts["max_rounds"]):
+        if rounds and remaining() <= 0:  # the run's time limit: the last round's point stands
+            status, code = Status.TIME_LIMIT, f"time limit of {limit_seconds():g} s reached after {rounds} rounds"
+            break
         rounds += 1
         K = len(cut_b)
         slots = _slots(max(K, 1)) if m else 0
@@ -356,7 +362,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         elif rounds > 1 and REWARM and not ms:
             attempts = ("rewarm",) + ATTEMPTS
         for mu_strategy in attempts:
-            solver = _solver(n, slots, *settings, mu_strategy, *sphere)
+            solver = _solver(n, slots, *settings, mu_strategy, *sphere, min(limit_seconds(), 1e20))
             if mu_strategy == "warm":
                 lam0 = np.zeros(slots)
                 # the multipliers divided by the remembered cost, not by f0: under the rescaling
@@ -388,6 +394,9 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             if status is Status.OPTIMAL:
                 break
             tried.append(f"round {rounds} {mu_strategy}: {code}")
+            if remaining() <= 0:  # the run's time limit (tolsynth.progress.time_limit): no more attempts
+                status, code = Status.TIME_LIMIT, f"time limit of {limit_seconds():g} s reached"
+                break
         u, lam_g, lam_x = sol["x"], sol["lam_g"], sol["lam_x"]
         if status is not Status.OPTIMAL:
             break
@@ -482,7 +491,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             _remember(key, rb, rw, rr, (eps, rl, lam_u, top, float(sol["f"][0]) * f0))
     # P_b >= p_b active at its lower bound: CasADi's lam is <= 0 there; f - mu (P - p) with mu >= 0
     mu_sphere = -lam_g[len(lam_g) - ms :] * f0 if ms else np.zeros(0)
-    message = code if status is Status.OPTIMAL else "; ".join(tried) or code
+    message = code if status is Status.OPTIMAL else "; ".join(tried + [code] * (status is Status.TIME_LIMIT)) or code
     message = f"{message}; {rounds} exchange round(s), {K} cut(s)"
     if status is Status.OPTIMAL and m and max_viol > feas_tol:
         status = Status.ITERATION_LIMIT

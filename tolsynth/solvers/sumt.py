@@ -43,6 +43,7 @@ import numpy as np
 from tolsynth.errors import InputError
 from tolsynth.problem.nlp import ToleranceNLP, nlp_graphs, sphere_graph
 from tolsynth.problem.result import Status
+from tolsynth.progress import limit_seconds, remaining
 from tolsynth.solvers.common import assemble
 from tolsynth.solvers.cpowell import compile_powell
 from tolsynth.solvers.ipopt import relaxation_bound
@@ -208,6 +209,9 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             status, message = Status.OPTIMAL, (
                 f"converged: barrier gap bound r*nu = {r * nu:.2e} <= {o['gap_tol']:g} * cost after {outer} outer iterations"
             )
+            break
+        if remaining() <= 0:  # the run's time limit (tolsynth.progress.time_limit)
+            status, message = Status.TIME_LIMIT, f"time limit of {limit_seconds():g} s reached after {outer} outer iterations"
             break
         r *= o["reduction"]
     wall = time.perf_counter() - t0

@@ -73,12 +73,15 @@ def best_accuracy(mechanism, budget: float, *, p: float | None = None, R: float 
     >>> out.bracket[0] <= out.value  # doctest: +SKIP
     True
     """
-    from tolsynth.checks import check_positive, check_probability
+    from tolsynth.checks import check_count, check_positive, check_probability
     from tolsynth.kinematics.mechanism import as_mechanism
     from tolsynth.synthesis.single import synthesize
 
     mechanism = as_mechanism(mechanism)
-    budget = check_positive(budget, "budget")
+    budget = check_positive(budget, "budget", "cost units")
+    # the bracket's width in ln R (or logit p): NaN would end the bisection at once with R = 1
+    rtol = check_positive(rtol, "rtol", "width of the bracket in ln R or logit p", upper=1.0)
+    max_solves = check_count(max_solves, "max_solves", lower=2, upper=10_000)
     if (p is None) == (R is None):
         raise InputError("p/R", "give exactly one of them", "p (then the smallest R is found) or R (the largest p)")
     t0 = time.perf_counter()

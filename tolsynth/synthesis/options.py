@@ -52,6 +52,8 @@ class SolverOptions:
     validate: int | None = None
     seed: int = 0
     verify: Any = None
+    #: seconds the solve may take (None: tolsynth.checks.DEFAULT_TIME_LIMIT), then Status.TIME_LIMIT
+    time_limit: float | None = None
 
 
 def _same(a, b) -> bool:

@@ -252,9 +252,10 @@ def synthesize_processes(mechanism, R: float, p: float, processes=None, distribu
         Parameter name -> list of :class:`Process` (or dicts ``{name, cost, lower, upper}``).
         Parameters not listed keep their cost model and bounds.
     rel_gap : float
-        Optimality tolerance of the search, relative to the cost.
+        Optimality tolerance of the search, relative to the cost, from 0 to 1.
     max_nodes : int
-        Limit on the continuous solves; the result then says ``proven = False``.
+        Limit on the continuous solves, at least 2 (the root's relaxation and its rounding); a
+        search stopped by it says ``proven = False``.
     **kwargs
         Further arguments of :func:`tolsynth.synthesize` (pose, poses, Phi, alpha, k, cost for the
         parameters without processes, bounds, ...).
@@ -276,7 +277,12 @@ def synthesize_processes(mechanism, R: float, p: float, processes=None, distribu
     """
     from tolsynth.kinematics.mechanism import as_mechanism
 
+    from tolsynth.checks import check_count, check_real
+
     mechanism = as_mechanism(mechanism)
+    rel_gap = check_real(rel_gap, "rel_gap", "(relative to the cost)", lower=0.0, upper=1.0)
+    # the root's relaxation and its rounding are two solves: fewer cannot start the search
+    max_nodes = check_count(max_nodes, "max_nodes", lower=2, upper=10**7)
     t0 = time.perf_counter()
     if processes is None:
         processes = mechanism.processes  # the model file's

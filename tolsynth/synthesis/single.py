@@ -13,13 +13,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tolsynth.checks import TINY, check_count, check_mapping, check_options, check_vector
-from tolsynth.errors import InputError
+from tolsynth.checks import TINY, check_count, check_mapping, check_options, check_time_limit, check_vector
+from tolsynth.errors import InputError, TimeLimitError
 from tolsynth.solvers.exact import PROBABILITIES
 from tolsynth.kinematics.mechanism import as_mechanism
 from tolsynth.problem.nlp import ToleranceNLP
 from tolsynth.problem.specification import SPHERE_NODES, make_specification
 from tolsynth.problem.result import Status, SynthesisResult
+from tolsynth.progress import time_limit as deadline
 from tolsynth.synthesis.options import DesignSpec, SolverOptions, merge_groups
 from tolsynth.tabular import Tabular
 
@@ -38,9 +39,11 @@ def _sumt(nlp, eps0, options):
     return solve_sumt(nlp, eps0, **options)
 
 
-def _solver_defaults(solver: str) -> dict:
+def _solver_defaults(solver: str, probability: str = "gaussian") -> dict:
     """The options a solver accepts, with their defaults."""
-    if solver == "ipopt":
+    if probability == "exact":
+        from tolsynth.solvers.exact import DEFAULT_OPTIONS
+    elif solver == "ipopt":
         from tolsynth.solvers.ipopt import DEFAULT_OPTIONS
     else:
         from tolsynth.solvers.sumt import DEFAULT_OPTIONS
@@ -83,6 +86,7 @@ def synthesize(
     seed: int = 0,
     probability: str | None = None,
     verify=None,
+    time_limit: float | None = None,
     spec: DesignSpec | None = None,
 ) -> SynthesisResult:
     """Cheapest tolerances meeting the accuracy specification (the paper's Eq. 23).
@@ -151,6 +155,12 @@ def synthesize(
         samples per pose; True: chosen from p), and while its 99 % lower bound is below ``p``,
         a tighter target and a new solve; ``result.verification`` reports the achieved
         probability with its interval.
+    time_limit : float, optional
+        Seconds the solve may take (default :data:`tolsynth.checks.DEFAULT_TIME_LIMIT`, 600 s:
+        far beyond any solve of the bundled models, so it only ends one that would not end).  At
+        the limit the result has ``status = Status.TIME_LIMIT`` and ``success = False`` (the last
+        iterate, or the start point if the solver stopped inside an evaluation).  IPOPT gets it as
+        its ``max_wall_time``; the exchange, SUMT and exact-probability loops check it each round.
 
     spec : DesignSpec, optional
         The specification's fields as one object (:mod:`tolsynth.synthesis.options`); ``solver``
@@ -173,7 +183,7 @@ def synthesize(
             dict(R=R, p=p, distribution=distribution, alpha=alpha, k=k, bounds=bounds, pose=pose, poses=poses,
                  Phi=Phi, p_orientation=p_orientation, criterion=criterion, cost=cost, locks=locks,
                  probability=probability, options=options, x0=x0, validate=validate, seed=seed, verify=verify,
-                 **({} if isinstance(solver, SolverOptions) else {"solver": solver})),
+                 time_limit=time_limit, **({} if isinstance(solver, SolverOptions) else {"solver": solver})),
             spec, solver if isinstance(solver, SolverOptions) else None)
         return synthesize(mechanism, **args)
     if probability == "worst_case":  # every error anywhere in its band: no p or distribution needed
@@ -188,14 +198,16 @@ def synthesize(
     if not isinstance(solver, str) or solver not in SOLVERS:
         raise InputError("solver", f"unknown solver {solver!r}", " or ".join(repr(s) for s in SOLVERS))
     again = dict(k=k, bounds=bounds, pose=pose, poses=poses, Phi=Phi, p_orientation=p_orientation,
-                 criterion=criterion, cost=cost, locks=locks, options=options, probability=probability)
+                 criterion=criterion, cost=cost, locks=locks, options=options, probability=probability,
+                 time_limit=time_limit)
 
     if not isinstance(probability, str) or probability not in PROBABILITIES:
         raise InputError("probability", f"got {probability!r}", " or ".join(repr(s) for s in PROBABILITIES))
-    if probability == "gaussian" and options is not None:  # (None: every default)
-        options = check_options(options, _solver_defaults(solver))
+    if options is not None:  # (None: every default)
+        options = check_options(options, _solver_defaults(solver, probability))
     if validate is not None and validate is not False:
         validate = check_count(validate, "validate", lower=0)
+    limit = check_time_limit(time_limit)
     cost, locks, bounds = _costs_and_locks(mechanism, cost, locks, bounds)
     spec = make_specification(
         mechanism, R, p, distribution, alpha, k, bounds, pose, poses, Phi, p_orientation, criterion, cost
@@ -207,14 +219,18 @@ def synthesize(
         check_locks(nlp, mechanism.joint_error_parameters)
     nlp.check_feasible()
     eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0), "x0", lower=TINY)
-    if probability == "exact":
-        from tolsynth.solvers.exact import solve_exact
+    with deadline(limit):
+        try:
+            if probability == "exact":
+                from tolsynth.solvers.exact import solve_exact
 
-        result = solve_exact(nlp, spec.shapes, solver, eps0, options)
-    else:
-        result = SOLVERS[solver](nlp, eps0, dict(options or {}))
-    if probability == "gaussian" and spec.sphere_blocks:
-        result = _refine_sphere(nlp, spec, result, solver, options)
+                result = solve_exact(nlp, spec.shapes, solver, eps0, options)
+            else:
+                result = SOLVERS[solver](nlp, eps0, dict(options or {}))
+            if probability == "gaussian" and spec.sphere_blocks:
+                result = _refine_sphere(nlp, spec, result, solver, options)
+        except TimeLimitError as exc:  # stopped inside an evaluation: no iterate to report
+            result = _timed_out(nlp, solver, eps0, exc)
     from dataclasses import replace
 
     # the solver's fresh result gets its inputs in place of a dataclasses.replace (which runs
@@ -239,6 +255,19 @@ def synthesize(
                              n=None if verify is True else verify, seed=seed)
         result = replace(result, inputs={**(result.inputs or {}), "verify": verify})  # the re-solves' record it not
     return result
+
+
+def _timed_out(nlp, solver: str, eps0, exc: TimeLimitError) -> SynthesisResult:
+    """The honest result of a solve stopped inside an evaluation: the start point (not a design),
+    its Gaussian constraint values, and the bound of zero multipliers (the cheapest tolerances
+    inside the bounds: valid, loose)."""
+    from tolsynth.solvers.common import assemble
+
+    eps = nlp.start_point() if eps0 is None else np.asarray(eps0, dtype=float)
+    zero = np.zeros((len(nlp.spec.blocks), 3, 3))
+    return assemble(solver, nlp, eps, zero, np.zeros(nlp.spec.n), Status.TIME_LIMIT,
+                    f"{exc}; the tolerances are the start point, not a design", 0, 0, exc.limit, [],
+                    relaxation_bound=lambda n: n.dual_bound(zero))
 
 
 def _worst_case(mechanism, R, p, distribution, alpha, solver, k, bounds, pose, poses, Phi, p_orientation, criterion,
