@@ -291,6 +291,7 @@ def worst_pose(
         val = np.full(U.shape[1], -np.inf)
         if np.any(ok):
             val[ok] = _criterion_batch(mechanism, Q[:, ok], eps, distribution, criterion, R, tol)[0]
+            val[~np.isfinite(val)] = -np.inf  # a parallel robot's platform not assembled there
             n_eval += int(np.count_nonzero(ok))
         return val
 

@@ -20,6 +20,8 @@ from tolsynth.kinematics.batch_stats import _evaluator, principal_std_batch
 from tolsynth.checks import check_count, check_mapping, check_real, check_vector
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
 from tolsynth.kinematics.ik import PLANES, _GridIK, _ik_evaluator
+from tolsynth.kinematics.parallel_ik import ParallelGridIK
+from tolsynth.model.parallel import is_parallel
 from tolsynth.kinematics.joint_space import MODEL_REFERENCE, _limits, _reference
 from tolsynth.progress import make_bar
 from tolsynth.tabular import Tabular
@@ -237,7 +239,7 @@ def probability_map(
             if name not in names:
                 raise UnknownNameError("fixed", f"unknown joint {name!r}", "one of " + ", ".join(names))
             held[names.index(name)] = (check_real(val, f"fixed[{name}]", "rad"), "given")
-    else:
+    elif not is_parallel(mechanism.spec):  # a parallel robot's platform pose sets every actuator
         ev_all = _ik_evaluator(mechanism, tuple(range(nq)), axis is not None)
         Qr = lo[:, None] + (hi - lo)[:, None] * rng.random((nq, 6))
         _, J = ev_all([Qr, np.zeros(3), axis if axis is not None else np.zeros(3)])
@@ -257,7 +259,8 @@ def probability_map(
             raise InputError("fixed", "every joint is held fixed", "at least one free joint")
         iu, iv, inorm = PLANES[plane]
 
-        ik = _GridIK(mechanism, free, held, ref_q, axis, plane, offset, int(seeds))
+        ik = (ParallelGridIK if is_parallel(mechanism.spec) else _GridIK)(
+            mechanism, free, held, ref_q, axis, plane, offset, int(seeds))
         if given_extent is not None:
             break
         # extent: reachable bounding box from a coarse pass
@@ -266,6 +269,7 @@ def probability_map(
         for j, (v, _) in held.items():
             Qr[j] = v
         P = pos([Qr, np.zeros(mechanism.n)])[0]
+        P = P[:, np.all(np.isfinite(P), axis=0)]  # a parallel robot's platform is not assembled everywhere
         reach = float(np.max(np.linalg.norm(P - P.mean(axis=1, keepdims=True), axis=0)))
         cu, cv = P[iu].mean(), P[iv].mean()
         span = 1.6 * reach
@@ -321,7 +325,7 @@ def probability_map(
         diff = np.max(np.abs(Q[list(free)] - np.tile(Qs[list(free)][:, chk], nseed)), axis=0)
         alt = np.any((good & (diff > 1e-5)).reshape(nseed, chk.size), axis=0)
     n_alt = int(np.count_nonzero(alt))
-    branch = ("continuation from the reference configuration"
+    branch = getattr(ik, "branch_note", None) or ("continuation from the reference configuration"
               + (f"; loop branch {', '.join(f'{lp.name} {lp.branch:+d}' for lp in mechanism.spec.loops)} (model file)"
                  if mechanism.spec.loops else "")
               + (f"; unique within the limits at {chk.size} checked points" if n_alt == 0

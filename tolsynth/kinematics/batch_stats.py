@@ -91,7 +91,10 @@ def principal_std_batch(mechanism, Q: np.ndarray, tolerances, distribution=None)
             S = sens.dense(0, sens([Qc, np.zeros(mechanism.n)])[0])  # (6, n, N)
             S = S.transpose(1, 0, 2).reshape(6 * mechanism.n, -1)  # column-major vec of each S
             V = cov.dense(0, cov([S, eps, c])[0]).transpose(2, 0, 1)  # (N, 3, 3) mm^2
-        lam = np.linalg.eigvalsh(0.5 * (V + V.transpose(0, 2, 1)))[:, ::-1]
+        # a parallel robot's sensitivities are NaN where the platform is not assembled: NaN sigmas
+        good = np.all(np.isfinite(V), axis=(1, 2))
+        lam = np.full((V.shape[0], 3), np.nan)
+        lam[good] = np.linalg.eigvalsh(0.5 * (V[good] + V[good].transpose(0, 2, 1)))[:, ::-1]
         floor = 1e-15 * np.maximum(lam[:, :1], 0.0)
         lam = np.where(lam <= floor, 0.0, lam)
         out[a : a + chunk] = np.sqrt(lam)
@@ -104,5 +107,7 @@ def _criterion_batch(mech, Q, eps, distribution, criterion, R, tol: float = 1e-1
     sig = principal_std_batch(mech, Q, eps, distribution)
     if criterion == "sigma":
         return sig[:, 0], sig, None
-    P = p_ball_batch(sig**2, R, tol=tol)
+    P = np.full(sig.shape[0], np.nan)
+    good = np.all(np.isfinite(sig), axis=1)
+    P[good] = p_ball_batch(sig[good] ** 2, R, tol=tol)
     return -P, sig, P
