@@ -241,3 +241,13 @@ def test_csv_of_earlier_versions_still_reads(tmp_path):
     back = tolsynth.read_table(path)
     assert back.attrs["summary"]["cost"] == 1.5 and back.attrs["tolsynth_version"] == "0.1.0"
     assert back["tolerance"].tolist() == [0.1]
+
+
+def test_write_errors_are_typed(solved, tmp_path):
+    import os
+
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full")
+    os.symlink("/dev/full", tmp_path / "t.csv.json")  # the sidecar's write fails: no space left
+    with pytest.raises(InputError, match="cannot be written"):
+        solved.save(tmp_path / "t.csv")

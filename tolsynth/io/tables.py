@@ -162,6 +162,16 @@ def write_table(frame, path, field: str = "path") -> str:
     path = os.fspath(path)
     meta = jsonable(dict(frame.attrs))
     meta.setdefault("tolsynth_version", _version())
+    try:
+        _write(frame, path, fmt, meta)
+    except OSError as exc:  # a full disk, a read-only sidecar, a path the system refuses
+        where = exc.filename if exc.filename is not None else path
+        raise InputError(field, f"{where!r} cannot be written: {exc.strerror or type(exc).__name__}",
+                         "a writable file path") from None
+    return path
+
+
+def _write(frame, path: str, fmt: str, meta: dict) -> None:
     if fmt == "csv":
         frame.to_csv(path, index=False)
         side = {"tolsynth": meta, "columns": [str(c) for c in frame.columns]}
@@ -181,7 +191,6 @@ def write_table(frame, path, field: str = "path") -> str:
         out = frame.copy()
         out.attrs = meta
         out.to_parquet(path, index=False)
-    return path
 
 
 def _write_xlsx(frame, path: str, meta: dict) -> None:
