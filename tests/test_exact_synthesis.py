@@ -1,6 +1,8 @@
-"""synthesize(..., probability="exact") and verify=, against the exact
-probabilities recomputed independently (tolsynth.probability.exact, rigorous bounds), closed forms (all-normal
-errors: the exact design is the Gaussian one), the nonlinear Monte Carlo, and SUMT + Powell."""
+"""synthesize(..., probability="exact"): the certified exact design, against independent
+computations: the reference evaluator of tolsynth.probability.exact on dense grids of directions, a
+Monte Carlo of the linear error model with its confidence interval, cvxpy + Clarabel on the
+all-normal case (where the exact problem is the Gaussian one), a brute-force grid of a
+two-parameter problem, and the nonlinear Monte Carlo."""
 
 import math
 
@@ -10,6 +12,7 @@ import pytest
 import tolsynth
 from tolsynth.analysis.verify import sample_size
 from tolsynth.errors import InputError
+from tolsynth.probability.distributions import Shape, shape
 from tolsynth.probability.exact import ball_probability, direction_probability
 
 R = 0.5
@@ -23,53 +26,166 @@ def _wilson(k, n, z):
     return c - h, c + h
 
 
-def _binding_direction_mc(m, r, n=200_000, seed=11):
-    """Nonlinear Monte Carlo along the result's binding (worst) direction at its pose."""
-    label, q = next(iter(r.spec.poses.items()))
-    w = r.constraints[0].directions[:, 0]
-    mc = tolsynth.monte_carlo(m, q, r.x, None, R=R, n=n, seed=seed, directions=w[:, None], confidence=0.99,
-                              check_limits=False)
-    return mc.p_directions[0], mc.p_directions_ci[0]
+def _sphere_directions(m, seed=5):
+    D = np.random.default_rng(seed).normal(size=(m, 3))
+    return D / np.linalg.norm(D, axis=1, keepdims=True)
 
 
-def test_exact_components_at_one_pose(xz):
-    """p = 0.9, uniform (Table 2): every direction meets p by the exact probability recomputed
-    outside the solver (2000 random directions + the binding one), the binding one is at p to 1e-6,
-    and the nonlinear Monte Carlo along it contains p in its 99 % interval."""
-    r = tolsynth.synthesize(xz, R=R, p=0.9, probability="exact")
+def _linear_mc(A, eps, shapes, w, n=400_000, seed=7):
+    """P(|w . dr| <= R) of the linear model by sampling the errors (shapes' own samplers)."""
+    rng = np.random.default_rng(seed)
+    Y = np.column_stack([shape(s).sample(rng, n) for s in shapes])
+    x = (Y * eps) @ (w @ A)
+    return int(np.count_nonzero(np.abs(x) <= R)), n
+
+
+def test_certified_exact_design_at_one_pose(xz):
+    """p = 0.7, uniform: certified (gap <= 1e-6 of the cost, bound below the cost); 4000 random
+    directions by the reference evaluator meet p - 1e-7; the binding direction is at p, and a Monte
+    Carlo of the linear model along it contains p in its 99.9 % interval; the Gaussian design of the
+    same column misses p along that direction by more than the interval."""
+    r = tolsynth.synthesize(xz, R=R, p=0.7, probability="exact")
     assert r.success, r.message
+    assert r.lower_bound <= r.cost and r.gap <= 1e-6 * r.cost
+    assert "certified optimum" in r.message and "proven" in r.message
     A = xz.sensitivity(xz.joints("worst"))[:3]
     sh = ["uniform"] * xz.n
-    rng = np.random.default_rng(5)
-    D = rng.normal(size=(2000, 3))
-    D /= np.linalg.norm(D, axis=1, keepdims=True)
-    assert direction_probability(D @ A * r.x, sh, R).min() >= 0.9 - 1e-7
+    D = _sphere_directions(4000)
+    assert direction_probability(D @ A * r.x, sh, R).min() >= 0.7 - 1e-7
     w = r.constraints[0].directions[:, 0]
-    assert abs(direction_probability(w @ A * r.x, sh, R) - 0.9) <= 1e-6
-    P, (lo, hi) = _binding_direction_mc(xz, r)
-    assert lo <= 0.9 <= hi
-    # the Gaussian design of the same column is off along that direction by more than the interval
-    g = tolsynth.synthesize(xz, R=R, p=0.9)
-    Pg = direction_probability(w @ A * g.x, sh, R)
-    assert r.cost != pytest.approx(g.cost, rel=1e-3)
-    assert r.lower_bound <= r.cost
-    assert "no convexity certificate" in r.message
-    assert abs(Pg - 0.9) > 1e-4  # the Gaussian design misses p along it (0.8995 here)
+    assert abs(direction_probability(w @ A * r.x, sh, R) - 0.7) <= 1e-6
+    lo, hi = _wilson(*_linear_mc(A, r.x, sh, w), 3.2905)
+    assert lo <= 0.7 <= hi
+    g = tolsynth.synthesize(xz, R=R, p=0.7, probability="gaussian")
+    assert abs(direction_probability(w @ A * g.x, sh, R) - 0.7) > hi - lo
 
 
-def test_all_normal_errors_give_the_gaussian_design(xz):
-    """For normal errors the exact probabilities are the Gaussian ones: the two designs coincide."""
-    g = tolsynth.synthesize(xz, R=R, p=0.99, distribution="normal")
+def test_all_normal_errors_are_the_gaussian_problem_solved_by_cvxpy(xz):
+    """All-normal errors: the exact problem is the Gaussian one (routed to its path), and cvxpy +
+    Clarabel on the convex form (v = eps^2, an LMI per pose) finds the same cost."""
+    cp = pytest.importorskip("cvxpy")
     e = tolsynth.synthesize(xz, R=R, p=0.99, distribution="normal", probability="exact")
-    assert e.success
-    assert e.cost == pytest.approx(g.cost, rel=1e-6)
-    np.testing.assert_allclose(e.x, g.x, rtol=1e-4)
+    assert e.success and "every error is normal" in e.message
+    from tolsynth.probability.stats import z_of_p
+
+    A = xz.sensitivity(xz.joints("worst"))[:3]
+    k, alpha = xz.k, 0.7
+    lo, hi = xz.bounds
+    v = cp.Variable(xz.n)
+    S = A * (z_of_p(0.99) / (3.0 * R))  # sigma_i = eps_i / 3; z sigma_j <= R
+    lmi = S @ cp.diag(v) @ S.T
+    prob = cp.Problem(cp.Minimize(cp.sum(cp.multiply(k, cp.power(v, -alpha / 2, approx=False)))),
+                      [0.5 * (lmi + lmi.T) << np.eye(3), v >= lo**2, v <= hi**2])
+    prob.solve(solver="CLARABEL")
+    assert e.cost == pytest.approx(prob.value, rel=1e-5)
+    np.testing.assert_allclose(e.x, np.sqrt(v.value), rtol=1e-3)
+
+
+@pytest.mark.parametrize("p", [0.5, 0.7, 0.99])
+def test_midpoints_of_feasible_designs_stay_feasible(p):
+    """The convexity the certificate rests on (Lagoa, Li & Sznaier 2005): along a fixed direction,
+    designs on the boundary P = p have their arithmetic and geometric midpoints inside (the
+    reference evaluator, mixed log-concave shapes)."""
+    rng = np.random.default_rng(int(p * 100))
+    sh = ["uniform", "uniform", "triangular", "truncnormal", "normal", "uniform"]
+    c = rng.uniform(0.1, 1.0, size=6)
+
+    def on_boundary(eps):  # scale eps until P = p (P falls as the scale grows)
+        a, b = 1e-3, 1e3
+        for _ in range(80):
+            m = math.sqrt(a * b)
+            if direction_probability(c * eps * m, sh, 1.0, tol=1e-10) >= p:
+                a = m
+            else:
+                b = m
+        return eps * a
+
+    worst = math.inf
+    for _ in range(12):
+        e1, e2 = on_boundary(rng.uniform(0.05, 1.0, 6)), on_boundary(rng.uniform(0.05, 1.0, 6))
+        for mid in (0.5 * (e1 + e2), np.sqrt(e1 * e2)):
+            worst = min(worst, direction_probability(c * mid, sh, 1.0, tol=1e-10) - p)
+    assert worst >= -1e-9
+
+
+def test_brute_force_grid_of_a_two_parameter_problem():
+    """planar_2r with its angle errors locked: two free tolerances (l1, l2).  For a grid of l1 the
+    largest feasible l2 is found by bisection, feasibility being the least exact P over 91
+    directions of the plane (the reference evaluator, P even in each coefficient); the grid's
+    cheapest design costs no less than the certified optimum, and within the grid's resolution."""
+    m = tolsynth.load_model("planar_2r")
+    locks = {"o1": 0.2, "o2": 0.4}
+    r = tolsynth.synthesize(m, R=0.5, p=0.9, locks=locks, probability="exact")
+    assert r.success, r.message
+    A = m.sensitivity(m.joints("worst"))[:3]
+    sh = ["uniform"] * m.n
+    th = np.linspace(0.0, 0.5 * np.pi, 91)
+    D = np.column_stack([np.cos(th), np.sin(th), np.zeros_like(th)])
+    locked = np.array([0.0, 0.0, locks["o1"], locks["o2"]])
+
+    def feasible(l1, l2):
+        eps = locked + np.array([l1, l2, 0.0, 0.0])
+        return direction_probability(D @ A * eps, sh, 0.5, tol=1e-10).min() >= 0.9
+
+    cost = tolsynth.synthesize(m, R=0.5, p=0.9, locks=locks, probability="gaussian").spec.costs
+    best = math.inf
+    l1s = r.tolerances["l1"] * np.linspace(0.7, 1.3, 25)
+    for l1 in l1s:
+        a, b = 1e-3, 5.0
+        if not feasible(l1, a):
+            continue
+        for _ in range(30):
+            mid = 0.5 * (a + b)
+            a, b = (mid, b) if feasible(l1, mid) else (a, mid)
+        eps = locked + np.array([l1, a, 0.0, 0.0])
+        best = min(best, cost.cost(eps))
+    assert best >= r.cost * (1 - 1e-7)
+    assert best <= r.cost * (1 + 2e-3)
+
+
+def test_no_certificate_for_a_shape_that_is_not_log_concave(xz):
+    """A shape outside the symmetric log-concave family (a bimodal density) has no convexity
+    argument: the status would say so, never "optimal"."""
+    from tolsynth.problem.specification import make_specification
+    from tolsynth.solvers.exact import certifiable
+
+    spec = make_specification(xz, R, 0.9, "uniform")
+    ok, why = certifiable((shape("uniform"),) * (xz.n - 1) + (Shape("bimodal", "bimodal"),), spec)
+    assert not ok and "not symmetric log-concave" in why and "no certificate" in why
+    assert certifiable(spec.shapes, spec) == (True, "")
+
+
+def test_bad_input():
+    with pytest.raises(InputError, match="probability"):
+        tolsynth.synthesize("xu_zhang_1988", R=R, p=0.9, probability="exactly")
+    with pytest.raises(InputError, match="bogus"):
+        tolsynth.synthesize("xu_zhang_1988", R=R, p=0.9, probability="exact", options={"bogus": 1})
+    with pytest.raises(InputError, match="max_rounds"):
+        tolsynth.synthesize("xu_zhang_1988", R=R, p=0.9, probability="exact", options={"max_rounds": "a"})
+    with pytest.raises(InputError, match="options"):
+        tolsynth.synthesize("xu_zhang_1988", R=R, p=0.9, probability="exact", options=[1])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("p", [0.7, 0.99])
+@pytest.mark.parametrize("dist", ["uniform", "mixed"])
+def test_certified_across_p_and_shapes(xz, p, dist):
+    """The paper's robot at p = 0.7 and 0.99, uniform and mixed shapes: certified, and 2000 random
+    directions meet p - 1e-7 by the reference evaluator."""
+    d = "uniform" if dist == "uniform" else {"*": "uniform", "h2": "normal", "s1": "triangular",
+                                             "alpha3": "truncnormal"}
+    r = tolsynth.synthesize(xz, R=R, p=p, distribution=d, probability="exact")
+    assert r.success and r.gap <= 1e-6 * r.cost, r.message
+    A = xz.sensitivity(xz.joints("worst"))[:3]
+    sh = r.spec.shapes
+    assert direction_probability(_sphere_directions(2000) @ A * r.x, sh, R).min() >= p - 1e-7
 
 
 @pytest.mark.slow
 def test_exact_sphere(xz):
-    """P(|dr| <= R) >= p exactly: the exact ball probability at the result is p (to its 1e-6
-    accuracy), the Monte Carlo interval contains p, and the Gaussian design's exact P is not p."""
+    """P(|dr| <= R) >= p exactly: the error-controlled ball probability at the result is p, the
+    nonlinear Monte Carlo interval contains p, and the lower bound is the certified per-component
+    optimum (the sphere lies in every slab), below the cost."""
     r = tolsynth.synthesize(xz, R=R, p=0.9, criterion="sphere", probability="exact")
     assert r.success, r.message
     A = xz.sensitivity(xz.joints("worst"))[:3]
@@ -77,7 +193,9 @@ def test_exact_sphere(xz):
     assert abs(P - 0.9) <= 2e-6
     mc = tolsynth.monte_carlo(xz, "worst", r.x, R=R, n=200_000, seed=2, confidence=0.99)
     assert mc.p_sphere_ci[0] <= 0.9 <= mc.p_sphere_ci[1]
-    g = tolsynth.synthesize(xz, R=R, p=0.9, criterion="sphere")
+    comp = tolsynth.synthesize(xz, R=R, p=0.9, probability="exact")
+    assert r.lower_bound == pytest.approx(comp.lower_bound, rel=1e-9) and r.lower_bound < r.cost
+    g = tolsynth.synthesize(xz, R=R, p=0.9, criterion="sphere", probability="gaussian")
     assert ball_probability(A, g.x, ["uniform"] * xz.n, R, tol=1e-6) > 0.9 + 5e-3
 
 
@@ -86,17 +204,33 @@ def test_exact_at_several_poses(xz):
     qs = [xz.joints("worst"), xz.joints("home")]
     r = tolsynth.synthesize(xz, R=R, p=0.8, poses=qs, probability="exact")
     assert r.success, r.message
+    D = _sphere_directions(2000)
     for q in qs:
         A = xz.sensitivity(q, check_limits=False)[:3]
-        from tolsynth.probability.exact import worst_direction
-
-        assert worst_direction(A, r.x, ["uniform"] * xz.n, R)[1] >= 0.8 - 1e-7
+        assert direction_probability(D @ A * r.x, ["uniform"] * xz.n, R).min() >= 0.8 - 1e-7
 
 
+@pytest.mark.slow
+def test_puma560_random_poses_certified():
+    """puma560 at 30 random poses: certified, each pose's directions checked on a grid."""
+    m = tolsynth.load_model("puma560")
+    rng = np.random.default_rng(3)
+    lo = np.array([j.lower for j in m.spec.joints])
+    hi = np.array([j.upper for j in m.spec.joints])
+    qs = [lo + (hi - lo) * rng.random(lo.size) for _ in range(30)]
+    r = tolsynth.synthesize(m, R=1.0, p=0.95, poses=qs, probability="exact")
+    assert r.success and r.gap <= 1e-6 * r.cost, r.message
+    D = _sphere_directions(500)
+    for q in qs[:10]:
+        A = m.sensitivity(q, check_limits=False)[:3]
+        assert direction_probability(D @ A * r.x, r.spec.shapes, 1.0).min() >= 0.95 - 1e-7
+
+
+@pytest.mark.slow
 def test_verify_closes_the_loop(xz):
     """The Gaussian Table 1 design (p = 0.99) is verified in one round; the exact p = 0.9 design,
     whose probability is exactly p, gets a raised target until the 99 % lower bound reaches p."""
-    r = tolsynth.synthesize(xz, R=R, p=0.99, verify=True, seed=3)
+    r = tolsynth.synthesize(xz, R=R, p=0.99, probability="gaussian", verify=True, seed=3)
     v = r.verification
     assert v.verified and len(v.rounds) == 1 and v.ci[0] >= 0.99
     assert v.n == sample_size(0.99) == math.ceil(2.5758293**2 * 0.99 * 0.01 / 0.001**2)
@@ -104,36 +238,17 @@ def test_verify_closes_the_loop(xz):
     v = e.verification
     assert v.verified and v.ci[0] >= 0.9 and v.p_target > 0.9
     assert e.cost > tolsynth.synthesize(xz, R=R, p=0.9, probability="exact").cost
-    # the interval is the Wilson score interval of the reported estimate
     lo, hi = _wilson(round(v.achieved * v.n), v.n, 2.5758293)
     assert v.ci[0] == pytest.approx(lo, abs=1e-6) and v.ci[1] == pytest.approx(hi, abs=1e-6)
-    assert "verified" in v.report()
-
-
-def test_bad_input():
-    with pytest.raises(InputError, match="probability"):
-        tolsynth.synthesize("xu_zhang_1988", R=R, p=0.9, probability="exactly")
 
 
 @pytest.mark.slow
-def test_sumt_reads_the_same_graphs(xz):
-    """SUMT + Powell on the same exact-probability graphs finds IPOPT's design (p = 0.9)."""
+def test_sumt_start_reaches_the_same_design(xz):
+    """solver="sumt" starts the exact search from SUMT's Gaussian design: the same certified optimum."""
     a = tolsynth.synthesize(xz, R=R, p=0.9, probability="exact")
     b = tolsynth.synthesize(xz, R=R, p=0.9, probability="exact", solver="sumt")
     assert a.success and b.success
     assert b.cost == pytest.approx(a.cost, rel=1e-6)
-    np.testing.assert_allclose(b.x, a.x, rtol=1e-4)
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("p", [0.7, 0.8, 0.9, 0.99])
-def test_acceptance_uniform_columns_of_tables_1_2(xz, p):
-    """The acceptance: the nonlinear Monte Carlo at the exact optimum contains p in its
-    99 % interval along the binding direction (R = 0.5 mm, uniform, alpha 0.7)."""
-    r = tolsynth.synthesize(xz, R=R, p=p, probability="exact")
-    assert r.success, r.message
-    P, (lo, hi) = _binding_direction_mc(xz, r, n=400_000)
-    assert lo <= p <= hi
 
 
 @pytest.mark.slow
@@ -141,18 +256,17 @@ def test_workspace_exact(xz):
     w = tolsynth.synthesize_workspace(xz, R, 0.99, probability="exact")
     assert w.converged and w.result.success
     assert w.rounds[-1]["worst_value"] <= 1 + 1e-3
-    g = tolsynth.synthesize_workspace(xz, R, 0.99)
+    g = tolsynth.synthesize_workspace(xz, R, 0.99, probability="gaussian")
     assert w.result.cost < g.result.cost  # uniform errors at p = 0.99: the exact design is cheaper
 
 
-def test_command_line_exact_and_verify(xz):
-    """tolsynth solve --probability exact --json: its tolerances meet p along every direction by the
-    exact probability recomputed here; a bad --verify exits 2 without a traceback."""
+@pytest.mark.slow
+def test_command_line_exact(xz):
+    """tolsynth solve --probability exact --json: its tolerances meet p along 2000 directions by
+    the reference evaluator, and the binding one is at p."""
     import json
     import subprocess
     import sys
-
-    from tolsynth.probability.exact import worst_direction
 
     out = subprocess.run([sys.executable, "-m", "tolsynth", "solve", "--model", "xu_zhang_1988", "--R", "0.5",
                           "--p", "0.8", "--probability", "exact", "--json"], capture_output=True, text=True, timeout=600)
@@ -161,7 +275,5 @@ def test_command_line_exact_and_verify(xz):
     assert d["inputs"]["probability"] == "exact"
     eps = np.array([d["tolerances"][n] for n in xz.error_parameters])
     A = xz.sensitivity(xz.joints("worst"))[:3]
-    assert abs(worst_direction(A, eps, ["uniform"] * xz.n, R)[1] - 0.8) <= 1e-6
-    bad = subprocess.run([sys.executable, "-m", "tolsynth", "solve", "--model", "xu_zhang_1988", "--R", "0.5",
-                          "--p", "0.8", "--verify", "12"], capture_output=True, text=True, timeout=120)
-    assert bad.returncode == 2 and "Traceback" not in bad.stderr and "--verify" in bad.stderr
+    P = direction_probability(_sphere_directions(2000) @ A * eps, ["uniform"] * xz.n, R)
+    assert P.min() >= 0.8 - 1e-7 and P.min() <= 0.8 + 1e-3

@@ -204,7 +204,7 @@ def solve_exact(nlp: ToleranceNLP, shapes: tuple, solver: str = "ipopt", eps0=No
     """The exact problem of this module's docstring; ``solver`` solves the Gaussian problem whose
     optimum starts the search (or the whole problem, when every error is normal)."""
     t0 = time.perf_counter()
-    opts = {**DEFAULT_OPTIONS, **(options or {})}
+    opts = {**DEFAULT_OPTIONS, **_checked(options)}
     spec = nlp.spec
     shapes = tuple(shapes)
     if all(s.kind == "normal" for s in shapes):
@@ -216,6 +216,25 @@ def solve_exact(nlp: ToleranceNLP, shapes: tuple, solver: str = "ipopt", eps0=No
         comp = _solve_components(ToleranceNLP(spec.relaxed()), shapes, solver, eps0, opts, t0, False)
         return solve_sphere(nlp, shapes, solver, comp, _gaussian_start(nlp, solver, eps0), opts, t0)
     return _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose)
+
+
+def _checked(options) -> dict:
+    """The exact solver's options, each a known key with a positive whole number (typed errors
+    naming the field otherwise)."""
+    from collections.abc import Mapping
+
+    from tolsynth.errors import InputError
+
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise InputError("options", f"got {type(options).__name__}", "a dict of " + ", ".join(DEFAULT_OPTIONS))
+    for key, value in options.items():
+        if key not in DEFAULT_OPTIONS:
+            raise InputError(f"options[{key!r}]", "unknown option of the exact solver", ", ".join(DEFAULT_OPTIONS))
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise InputError(f"options[{key!r}]", f"got {value!r}", "a whole number >= 1")
+    return dict(options)
 
 
 def _gaussian_start(nlp, solver, eps0):
