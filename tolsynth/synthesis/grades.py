@@ -461,8 +461,10 @@ class _Search:
                 closed.append(c if self.feasible(choice) else math.inf)
                 continue
             nb, eps = self.relax(node)
-            nb = max(nb, bound)
             lag = self.lagrangian(eps) if eps is not None else lag
+            # the node's own multipliers over its grades alone: at least the box's bound where
+            # they are the box's optimal ones (the grades are a subset of the box)
+            nb = max(nb, bound, self.lagrangian_bound(node, lag))
             log.append({"node": [b - a + 1 for a, b in node], "bound": nb})
             if eps is None or nb >= inc_cost * (1 - rel_gap):
                 closed.append(nb)
