@@ -466,9 +466,11 @@ class _Search:
             # they are the box's optimal ones (the grades are a subset of the box)
             nb = max(nb, bound, self.lagrangian_bound(node, lag))
             log.append({"node": [b - a + 1 for a, b in node], "bound": nb})
-            if eps is None or nb >= inc_cost * (1 - rel_gap):
+            if not math.isfinite(nb) or nb >= inc_cost * (1 - rel_gap):
                 closed.append(nb)
                 continue
+            if eps is None:  # the relaxation's solve did not succeed (its bound holds): split in the middle
+                eps = self.point(tuple((a + b) // 2 for a, b in node))
             cand = self.improve(self.round_down(eps, node), node)
             if self.feasible(cand) and self.cost(cand) < inc_cost:
                 inc, inc_cost = cand, self.cost(cand)
