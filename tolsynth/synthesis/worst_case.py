@@ -53,8 +53,10 @@ def synthesize_worst_case(mechanism, R, *, p=None, alpha=0.7, solver="ipopt", k=
         options = check_options(options, DEFAULT_OPTIONS)
     spec = make_specification(mechanism, R, _NO_P, "uniform", alpha, k, bounds, pose, poses, Phi, None,
                               "components", cost)
-    spec = replace(spec, p=None, z=math.nan, distribution="any (worst case)",
-                   p_orientation=None)
+    # no probability: z and the blocks' z / R scales are NaN, so that no Gaussian reading of this
+    # specification (a multiplier, a bound) can pass for a number
+    spec = replace(spec, p=None, z=math.nan, distribution="any (worst case)", p_orientation=None,
+                   blocks=tuple(replace(b, scale=math.nan) for b in spec.blocks))
     eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0), "x0", lower=TINY)
     result = solve_worst_case(spec, eps0, options)
     stat = None
