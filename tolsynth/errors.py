@@ -20,6 +20,7 @@ __all__ = [
     "MissingDependencyError",
     "UnsupportedJointError",
     "TimeLimitError",
+    "WorkspaceWarning",
 ]
 
 
@@ -145,3 +146,9 @@ class UnsupportedJointError(ModelFileError):
         self.joint = joint
         self.joint_type = joint_type
         super().__init__(path, f"joint {joint!r}", message)
+
+
+class WorkspaceWarning(UserWarning):
+    """A design made for some poses is over its specification elsewhere in the workspace (by a
+    quick sampled check, :class:`tolsynth.analysis.validation.WorkspaceCheck`); the message points
+    to :func:`tolsynth.synthesize_workspace`, which designs for every pose."""

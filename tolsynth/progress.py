@@ -16,7 +16,7 @@ import sys
 import time
 
 __all__ = ["make_bar", "Progress", "LineProgress", "AUTO_PROGRESS_DELAY", "time_limit", "remaining",
-           "limit_seconds", "check_deadline"]
+           "limit_seconds", "check_deadline", "Working", "interactive"]
 
 AUTO_PROGRESS_DELAY = 2.0  # s: with progress=None the bar appears only on runs longer than this
 
@@ -72,6 +72,65 @@ def make_bar(total: int, desc: str, unit: str, delay: float):
         return tqdm(**kw)
 
 
+def interactive() -> bool:
+    """Someone is watching: stderr is a terminal, or the code runs in a Jupyter kernel (whose
+    stderr is shown under the cell).  The automatic progress reports appear only then."""
+    try:
+        if sys.stderr.isatty():
+            return True
+    except (AttributeError, ValueError):  # a closed or replaced stream
+        return False
+    return "ipykernel" in sys.modules
+
+
+class Working:
+    """A run whose length is not known in steps (an everywhere design, an exact solve, a report):
+    after ``delay`` s, a line on stderr every ``every`` s saying what runs and for how long
+    (``tolsynth solve: the workspace design, 4 s``), and when it ends, how long it took; nothing
+    for a run shorter than ``delay``.  A ``with`` block; a daemon thread, so Ctrl-C is not held up."""
+
+    def __init__(self, desc: str, delay: float = 1.0, every: float = 5.0, file=None, show: bool | None = None):
+        import threading
+
+        self.desc, self.delay, self.every = desc, float(delay), float(every)
+        self.file = file if file is not None else sys.stderr
+        self.show = interactive() if show is None else bool(show)
+        self._stop = threading.Event()
+        self._thread = None
+        self._printed = False
+        self.t0 = 0.0
+
+    def _line(self, text: str) -> None:
+        try:
+            print(text, file=self.file, flush=True)
+        except (OSError, ValueError):  # a closed stream: progress is not worth an error
+            pass
+
+    def _run(self) -> None:
+        wait = self.delay
+        while not self._stop.wait(wait):
+            self._printed = True
+            self._line(f"{self.desc}, {time.perf_counter() - self.t0:.0f} s ...")
+            wait = self.every
+
+    def __enter__(self):
+        import threading
+
+        self.t0 = time.perf_counter()
+        if self.show:
+            self._thread = threading.Thread(target=self._run, name="tolsynth-working", daemon=True)
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=1.0)
+        if self._printed and exc[0] is None:
+            self._line(f"{self.desc}: done in {time.perf_counter() - self.t0:.1f} s")
+        return False
+
+
 class Progress:
     """tqdm (or plain lines) on stderr if wanted; a callable ``progress(done, total)`` also works."""
 
@@ -85,7 +144,7 @@ class Progress:
         if callable(progress) and not isinstance(progress, bool):
             self.callback = progress
             return
-        show = progress if progress is not None else sys.stderr.isatty()
+        show = progress if progress is not None else interactive()
         if show:  # auto (None): only runs longer than ~2 s show the bar
             self.bar = make_bar(total, desc, unit, 0.0 if progress else AUTO_PROGRESS_DELAY)
 

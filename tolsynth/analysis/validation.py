@@ -7,17 +7,20 @@ probability asked for, with confidence intervals.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+import warnings
+from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 import numpy as np
 
-from tolsynth.errors import InputError
+from tolsynth.errors import InputError, WorkspaceWarning
 from tolsynth.analysis.montecarlo import DEFAULT_BATCH, MonteCarloResult, monte_carlo
+from tolsynth.checks import is_real
 from tolsynth.probability.stats import check_probability
 from tolsynth.tabular import Tabular
 
-__all__ = ["ValidationResult", "validate"]
+__all__ = ["ValidationResult", "validate", "WorkspaceCheck"]
 
 
 @dataclass(frozen=True)
@@ -59,6 +62,8 @@ class ValidationResult(Tabular):
     n: int
     seed: int
     montecarlo: MonteCarloResult
+    #: with several poses (``pose=[...]``): every pose's result, this one (the worst) among them
+    per_pose: tuple = field(default=(), repr=False)
 
     @property
     def met(self) -> bool:
@@ -67,9 +72,12 @@ class ValidationResult(Tabular):
 
     def to_dict(self) -> dict:
         """Plain dict (arrays as lists) for JSON, with :attr:`met`."""
-        out = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items() if k != "montecarlo"}
+        out = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()
+               if k not in ("montecarlo", "per_pose")}
         out["pose"] = self.pose if isinstance(self.pose, str) else np.asarray(self.pose).tolist()
         out["met"] = self.met
+        if len(self.per_pose) > 1:
+            out["per_pose"] = [{**v.to_dict(), "per_pose": None} for v in self.per_pose]
         return out
 
     def report(self) -> str:
@@ -84,7 +92,16 @@ class ValidationResult(Tabular):
         lo, hi = self.p_sphere_ci
         lines.append(f"P(|dr|<=R)  {self.p_sphere:.5f} [{lo:.5f}, {hi:.5f}]  analytic {self.p_sphere_analytic:.5f}  "
                      + ("met" if self.sphere_met else "below p (sphere is stricter than Eq. 20)"))
+        if len(self.per_pose) > 1:
+            lines[0] += f"; the worst of {len(self.per_pose)} poses shown ({_label(self.pose)})"
+            for v in self.per_pose:
+                lines.append(f"  pose {_label(v.pose)}: lowest P(|w_j|<=R) {float(np.min(v.p_components)):.5f}, "
+                             f"{'met' if v.met else 'NOT met'}")
         return "\n".join(lines)
+
+
+def _label(pose) -> str:
+    return pose if isinstance(pose, str) else "(" + ", ".join(f"{math.degrees(v):.4g}" for v in np.ravel(pose)) + ") deg"
 
 
 def _attr(obj, name):
@@ -121,8 +138,10 @@ def validate(
         Probability asked for, 0 < p < 1 (same fallback).
     distribution : str or dict, optional
         Same fallback; default "uniform".
-    pose : str or array
-        Where to check (the paper's pose of largest error by default).
+    pose : str, array, or a list of them
+        Where to check: the paper's pose of largest error by default, or, for a result, every pose
+        it was designed at.  With several poses each is run (seeds ``seed``, ``seed + 1``, ...) and
+        the worst (lowest ``P(|w_j| <= R)`` against p) is returned, every pose's in ``per_pose``.
     n, seed, batch, confidence, progress
         As for :func:`monte_carlo`.
     Phi : float, optional
@@ -152,6 +171,17 @@ def validate(
     if p is None:
         raise InputError("p", "no probability given", "0 < p < 1")
     p = check_probability(p, "p")
+    if isinstance(pose, str) and pose == "worst" and "worst" not in getattr(mechanism, "configurations", {"worst": 0}):
+        designed = getattr(getattr(tolerances_or_result, "spec", None), "poses", None)
+        if designed:  # a result: the poses it was designed at
+            pose = list(designed.values())
+    if isinstance(pose, list) and pose and not all(is_real(v) for v in pose):
+        runs = [validate(mechanism, tol, R, p, distribution, q, n, seed + k, batch, confidence, progress, Phi)
+                for k, q in enumerate(pose)]
+        worst = min(runs, key=lambda v: float(np.min(v.p_components)) - v.p)
+        from dataclasses import replace
+
+        return replace(worst, per_pose=tuple(runs))
     # distribution None: the model's own shapes, as everywhere
     mc = monte_carlo(mechanism, pose, tol, distribution, R=R, n=n, seed=seed, batch=batch,
                      confidence=confidence, progress=progress, Phi=Phi)
@@ -174,3 +204,104 @@ def validate(
         seed=mc.seed,
         montecarlo=mc,
     )
+
+
+# ---------------------------------------------------------------------------------------------
+# how a design made at some poses does over the workspace: a quick sampled check
+# ---------------------------------------------------------------------------------------------
+class WorkspaceCheck:
+    """The largest constraint value of a design over ``n`` joint configurations drawn uniformly
+    inside the joint limits (and joint constraints), seed ``seed``: ``sigma_1 z / R`` (the
+    per-component criterion) or ``(1 - P) / (1 - p)`` with ``P = P(|dr| <= R)`` (the sphere), in the
+    linear Gaussian model (:mod:`tolsynth.kinematics.batch_stats`).  Not a certificate (a sample can
+    miss the worst pose; :func:`tolsynth.synthesize_workspace` designs for every pose and
+    certifies it); a value above 1 is a pose where the design is over its specification.
+
+    Computed when first read (``result.summary()``, reports, the command line), not by
+    ``synthesize`` itself; it then warns (:class:`tolsynth.errors.WorkspaceWarning`) if the largest
+    value exceeds ``1 + WARN``.  The same answer every time (a fixed seed).
+    """
+
+    N = 300
+    SEED = 0
+    WARN = 1e-3
+
+    def __init__(self, mechanism, result, distribution=None, n: int = N, seed: int = SEED):
+        self.mechanism, self.result, self.distribution = mechanism, result, distribution
+        self.n, self.seed = int(n), int(seed)
+        self._value = None
+
+    def _samples(self) -> np.ndarray:
+        from tolsynth.kinematics.joint_space import _feasible, _limits
+
+        lo, hi = _limits(self.mechanism)
+        rng = np.random.default_rng(self.seed)
+        got, tries = [], 0
+        while sum(q.shape[1] for q in got) < self.n and tries < 20:
+            Q = lo[:, None] + (hi - lo)[:, None] * rng.random((len(lo), self.n))
+            got.append(Q[:, _feasible(self.mechanism, Q)])
+            tries += 1
+        return np.concatenate(got, axis=1)[:, : self.n]
+
+    def _compute(self) -> tuple[float, np.ndarray | None, int]:
+        if self._value is not None:
+            return self._value
+        from tolsynth.kinematics.batch_stats import principal_std_batch
+
+        spec = self.result.spec
+        Q = self._samples()
+        worst, q = math.nan, None
+        if Q.shape[1]:
+            sig = principal_std_batch(self.mechanism, Q, self.result.x, self.distribution)
+            if spec.sphere_blocks:
+                from tolsynth.probability.stats import p_ball
+
+                P = np.array([p_ball(np.square(s), spec.R) if np.all(np.isfinite(s)) else np.nan for s in sig])
+                vals = (1.0 - P) / (1.0 - spec.p)
+            else:
+                vals = sig[:, 0] * spec.z / spec.R
+            if np.any(np.isfinite(vals)):
+                k = int(np.nanargmax(vals))
+                worst, q = float(vals[k]), Q[:, k]
+        self._value = (worst, q, int(Q.shape[1]))
+        if self.exceeds:
+            warnings.warn(WorkspaceWarning(self.line()), stacklevel=3)
+        return self._value
+
+    @property
+    def worst(self) -> float:
+        """The largest constraint value over the sample (NaN if no sampled pose could be evaluated)."""
+        return self._compute()[0]
+
+    @property
+    def q(self):
+        """The sampled joint vector (rad) where it is reached."""
+        return self._compute()[1]
+
+    @property
+    def n_poses(self) -> int:
+        return self._compute()[2]
+
+    @property
+    def exceeds(self) -> bool:
+        """The design is over its specification somewhere in the sample (by more than WARN)."""
+        return bool(self._compute()[0] > 1.0 + self.WARN)
+
+    def line(self) -> str:
+        """One line for summaries and the command line."""
+        worst, q, n = self._compute()
+        what = "(1-P)/(1-p) in the sphere" if self.result.spec.sphere_blocks else "sigma z/R"
+        if not math.isfinite(worst):
+            return f"workspace check: no sampled pose could be evaluated ({n} drawn)"
+        where = "(" + ", ".join(f"{math.degrees(v):.4g}" for v in q) + ") deg"
+        text = f"workspace check ({n} sampled poses, Gaussian): largest {what} {worst:.4f} at q = {where}"
+        if worst > 1.0 + self.WARN:
+            return (text + f": {100 * (worst - 1):.3g} % over the specification there; the design meets it only at "
+                    "the poses it was made for (tolsynth.synthesize_workspace, or solve --everywhere, designs for "
+                    "every pose)")
+        return text + ": within the specification at every sampled pose (a sample, not a proof)"
+
+    def to_dict(self) -> dict:
+        worst, q, n = self._compute()
+        return {"worst": worst, "q": None if q is None else np.asarray(q).tolist(), "n_poses": n,
+                "exceeds": self.exceeds, "seed": self.seed}

@@ -19,6 +19,7 @@ import argparse
 import os
 import signal
 import sys
+import warnings
 
 from tolsynth.errors import TolsynthError
 from tolsynth.interrupts import Interrupts, QuietCasadiInterrupt, started_as_command
@@ -85,7 +86,15 @@ def main(argv=None) -> int:
 def _main(argv) -> int:
     command = "tolsynth"
     args = None
-    with Interrupts() as interrupts:
+
+    def one_line(message, category, filename, lineno, file=None, line=None):  # a warning: one line, no source
+        try:
+            print(f"{command}: warning: {message}", file=sys.stderr)
+        except (OSError, ValueError):  # pragma: no cover - stderr gone
+            pass
+
+    with Interrupts() as interrupts, warnings.catch_warnings():
+        warnings.showwarning = one_line
         try:
             parser = build_parser()
             args = parser.parse_args(argv)  # a usage error exits 2 (SystemExit) with argparse's message

@@ -553,7 +553,7 @@ def add_specification_arguments(p: argparse.ArgumentParser, solvers=("ipopt", "s
                    help="per principal component (the paper's Eq. 20) or the sphere P(|dr| <= R) >= p")
     p.add_argument("--probability", choices=["gaussian", "exact"], default="gaussian",
                    help="gaussian (the paper's: each principal component read as normal) or exact (the exact "
-                        "probabilities of the linear error model, along every direction or in the sphere); default: gaussian")
+                        "probabilities of the linear error model, along every direction or in the sphere)")
     p.add_argument("--verify", default=None, type=_verify_arg, metavar="N|auto",
                    help="close the loop: nonlinear Monte Carlo at the optimum with N samples per pose (auto: from p), "
                         "and a tighter target until its 99%% lower bound reaches p; default: off")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 
 from tolsynth.errors import InputError
+from tolsynth.progress import Working
 from tolsynth.kinematics.mechanism import load_model
 from tolsynth.cli.args import (  # noqa: I001
     add_specification_arguments,
@@ -32,9 +33,10 @@ def _cmd_report(args) -> int:
     kw["poses"] = parse_poses(mech, args.pose)
     if args.lock:
         kw["locks"] = _parse_locks(mech, args.lock)
-    rep = report(mech, args.R, args.p, args.dist, alpha, solver=args.solver, processes=True if args.processes else None,
-                 mc_samples=args.mc_samples, seed=args.seed, map_n=args.map_n, map_plane=args.plane,
-                 map_hand_axis=_hand_axis(args.hand_axis), worst_grid=args.worst_grid, **kw)
+    with Working("tolsynth report: the solve, Monte Carlo, map and worst pose of the report"):
+        rep = report(mech, args.R, args.p, args.dist, alpha, solver=args.solver, processes=True if args.processes else None,
+                     mc_samples=args.mc_samples, seed=args.seed, map_n=args.map_n, map_plane=args.plane,
+                     map_hand_axis=_hand_axis(args.hand_axis), worst_grid=args.worst_grid, **kw)
     files = rep.write(args.out, fmt)
     res = rep.result
     if args.json:

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import sys
-
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
 from tolsynth.cli.args import emit_json, inputs_record
+from tolsynth.progress import interactive
 
 __all__ = ["register"]
 
@@ -19,7 +18,7 @@ def cmd_reproduce(args) -> int:
         raise InputError("--model", f"{mech.name} has no published results to reproduce "
                                     "(no [[reference_results]] in its model file)",
                          "a model with reference results, e.g. xu_zhang_1988")
-    reports = reproduce(mech, sumt=not args.no_sumt, progress=not args.json and sys.stderr.isatty())
+    reports = reproduce(mech, sumt=not args.no_sumt, progress=not args.json and interactive())
     if args.json:
         emit_json({"inputs": inputs_record(args, mech, sumt=not args.no_sumt),
                    "model": mech.name, "columns": [r.to_dict() for r in reports]})
@@ -38,6 +37,6 @@ def register(sub) -> None:
                                    "printed tolerances against IPOPT's and SUMT + Powell's optimum.")
     p.add_argument("--model", default="xu_zhang_1988",
                    help="bundled model name or path to a .toml model file with [[reference_results]]")
-    p.add_argument("--no-sumt", action="store_true", help="skip SUMT + Powell (about 1.5 s a column)")
+    p.add_argument("--no-sumt", action="store_true", help="skip SUMT + Powell (IPOPT only; SUMT adds a few milliseconds a column)")
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
     p.set_defaults(func=cmd_reproduce, task="the reproduction of the published tables")

@@ -7,6 +7,7 @@ import sys
 import numpy as np
 
 from tolsynth.errors import InputError
+from tolsynth.progress import Working
 from tolsynth.kinematics.mechanism import load_model
 from tolsynth.cli.args import (  # noqa: I001
     add_specification_arguments,
@@ -72,6 +73,22 @@ def side_by_side(c, width: int = 22) -> str:
     return "\n".join(lines)
 
 
+def _contributions(args, results: dict) -> dict:
+    """``--contributions``: each result's contributor report (label -> report), or {} if not asked."""
+    if not args.contributions:
+        return {}
+    from tolsynth.analysis.contributions import contributions
+
+    return {label: contributions(res) for label, res in results.items()}
+
+
+def _print_contributions(reps: dict) -> None:
+    for label, rep in reps.items():
+        print(f"contributions{' of ' + label if len(reps) > 1 else ''} (share of each principal variance, of tr V "
+              "and of 1 - P(sphere)):")
+        print(rep.format())
+
+
 def _spec_kwargs(mech, args) -> tuple:
     kw = dict(Phi=args.Phi, criterion=args.criterion)
     probability = args.probability
@@ -110,6 +127,9 @@ def cmd_solve(args) -> int:
                   Phi_rad=args.Phi, p_orientation=kw.get("p_orientation"), solver=args.solver,
                   k=kw.get("k", mech.k), bounds=kw.get("bounds", mech.bounds), probability=args.probability,
                   verify=args.verify)
+    if args.lock:
+        kw["locks"] = _parse_locks(mech, args.lock)
+        record["locks"] = kw["locks"]
     if args.everywhere:
         from tolsynth.kinematics.joint_space import _reference
         from tolsynth.synthesis.workspace import synthesize_workspace
@@ -123,7 +143,9 @@ def cmd_solve(args) -> int:
         else:
             name, q = _reference(mech, parse_reference(mech, args.reference))
             start = name if (name is not None and name != "given") else q  # None: the search's worst pose
-        w = synthesize_workspace(mech, args.R, args.p, args.dist, alpha, solver=args.solver, pose=start, **kw)
+        with Working("tolsynth solve: the design for every reachable pose (exchange rounds with the worst-pose search)"):
+            w = synthesize_workspace(mech, args.R, args.p, args.dist, alpha, solver=args.solver, pose=start, **kw)
+        reps = _contributions(args, {"the design": w.result})
         if args.out:  # the tolerance table; the exchange's rounds beside the summary
             frame = w.result.to_frame()
             frame.attrs["summary"].update(converged=w.converged, rounds=w.to_frame().to_dict(orient="records"))
@@ -133,6 +155,8 @@ def cmd_solve(args) -> int:
             out = w.result.to_dict()
             out.update(converged=w.converged, rounds=w.rounds, poses=w.poses, worst_value=w.worst_value,
                        max_violation=w.max_violation)
+            if reps:
+                out["contributions"] = reps["the design"].to_dict()
             out["inputs"] = inputs_record(args, mech, start_pose=pose_label(start) if start is not None else None,
                                           everywhere=True, **record)
             emit_json(out)
@@ -145,6 +169,7 @@ def cmd_solve(args) -> int:
                   f"afterwards the largest value found anywhere is {w.worst_value:.6f} "
                   f"(violation {w.max_violation:.2e})")
             print(w.result.summary())
+            _print_contributions(reps)
         if not w.success:
             print("tolsynth solve: no convergence over the workspace; the numbers above are not an optimum", file=sys.stderr)
             return 1
@@ -158,35 +183,38 @@ def cmd_solve(args) -> int:
     where = ", ".join(q if isinstance(q, str) else "(" + ", ".join(f"{np.degrees(v):.4g}" for v in q) + ") deg"
                       for q in poses)
     if args.solver == "both":
-        c = compare(mech, args.R, args.p, args.dist, alpha, **kw)
+        with Working("tolsynth solve: IPOPT and SUMT + Powell"):
+            c = compare(mech, args.R, args.p, args.dist, alpha, **kw)
+        reps = _contributions(args, {"IPOPT's optimum": c.ipopt, "SUMT's optimum": c.sumt})
         if args.out:
             write_out(c.to_frame(), args, mech, **record)
         if args.json:
             out = c.to_dict()
+            if reps:
+                out["contributions"] = {"ipopt": reps["IPOPT's optimum"].to_dict(), "sumt": reps["SUMT's optimum"].to_dict()}
             out["inputs"] = inputs_record(args, mech, **record)
             emit_json(out)
         else:
             print(f"{head}, pose{'s' if len(poses) > 1 else ''} {where}")
             print(side_by_side(c))
+            _print_contributions(reps)
         ok = c.ipopt.success and c.sumt.success
     else:
-        if args.lock:
-            kw["locks"] = _parse_locks(mech, args.lock)
-            record["locks"] = kw["locks"]
-        res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
-        rep = None
-        if args.contributions:
-            from tolsynth.analysis.contributions import contributions
-
-            rep = contributions(res)
+        with Working(f"tolsynth solve: the {args.solver.upper()} solve" + (" (exact probabilities)" if args.probability == "exact" else "")):
+            res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
+        reps = _contributions(args, {"the optimum": res})
         if args.out:
             write_out(res.to_frame(), args, mech, **record)
         if args.json:
             out = res.to_dict()
-            if rep is not None:
-                out["contributions"] = rep.to_dict()
+            if reps:
+                out["contributions"] = reps["the optimum"].to_dict()
             if res.verification is not None:
                 out["verification"] = res.verification.to_dict()
+            if res.workspace is not None:
+                out["workspace_check"] = res.workspace.to_dict()
+            if res.inputs and res.inputs.get("default_pose"):
+                out["default_pose"] = res.inputs["default_pose"]
             out["inputs"] = inputs_record(args, mech, **record)
             emit_json(out)
         else:
@@ -194,9 +222,7 @@ def cmd_solve(args) -> int:
             print(res.summary())
             if res.verification is not None:
                 print(res.verification.report())
-            if rep is not None:
-                print("contributions (share of each principal variance, of tr V and of 1 - P(sphere)):")
-                print(rep.format())
+            _print_contributions(reps)
         ok = res.success
     if not ok:
         print("tolsynth solve: the solver did not converge; the numbers above are not an optimum", file=sys.stderr)
@@ -205,17 +231,28 @@ def cmd_solve(args) -> int:
 
 
 def _parse_locks(mech, items) -> dict:
-    """``--lock NAME=VALUE`` (repeatable): a tolerance fixed at VALUE (the parameter's unit)."""
+    """``--lock NAME=VALUE`` (repeatable): a tolerance fixed at VALUE, a bare number in the
+    parameter's tolerance unit or with a unit suffix (``a=50um``); each parameter once."""
+    from tolsynth.units import split_quantity, to_base, unit_kind
+
     out = {}
     for item in items:
-        name, sep, value = item.partition("=")
-        if not sep:
-            raise InputError("--lock", f"got {item!r}", "NAME=VALUE, e.g. --lock h3=0.2")
-        try:
-            out[name.strip()] = float(value)
-        except ValueError:
-            raise InputError(f"--lock {name}", f"not a number: {value!r}", "a tolerance in the parameter's unit") from None
-    return out
+        name, sep, value = (s.strip() for s in item.partition("="))
+        if not sep or not name or not value:
+            raise InputError("--lock", f"got {item!r}", "NAME=VALUE, e.g. --lock h3=0.2 or --lock a=50um")
+        i = mech.index(name)  # UnknownNameError naming the parameter and the allowed names
+        canon, unit = mech.error_parameters[i], mech.units[i]
+        if canon in out:
+            raise InputError(f"--lock {canon}", f"given twice ({out[canon][1]!r} and {item!r})", "each parameter locked once")
+        parsed = split_quantity(value)
+        kind = unit_kind(unit)
+        if parsed is None or (parsed[1] is not None and unit_kind(parsed[1]) != kind):
+            raise InputError(f"--lock {canon}", f"{value!r} is not a tolerance",
+                             f"a number in {unit} (its tolerance unit), or with a{'n' if kind == 'angle' else ''} {kind} "
+                             "unit suffix (5um, 0.02mm, 2mrad, 0.01deg)")
+        v = parsed[0] if parsed[1] is None else parsed[0] * to_base(parsed[1]) / to_base(unit)
+        out[canon] = (v, item)
+    return {k: v for k, (v, _) in out.items()}
 
 
 def register(sub) -> None:

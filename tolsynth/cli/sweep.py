@@ -34,7 +34,7 @@ GRID_KEYS = {
     "R": "radius, mm (numbers, or strings with a unit: \"500um\")",
     "p": "probability, 0 < p < 1",
     "alpha": "cost exponent > 0",
-    "distribution": "\"uniform\" or \"normal\"",
+    "distribution": "\"uniform\", \"normal\", \"triangular\", \"truncnormal\" or \"truncnormal(beta)\"",
     "criterion": "\"components\" or \"sphere\"",
     "solver": "\"ipopt\" or \"sumt\"",
 }
@@ -159,7 +159,8 @@ def register(sub) -> None:
     p.add_argument("--p", default=None, help="probabilities, comma-separated, each 0 < p < 1")
     p.add_argument("--alpha", default=None, help="cost exponents (the same for every parameter), comma-separated; "
                                                    "default: 0.7")
-    p.add_argument("--dist", default=None, help="distributions, comma-separated: uniform, normal; default: uniform")
+    p.add_argument("--dist", default=None, help="distributions, comma-separated: uniform, normal, triangular, truncnormal, truncnormal(beta) "
+                        "(one shape for every error per row); default: uniform")
     p.add_argument("--criterion", default=None, help="criteria, comma-separated: components, sphere; default: components")
     p.add_argument("--solver", default=None, help="solvers, comma-separated: ipopt, sumt; default: ipopt")
     p.add_argument("--k", default=None,

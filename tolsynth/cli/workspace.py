@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from tolsynth.errors import InputError
+from tolsynth.progress import Working
 from tolsynth.kinematics.mechanism import load_model
 from tolsynth.analysis.pose_search import worst_pose
 from tolsynth.analysis.workspace_map import PLANES, ProbabilityMap, probability_map
@@ -58,14 +59,28 @@ def _extent(text: str | None):
     return [quantity(x, "--extent", "length", "mm") for x in items]
 
 
+def _tolerances(mech, text: str | None):
+    """``--tolerances``, or when not given: the model's figure3 set (the paper's Figure 3), else its
+    first tolerance set, else the geometric middle of every parameter's bounds.  Returns the
+    tolerances and a label that says which was chosen."""
+    if text is not None:
+        return parse_tolerances(mech, text), text
+    sets = list(mech.tolerance_sets)
+    if "figure3" in sets:
+        return mech.tolerances("figure3"), "figure3"
+    if sets:
+        return mech.tolerances(sets[0]), f"{sets[0]} (the model's first tolerance set; --tolerances not given)"
+    lo, hi = (np.asarray(b, dtype=float) for b in mech.bounds)
+    return np.sqrt(lo * hi), "the geometric middle of the bounds (the model has no tolerance set; --tolerances not given)"
+
+
 def _cmd_map(args) -> int:
     check_figure_path(args.out)  # before any work: matplotlib, the format, the folder
     check_table_out(args, "--data")
     mech = load_model(args.model)
     if hasattr(args, "dist"):
         args.dist = dist_for(args, mech)
-    eps = parse_tolerances(mech, args.tolerances)
-    label = args.tolerances
+    eps, label = _tolerances(mech, args.tolerances)
     extent = _extent(args.extent)
     axis = _hand_axis(args.hand_axis)
     reference = parse_reference(mech, args.reference)
@@ -92,6 +107,7 @@ def _cmd_map(args) -> int:
     else:
         rch = pm.reachable
         print(f"map          {mech.name}, plane {pm.plane}, {args.n} x {args.n} points, {int(rch.sum())} reachable")
+        print(f"tolerances   {label}")
         print(f"extent       {pm.u[0]:.1f} .. {pm.u[-1]:.1f} x {pm.v[0]:.1f} .. {pm.v[-1]:.1f} mm")
         if rch.any():
             print(f"P(dr<=R)     {np.nanmin(pm.P):.4f} .. {np.nanmax(pm.P):.4f}  (R = {pm.R:g} mm, {pm.distribution})")
@@ -112,9 +128,10 @@ def _cmd_worst(args) -> int:
     mech = load_model(args.model)
     if hasattr(args, "dist"):
         args.dist = dist_for(args, mech)
-    eps = parse_tolerances(mech, args.tolerances)
-    w = worst_pose(mech, eps, criterion=args.criterion, R=args.R, distribution=args.dist, grid=args.grid,
-                   reference=parse_reference(mech, args.reference))
+    eps, label = _tolerances(mech, args.tolerances)
+    with Working("tolsynth worst-pose: the grid and pattern search"):
+        w = worst_pose(mech, eps, criterion=args.criterion, R=args.R, distribution=args.dist, grid=args.grid,
+                       reference=parse_reference(mech, args.reference))
     record = dict(tolerances=w.tolerances, distribution=args.dist, R_mm=args.R, criterion=args.criterion,
                   reference=w.reference)
     if args.out:
@@ -124,6 +141,7 @@ def _cmd_worst(args) -> int:
         out["inputs"] = inputs_record(args, mech, **record)
         emit_json(out)
     else:
+        print(f"tolerances   {label}")
         print(w.report(mech.joint_names))
     return 0
 
@@ -135,7 +153,9 @@ def register(sub) -> None:
                                    "base-frame plane for a fixed hand axis, by inverse kinematics on the model's "
                                    "forward-kinematics graph; optionally drawn as the paper's Figure 3.")
     add_model_argument(p)
-    p.add_argument("--tolerances", default="figure3", help=TOLERANCES_HELP)
+    p.add_argument("--tolerances", default=None,
+                   help=TOLERANCES_HELP + "; default: the model's figure3 set (the paper's model), else its first "
+                                          "tolerance set, else the geometric middle of the bounds (said in the output)")
     add_dist_argument(p)
     p.add_argument("--R", type=length_mm("--R"), default=0.2, help="radius of the accuracy sphere, mm (suffixes allowed)")
     p.add_argument("--n", type=number("--n", "an integer >= 5", integer=True), default=100,
@@ -159,7 +179,9 @@ def register(sub) -> None:
                        description="Grid plus pattern search over the joint space (inside the joint limits and "
                                    "constraints) for the pose of largest principal sigma or lowest P(|dr| <= R).")
     add_model_argument(p)
-    p.add_argument("--tolerances", default="figure3", help=TOLERANCES_HELP)
+    p.add_argument("--tolerances", default=None,
+                   help=TOLERANCES_HELP + "; default: the model's figure3 set (the paper's model), else its first "
+                                          "tolerance set, else the geometric middle of the bounds (said in the output)")
     add_dist_argument(p)
     p.add_argument("--criterion", choices=["sigma", "probability"], default="sigma",
                    help="largest principal standard deviation, or lowest P(|dr| <= R) (needs --R)")

@@ -148,6 +148,13 @@ def _layout(rep) -> list[tuple]:
             crow.append([b.label, f"{j + 1}", what, f"{val:.6f}", "yes" if b.active[j] else "", f"{b.multipliers[j]:.4g}"])
     B.append(("table", ["constraint block", "#", "quantity", "value", "active", "multiplier"], crow,
               [False, True, False, True, False, True], "values <= 1 meet the specification; multipliers in cost units."))
+    ws = getattr(res, "workspace", None)
+    if ws is not None:  # how the design does away from the poses it was made for (a sample, not a proof)
+        import warnings
+
+        with warnings.catch_warnings():  # the report says it; no second copy on stderr
+            warnings.simplefilter("ignore")
+            B.append(("note" if ws.exceeds else "p", ws.line()))
 
     # 5. contributions
     c = rep.contributions

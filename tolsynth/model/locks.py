@@ -14,7 +14,7 @@ from typing import Mapping
 
 import numpy as np
 
-from tolsynth.errors import InfeasibleSpecificationError, InputError
+from tolsynth.errors import InfeasibleSpecificationError, InputError, OutOfRangeError
 
 __all__ = ["apply_locks", "check_locks"]
 
@@ -54,6 +54,13 @@ def apply_locks(mechanism, bounds, locks) -> dict:
             raise InputError("bounds", f"got {bounds!r}", "(lower, upper) or a dict name -> (lower, upper)") from None
         out = {nm: (float(a), float(b)) for nm, a, b in zip(names, lo, hi)}
     for nm, v in locked.items():
+        a, b = out[nm]
+        # a lock is a tolerance some process holds: outside the parameter's range it is a typo
+        # or a unit slip (a lock below the lower bound once cost 3243 silently)
+        if not float(a) * (1 - 1e-12) <= v <= float(b) * (1 + 1e-12):
+            unit = mechanism.units[mechanism.index(nm)]
+            raise OutOfRangeError(f"locks[{nm}]", f"{v:g} {unit} is outside the parameter's bounds",
+                                  f"{float(a):g} to {float(b):g} {unit} (its bounds; widen them with bounds= to lock outside)")
         out[nm] = (v, v)
     return out
 

@@ -110,6 +110,9 @@ class SynthesisResult(Tabular):
     inputs: dict | None = field(default=None, repr=False)
     #: ``synthesize(..., verify=...)``: the closed loop's :class:`tolsynth.analysis.verify.Verification`
     verification: Any = field(default=None, repr=False)
+    #: how the design does over the workspace, a quick sampled check computed when first read
+    #: (:class:`tolsynth.analysis.validation.WorkspaceCheck`); None where synthesize attached none
+    workspace: Any = field(default=None, repr=False, compare=False)
 
     @property
     def x(self) -> np.ndarray:
@@ -145,7 +148,22 @@ class SynthesisResult(Tabular):
                 continue
             what = "(1-P)/(1-p)" if b.kind == "sphere" else "sigma z/limit"
             lines.append(f"  {b.label}: {what} = ({vals}); multipliers ({mult})")
+        if self.inputs and self.inputs.get("default_pose"):
+            lines.append(f"pose: {self.inputs['default_pose']}")
+        if self.workspace is not None:
+            lines.append(self.workspace.line())
         return "\n".join(lines)
+
+    def _repr_html_(self) -> str:
+        """The summary as an HTML block (Jupyter shows it in place of the dataclass repr)."""
+        import html
+
+        head = f"<b>{html.escape(self.solver)}: {html.escape(str(self.status))}</b> (success: {self.success})"
+        rows = "".join(f"<tr><td>{html.escape(n)}</td><td>{v:.6g}</td><td>{html.escape(self.units[n])}</td></tr>"
+                       for n, v in self.tolerances.items())
+        return (f"<div>{head}<br>cost {self.cost:.8g}, dual bound {self.lower_bound:.8g}, gap {self.gap:.2e}"
+                f"<table><tr><th>parameter</th><th>tolerance</th><th>unit</th></tr>{rows}</table>"
+                f"<pre>{html.escape(self.summary())}</pre></div>")
 
     def to_dict(self) -> dict:
         """Plain dict for JSON (tolerances, units, cost, bound, gap, constraints, bounds, counts, time)."""

@@ -195,6 +195,9 @@ def synthesize(
     if probability is None:
         probability = DEFAULT_PROBABILITY
     mechanism = as_mechanism(mechanism)
+    chosen = None
+    if poses is None and isinstance(pose, str) and pose == "worst" and "worst" not in mechanism.configurations:
+        pose, chosen = _default_pose(mechanism)  # a model without a 'worst' pose (from_dh, load_urdf)
     if not isinstance(solver, str) or solver not in SOLVERS:
         raise InputError("solver", f"unknown solver {solver!r}", " or ".join(repr(s) for s in SOLVERS))
     again = dict(k=k, bounds=bounds, pose=pose, poses=poses, Phi=Phi, p_orientation=p_orientation,
@@ -237,12 +240,19 @@ def synthesize(
     # __init__ over every field again: ~3 % of a warm solve)
     object.__setattr__(result, "inputs", _run_inputs(mechanism, solver, options, locks, x0, validate, seed,
                                                      probability, verify))
+    if chosen is not None:
+        result.inputs["default_pose"] = chosen
+    if result.success:
+        from tolsynth.analysis.validation import WorkspaceCheck
+
+        # computed only when read (summary, reports, the command line): a sweep pays nothing
+        object.__setattr__(result, "workspace", WorkspaceCheck(mechanism, result, distribution))
     if validate:
         from tolsynth.analysis.validation import validate as mc_validate
 
-        report = mc_validate(
+        report = mc_validate(  # at every pose of the design, the worst one reported first
             mechanism, result, R=R, p=p, distribution=distribution,
-            pose=pose if poses is None else list(poses)[0], n=int(validate), seed=seed,
+            pose=[pose] if poses is None else list(poses), n=int(validate), seed=seed,
         )
         result = replace(result, validation=report)
     if verify is not None and verify is not False:
@@ -255,6 +265,31 @@ def synthesize(
                              n=None if verify is True else verify, seed=seed)
         result = replace(result, inputs={**(result.inputs or {}), "verify": verify})  # the re-solves' record it not
     return result
+
+
+def _default_pose(mechanism):
+    """``pose="worst"`` on a model without that configuration: the pose of largest principal sigma
+    at the geometric middle of the tolerance bounds (:func:`tolsynth.worst_pose`, deterministic;
+    remembered per mechanism), else the model's first configuration.  Returns the pose and the
+    sentence that says which was chosen (``result.inputs["default_pose"]``, the summary)."""
+    known = mechanism.__dict__.get("_default_pose")
+    if known is not None:
+        return known
+    from tolsynth.analysis.pose_search import worst_pose
+    from tolsynth.errors import TolsynthError
+
+    lo, hi = (np.asarray(b, dtype=float) for b in mechanism.bounds)
+    try:
+        w = worst_pose(mechanism, np.sqrt(lo * hi), criterion="sigma", reference=None)
+        q = np.asarray(w.q, dtype=float)
+        text = ("the worst-pose search's pose q = (" + ", ".join(f"{np.degrees(v):.4g}" for v in q) + ") deg "
+                "(largest principal sigma at the middle of the bounds; the model has no 'worst' configuration)")
+        out = (q, text)
+    except TolsynthError:
+        first = next(iter(mechanism.configurations))
+        out = (first, f"the model's first configuration {first!r} (it has no 'worst' one; the pose search failed)")
+    mechanism.__dict__["_default_pose"] = out
+    return out
 
 
 def _timed_out(nlp, solver: str, eps0, exc: TimeLimitError) -> SynthesisResult:
