@@ -110,15 +110,18 @@ class WorstPose(Tabular):
         """Plain dict (arrays as lists) for JSON."""
         return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
 
-    def report(self, joint_names: Sequence[str] | None = None) -> str:
-        """Readable table: the worst pose found beside the reference (joints in deg, hand in mm)."""
+    def report(self, joint_names: Sequence[str] | None = None, joint_units: Sequence[str] | None = None) -> str:
+        """Readable table: the worst pose found beside the reference (joints in deg, or in mm where
+        ``joint_units`` says so, as :attr:`tolsynth.Mechanism.joint_units` does; hand in mm)."""
         unit = "mm (largest principal sigma)" if self.criterion == "sigma" else f"(P(|dr|<={self.R:g} mm))"
         names = joint_names or [f"q{i + 1}" for i in range(len(self.q))]
+        units = tuple(joint_units or ["deg"] * len(self.q))
         lines = [f"worst pose   criterion {self.criterion} {unit}, {self.distribution} errors; {self.method}"]
         lines.append(f"{'':22}{'found':>42}{'reference (' + str(self.reference) + ')':>40}")
         fmt = lambda v: "(" + ", ".join(f"{x:.3f}" for x in v) + ")"  # noqa: E731
-        lines.append(f"{'joints (deg)':22}{fmt(np.degrees(self.q)):>42}"
-                     f"{fmt(np.degrees(self.reference_q)) if self.reference_q is not None else '-':>40}")
+        shown = lambda q: [x if u == "mm" else math.degrees(x) for x, u in zip(q, units)]  # noqa: E731
+        lines.append(f"{'joints (' + '/'.join(sorted(set(units))) + ')':22}{fmt(shown(self.q)):>42}"
+                     f"{fmt(shown(self.reference_q)) if self.reference_q is not None else '-':>40}")
         lines.append(f"{'hand (mm)':22}{fmt(self.position):>42}"
                      f"{fmt(self.reference_position) if self.reference_position is not None else '-':>40}")
         lines.append(f"{'criterion':22}{self.value:>42.6f}"

@@ -293,7 +293,7 @@ class WorkspaceCheck:
         what = "(1-P)/(1-p) in the sphere" if self.result.spec.sphere_blocks else "sigma z/R"
         if not math.isfinite(worst):
             return f"workspace check: no sampled pose could be evaluated ({n} drawn)"
-        where = "(" + ", ".join(f"{math.degrees(v):.4g}" for v in q) + ") deg"
+        where = self.mechanism.format_joints(q)
         text = f"workspace check ({n} sampled poses, Gaussian): largest {what} {worst:.4f} at q = {where}"
         if worst > 1.0 + self.WARN:
             return (text + f": {100 * (worst - 1):.3g} % over the specification there; the design meets it only at "

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from tolsynth.kinematics.mechanism import load_model
 from tolsynth.cli.args import dist_for, add_pose_arguments, default_pose, emit_json, fmt_vec as _fmt_vec, inputs_record, parse_pose, parse_tolerances, pose_label
 
@@ -47,7 +45,7 @@ def cmd_analyze(args) -> int:
         emit_json(out)
         return 0
     print(f"model        {mech.name}: {mech.title}")
-    print(f"pose         {pose_name}  q = {_fmt_vec(np.degrees(a.q), '{:.4f}')} deg")
+    print(f"pose         {pose_name}  q = {mech.format_joints(a.q)}")
     from tolsynth.probability.distributions import describe
 
     print(f"errors       {describe(args.dist)}")

@@ -169,17 +169,18 @@ def parse_pose(mech: Mechanism, text: str, field: str = "--pose"):
     if text in mech.configurations:
         return text
     allowed = ("one of " + ", ".join(mech.configurations) + " (configurations), or "
-               f"{len(mech.joint_names)} comma-separated joint values in deg ({', '.join(mech.joint_names)})")
+               f"{len(mech.joint_names)} comma-separated joint values in "
+               f"{'/'.join(sorted(set(mech.joint_units)))} ({', '.join(mech.joint_names)})")
     items = [t.strip() for t in str(text).split(",")]
     if not any(_QTY.match(t) for t in items):
         raise UnknownNameError(field, f"{text!r} is neither a configuration nor joint values", allowed)
+    if len(items) != len(mech.joint_names):
+        raise InputError(field, f"{len(items)} joint values q given for {len(mech.joint_names)} joints", allowed)
     values = []
-    for t in items:
+    for t, unit in zip(items, mech.joint_units):  # a parallel robot's struts in mm, other joints in deg
         if not t:
             raise InputError(field, f"empty item in {text!r}", allowed)
-        values.append(math.radians(quantity(t, field, "angle", "deg")))
-    if len(values) != len(mech.joint_names):
-        raise InputError(field, f"{len(values)} joint values q given for {len(mech.joint_names)} joints", allowed)
+        values.append(quantity(t, field, "length", "mm") if unit == "mm" else math.radians(quantity(t, field, "angle", "deg")))
     return np.array(values)
 
 

@@ -180,8 +180,7 @@ def cmd_solve(args) -> int:
     poses = parse_poses(mech, args.pose)
     kw["poses"] = poses
     record["poses"] = [pose_label(q) for q in poses]
-    where = ", ".join(q if isinstance(q, str) else "(" + ", ".join(f"{np.degrees(v):.4g}" for v in q) + ") deg"
-                      for q in poses)
+    where = ", ".join(q if isinstance(q, str) else mech.format_joints(q) for q in poses)
     if args.solver == "both":
         with Working("tolsynth solve: IPOPT and SUMT + Powell"):
             c = compare(mech, args.R, args.p, args.dist, alpha, **kw)

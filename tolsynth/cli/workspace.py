@@ -142,7 +142,7 @@ def _cmd_worst(args) -> int:
         emit_json(out)
     else:
         print(f"tolerances   {label}")
-        print(w.report(mech.joint_names))
+        print(w.report(mech.joint_names, mech.joint_units))
     return 0
 
 

@@ -31,10 +31,6 @@ def _asked_p(res, spec) -> str:
 # ---------------------------------------------------------------------------------------------
 # layout: one list of blocks for both formats
 # ---------------------------------------------------------------------------------------------
-def _deg(q) -> str:
-    return _vec(np.degrees(np.asarray(q, dtype=float)))
-
-
 def _num(x, fmt: str) -> str:
     s = format(float(x), fmt)
     return format(0.0, fmt) if float(s) == 0 else s  # no "-0.000"
@@ -76,7 +72,7 @@ def _layout(rep) -> list[tuple]:
     if spec.Phi is not None:
         kv.append(("orientation accuracy Phi", f"{spec.Phi:g} rad, probability {spec.p_orientation:g}"))
     for lbl, q in spec.poses.items():
-        kv.append((f"pose '{lbl}'", f"joints {_deg(q)} deg ({', '.join(mech.joint_names)})"))
+        kv.append((f"pose '{lbl}'", f"joints {mech.format_joints(q)} ({', '.join(mech.joint_names)})"))
     kv.append(("solver", f"{res.solver}: {res.status} ({res.message}); {res.iterations} iterations, "
                          f"{res.wall_time * 1e3:.1f} ms"))
     locks = (res.inputs or {}).get("locks")
@@ -258,7 +254,7 @@ def _layout(rep) -> list[tuple]:
         B.append(("h", 3, "Worst pose"))
         B.append(("p", f"Search over the joint space inside every limit and constraint ({w.method}) for the largest "
                        "principal sigma at the optimal tolerances."))
-        rows = [["joints, deg", _deg(w.q), _deg(w.reference_q) if w.reference_q is not None else "-"],
+        rows = [["joints", mech.format_joints(w.q), mech.format_joints(w.reference_q) if w.reference_q is not None else "-"],
                 ["hand, mm", _vec(w.position), _vec(w.reference_position) if w.reference_position is not None else "-"],
                 ["principal sigma, mm", _vec(w.principal_std, ".4f"),
                  _vec(w.reference_principal_std, ".4f") if w.reference_principal_std is not None else "-"],

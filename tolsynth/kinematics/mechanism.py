@@ -200,6 +200,21 @@ class Mechanism:
         return out
 
     @property
+    def joint_units(self) -> tuple[str, ...]:
+        """The unit each joint value is shown and typed in: ``"mm"`` for a parallel robot's struts
+        (prismatic actuators), ``"deg"`` for the others (the API takes mm and rad)."""
+        lengths = getattr(self.spec, "length_joints", ())
+        return tuple("mm" if name in lengths else "deg" for name in self.joint_names)
+
+    def format_joints(self, q) -> str:
+        """Joint values for a reader: ``(10, 20) deg``, ``(755.6, 755.6) mm``, or each with its unit."""
+        units = self.joint_units
+        shown = [float(v) if u == "mm" else math.degrees(v) for v, u in zip(np.asarray(q, dtype=float), units)]
+        if len(set(units)) == 1:
+            return "(" + ", ".join(f"{v:.3f}" for v in shown) + f") {units[0]}"
+        return "(" + ", ".join(f"{v:.3f} {u}" for v, u in zip(shown, units)) + ")"
+
+    @property
     def units(self) -> tuple[str, ...]:
         """Tolerance unit of each error parameter."""
         return self._per_parameter["units"]

@@ -190,8 +190,8 @@ class ParallelGraphs:
         if not abs(c[0]) <= 1.0:
             raise LoopClosureError(
                 f"the platform cannot be assembled at {where} (mm / rad): outside the workspace reachable from the "
-                f"home pose (Newton residual {c[0] * self.residual_tol:.3g} mm after the continuation, "
-                f"at most {self.residual_tol:.3g} mm accepted)")
+                f"home pose, or at a singularity, where Newton's method does not converge (residual "
+                f"{c[0] * self.residual_tol:.3g} mm after the continuation, at most {self.residual_tol:.3g} mm accepted)")
         if not abs(c[1]) <= 1.0:
             raise LoopClosureError(
                 f"the platform at {where} (mm / rad) is past a singularity or on another assembly branch "

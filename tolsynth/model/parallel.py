@@ -37,6 +37,7 @@ from tolsynth.model.fields import (
     DEFAULT_K,
     DEFAULT_TOLERANCE_UNITS,
     _by_kind,
+    _check_configurations,
     _nearest,
     _Reader,
     _tolerance_sets,
@@ -299,13 +300,11 @@ def _parse_parallel_model(data: dict, r: _Reader) -> ParallelSpec:
         if not isinstance(note, str):
             raise r.fail(f"{where}.note", f"expected a string, got {_type_name(note)}")
         q = tuple(r.get(raw, j, where, float) * factor[j] for j in joint_names)
-        for j, v in zip(joints, q):
-            if not j.lower <= v <= j.upper:
-                raise r.fail(f"{where}.{j.name}", f"{v / factor[j.name]:g} is outside the limits of {j.name} "
-                                                  f"[{j.lower / factor[j.name]:g}, {j.upper / factor[j.name]:g}]")
         configurations[cname] = Configuration(cname, q, note)
     if "home" not in configurations:
         raise r.fail("configurations.home", "missing: the configuration the assembly pose starts from")
+    lengths = tuple(leg.joint for leg in legs if leg.actuation == "prismatic")
+    _check_configurations(r, configurations, joints, length_joints=lengths)
     return ParallelSpec(
         name=name, title=title, source=source, assumptions=tuple(assumptions), path=r.path, convention="parallel",
         base=(), tool=(), links=(), symbols=symbols, symbol_kinds=kinds, joints=tuple(joints), loops=(),

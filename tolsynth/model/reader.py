@@ -96,7 +96,7 @@ def read_model_file(path: str | os.PathLike) -> MechanismSpec:
 def _parse(data: dict, r: _Reader) -> MechanismSpec:
     if isinstance(data, dict) and isinstance(data.get("chain"), dict) and "urdf" in data["chain"]:
         return _parse_urdf_model(data, r)
-    if isinstance(data, dict) and "leg" in data and "chain" not in data:  # a parallel robot
+    if isinstance(data, dict) and "leg" in data:  # a parallel robot
         return _parse_parallel_model(data, r)
     r.table(data, "", "")
     meta = r.table(data["model"], "model", "model")

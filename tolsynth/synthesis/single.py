@@ -282,7 +282,7 @@ def _default_pose(mechanism):
     try:
         w = worst_pose(mechanism, np.sqrt(lo * hi), criterion="sigma", reference=None)
         q = np.asarray(w.q, dtype=float)
-        text = ("the worst-pose search's pose q = (" + ", ".join(f"{np.degrees(v):.4g}" for v in q) + ") deg "
+        text = (f"the worst-pose search's pose q = {mechanism.format_joints(q)} "
                 "(largest principal sigma at the middle of the bounds; the model has no 'worst' configuration)")
         out = (q, text)
     except TolsynthError:

@@ -1,0 +1,187 @@
+"""Parallel robots' model files read strictly, and the package's tools on parallel robots.
+
+Each defect of a ``[[leg]]`` file is a ModelFileError naming its field.  The tools (synthesis with
+its three criteria, the workspace exchange, the map, contributions, joint errors) are checked
+against numbers computed here independently: the principal standard deviations from the
+sensitivity matrix by NumPy, brute force over the actuator box, the closed-form IK of the map
+against the forward kinematics.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+import tolsynth
+from tolsynth.errors import InputError, ModelFileError
+from tolsynth.probability.stats import z_of_p
+
+from model_text import model_dict, toml_text
+
+
+def _load(tmp_path, data):
+    path = tmp_path / "m.toml"
+    path.write_text(toml_text(data))
+    return tolsynth.load_model(path)
+
+
+def _edit(model, fn):
+    d = copy.deepcopy(model_dict(model))
+    fn(d)
+    return d
+
+
+def _set(path, value):
+    def fn(d):
+        t = d
+        for k in path[:-1]:
+            t = t[k]
+        t[path[-1]] = value
+    return fn
+
+
+def _drop(path):
+    def fn(d):
+        t = d
+        for k in path[:-1]:
+            t = t[k]
+        del t[path[-1]]
+    return fn
+
+
+def _far_strut(d):
+    """One strut far longer than the others can follow: a configuration that does not assemble."""
+    for leg in d["leg"]:
+        leg["limits"] = [700.0, 2000.0]
+    d["configurations"]["far"] = {"q1": 1990.0, "q2": 700.0, "q3": 700.0, "q4": 700.0, "q5": 700.0, "q6": 700.0}
+
+
+CASES = [
+    ("delta", _set(["leg", 0, "lenght"], 1.0), "leg[0].lenght", "unknown key"),
+    ("delta", _set(["leg", 1, "actuation"], "revolut"), "leg[1].actuation", "did you mean"),
+    ("stewart_gough", _set(["leg", 0, "arm"], 100.0), "leg[0].arm", "only a revolute leg"),
+    ("delta", _drop(["leg", 2, "link"]), "leg[2].link", "missing required field"),
+    ("delta", _set(["leg", 0, "zero"], [1.0, 1.0, 0.0]), "leg[0].zero", "not perpendicular"),
+    ("delta", _set(["leg", 0, "axis"], [0.0, 0.0, 0.0]), "leg[0].axis", "zero vector"),
+    ("delta", _set(["leg", 0, "arm"], -524.0), "leg[0].arm", "finite number"),
+    ("delta", _set(["leg", 0, "base"], [0.0, -164.0]), "leg[0].base", "expected [x, y, z]"),
+    ("delta", _set(["leg", 1, "name"], "A1"), "leg", "leg name ['A1'] declared more than once"),
+    ("delta", _set(["leg", 1, "name"], "A.1"), "leg[1].name", "letters, digits"),
+    ("delta", _set(["platform", "dof"], ["x", "y", "z", "rz"]), "platform.dof", "as many as legs"),
+    ("delta", _set(["platform", "dof"], ["x", "y", "zz"]), "platform.dof[2]", "unknown pose coordinate"),
+    ("delta", _set(["platform", "assembly"], {"rz": 0.0}), "platform.assembly.rz", "not a pose coordinate"),
+    ("stewart_gough", _set(["platform", "assembly"], {"z": 0.0}), "platform.assembly", "does not assemble"),
+    ("delta", _drop(["configurations", "home"]), "configurations.home", "missing"),
+    ("delta", _set(["configurations", "home", "theta1"], 95.0), "configurations.home.theta1", "outside the joint limits"),
+    ("stewart_gough", lambda d: _far_strut(d), "configurations.far", "cannot be assembled"),
+    ("delta", _set(["errors", "select"], ["*.bx", "*.arms"]), "errors.select[1]", "selects no leg dimension"),
+    ("delta", _set(["errors", "k"], {"lenght": 1.0}), "errors.k[lenght]", "did you mean"),
+    ("delta", _set(["errors", "selekt"], ["*"]), "errors.selekt", "unknown key"),
+    ("delta", _set(["tolerance_sets", "coarse", "*.anchor"], 0.1), "tolerance_sets.coarse.*.anchor", "selects no"),
+    ("delta", _set(["tolerance_sets", "coarse", "A1.bx"], 0.1), "tolerance_sets.coarse.A1.bx", "already given"),
+    ("delta", _drop(["tolerance_sets", "coarse", "*.link"]), "tolerance_sets.coarse", "missing tolerance"),
+    ("delta", _set(["chain"], {}), "chain", "unknown key"),
+]
+
+
+@pytest.mark.parametrize("model, edit, field, fragment", CASES, ids=[c[2] for c in CASES])
+def test_defect_names_field(tmp_path, model, edit, field, fragment):
+    with pytest.raises(ModelFileError) as info:
+        _load(tmp_path, _edit(model, edit))
+    assert info.value.field == field, str(info.value)
+    assert fragment in str(info.value)
+
+
+def test_error_selection_and_tolerance_patterns():
+    """[errors] selects by pattern and group; a tolerance set's pattern keys reach every match."""
+    m = tolsynth.load_model("planar_3rrr")
+    assert m.n == 21 and not any(n.endswith(("bz", "pz")) for n in m.error_parameters)
+    eps = dict(zip(m.error_parameters, m.tolerances("coarse")))
+    assert eps["R2.py"] == 0.02 and eps["R3.offset"] == 0.2 and m.units[m.index("R3.offset")] == "mrad"
+    h = tolsynth.load_model("stewart_gough")
+    assert h.n == 42 and h.units == ("mm",) * 42
+
+
+def _sigma(m, q, eps, c=3.0):
+    """Largest principal standard deviation (mm) from the sensitivity matrix, by NumPy."""
+    S = m.sensitivity(q)[:3]
+    return float(np.sqrt(np.linalg.eigvalsh(S @ np.diag(eps**2 / c) @ S.T).max()))
+
+
+@pytest.mark.parametrize("name", ["stewart_gough", "delta", "planar_3rrr"])
+def test_synthesis_meets_the_specification(name):
+    """Components: every principal sigma z / R <= 1 at the optimum (NumPy eigenvalues), certified."""
+    m = tolsynth.load_model(name)
+    res = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home")
+    assert res.success and res.gap <= 1e-6 * res.cost
+    assert _sigma(m, "home", res.x) * z_of_p(0.99) / 0.1 <= 1 + 1e-6
+
+
+def test_orientation_constraint_binds_on_the_hexapod():
+    """A tight Phi makes the platform's rotation the active constraint and raises the cost; the
+    rotation's principal sigma then meets Phi (NumPy, rows 3-5 of the sensitivity)."""
+    m = tolsynth.load_model("stewart_gough")
+    free = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home")
+    tight = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home", Phi=2e-5)
+    assert tight.success and tight.cost > 1.01 * free.cost
+    So = m.sensitivity("home")[3:]
+    sig_o = np.sqrt(np.linalg.eigvalsh(So @ np.diag(tight.x**2 / 3) @ So.T).max())
+    assert sig_o * z_of_p(0.99) / 2e-5 <= 1 + 1e-6
+
+
+def test_servo_errors_of_revolute_actuators_and_what_is_refused():
+    """A servo error on a Delta arm acts as that arm's zero offset (same sensitivity column);
+    clearances and strut servo errors are typed errors."""
+    d = tolsynth.load_model("delta")
+    d2 = d.with_joint_errors([tolsynth.JointError("theta2", "servo", value=0.1, unit="mrad")])
+    S = d2.sensitivity("corner")
+    assert np.allclose(S[:, -1], S[:, d.index("A2.offset")], rtol=0, atol=1e-12)
+    h = tolsynth.load_model("stewart_gough")
+    with pytest.raises(InputError, match="strut"):
+        h.with_joint_errors([tolsynth.JointError("q1", "servo", value=0.1, unit="mrad")]).sensitivity("home")
+    with pytest.raises(InputError):
+        h.with_joint_errors([tolsynth.JointError("q1", "clearance", value=0.01)])
+
+
+def test_map_points_invert_the_forward_kinematics():
+    """The map's closed-form IK: at every reachable point the forward kinematics of its actuators
+    is the grid point with the home orientation, and P there is the analysis' sphere probability."""
+    m = tolsynth.load_model("delta")
+    pm = tolsynth.probability_map(m, "coarse", R=0.3, n=12, progress=False)
+    idx = np.argwhere(np.isfinite(pm.P))
+    assert idx.shape[0] > 20
+    for a, b in idx[:: max(1, idx.shape[0] // 8)]:
+        q = pm.Q[:, a, b]
+        T = m.fk(q)
+        assert np.allclose(T[:3, 3], [pm.u[b], 0.0, pm.v[a]], atol=1e-8)
+        assert abs(m.analyze(q, "coarse", R=0.3).p_sphere - pm.P[a, b]) <= 1e-9
+
+
+@pytest.mark.slow
+def test_workspace_design_holds_over_the_actuator_box():
+    """synthesize_workspace on the Delta: at its tolerances, sigma z / R <= 1 + tol at every point
+    of a brute-force grid over the actuator box (NumPy eigenvalues per pose)."""
+    m = tolsynth.load_model("delta")
+    ws = tolsynth.synthesize_workspace(m, R=0.1, p=0.99, pose="home", tol=1e-3)
+    assert ws.success
+    lo, hi = (np.array([getattr(j, k) for j in m.spec.joints]) for k in ("lower", "upper"))
+    g = np.linspace(0, 1, 7)
+    worst = max(_sigma(m, lo + (hi - lo) * np.array(u), ws.result.x)
+                for u in np.array(np.meshgrid(g, g, g)).reshape(3, -1).T)
+    assert worst * z_of_p(0.99) / 0.1 <= 1 + 2e-3
+
+
+def test_contributions_of_anchors_and_leg_offsets():
+    """Each parameter's share of the total variance tr V at the optimum is its term
+    eps_i^2 |a_i|^2 / 3 over the sum (NumPy from the sensitivity matrix); anchors and leg offsets
+    together make all of it."""
+    m = tolsynth.load_model("stewart_gough")
+    res = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home")
+    c = tolsynth.contributions(res)
+    A = m.sensitivity("home")[:3]
+    terms = res.x**2 * (A**2).sum(axis=0) / 3
+    assert np.allclose(c.total_share[0], terms / terms.sum(), rtol=0, atol=1e-12)
+    offsets = [i for i, n in enumerate(m.error_parameters) if n.endswith(".offset")]
+    assert len(offsets) == 6 and 0 < c.total_share[0][offsets].sum() < 1
