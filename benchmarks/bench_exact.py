@@ -1,64 +1,113 @@
-"""The acceptance table: the uniform columns of Tables 1-2 (xu_zhang_1988, R = 0.5 mm,
-alpha 0.7, p = 0.7, 0.8, 0.9, 0.99) designed with the Gaussian reading (the paper's) and with the
-exact probabilities, each checked by the nonlinear Monte Carlo along its binding direction
-(the worst direction of the exact design; the same direction for the Gaussian one), 99 % Wilson
-intervals.  Also the sphere criterion, and the times.
+"""The exact design's speed and certificate, paired in one run against the lean cvxpy + Clarabel
+model of the Gaussian problem (benchmarks/lean_cvxpy.py: a cold solve is building plus solving).
 
-    python benchmarks/bench_exact.py [--n 400000] [--sphere]
+Rows (medians over ``--repeat`` runs, a new R each time so no solve repeats another):
+
+* the paper's robot (xu_zhang_1988 at its worst pose), uniform and mixed shapes, p = 0.7, 0.9,
+  0.99: the exact solve's time, its ratio to one cold cvxpy solve of the Gaussian problem
+  (target <= 8x), its cost, gap and the certificate's status;
+* ``verify=True`` at p = 0.99: the time it adds (target < 1 s);
+* puma560 at 30 random poses (target < 5 s);
+* the sphere criterion against the component one at p = 0.9 (target <= 10x);
+* all-normal errors: the exact path's time against the Gaussian path's (the same problem).
+
+    python benchmarks/bench_exact.py [--repeat 3]
 """
 
 from __future__ import annotations
 
 import argparse
+import statistics
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 import tolsynth
-from tolsynth.probability.exact import direction_probability
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+MIXED = {"*": "uniform", "h2": "normal", "s1": "triangular", "alpha3": "truncnormal"}
+
+
+def _cold_cvxpy(m, R, p, distribution):
+    """One cold lean cvxpy + Clarabel solve of the Gaussian problem (build + solve), seconds."""
+    try:
+        from lean_cvxpy import LeanModel
+    except ImportError:  # the reference model is not there: no ratio
+        return float("nan")
+    t0 = time.perf_counter()
+    LeanModel(m, poses=("worst",), distribution=distribution).solve(R, p)
+    return time.perf_counter() - t0
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--n", type=int, default=400_000, help="Monte Carlo samples per design (default 400000)")
-    ap.add_argument("--sphere", action="store_true", help="also the sphere criterion")
+    ap.add_argument("--repeat", type=int, default=3, help="runs per row (default 3; medians)")
     args = ap.parse_args()
+    rng = np.random.default_rng(0)
     m = tolsynth.load_model("xu_zhang_1988")
-    A = m.sensitivity(m.joints("worst"))[:3]
-    sh = ["uniform"] * m.n
-    R = 0.5
-    print(f"xu_zhang_1988, R = {R} mm, uniform errors, alpha 0.7; Monte Carlo n = {args.n}, 99 % intervals")
-    print(f"{'p':>5} | {'Gaussian cost':>13} {'exact cost':>10} {'diff':>7} | "
-          f"{'exact P along w*':>16} {'MC at exact design':>28} {'p in CI':>7} | {'Gaussian design: exact P':>24} "
-          f"{'MC':>8} | {'t exact s':>9}")
-    for p in (0.7, 0.8, 0.9, 0.99):
-        g = tolsynth.synthesize(m, R=R, p=p)
+    tolsynth.synthesize(m, R=0.5, p=0.9, probability="gaussian")  # graphs built once, outside the timings
+    print(f"xu_zhang_1988 at its worst pose; medians of {args.repeat} runs, a new R each time\n")
+    print(f"{'shapes':>8} {'p':>5} | {'exact s':>8} {'cvxpy s':>8} {'ratio':>6} | {'cost':>10} {'gap/cost':>9} "
+          f"{'rounds':>6} {'status':>18}")
+    for name, dist in (("uniform", "uniform"), ("mixed", MIXED)):
+        for p in (0.7, 0.9, 0.99):
+            te, tc, last = [], [], None
+            for _ in range(args.repeat):
+                R = 0.5 * (1 + 0.02 * rng.random())
+                tc.append(_cold_cvxpy(m, R, p, dist))
+                t0 = time.perf_counter()
+                last = tolsynth.synthesize(m, R=R, p=p, distribution=dist, probability="exact")
+                te.append(time.perf_counter() - t0)
+            e, c = statistics.median(te), statistics.median(tc)
+            print(f"{name:>8} {p:5.2f} | {e:8.3f} {c:8.3f} {e / c:6.1f} | {last.cost:10.4f} "
+                  f"{last.gap / last.cost:9.1e} {len(last.history):6d} {str(last.status):>18}")
+    # verify=True at p = 0.99: the time it adds
+    tv = []
+    for _ in range(args.repeat):
+        R = 0.5 * (1 + 0.02 * rng.random())
         t0 = time.perf_counter()
-        e = tolsynth.synthesize(m, R=R, p=p, probability="exact")
-        te = time.perf_counter() - t0
-        w = e.constraints[0].directions[:, 0]
-        Pe = direction_probability(w @ A * e.x, sh, R)
-        Pg = direction_probability(w @ A * g.x, sh, R)
-        mce = tolsynth.monte_carlo(m, "worst", e.x, R=R, n=args.n, seed=1, directions=w[:, None], confidence=0.99)
-        mcg = tolsynth.monte_carlo(m, "worst", g.x, R=R, n=args.n, seed=2, directions=w[:, None], confidence=0.99)
-        lo, hi = mce.p_directions_ci[0]
-        print(f"{p:5.2f} | {g.cost:13.4f} {e.cost:10.4f} {100 * (e.cost / g.cost - 1):+6.2f}% | "
-              f"{Pe:16.7f} {mce.p_directions[0]:10.5f} [{lo:.5f}, {hi:.5f}] {str(bool(lo <= p <= hi)):>7} | "
-              f"{Pg:24.5f} {mcg.p_directions[0]:8.5f} | {te:9.1f}")
-    if args.sphere:
-        print("\nsphere criterion P(|dr| <= R) >= p")
-        for p in (0.7, 0.8, 0.9, 0.99):
-            g = tolsynth.synthesize(m, R=R, p=p, criterion="sphere")
-            t0 = time.perf_counter()
-            e = tolsynth.synthesize(m, R=R, p=p, criterion="sphere", probability="exact")
-            te = time.perf_counter() - t0
-            mce = tolsynth.monte_carlo(m, "worst", e.x, R=R, n=args.n, seed=3, confidence=0.99)
-            mcg = tolsynth.monte_carlo(m, "worst", g.x, R=R, n=args.n, seed=4, confidence=0.99)
-            lo, hi = mce.p_sphere_ci
-            print(f"{p:5.2f} | Gaussian {g.cost:10.4f} (MC {mcg.p_sphere:.5f}) | exact {e.cost:10.4f} "
-                  f"({100 * (e.cost / g.cost - 1):+.2f}%), MC {mce.p_sphere:.5f} [{lo:.5f}, {hi:.5f}] "
-                  f"p in CI {bool(lo <= p <= hi)} | {te:.1f} s")
-    np.set_printoptions(precision=4)
+        tolsynth.synthesize(m, R=R, p=0.99, probability="exact")
+        t1 = time.perf_counter()
+        tolsynth.synthesize(m, R=R, p=0.99, probability="exact", verify=True, seed=1)
+        tv.append((time.perf_counter() - t1) - (t1 - t0))
+    print(f"\nverify=True at p = 0.99 adds {statistics.median(tv):.2f} s (median)")
+    # puma560 at 30 random poses
+    from lean_cvxpy import random_poses
+
+    pm = tolsynth.load_model("puma560")
+    qs = random_poses(pm, 30, rng)
+    t0 = time.perf_counter()
+    r = tolsynth.synthesize(pm, R=1.0, p=0.95, poses=qs, probability="exact")
+    print(f"puma560, 30 random poses, p = 0.95: {time.perf_counter() - t0:.2f} s, {r.status}, "
+          f"gap/cost {r.gap / r.cost:.1e}")
+    # sphere against components
+    ts, tcmp = [], []
+    for _ in range(args.repeat):
+        R = 0.5 * (1 + 0.02 * rng.random())
+        t0 = time.perf_counter()
+        tolsynth.synthesize(m, R=R, p=0.9, probability="exact")
+        t1 = time.perf_counter()
+        s = tolsynth.synthesize(m, R=R, p=0.9, criterion="sphere", probability="exact")
+        ts.append(time.perf_counter() - t1)
+        tcmp.append(t1 - t0)
+    print(f"sphere p = 0.9: {statistics.median(ts):.2f} s against components {statistics.median(tcmp):.2f} s "
+          f"({statistics.median(ts) / statistics.median(tcmp):.1f}x); {s.status}, cost {s.cost:.4f}, "
+          f"bound {s.lower_bound:.4f}")
+    # all-normal: the Gaussian path
+    tn, tg = [], []
+    for _ in range(args.repeat):
+        R = 0.5 * (1 + 0.02 * rng.random())
+        t0 = time.perf_counter()
+        tolsynth.synthesize(m, R=R, p=0.99, distribution="normal", probability="exact")
+        t1 = time.perf_counter()
+        tolsynth.synthesize(m, R=R * 1.001, p=0.99, distribution="normal", probability="gaussian")
+        tn.append(t1 - t0)
+        tg.append(time.perf_counter() - t1)
+    print(f"all-normal p = 0.99: exact path {1e3 * statistics.median(tn):.2f} ms, Gaussian path "
+          f"{1e3 * statistics.median(tg):.2f} ms")
 
 
 if __name__ == "__main__":
