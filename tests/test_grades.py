@@ -214,3 +214,26 @@ def test_lagrangian_bound_holds_at_every_feasible_point(probability):
     assert hits > 30
     # at the continuous optimum the bound is tight (the multipliers are its own)
     assert float(np.sum(res.spec.k * res.x ** -res.spec.alpha + w * res.x**q) - T) == pytest.approx(res.cost, rel=1e-6)
+
+
+def test_exact_feasibility_is_the_certified_cover():
+    # the exact reading's leaf check: every direction proven to reach p - 1e-7; its value, P along
+    # the worst direction, against a Monte Carlo of the linear model along 180 in-plane directions
+    from tolsynth.problem.specification import make_specification
+    from tolsynth.synthesis.grades import constraint_values, meets
+
+    m = tolsynth.load_model("planar_2r")
+    spec = make_specification(m, 0.5, 0.99, "uniform")
+    eps = tolsynth.synthesize(m, R=0.5, p=0.99, distribution="uniform", probability="gaussian").x
+    assert meets(spec, "exact", 0.8 * eps) and not meets(spec, "exact", 1.3 * eps)
+    v = constraint_values(spec, "exact", eps)[0]
+    worst = 1.0 - v * (1.0 - 0.99)
+    A = spec.blocks[0].A
+    assert np.allclose(A[2], 0.0)  # a planar arm: the worst direction lies in its plane
+    rng = np.random.default_rng(11)
+    U = rng.uniform(-1.0, 1.0, size=(400_000, spec.n)) * eps
+    phi = np.linspace(0.0, np.pi, 180, endpoint=False)
+    W = np.stack([np.cos(phi), np.sin(phi)])
+    P = (np.abs(U @ A[:2].T @ W) <= 0.5).mean(axis=0)
+    se = math.sqrt(0.01 * 0.99 / len(U))
+    assert P.min() - 4 * se - 1e-3 <= worst <= P.min() + 4 * se  # the 1-degree grid may miss the minimum a little
