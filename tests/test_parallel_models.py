@@ -15,10 +15,9 @@ import numpy as np
 import pytest
 
 import tolsynth
+from model_text import model_dict, toml_text
 from tolsynth.errors import InputError, ModelFileError
 from tolsynth.probability.stats import z_of_p
-
-from model_text import model_dict, toml_text
 
 
 def _load(tmp_path, data):
