@@ -319,7 +319,7 @@ def _assemble(nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, inner, covers
     u = np.log(eps)
     cost = nlp.cost(eps)
     C, Rc, pc = (x[: lam.size] for x in cuts.arrays())  # cuts added after the last solve carry no multiplier
-    active = lam > 1e-12 * max(float(lam.max(initial=0.0)), 1e-300)
+    active = lam > 1e-6 * max(float(lam.max(initial=0.0)), 1e-300)  # the others add nothing to the bound
     lower, _ = half_space_bound(spec.costs, nlp.lu, nlp.uu, u, C[active], Rc[active], pc[active], shapes,
                                 lam[active] / (1 - pc[active]))
     Pcut, _ = probability(C * eps[None, :], shapes, Rc, 1e-12)

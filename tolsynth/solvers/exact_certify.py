@@ -237,10 +237,10 @@ def half_space_bound(costs, lu, uu, u_star, c_rows, R_rows, p_rows, shapes, lam0
         return math.fsum(val.tolist()), np.zeros(0)
     # each cut's half-space is taken where P = p (or just below): every tolerance scaled up by e^s
     P0, G0, _, _, _ = derivatives(c_rows, u_star, shapes, R_rows, tol=1e-12, hessian=False)
-    slope = np.maximum(-G0.sum(axis=1), 1e-300)  # -dP/ds
+    slope = np.maximum(-G0.sum(axis=1), 1e-12)  # -dP/ds
     s = np.maximum(P0 - p_rows, 0.0) / slope
     for _ in range(8):
-        Ps, es_ = probability(c_rows * np.exp(u_star + s[:, None]), shapes, R_rows, 1e-12)
+        Ps, es_ = probability(c_rows * np.exp(u_star + s[:, None]), shapes, R_rows, 1e-11)
         over = Ps + es_ - p_rows
         if np.all(over <= 0):
             break
@@ -268,19 +268,22 @@ def half_space_bound(costs, lu, uu, u_star, c_rows, R_rows, p_rows, shapes, lam0
     lam = np.maximum(np.asarray(lam0, dtype=float), 0.0)
     best, grad, Hd = dual(lam)
     best_lam = lam
-    for _ in range(30):  # projected Newton on the concave dual
+    for _ in range(40):  # projected Newton on the concave dual, gradient ascent where Newton stalls
         step = -np.linalg.lstsq(Hd - 1e-14 * np.abs(np.diag(Hd)).max() * np.eye(m), grad, rcond=None)[0]
-        if not np.all(np.isfinite(step)):
-            step = grad
         improved = False
-        a = 1.0
-        for _ in range(30):
-            trial = np.maximum(lam + a * step, 0.0)
-            v, gr, Hn = dual(trial)
-            if v > best:
-                improved = True
+        for direction in (step, grad * (np.abs(lam).max() + 1.0) / (np.abs(grad).max() + 1e-300)):
+            if not np.all(np.isfinite(direction)):
+                continue
+            a = 1.0
+            for _ in range(40):
+                trial = np.maximum(lam + a * direction, 0.0)
+                v, gr, Hn = dual(trial)
+                if v > best:
+                    improved = True
+                    break
+                a *= 0.5
+            if improved:
                 break
-            a *= 0.5
         if not improved:
             break
         gain = v - best

@@ -223,7 +223,7 @@ def _split(b, rw, budget):
     var_e = np.where(count > 0, np.take_along_axis(cv, np.maximum(count - 1, 0)[:, None], axis=1)[:, 0], 0.0)
     # the gradient's bound: a dropped term's own derivative is at most 2 b^2 Var(Y) sup|f'|; a kept
     # one's moves by at most 2 b_j Var(e) sup|f''|, sup|f''| from the three largest kept terms
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         S3 = 4.0 * p1[:, -1] * p1[:, -2] * p1[:, -3] / np.maximum(b1 * b2 * bs[:, -3], 1e-300) if n >= 3 else np.inf
     gdrop = 2.0 * b**2 * var[None, :] * S[:, None]
     gkeep = 2.0 * b * (var_e * S3)[:, None]
@@ -329,7 +329,13 @@ def derivatives(c, u, shapes: tuple, R, tol: float = 1e-12, hessian: bool = True
     b = c * np.exp(np.asarray(u, dtype=float))[None, :]
     # the dropped terms' own derivatives are second order in them: 0 here, bounded in gerr
     if n >= 3 and not ball:
+        b0 = b
         b, dropped, gerr = _split(b, rw, 0.25 * tol)
+        if rigorous:  # where the gradient's bound for the dropped terms is not small, keep them all
+            loose = gerr.max(axis=1) > tol
+            b = np.where(loose[:, None], b0, b)
+            dropped = np.where(loose, 0.0, dropped)
+            gerr = np.where(loose[:, None], 0.0, gerr)
     else:
         dropped, gerr = np.zeros(M), np.zeros((M, n))
     Rv = np.broadcast_to(np.asarray(R, dtype=float), (M,))
