@@ -458,7 +458,8 @@ DH_TO_URDF = {
 def _dh_mechanism(errors):
     links = [{"d": UR5_DH["d"][i], "a": UR5_DH["a"][i], "alpha": UR5_DH["alpha"][i], "limits": (-360, 360)}
              for i in range(6)]
-    return tolsynth.Mechanism.from_dh(links, name="ur5_dh", errors=errors)
+    # the table's twists and limits are degrees (as the UR data sheet gives them): said, not guessed
+    return tolsynth.Mechanism.from_dh(links, name="ur5_dh", errors=errors, angle_unit="deg")
 
 
 def test_ur5_same_optimum_from_urdf_and_dh_where_the_error_parameters_are_the_same():
