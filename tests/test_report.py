@@ -239,9 +239,11 @@ def test_cli_without_matplotlib_says_how_to_install(tmp_path, capsys, monkeypatc
 
 
 def test_exact_and_verified_design_says_so(tmp_path):
-    """probability="exact" with verify=: the report names the probability model, says there is no
-    convexity certificate, and shows the closed loop's Monte Carlo, whose printed interval is the
-    Wilson interval of its printed estimate and n (closed form, recomputed here)."""
+    """probability="exact" with verify=: the report names the probability model, states the exact
+    solver's certificate as the result holds it (certified only where the result succeeded and the
+    gap recomputed from the printed cost and bound is within 1e-6 of the cost), and shows the closed
+    loop's Monte Carlo, whose printed interval is the Wilson interval of its printed estimate and n
+    (closed form, recomputed here)."""
     path = tmp_path / "exact.html"
     rep = tolsynth.report("planar_2r", R=0.5, p=0.9, probability="exact", verify=4000, mc_samples=1000, seed=2,
                           map_n=0, worst_grid=0, path=path)
@@ -250,7 +252,8 @@ def test_exact_and_verified_design_says_so(tmp_path):
     text = path.read_text(encoding="utf-8")
     c = _parse(text)
     body = "".join(c.text)
-    assert "exact (the linear error model" in body and "no certificate of global optimality" in body
+    assert "exact (the linear error model" in body
+    _assert_exact_certificate_stated(body, res)
     ver = res.verification
     m = re.search(r"achieved ([0-9.]+) \[([0-9.]+), ([0-9.]+)\] against p = 0\.9", body)
     assert m, body[-3000:]
@@ -265,6 +268,42 @@ def test_exact_and_verified_design_says_so(tmp_path):
     assert len(rounds) - 1 == len(ver.rounds) >= 1
 
 
+def _assert_exact_certificate_stated(text: str, res) -> None:
+    """The certificate paragraph agrees with the printed numbers: the relative gap recomputed from
+    the printed cost and dual lower bound, and the solver's own status and message quoted."""
+    cost = float(re.search(r"cost\W*([0-9.eE+-]+)", text.split("4. Certificate", 1)[1]).group(1))
+    bound = float(re.search(r"dual lower bound\W*([0-9.eE+-]+)", text).group(1))
+    rel = (cost - bound) / cost
+    assert bound <= cost * (1 + 1e-12) and cost == pytest.approx(res.cost, rel=1e-7)
+    assert "no certificate of global optimality" not in text and "peak-density" not in text
+    assert f"The solver says: {res.status}" in text
+    if res.success:
+        assert rel <= 1e-6 and "Exact probabilities, certified optimum" in text
+    else:
+        assert "Exact probabilities, NOT certified" in text
+
+
+def test_exact_report_does_not_claim_a_certificate_the_result_lacks(tmp_path):
+    """The same design with its status turned to not-optimal (as when the branch and bound runs out):
+    the report then says NOT certified; the layout reads the result, not the probability model."""
+    import dataclasses
+
+    from tolsynth.io.report_layout import _layout
+    from tolsynth.problem.result import Status
+
+    rep = tolsynth.report("planar_2r", R=0.5, p=0.9, probability="exact", mc_samples=500, seed=3,
+                          map_n=0, worst_grid=0, path=tmp_path / "a.md")
+    assert rep.result.success
+    good = " ".join(str(b[1]) for b in _layout(rep) if b[0] in ("ok", "note"))
+    assert "Exact probabilities, certified optimum" in good
+    rep = dataclasses.replace(rep, result=dataclasses.replace(rep.result, status=Status.OPTIMAL_INACCURATE,
+                                                              success=False,
+                                                              message="exact probabilities: not certified (test)"))
+    bad = " ".join(str(b[1]) for b in _layout(rep) if b[0] in ("ok", "note"))
+    assert "Exact probabilities, NOT certified" in bad and "certified optimum" not in bad
+    assert "not certified (test)" in bad
+
+
 def test_cli_report_takes_probability_and_verify(tmp_path, capsys):
     out = tmp_path / "r.md"
     rc = main(["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.9", "--probability", "exact",
@@ -273,3 +312,4 @@ def test_cli_report_takes_probability_and_verify(tmp_path, capsys):
     text = out.read_text(encoding="utf-8")
     exact = tolsynth.synthesize("planar_2r", 0.5, 0.9, probability="exact")
     assert "| probability model | exact" in text and f"{exact.cost:.8g}" in text
+    _assert_exact_certificate_stated(text, exact)
