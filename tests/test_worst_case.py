@@ -173,6 +173,26 @@ def test_bad_inputs_are_typed():
     assert not res.success and "time limit" in res.message  # out of time: never an optimum
 
 
+def test_time_limit_reaches_the_worst_case_solve():
+    """synthesize(time_limit=) bounds the worst-case solve as options['time_limit'] does: a limit
+    far below the solve's time stops it honestly (not success, the message says so), measured by
+    a clock outside the package; the same call without it succeeds; bad or doubled limits are typed."""
+    import time
+
+    free = tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case")
+    assert free.success
+    t0 = time.perf_counter()
+    res = tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case", time_limit=1e-3)
+    assert time.perf_counter() - t0 < 30.0
+    assert not res.success and str(res.status) == "time_limit" and "time limit (0.001 s)" in res.message
+    for bad in (-1.0, "a", 0.0):
+        with pytest.raises(InputError, match="time_limit"):
+            tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case", time_limit=bad)
+    with pytest.raises(InputError, match="time_limit"):
+        tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case", time_limit=5.0,
+                            options={"time_limit": 5.0})
+
+
 def test_table_of_a_worst_case_design():
     pytest.importorskip("pandas")
     res = tolsynth.synthesize("planar_2r", R=0.5, p=0.9, probability="worst_case")

@@ -188,7 +188,7 @@ def synthesize(
         return synthesize(mechanism, **args)
     if probability == "worst_case":  # every error anywhere in its band: no p or distribution needed
         return _worst_case(mechanism, R, p, distribution, alpha, solver, k, bounds, pose, poses, Phi, p_orientation,
-                           criterion, cost, locks, x0, options, validate, verify)
+                           criterion, cost, locks, x0, options, validate, verify, time_limit)
     if R is None or p is None:
         missing = "R" if R is None else "p"
         raise InputError(missing, "missing", f"a value for {missing} (a keyword, or spec=DesignSpec({missing}=...))")
@@ -306,13 +306,20 @@ def _timed_out(nlp, solver: str, eps0, exc: TimeLimitError) -> SynthesisResult:
 
 
 def _worst_case(mechanism, R, p, distribution, alpha, solver, k, bounds, pose, poses, Phi, p_orientation, criterion,
-                cost, locks, x0, options, validate, verify):
+                cost, locks, x0, options, validate, verify, time_limit=None):
     """``probability="worst_case"`` (:mod:`tolsynth.synthesis.worst_case`), with the statistical
-    design at the same R and p beside it when p is given."""
+    design at the same R and p beside it when p is given; ``time_limit`` bounds the worst-case
+    solve (its ``options["time_limit"]``) and the statistical one alike."""
     from tolsynth.synthesis.worst_case import synthesize_worst_case
 
     if R is None:
         raise InputError("R", "missing", "a value for R (mm)")
+    if time_limit is not None:
+        if isinstance(options, dict) and "time_limit" in options:
+            raise InputError("time_limit", "given twice: time_limit= and options['time_limit']", "one of the two")
+        time_limit = check_time_limit(time_limit)
+        options = {**(options if isinstance(options, dict) else {}), "time_limit": time_limit} \
+            if options is None or isinstance(options, dict) else options
     for name, value in (("validate", validate), ("verify", verify)):
         if value is not None and value is not False:
             raise InputError(name, "given with probability='worst_case' (it reads no probability)",
@@ -323,7 +330,7 @@ def _worst_case(mechanism, R, p, distribution, alpha, solver, k, bounds, pose, p
 
     def statistical():
         return synthesize(mechanism, R, p, distribution, alpha, solver, p_orientation=p_orientation,
-                          criterion=criterion, **given)
+                          criterion=criterion, time_limit=time_limit, **given)
 
     return synthesize_worst_case(
         mechanism, R, p=p, alpha=alpha, solver=solver, k=k, bounds=bounds, pose=pose, poses=poses, Phi=Phi,
