@@ -310,11 +310,46 @@ def probability(b, shapes: tuple, R, tol: float = 1e-10):
         P[r], err[r] = Pr, er + ROUNDING + dropped[r]
     slow = np.flatnonzero(err > tol + ROUNDING)
     if slow.size:  # one term dominates (a near-jump): the reference evaluator's closed forms
-        from tolsynth.probability.exact import direction_probability
+        from tolsynth.probability.exact import direction_probability_batch
 
-        for r in slow:
-            P[r], err[r] = direction_probability(b[r], shapes, float(Rv[r]), tol=tol, return_error=True)
+        # one batch: the reference evaluator's rows are independent of each other, and its
+        # per-call overhead is most of its cost for a row
+        P[slow], err[slow] = direction_probability_batch(b[slow], shapes, Rv[slow], tol=tol)
     return np.clip(P, 0.0, 1.0), err
+
+
+def _series_block(b, R, L, K: int, rw: "Rows", hessian: bool, ball: bool):
+    """P, gradient and Hessian in u of rows ``b`` (m, n) that share their number of terms K."""
+    m, n = b.shape
+    k = np.arange(1, K + 1, dtype=float)
+    tau = np.pi * k[None, :] / L[:, None]  # (m, K)
+    phi = np.empty((m, K, n))
+    d1 = np.empty((m, K, n))
+    d2 = np.empty((m, K, n)) if hessian else None
+    for shp, ix in rw.groups:
+        f0, f1, f2 = _cf3(shp, tau[:, :, None] * b[:, None, ix], 2 if hessian else 1)
+        phi[:, :, ix], d1[:, :, ix] = f0, f1
+        if hessian:
+            d2[:, :, ix] = f2
+    s = _kernel(k, R, L, ball)  # (m, K)
+    # products without one factor, by prefix and suffix products (no division by phi)
+    pre = np.ones((m, K, n + 1))
+    np.cumprod(phi, axis=2, out=pre[:, :, 1:])
+    suf = np.ones((m, K, n + 1))
+    suf[:, :, :-1] = np.cumprod(phi[:, :, ::-1], axis=2)[:, :, ::-1]
+    others = pre[:, :, :-1] * suf[:, :, 1:]  # (m, K, n)
+    P = (0.0 if ball else R / L) + np.einsum("mk,mk->m", s, pre[:, :, -1])
+    sd1 = s[:, :, None] * d1 * others
+    G = sd1.sum(axis=1)
+    H = None
+    if hessian:
+        # without two factors: others / phi_j where phi_j is not tiny, else the product directly
+        safe = np.where(np.abs(phi) > 1e-150, phi, 1e-150)
+        Hm = np.matmul(sd1.transpose(0, 2, 1), d1 / safe)  # (m, n, n)
+        diag = (s[:, :, None] * d2 * others).sum(axis=1)
+        Hm[:, np.arange(n), np.arange(n)] = diag
+        H = 0.5 * (Hm + Hm.transpose(0, 2, 1))
+    return P, G, H
 
 
 def derivatives(c, u, shapes: tuple, R, tol: float = 1e-12, hessian: bool = True, rigorous: bool = False,
@@ -355,38 +390,20 @@ def derivatives(c, u, shapes: tuple, R, tol: float = 1e-12, hessian: bool = True
         from tolsynth.solvers.exact_closed import closed_rows
 
         closed = {long[r]: v for r, v in closed_rows(b[long], shapes, Rv[long], 2 if hessian else 1, tol).items()}
-    for r, Kg in enumerate(K):
-        if r in closed:
-            P[r], G[r], Hr, _ = closed[r]
+    for r, (Pr, Gr, Hr, _) in closed.items():
+        P[r], G[r] = Pr, Gr
+        if hessian:
+            H[r] = Hr
+    series = np.ones(M, dtype=bool)
+    series[list(closed)] = False
+    for Kg in np.unique(K[series]):
+        rows = np.flatnonzero(series & (K == Kg))
+        step = max(1, 400_000 // (int(Kg) * n))  # rows per batch: a few MB of work arrays
+        for a in range(0, rows.size, step):
+            r = rows[a : a + step]
+            P[r], G[r], Hr = _series_block(b[r], Rv[r], L[r], int(Kg), rw, hessian, ball)
             if hessian:
                 H[r] = Hr
-            continue
-        k = np.arange(1, Kg + 1, dtype=float)
-        tau = np.pi * k / L[r]
-        phi = np.empty((Kg, n))
-        d1 = np.empty((Kg, n))
-        d2 = np.empty((Kg, n))
-        for shp, ix in rw.groups:
-            f0, f1, f2 = _cf3(shp, tau[:, None] * b[r, ix][None, :], 2 if hessian else 1)
-            phi[:, ix], d1[:, ix] = f0, f1
-            if hessian:
-                d2[:, ix] = f2
-        s = _kernel(k, Rv[r : r + 1], L[r : r + 1], ball)[0]
-        # products without one factor, by prefix and suffix products (no division by phi)
-        pre = np.ones((Kg, n + 1))
-        np.cumprod(phi, axis=1, out=pre[:, 1:])
-        suf = np.ones((Kg, n + 1))
-        suf[:, :-1] = np.cumprod(phi[:, ::-1], axis=1)[:, ::-1]
-        others = pre[:, :-1] * suf[:, 1:]  # (K, n)
-        P[r] = (0.0 if ball else Rv[r] / L[r]) + s @ pre[:, -1]
-        G[r] = (s[:, None] * d1 * others).sum(axis=0)
-        if hessian:
-            # without two factors: others / phi_j where phi_j is not tiny, else the product directly
-            safe = np.where(np.abs(phi) > 1e-150, phi, 1e-150)
-            ratio = d1 / safe  # (K, n)
-            Hm = np.einsum("k,ki,kj->ij", s, d1 * others, ratio)
-            np.fill_diagonal(Hm, (s[:, None] * d2 * others).sum(axis=0))
-            H[r] = 0.5 * (Hm + Hm.T)
     errP = rw.tail(b, L, K) + ROUNDING + dropped
     if ball:  # the kernel's weight is (2/(k pi)) (1 + k pi R / L): one power of k more
         errP = errP * (1.0 + np.pi * K * Rv / L) * 2.0
