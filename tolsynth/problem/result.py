@@ -130,6 +130,7 @@ class SynthesisResult(Tabular):
             f"{self.solver}: {self.status} ({self.message})",
             f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})",
             f"iterations {self.iterations}, evaluations {self.function_evaluations}, {self.wall_time * 1e3:.1f} ms",
+            f"probabilities: {(self.inputs or {}).get('probability') or ('exact' if any(b.kind.endswith('(exact)') for b in self.constraints) else 'gaussian')}",
         ]
         spec = self.spec
         fixed = {n for n, a, b in zip(getattr(spec, "names", ()), getattr(spec, "lower", ()), getattr(spec, "upper", ()))
