@@ -310,11 +310,14 @@ def probability(b, shapes: tuple, R, tol: float = 1e-10):
         P[r], err[r] = Pr, er + ROUNDING + dropped[r]
     slow = np.flatnonzero(err > tol + ROUNDING)
     if slow.size:  # one term dominates (a near-jump): the reference evaluator's closed forms
-        from tolsynth.probability.exact import direction_probability_batch
+        from tolsynth.probability import exact as ref
 
-        # one batch: the reference evaluator's rows are independent of each other, and its
-        # per-call overhead is most of its cost for a row
-        P[slow], err[slow] = direction_probability_batch(b[slow], shapes, Rv[slow], tol=tol)
+        batch = getattr(ref, "direction_probability_batch", None)
+        if batch is not None:  # one call: its rows are independent, and its per-call overhead is most of a row's cost
+            P[slow], err[slow] = batch(b[slow], shapes, Rv[slow], tol=tol)
+        else:
+            for r in slow:
+                P[r], err[r] = ref.direction_probability(b[r], shapes, float(Rv[r]), tol=tol, return_error=True)
     return np.clip(P, 0.0, 1.0), err
 
 
