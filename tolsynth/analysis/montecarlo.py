@@ -42,9 +42,9 @@ import numpy as np
 from tolsynth.checks import check_count, check_seed
 from tolsynth.errors import InputError, LoopClosureError, OutOfRangeError
 from tolsynth.kinematics.numpy_eval import NumpyEvaluator
+from tolsynth.probability.stats import check_positive, check_probability, principal
 from tolsynth.progress import Progress, make_bar  # noqa: F401  (make_bar: re-exported for older imports)
 from tolsynth.tabular import Tabular
-from tolsynth.probability.stats import check_positive, check_probability, principal
 
 __all__ = [
     "NumpyEvaluator",
@@ -271,6 +271,8 @@ class MonteCarloResult(Tabular):
         "position": "mm", "mean": "mm", "covariance": "mm^2", "principal_std": "mm", "R": "mm",
         "q": "rad", "Phi": "rad", "tolerances": "each parameter's tolerance unit",
     })
+    #: the pose as a person reads it, each joint in its own unit (a strut's in mm, a revolute's in deg)
+    pose_text: str = ""
 
     def to_dict(self) -> dict:
         """Plain dict (arrays as lists) for JSON."""
@@ -281,7 +283,7 @@ class MonteCarloResult(Tabular):
         pct = int(round(100 * self.confidence))
         lines = [
             f"model        {self.model}",
-            f"pose         q = ({', '.join(f'{math.degrees(v):.4f}' for v in self.q)}) deg; "
+            f"pose         q = {self.pose_text or '(' + ', '.join(f'{math.degrees(v):.4f}' for v in self.q) + ') deg'}; "
             f"hand ({', '.join(f'{v:.3f}' for v in self.position)}) mm",
             f"errors       {_dist_text(self.distribution)}",
             f"samples      n = {self.n}, seed = {self.seed}, batch = {self.batch}; "
@@ -400,8 +402,8 @@ def monte_carlo(
     >>> r.n, r.seed, r.n_loop_failures
     (100000, 7, 0)
     """
-    from tolsynth.probability.distributions import resolve
     from tolsynth.kinematics.mechanism import as_mechanism
+    from tolsynth.probability.distributions import resolve
 
     mechanism = as_mechanism(mechanism)
     distribution = resolve(distribution, mechanism)
@@ -433,7 +435,7 @@ def monte_carlo(
     if mechanism.spec.loops:
         c0 = np.asarray(mechanism.graphs.closure(qv, np.zeros(mechanism.n))).ravel()
         if not np.all(np.abs(c0) <= 1):
-            raise LoopClosureError(f"a loop cannot close at the nominal dimensions at q = {np.degrees(qv).round(4).tolist()} deg")
+            raise LoopClosureError(f"a loop cannot close at the nominal dimensions at q = {mechanism.format_joints(qv)}")
     p0 = sampler.p0
     if Phi is not None:
         Uo = principal(ana.orientation_covariance)[1]
@@ -550,6 +552,7 @@ def monte_carlo(
     return MonteCarloResult(
         model=mechanism.name,
         q=qv,
+        pose_text=mechanism.format_joints(qv),
         position=p0.copy(),
         distribution=distribution,
         tolerances=dict(zip(mechanism.error_parameters, eps.tolist())),

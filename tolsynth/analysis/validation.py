@@ -14,9 +14,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from tolsynth.errors import InputError, WorkspaceWarning
 from tolsynth.analysis.montecarlo import DEFAULT_BATCH, MonteCarloResult, monte_carlo
 from tolsynth.checks import is_real
+from tolsynth.errors import InputError, WorkspaceWarning
 from tolsynth.probability.stats import check_probability
 from tolsynth.tabular import Tabular
 
@@ -93,15 +93,19 @@ class ValidationResult(Tabular):
         lines.append(f"P(|dr|<=R)  {self.p_sphere:.5f} [{lo:.5f}, {hi:.5f}]  analytic {self.p_sphere_analytic:.5f}  "
                      + ("met" if self.sphere_met else "below p (sphere is stricter than Eq. 20)"))
         if len(self.per_pose) > 1:
-            lines[0] += f"; the worst of {len(self.per_pose)} poses shown ({_label(self.pose)})"
+            lines[0] += f"; the worst of {len(self.per_pose)} poses shown ({_label(self)})"
             for v in self.per_pose:
-                lines.append(f"  pose {_label(v.pose)}: lowest P(|w_j|<=R) {float(np.min(v.p_components)):.5f}, "
+                lines.append(f"  pose {_label(v)}: lowest P(|w_j|<=R) {float(np.min(v.p_components)):.5f}, "
                              f"{'met' if v.met else 'NOT met'}")
         return "\n".join(lines)
 
 
-def _label(pose) -> str:
-    return pose if isinstance(pose, str) else "(" + ", ".join(f"{math.degrees(v):.4g}" for v in np.ravel(pose)) + ") deg"
+def _label(v: ValidationResult) -> str:
+    """The pose of a validation as a person reads it: its name, else each joint in its own unit
+    (a strut in mm), as its Monte Carlo run recorded it from the mechanism."""
+    if isinstance(v.pose, str):
+        return v.pose
+    return v.montecarlo.pose_text or "(" + ", ".join(f"{math.degrees(x):.4g}" for x in np.ravel(v.pose)) + ") deg"
 
 
 def _attr(obj, name):
