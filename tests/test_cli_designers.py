@@ -130,3 +130,28 @@ def test_every_bundled_model_with_the_default_probability(capsys, name):
     out = _json(capsys, ["budget", "--model", name, "--p", "0.99", "--cost", f"{budget:.12g}", "--rtol", "1e-3",
                          *pose])
     assert out["budget"]["certified"] and out["budget"]["value"] <= 1.0 + 1e-9
+
+
+def test_solve_worst_case_without_p(capsys):
+    """``solve --probability worst_case`` needs no --p: the design's hand error over every corner of
+    the error box (2^11 sign patterns, brute force on the sensitivity matrix) reaches R = 0.8 and no
+    further; with --p the statistical design's cost is beside it (the worst case about 69 % dearer)."""
+    import itertools
+
+    import numpy as np
+
+    out = _json(capsys, ["solve", "--model", "xu_zhang_1988", "--R", "0.8", "--probability", "worst_case"])
+    assert out["success"] and out["inputs"]["probability"] == "worst_case"
+    m = tolsynth.load_model("xu_zhang_1988")
+    A = np.asarray(m.sensitivity("worst"))[:3]
+    eps = np.array([out["tolerances"][n] for n in m.error_parameters])
+    worst = max(np.linalg.norm(A @ (np.array(s) * eps)) for s in itertools.product((-1.0, 1.0), repeat=len(eps)))
+    assert worst == pytest.approx(0.8, rel=1e-6)
+    both = _json(capsys, ["solve", "--model", "xu_zhang_1988", "--R", "0.8", "--p", "0.99", "--probability",
+                          "worst_case"])
+    assert both["cost"] == pytest.approx(out["cost"], rel=1e-9)
+    assert 1.6 < both["cost"] / both["statistical"]["cost"] < 1.8
+    for bad in (["--solver", "both"], ["--everywhere"], ["--criterion", "sphere"]):
+        assert main(["solve", "--model", "planar_2r", "--R", "0.5", "--probability", "worst_case", *bad]) == 2
+    assert main(["solve", "--model", "planar_2r", "--R", "0.5"]) == 2  # a statistical design needs --p
+    assert "--p" in capsys.readouterr().err

@@ -21,9 +21,11 @@ import numpy as np
 
 from tolsynth.checks import check_writable_path
 from tolsynth.errors import InputError, UnknownNameError
-from tolsynth.kinematics.mechanism import Mechanism
 from tolsynth.io.tables import jsonable
-from tolsynth.units import QUANTITY as _QTY, SUFFIXES, split_quantity, suffixes as _suffixes, to_base, unit_kind
+from tolsynth.kinematics.mechanism import Mechanism
+from tolsynth.units import QUANTITY as _QTY
+from tolsynth.units import SUFFIXES, split_quantity, to_base, unit_kind
+from tolsynth.units import suffixes as _suffixes
 
 __all__ = [
     "dist_for",
@@ -55,7 +57,8 @@ _WILDCARD = re.compile(r"[*?\[]")
 def version() -> str:
     """The installed package version (the distribution's metadata, else ``tolsynth.__version__``)."""
     try:
-        from importlib.metadata import PackageNotFoundError, version as _v
+        from importlib.metadata import PackageNotFoundError
+        from importlib.metadata import version as _v
 
         try:
             return _v("tolsynth")
@@ -520,15 +523,18 @@ def _verify_arg(text: str):
     return n
 
 
-def add_specification_arguments(p: argparse.ArgumentParser, solvers=("ipopt", "sumt")) -> None:
+def add_specification_arguments(p: argparse.ArgumentParser, solvers=("ipopt", "sumt"), worst_case: bool = False) -> None:
     """The arguments of one tolerance specification, shared by ``solve`` and ``report``: model, R, p,
     distribution, cost (alpha, k, bounds), solver, poses, orientation, criterion, probability,
-    verification and locked tolerances.  ``solvers``: the ``--solver`` choices."""
+    verification and locked tolerances.  ``solvers``: the ``--solver`` choices; ``worst_case``:
+    ``--probability worst_case`` offered (then ``--p`` is optional; the command checks it)."""
     add_model_argument(p)
     p.add_argument("--R", type=length_mm("--R"), required=True,
                    help="position accuracy radius, mm (or with a suffix: 500um)")
-    p.add_argument("--p", type=number("--p", "0 < p < 1"), required=True,
-                   help="probability per principal component (or of the sphere), 0 < p < 1")
+    p.add_argument("--p", type=number("--p", "0 < p < 1"), required=not worst_case, default=None,
+                   help="probability per principal component (or of the sphere), 0 < p < 1"
+                        + ("; not needed with --probability worst_case (given: the statistical design's cost "
+                           "is shown beside it)" if worst_case else ""))
     add_dist_argument(p)
     p.add_argument("--alpha", default=None,
                    help="cost exponent: VALUE for every parameter, name=VALUE or pattern=VALUE overrides "
@@ -552,9 +558,12 @@ def add_specification_arguments(p: argparse.ArgumentParser, solvers=("ipopt", "s
                    help="probability of the orientation specification, 0 < p < 1; default: --p")
     p.add_argument("--criterion", choices=["components", "sphere"], default="components",
                    help="per principal component (the paper's Eq. 20) or the sphere P(|dr| <= R) >= p")
-    p.add_argument("--probability", choices=["gaussian", "exact"], default="gaussian",
+    p.add_argument("--probability", choices=["gaussian", "exact"] + (["worst_case"] if worst_case else []),
+                   default="gaussian",
                    help="gaussian (the paper's: each principal component read as normal) or exact (the exact "
-                        "probabilities of the linear error model, along every direction or in the sphere)")
+                        "probabilities of the linear error model, along every direction or in the sphere)"
+                        + ("; worst_case: every error anywhere in its band, the hand still within R (no p)"
+                           if worst_case else ""))
     p.add_argument("--verify", default=None, type=_verify_arg, metavar="N|auto",
                    help="close the loop: nonlinear Monte Carlo at the optimum with N samples per pose (auto: from p), "
                         "and a tighter target until its 99%% lower bound reaches p; default: off")

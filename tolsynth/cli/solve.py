@@ -6,15 +6,12 @@ import sys
 
 import numpy as np
 
-from tolsynth.errors import InputError
-from tolsynth.progress import Working
-from tolsynth.kinematics.mechanism import load_model
 from tolsynth.cli.args import (  # noqa: I001
     add_specification_arguments,
-    dist_for,
-    dist_label,
     add_table_out_argument,
     check_table_out,
+    dist_for,
+    dist_label,
     emit_json,
     inputs_record,
     parse_bounds,
@@ -24,6 +21,9 @@ from tolsynth.cli.args import (  # noqa: I001
     pose_label,
     write_out,
 )
+from tolsynth.errors import InputError
+from tolsynth.kinematics.mechanism import load_model
+from tolsynth.progress import Working
 
 __all__ = ["register", "side_by_side"]
 
@@ -120,8 +120,18 @@ def cmd_solve(args) -> int:
     mech = load_model(args.model)
     if hasattr(args, "dist"):
         args.dist = dist_for(args, mech)
+    if args.probability == "worst_case":
+        for flag, given in (("--solver both", args.solver == "both"), ("--everywhere", args.everywhere),
+                            ("--criterion sphere", args.criterion == "sphere")):
+            if given:
+                raise InputError(flag.split()[0], f"{flag} with --probability worst_case",
+                                 "one worst-case solve at given poses (ipopt; every direction, so no sphere option)")
+    elif args.p is None:
+        raise InputError("--p", "missing", "0 < p < 1 (only --probability worst_case reads no p)")
     alpha, kw = _spec_kwargs(mech, args)
-    head = (f"{mech.name}: R={args.R:g} mm, p={args.p:g}, alpha={args.alpha or 0.7}, {dist_label(args.dist)} errors"
+    p_text = "worst case" if args.p is None else f"p={args.p:g}"
+    head = (f"{mech.name}: R={args.R:g} mm, {p_text}, alpha={args.alpha or 0.7}, "
+            + ("errors anywhere in their bands" if args.p is None else f"{dist_label(args.dist)} errors")
             + (f", Phi={args.Phi:g} rad" if args.Phi is not None else ""))
     record = dict(R_mm=args.R, p=args.p, distribution=args.dist, alpha=alpha, criterion=args.criterion,
                   Phi_rad=args.Phi, p_orientation=kw.get("p_orientation"), solver=args.solver,
@@ -199,7 +209,7 @@ def cmd_solve(args) -> int:
             _print_contributions(reps)
         ok = c.ipopt.success and c.sumt.success
     else:
-        with Working(f"tolsynth solve: the {args.solver.upper()} solve" + (" (exact probabilities)" if args.probability == "exact" else "")):
+        with Working(f"tolsynth solve: the {args.solver.upper()} solve" + (f" ({args.probability.replace('_', '-')} probabilities)" if args.probability != "gaussian" else "")):
             res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
         reps = _contributions(args, {"the optimum": res})
         if args.out:
@@ -261,7 +271,7 @@ def register(sub) -> None:
         description="Cheapest tolerances such that each principal component of the hand position error "
                     "stays within R with probability p (the paper's Eq. 20), or the sphere P(|dr| <= R) >= p; "
                     "at one or more poses, or at every reachable pose (--everywhere).")
-    add_specification_arguments(p, ("ipopt", "sumt", "both"))
+    add_specification_arguments(p, ("ipopt", "sumt", "both"), worst_case=True)
     p.add_argument("--everywhere", action="store_true",
                    help="impose the constraint at every reachable pose (exchange method with the worst-pose search)")
     p.add_argument("--reference", default=None,
