@@ -54,3 +54,38 @@ def test_process_errors():
     with pytest.raises(tolsynth.InfeasibleSpecificationError):
         synthesize_processes(mech, 0.05, 0.99, only_coarse)
     assert math.isfinite(synthesize_processes(mech, 0.5, 0.99, {"l1": _processes()["l1"]}).cost)
+
+
+@pytest.mark.slow
+def test_worst_case_process_choice_matches_brute_force():
+    """probability="worst_case": the Gaussian multipliers bound nothing there, so the nodes are
+    bounded by their cheapest box cost and the leaves by their own certified solves; the search
+    still proves the brute-force optimum over the 36 combinations (23.168 at R 0.5; ~13 s)."""
+    mech = tolsynth.load_model("planar_2r")
+    best = synthesize_processes(mech, 0.5, None, _processes(), probability="worst_case")
+    brute = [(c, r) for c, r in enumerate_processes(mech, 0.5, None, _processes(), probability="worst_case")
+             if r is not None and r.success]
+    choice, ref = min(brute, key=lambda cr: cr[1].cost)
+    assert best.proven and best.result.success and best.processes == choice
+    assert best.cost == pytest.approx(ref.cost, rel=1e-7)
+    assert best.lower_bound <= ref.cost * (1 + 1e-9) and best.gap <= 1e-6 * best.cost
+
+
+@pytest.mark.slow
+def test_exact_process_choice_matches_brute_force():
+    """probability="exact" on two processes of one parameter: the proven choice is the cheaper of
+    the two leaves solved separately, and its bound is below both."""
+    mech = tolsynth.load_model("planar_2r")
+    procs = {"l1": _processes()["l1"][:2]}
+    best = synthesize_processes(mech, 0.5, 0.9, procs, probability="exact")
+    brute = [(c, r) for c, r in enumerate_processes(mech, 0.5, 0.9, procs, probability="exact")
+             if r is not None and r.success]
+    choice, ref = min(brute, key=lambda cr: cr[1].cost)
+    assert best.proven and best.processes == choice
+    assert best.cost == pytest.approx(ref.cost, rel=1e-7)
+    assert best.lower_bound <= ref.cost * (1 + 1e-9)
+
+
+def test_process_choice_refuses_an_unknown_probability():
+    with pytest.raises(tolsynth.InputError, match="probability.*'gaussian' or 'exact' or 'worst_case'"):
+        synthesize_processes("planar_2r", 0.5, 0.99, {"l1": _processes()["l1"]}, probability="bogus")

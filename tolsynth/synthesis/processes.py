@@ -20,6 +20,13 @@ processes' costs over the union of their ranges.  A leaf (every process fixed) i
 problem, solved and certified by :func:`tolsynth.synthesize`.  Nodes whose bound is not below the
 incumbent (within ``rel_gap``) are pruned; the optimum is proven when every node is closed, and
 ``lower_bound`` is the smallest bound over the closed nodes and leaves.
+
+Other probability models.  The Lagrangian above reads the Gaussian constraint; with
+``probability="exact"`` or ``"worst_case"`` its multipliers bound nothing.  A node's bound is then
+the cheapest cost inside the node's ranges (every tolerance at its cheapest point: a bound for any
+constraint at all, loose), and a leaf's bound is its own solve's certified ``lower_bound`` where that
+solve succeeded (else the same box bound).  The relaxations still guide the branching and the
+rounding; the search is proven only by those valid bounds, so it may solve more leaves.
 """
 
 from __future__ import annotations
@@ -33,14 +40,16 @@ from typing import Mapping
 
 import numpy as np
 
-from tolsynth.model.cost import CostModel, Tabulated
 from tolsynth.errors import InfeasibleSpecificationError, InputError
+from tolsynth.model.cost import CostModel, Tabulated
 from tolsynth.model.process import Process
 
 __all__ = ["Process", "ProcessChoice", "synthesize_processes", "enumerate_processes"]
 
 #: knots of the relaxation's hull table
 _HULL_KNOTS = 24
+#: the probability models a process choice accepts (each with a valid bound, see the docstring)
+_PROBABILITIES = ("gaussian", "exact", "worst_case")
 
 
 @dataclass(frozen=True)
@@ -167,6 +176,15 @@ class _Search:
             raise InputError("cost", "with processes, give per-parameter costs as a dict name -> model",
                              "a dict for the parameters without processes")
         self.user_bounds = self.kwargs.pop("bounds", None)
+        from tolsynth.synthesis.single import DEFAULT_PROBABILITY
+
+        prob = self.kwargs.get("probability")
+        prob = DEFAULT_PROBABILITY if prob is None else prob
+        if not isinstance(prob, str) or prob not in _PROBABILITIES:
+            raise InputError("probability", f"got {prob!r}", " or ".join(repr(s) for s in _PROBABILITIES))
+        self.probability = self.kwargs["probability"] = prob
+        if prob == "worst_case":  # reads no p: no statistical comparison design at every node
+            self.p = None
         self.solves = 0
         self.leaf_cache: dict[tuple, object] = {}
 
@@ -203,8 +221,34 @@ class _Search:
             return math.inf, None, None
         return self.node_bound(res, node), res.x, res
 
+    def box_bound(self, spec, node) -> float:
+        """The cheapest cost inside the node's ranges (its processes' for the listed parameters, the
+        specification's bounds for the others): a lower bound whatever the constraint is."""
+        open_set = dict(zip(self.names, node))
+        zero = np.zeros(1)
+        total = 0.0
+        for i, nm in enumerate(spec.names):
+            if nm in open_set:
+                total += min(float(pr.cost.dual_min(zero, math.log(pr.lower), math.log(pr.upper))[0][0])
+                             for pr in (self.procs[nm][j] for j in open_set[nm]))
+            else:
+                total += float(spec.costs.models[i].dual_min(zero, math.log(spec.lower[i]), math.log(spec.upper[i]))[0][0])
+        return total
+
+    def leaf_bound(self, choice: tuple, res) -> float:
+        """A leaf's certified lower bound: its solve's own where that is valid (the Gaussian dual
+        bound holds for any multipliers; another probability's only when its solve succeeded)."""
+        if res is None:
+            return math.inf
+        if self.probability == "gaussian" or res.success:
+            return res.lower_bound
+        return self.box_bound(res.spec, tuple((j,) for j in choice))
+
     def node_bound(self, res, node) -> float:
         from tolsynth.problem.nlp import ToleranceNLP
+
+        if self.probability != "gaussian":  # the Gaussian Lagrangian does not bound these
+            return self.box_bound(res.spec, node)
 
         nlp = ToleranceNLP(res.spec)
         best = -math.inf
@@ -239,7 +283,7 @@ class _Search:
         return tuple(choice)
 
 
-def synthesize_processes(mechanism, R: float, p: float, processes=None, distribution=None, *,
+def synthesize_processes(mechanism, R: float, p: float | None, processes=None, distribution=None, *,
                          rel_gap: float = 1e-6, max_nodes: int = 10_000, **kwargs) -> ProcessChoice:
     """Cheapest process per parameter and tolerances within it, with a proven optimum.
 
@@ -275,9 +319,8 @@ def synthesize_processes(mechanism, R: float, p: float, processes=None, distribu
     >>> best.processes["h3"], best.proven  # doctest: +SKIP
     ('turning', True)
     """
-    from tolsynth.kinematics.mechanism import as_mechanism
-
     from tolsynth.checks import check_count, check_real
+    from tolsynth.kinematics.mechanism import as_mechanism
 
     mechanism = as_mechanism(mechanism)
     rel_gap = check_real(rel_gap, "rel_gap", "(relative to the cost)", lower=0.0, upper=1.0)
@@ -322,7 +365,7 @@ def synthesize_processes(mechanism, R: float, p: float, processes=None, distribu
         if all(len(S) == 1 for S in node):
             choice = tuple(S[0] for S in node)
             res = consider(choice)
-            closed_bounds.append(math.inf if res is None else res.lower_bound)
+            closed_bounds.append(search.leaf_bound(choice, res))
             continue
         if eps is None:
             closed_bounds.append(bound)
@@ -344,12 +387,9 @@ def synthesize_processes(mechanism, R: float, p: float, processes=None, distribu
             if all(len(S) == 1 for S in child):
                 cb, ce = -math.inf, None  # a leaf: solved when popped
                 res = search.leaf(tuple(S[0] for S in child))
-                if res is not None:
-                    cb = res.lower_bound
-                    if res.success and (incumbent is None or res.cost < incumbent.cost):
-                        incumbent, inc_choice = res, tuple(S[0] for S in child)
-                else:
-                    cb = math.inf
+                cb = search.leaf_bound(tuple(S[0] for S in child), res)
+                if res is not None and res.success and (incumbent is None or res.cost < incumbent.cost):
+                    incumbent, inc_choice = res, tuple(S[0] for S in child)
             else:
                 cb, ce, _ = search.relax(child)
                 if ce is not None:
@@ -361,7 +401,7 @@ def synthesize_processes(mechanism, R: float, p: float, processes=None, distribu
         raise InfeasibleSpecificationError("processes", math.inf,
                                            "infeasible specification: no process combination meets it")
     open_bounds = [b for b, *_ in heap]
-    lower = min(closed_bounds + open_bounds + [incumbent.lower_bound])
+    lower = min(closed_bounds + open_bounds + [search.leaf_bound(inc_choice, incumbent)])
     lower = min(lower, incumbent.cost)
     gap = incumbent.cost - lower
     return ProcessChoice(
