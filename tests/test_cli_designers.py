@@ -155,3 +155,27 @@ def test_solve_worst_case_without_p(capsys):
         assert main(["solve", "--model", "planar_2r", "--R", "0.5", "--probability", "worst_case", *bad]) == 2
     assert main(["solve", "--model", "planar_2r", "--R", "0.5"]) == 2  # a statistical design needs --p
     assert "--p" in capsys.readouterr().err
+
+
+def test_grades_command(capsys, tmp_path):
+    """``tolsynth grades``: lengths rounded to ISO 286 grades at 300 mm, whose half widths are the
+    standard's table typed here (250-315 mm: IT11 320 um, IT12 520 um, IT10 210 um, IT13 810 um),
+    angles to a grade file; the --out CSV reads back with pandas.read_csv and no arguments."""
+    iso_half = {"IT10": 0.105, "IT11": 0.16, "IT12": 0.26, "IT13": 0.405}
+    grades = tmp_path / "g.toml"
+    grades.write_text('["o*"]\nA = 0.1\nB = 0.2\nC = 0.5\nD = 1.0\n', encoding="utf-8")
+    out = _json(capsys, ["grades", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--sizes", "l1=300,l2=0.3m",
+                         "--grades", str(grades)])
+    assert out["proven"] and out["cost"] >= out["continuous_cost"]
+    for n in ("l1", "l2"):
+        assert out["tolerances"][n] == pytest.approx(iso_half[out["grades"][n]], rel=1e-12)
+    for n in ("o1", "o2"):
+        assert out["tolerances"][n] == {"A": 0.1, "B": 0.2, "C": 0.5, "D": 1.0}[out["grades"][n]]
+    csv = tmp_path / "g.csv"
+    assert main(["grades", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--sizes", "300",
+                 "--grades", str(grades), "--out", str(csv)]) == 0
+    frame = pd.read_csv(csv).set_index("parameter")
+    assert frame.loc["l1", "grade"] == out["grades"]["l1"] and frame.loc["o2", "tolerance"] == out["tolerances"]["o2"]
+    capsys.readouterr()
+    for bad in (["--sizes", "l1=abc"], ["--sizes", "l1=3,l1=4"], ["--grades", str(tmp_path / "none.toml")]):
+        assert main(["grades", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", *bad]) == 2

@@ -24,13 +24,13 @@ import warnings
 from tolsynth.errors import TolsynthError
 from tolsynth.interrupts import Interrupts, QuietCasadiInterrupt, started_as_command
 from tolsynth.cli import analyze, montecarlo, report, reproduce, solve, sweep, workspace
-from tolsynth.cli import budget, models, pareto, processes
+from tolsynth.cli import budget, grades, models, pareto, processes
 from tolsynth.cli.args import HelpFormatter, add_pose_arguments, emit_json, parse_pose, parse_tolerances, version
 
 __all__ = ["main", "build_parser", "add_pose_arguments", "parse_pose", "parse_tolerances", "emit_json"]
 
 #: the modules that register sub-commands, in the order of the help text
-COMMANDS = [analyze, solve, report, sweep, reproduce, montecarlo, workspace, models, pareto, budget, processes]
+COMMANDS = [analyze, solve, report, sweep, reproduce, montecarlo, workspace, models, pareto, budget, processes, grades]
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_INPUT, EXIT_INTERRUPTED, EXIT_PIPE = 0, 1, 2, 130, 141
 
