@@ -217,7 +217,7 @@ def test_covariance_approaches_the_linear_model(xz):
 def test_loop_failures_are_counted_not_dropped(xz):
     eps = xz.tolerances("figure3")
     eps[xz.index("hp3")] = 300.0  # coupler +-300 mm: the parallelogram often cannot close
-    # (R = 50 mm: stats.p_ball is slow for R far below the largest sigma, see the issue report)
+    # (R = 50 mm: stats.p_ball is slow for R far below the largest sigma)
     r = monte_carlo(xz, "worst", eps, R=50.0, n=50_000, seed=4)
     assert 0 < r.n_loop_failures < r.n
     assert r.n == 50_000
