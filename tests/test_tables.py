@@ -70,7 +70,7 @@ def test_synthesis_round_trip(solved, tmp_path, fmt):
     assert (inputs["R_mm"], inputs["p"], inputs["distribution"], inputs["criterion"]) == (0.5, 0.99, "normal", "components")
     assert inputs["alpha"]["h3"] == 0.5 and inputs["alpha"]["h2"] == 0.7 and inputs["k"]["a"] == 2.0
     assert inputs["bounds"]["h2"] == [0.05, 1.0]
-    assert inputs["solver"] == "ipopt" and inputs["options"] == {"tol": 1e-10}
+    assert inputs["solver"] == "auto" and inputs["options"] == {"tol": 1e-10}
     np.testing.assert_allclose(inputs["poses_rad"]["worst"], solved.spec.poses["worst"], rtol=0, atol=0)
     assert summary["cost"] == solved.cost and summary["gap"] == solved.gap and summary["status"] == "optimal"
 

@@ -35,9 +35,9 @@ problem with the same p, which contains it (the sphere lies inside every compone
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
-from collections.abc import Sequence
 
 import casadi as ca
 import numpy as np
@@ -370,7 +370,7 @@ class ToleranceNLP:
         if m == 0:
             return np.zeros(n), 0.0
         Zs = np.asarray(Z, dtype=float).reshape(m, 3, 3)
-        lam, vec = np.linalg.eigh(0.5 * (Zs + Zs.transpose(0, 2, 1)))
+        lam, vec = eigh(0.5 * (Zs + Zs.transpose(0, 2, 1)))
         lam = np.maximum(lam, 0.0)
         Zp = (vec * lam[:, None, :]) @ vec.transpose(0, 2, 1)  # the PSD projection
         # w_i = sum_b (scale_b a_bi)^T Zp_b (scale_b a_bi) / c; tr Zp_b = sum of its eigenvalues

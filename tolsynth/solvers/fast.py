@@ -35,6 +35,7 @@ import numpy as np
 from tolsynth.model.cost import PowerLaw
 from tolsynth.problem.nlp import ToleranceNLP
 from tolsynth.problem.result import Status
+from tolsynth.progress import remaining
 from tolsynth.solvers.common import assemble
 from tolsynth.solvers.fast_ipm import kernel, kernel_status, unpack
 
@@ -58,6 +59,8 @@ MAX_ROUNDS = 30
 #: multipliers (fewest iterations on most problems), then, where that does not reach its accuracy,
 #: y an iterate of its own (robust where the minimiser moves by large factors between iterates)
 MODES = (False, True)
+#: ... the first at most this many iterations (it converges in 8-30 where it converges at all)
+FIRST_MODE_ITER = 40
 
 #: the active blocks of recent solves, by the blocks' sensitivity rows (free of R, p and the cost)
 _ACTIVE: "OrderedDict[bytes, np.ndarray]" = OrderedDict()
@@ -144,18 +147,24 @@ def solve_fast(nlp: ToleranceNLP, **options):
     while True:
         rounds += 1
         A = A_all if J is None else np.ascontiguousarray(A_all[J])
+        if remaining() <= 0:  # the time limit (tolsynth.progress.time_limit): IPOPT reports it
+            return None, "the time limit passed"
         for primal in MODES:
-            status, state, zb, info = solve(A, par, None, tol, max_iter, primal=primal)
+            limit = max_iter if primal else min(max_iter, FIRST_MODE_ITER)
+            status, state, zb, info = solve(A, par, None, tol, limit, primal=primal)
             iterations += int(info[6])
-            history.append({"round": rounds, "iteration": int(info[0]), "objective": float(info[2]) * f_ref,
-                            "inf_pr": float(info[4]), "inf_du": float(info[3]) / max(float(info[2]), 1e-300)})
+            Z, _, y = unpack(state, A.shape[0], n)
+            eps = np.minimum(np.maximum(np.sqrt(y), lo), hi)  # as assemble clips it (the same memo)
+            # one entry per run of the method: its best iterate's cost, primal residual and
+            # complementarity relative to the cost
+            history.append({"round": rounds, "mode": "iterate" if primal else "minimiser",
+                            "iteration": int(info[0]), "objective": nlp.cost(eps), "inf_pr": float(info[4]),
+                            "inf_du": float(info[3]) / max(float(info[2]), 1e-300)})
             if status < 2 and info[1] <= max(ACCEPT, tol):
                 break
         else:
             return None, (f"the interior-point method stopped at error {info[1]:.1e} > {max(ACCEPT, tol):g} "
                           f"(status {status}, round {rounds})")
-        Z, _, y = unpack(state, A.shape[0], n)
-        eps = np.minimum(np.maximum(np.sqrt(y), lo), hi)  # as assemble clips it (the same memo)
         vals = nlp.block_values(eps)[0][:, 0]
         worst = float(vals.max())
         if worst <= 1.0 + feas_tol or J is None or len(J) == m:

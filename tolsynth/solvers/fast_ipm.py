@@ -509,11 +509,16 @@ _lock = threading.Lock()
 _state: dict = {}  # compiler -> (kernel or None, reason)
 
 
+_loaded: list = []  # the kernel once built (every solve asks; the compiler lookup reads the environment)
+
+
 def kernel() -> IPMKernel | None:
     """The compiled kernel (built on first use and cached on disk), or None where it cannot be had
     (no compiler, ``TOLSYNTH_NO_COMPILE``, a failed build): :func:`kernel_status` says why."""
     if disabled():
         return None
+    if _loaded:
+        return _loaded[0]
     cc = find_compiler()
     hit = _state.get(cc)
     if hit is not None:
@@ -526,6 +531,7 @@ def kernel() -> IPMKernel | None:
                 try:
                     lib, _ = load_library(C_INCLUDES + C_LINALG + C_SOURCE, "ipm", cc, ("ts_ipm_solve",))
                     _state[cc] = (IPMKernel(lib), "")
+                    _loaded.append(_state[cc][0])
                 except (OSError, AttributeError, RuntimeError) as err:
                     _state[cc] = (None, f"compilation failed: {err}")
         return _state[cc][0]

@@ -46,7 +46,7 @@ class DesignSpec:
 class SolverOptions:
     """How to solve: the solver, its options, a start, and the checks run at the optimum."""
 
-    solver: str = "ipopt"
+    solver: str = "auto"
     options: dict | None = None
     x0: Any = None
     validate: int | None = None

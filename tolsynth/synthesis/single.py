@@ -27,6 +27,12 @@ from tolsynth.tabular import Tabular
 __all__ = ["synthesize", "compare", "Comparison", "SOLVERS"]
 
 
+def _auto(nlp, eps0, options):
+    from tolsynth.solvers.fast import solve_auto
+
+    return solve_auto(nlp, eps0, **options)
+
+
 def _ipopt(nlp, eps0, options):
     from tolsynth.solvers.ipopt import solve_ipopt
 
@@ -43,7 +49,7 @@ def _solver_defaults(solver: str, probability: str = "gaussian") -> dict:
     """The options a solver accepts, with their defaults."""
     if probability == "exact":
         from tolsynth.solvers.exact import DEFAULT_OPTIONS
-    elif solver == "ipopt":
+    elif solver in ("auto", "ipopt"):  # auto: IPOPT's options (it may run IPOPT)
         from tolsynth.solvers.ipopt import DEFAULT_OPTIONS
     else:
         from tolsynth.solvers.sumt import DEFAULT_OPTIONS
@@ -60,7 +66,7 @@ COARSE_STEP_TOL = 1e-4
 DEFAULT_PROBABILITY = "gaussian"
 
 #: solver name -> private entry point (each solver lives in its own module)
-SOLVERS = {"ipopt": _ipopt, "sumt": _sumt}
+SOLVERS = {"auto": _auto, "ipopt": _ipopt, "sumt": _sumt}
 
 
 def synthesize(
@@ -69,7 +75,7 @@ def synthesize(
     p: float | None = None,
     distribution=None,
     alpha=0.7,
-    solver: str = "ipopt",
+    solver: str = "auto",
     *,
     k=None,
     bounds=None,
@@ -111,8 +117,11 @@ def synthesize(
         default; :mod:`tolsynth.probability.distributions`); default: the model file's, else uniform.
     alpha : float, sequence or dict
         Cost exponent(s) alpha_i > 0.
-    solver : {"ipopt", "sumt"}
-        IPOPT with exact derivatives (default), or the paper's SUMT + Powell.
+    solver : {"auto", "ipopt", "sumt"}
+        ``"auto"`` (default): the compiled interior-point method of :mod:`tolsynth.solvers.fast`
+        where it applies (per-component criterion, power-law costs, Gaussian probability), IPOPT
+        elsewhere; ``"ipopt"``: IPOPT with exact derivatives always; ``"sumt"``: the paper's SUMT +
+        Powell.  Every result is certified the same way (feasibility checked, dual gap <= 1e-6).
     k : float, sequence or dict, optional
         Cost factors (default: the model's).
     bounds : (lower, upper) or dict name -> (lower, upper), optional
@@ -187,7 +196,8 @@ def synthesize(
             spec, solver if isinstance(solver, SolverOptions) else None)
         return synthesize(mechanism, **args)
     if probability == "worst_case":  # every error anywhere in its band: no p or distribution needed
-        return _worst_case(mechanism, R, p, distribution, alpha, solver, k, bounds, pose, poses, Phi, p_orientation,
+        return _worst_case(mechanism, R, p, distribution, alpha, "ipopt" if solver == "auto" else solver, k, bounds,
+                           pose, poses, Phi, p_orientation,
                            criterion, cost, locks, x0, options, validate, verify, time_limit)
     if R is None or p is None:
         missing = "R" if R is None else "p"
@@ -227,7 +237,7 @@ def synthesize(
             if probability == "exact":
                 from tolsynth.solvers.exact import solve_exact
 
-                result = solve_exact(nlp, spec.shapes, solver, eps0, options)
+                result = solve_exact(nlp, spec.shapes, "ipopt" if solver == "auto" else solver, eps0, options)
             else:
                 result = SOLVERS[solver](nlp, eps0, dict(options or {}))
             if probability == "gaussian" and spec.sphere_blocks:

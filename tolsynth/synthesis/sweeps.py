@@ -264,7 +264,7 @@ def _engine(client, workers, n_rows: int):
 # ---------------------------------------------------------------------------------------------
 # the front door
 # ---------------------------------------------------------------------------------------------
-def sweep(mechanism, R, p, alpha=0.7, distribution="uniform", *, criterion="components", solver="ipopt",
+def sweep(mechanism, R, p, alpha=0.7, distribution="uniform", *, criterion="components", solver="auto",
           client=None, workers: int | None = None, chunk: int | None = None, progress=None, **kwargs):
     """Solve :func:`tolsynth.synthesize` over a grid; one DataFrame row per solve.
 
@@ -275,7 +275,7 @@ def sweep(mechanism, R, p, alpha=0.7, distribution="uniform", *, criterion="comp
     R, p, alpha, distribution, criterion, solver
         Each one value or a list of values; the grid is their Cartesian product, in this order
         (R mm; 0 < p < 1; alpha a number > 0 or a dict name -> number; distribution "uniform" /
-        "normal"; criterion "components" / "sphere"; solver "ipopt" / "sumt").
+        "normal"; criterion "components" / "sphere"; solver "auto" / "ipopt" / "sumt").
     client : None, "serial", "processes", dask.distributed.Client or str
         Where the solves run (see :mod:`tolsynth.synthesis.sweeps`); a string with ``://`` is a Dask
         scheduler address.
