@@ -22,8 +22,7 @@ the cut problem solved by a primal-dual interior-point Newton method on the exac
 every direction of every pose is examined by a branch and bound over direction patches
 (:func:`.exact_certify.cover`): a patch is either proven to meet ``p - 1e-7`` or split, and a
 patch centre below p, refined to a local minimum of P by Newton's method on the sphere,
-becomes a new cut, with a ring of cuts around it as wide as its move since the last round (the
-minimiser moves with the design; without the ring the rounds only chase it, about 11 at p = 0.99).  When no direction is short, the cuts' supporting
+becomes a new cut.  When no direction is short, the cuts' supporting
 half-spaces give a rigorous lower bound (:func:`.exact_certify.half_space_bound`).  A result is
 ``success`` only when every pose is proven and the gap is within ``1e-6`` of the cost.
 
@@ -70,10 +69,6 @@ START_CUTS = 0.9
 NEW_CUTS = 3
 #: a new cut this close (rad) to one of its pose's is not added
 SAME_CUT = 1e-5
-#: cuts on a ring around each new one: how many, and the ring's radius against the last move (rad)
-RING = 6
-RING_FACTOR = 0.5
-RING_MAX = 0.05
 
 
 @dataclass
@@ -135,11 +130,6 @@ class _Cuts:
         self.w.append(w)
         return True
 
-    def nearest(self, blk_index: int, w: np.ndarray) -> float:
-        """The angle (rad) from unit ``w`` to the pose's nearest cut (up to sign); pi/2 if none."""
-        cos = [abs(float(v @ w)) for b, v in zip(self.block, self.w) if b == blk_index]
-        return math.acos(min(max(cos, default=0.0), 1.0))
-
     def arrays(self):
         return np.array(self.c), np.array(self.R), np.array(self.p)
 
@@ -154,15 +144,6 @@ class _Cuts:
         P, G, H, _, _ = derivatives(C, u, self.shapes, R, tol=1e-11)
         s = 1.0 / (1 - p)
         return (P - p) * s, G * s[:, None], H * s[:, None, None]
-
-
-def _ring(w: np.ndarray, rho: float, count: int = RING) -> np.ndarray:
-    """``count`` unit vectors at angle ``rho`` around unit ``w``."""
-    e1 = np.cross(w, np.eye(3)[int(np.argmin(np.abs(w)))])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(w, e1)
-    a = 2 * math.pi * np.arange(count) / count
-    return math.cos(rho) * w[None, :] + math.sin(rho) * (np.cos(a)[:, None] * e1 + np.sin(a)[:, None] * e2)
 
 
 def _lattice(m: int) -> np.ndarray:
@@ -321,13 +302,7 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
                 continue
             for w, _ in cv.violations[:NEW_CUTS]:
                 w2, _ = refine_direction(blk.A * eps, shapes, blk.R, w)
-                moved = cuts.nearest(i, w2)
-                if cuts.add(i, blk, w2):
-                    added += 1
-                    # the minimiser moves as the design does: a ring of cuts around it, as wide as its
-                    # last move, keeps the next round from only chasing it across
-                    for v in _ring(w2, min(RING_MAX, RING_FACTOR * moved)):
-                        cuts.add(i, blk, v)
+                added += cuts.add(i, blk, w2)
         history.append({"round": rnd, "cuts": len(cuts.c), "newton": res.iterations, "added": added,
                         "cost": nlp.cost(eps), "inner": message,
                         "proven": min((c.proven for c in covers), default=1.0)})
