@@ -246,3 +246,26 @@ def test_history_and_counts():
     assert 5 <= res.iterations <= 60 and res.function_evaluations >= res.iterations
     assert res.history and res.history[-1]["inf_pr"] <= 1e-9
     assert res.history[-1]["objective"] == pytest.approx(res.cost, rel=1e-6)
+
+
+def test_long_pose_lists_are_remembered_by_value():
+    """A sweep re-solves the same poses: their checked joints and sensitivities are remembered per
+    mechanism by the poses' values (read-only arrays, the same rows as a fresh evaluation); a
+    changed pose is evaluated afresh, and a pose outside the limits still raises."""
+    mech = tolsynth.load_model("puma560")
+    poses = random_poses(mech, 12, seed=9)
+    a = make_specification(mech, R, P, "uniform", ALPHA, poses=poses)
+    b = make_specification(mech, 0.7, 0.9, "normal", ALPHA, poses=[q.copy() for q in poses])
+    for ba, bb, q in zip(a.blocks, b.blocks, poses):
+        assert ba.A is bb.A and not ba.A.flags.writeable
+        np.testing.assert_array_equal(ba.A, mech.sensitivity(q)[:3])
+    moved = [q.copy() for q in poses]
+    moved[3][0] += 0.1
+    c = make_specification(mech, R, P, "uniform", ALPHA, poses=moved)
+    np.testing.assert_array_equal(c.blocks[3].A, mech.sensitivity(moved[3])[:3])
+    assert not np.array_equal(c.blocks[3].A, a.blocks[3].A)
+    lo, _ = _limits(mech)
+    bad = [q.copy() for q in poses]
+    bad[5][0] = lo[0] - 0.5
+    with pytest.raises(tolsynth.OutOfRangeError):
+        make_specification(mech, R, P, "uniform", ALPHA, poses=bad)

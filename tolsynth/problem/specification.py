@@ -8,15 +8,15 @@ builds the CasADi graphs from a :class:`Specification`.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
-from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from tolsynth.checks import HUGE, TINY, check_real, check_vector
-from tolsynth.model.cost_set import CostSet, cost_set
 from tolsynth.errors import InputError, OutOfRangeError
+from tolsynth.model.cost_set import CostSet, cost_set
 from tolsynth.probability.distributions import resolve, shape, shapes_of
 from tolsynth.probability.stats import check_positive, check_probability, z_of_p
 
@@ -243,19 +243,14 @@ def make_specification(
     if not pose_list:
         raise InputError("poses", "empty", "at least one pose")
     blocks, sphere, qs = [], [], {}
-    for i, ps in enumerate(pose_list):
-        label = ps if isinstance(ps, str) else f"#{i}"
-        q = mechanism.joints(ps)
-        S = mechanism.sensitivity_at(q)  # a copy of the remembered one
-        if isinstance(col_scale, np.ndarray):  # mixed shapes
-            S *= col_scale
+    for label, q, pos, ori in _pose_rows(mechanism, pose_list, col_scale):
         qs[label] = q
         if criterion == "sphere":
-            sphere.append(SphereBlock(label, R, p, S[:3].copy()))
+            sphere.append(SphereBlock(label, R, p, pos))
         else:
-            blocks.append(Block(label, "position", z / R, S[:3].copy()))
+            blocks.append(Block(label, "position", z / R, pos))
         if Phi is not None:
-            blocks.append(Block(label, "orientation", z_o / Phi, S[3:].copy()))
+            blocks.append(Block(label, "orientation", z_o / Phi, ori))
     return Specification(
         names=tuple(names),
         units=units,
@@ -278,3 +273,43 @@ def make_specification(
         shapes=shapes,
         col_scale=col_scale,
     )
+
+
+#: pose lists at least this long are remembered per mechanism (a sweep re-solves the same poses)
+POSE_CACHE_MIN = 8
+#: ... at most this many lists per mechanism
+POSE_CACHE_SIZE = 16
+
+
+def _pose_rows(mechanism, pose_list: list, col_scale) -> list[tuple]:
+    """``(label, q, position rows, orientation rows)`` per pose: the joints checked by
+    :meth:`Mechanism.joints`, the sensitivities (times ``col_scale``).  Remembered on the mechanism
+    for long pose lists (a sweep over R, p, k or the bounds checks and evaluates the same poses);
+    the arrays are then shared between specifications and read-only."""
+    key = None
+    if len(pose_list) >= POSE_CACHE_MIN:
+        try:
+            key = (tuple(ps if isinstance(ps, str) else np.asarray(ps, dtype=float).tobytes() for ps in pose_list),
+                   col_scale.tobytes() if isinstance(col_scale, np.ndarray) else col_scale)
+        except (TypeError, ValueError):  # not numbers: Mechanism.joints names the problem below
+            key = None
+        cache = mechanism.__dict__.setdefault("_pose_rows_cache", {})
+        if key is not None and key in cache:
+            return cache[key]
+    out = []
+    for i, ps in enumerate(pose_list):
+        label = ps if isinstance(ps, str) else f"#{i}"
+        q = mechanism.joints(ps)
+        S = mechanism.sensitivity_at(q)  # a copy of the remembered one
+        if isinstance(col_scale, np.ndarray):  # mixed shapes
+            S *= col_scale
+        pos, ori = S[:3].copy(), S[3:].copy()
+        if key is not None:
+            for a in (q, pos, ori):
+                a.setflags(write=False)
+        out.append((label, q, pos, ori))
+    if key is not None:
+        if len(cache) >= POSE_CACHE_SIZE:
+            cache.pop(next(iter(cache)))
+        cache[key] = out
+    return out
