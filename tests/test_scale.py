@@ -1,4 +1,5 @@
-"""The solver core at scale: every feasible problem solved, at any number of poses.
+"""The solver core at scale: every feasible problem solved, at any number of poses, by the default
+engine (``solver="auto"``: the compiled interior-point method) and by IPOPT alike.
 
 Independent references:
 * cvxpy + Clarabel on the convex form in ``v = eps^2`` (cost ``k v^(-alpha/2)``, one 3x3 LMI
@@ -74,16 +75,18 @@ def reference_pose(mech):
 
 
 SIZES = [(1, 2), (3, 2), (10, 2), (30, 1)]
+#: the default engine and IPOPT (the general path and the cross-check)
+SOLVERS = ["auto", "ipopt"]
 SLOW_SIZES = [(100, 2), (300, 1)]
 
 
-def _sweep(model, N, seeds):
+def _sweep(model, N, seeds, solver):
     mech = tolsynth.load_model(model)
     for seed in range(seeds):
         rng = np.random.default_rng(1000 * N + seed)
         poses = random_poses(mech, N, rng)
         for dist in ("uniform", "normal"):
-            res = tolsynth.synthesize(mech, R=0.5, p=0.99, distribution=dist, alpha=0.7, poses=poses)
+            res = tolsynth.synthesize(mech, R=0.5, p=0.99, distribution=dist, alpha=0.7, poses=poses, solver=solver)
             assert res.success, (model, N, seed, dist, res.status, res.message)
             assert res.gap <= 1e-6 * res.cost
             assert_meets_spec(mech, res, 0.5, 0.99, dist, poses)
@@ -92,26 +95,28 @@ def _sweep(model, N, seeds):
                 assert res.cost == pytest.approx(ref, rel=1e-6), (model, N, seed, dist)
 
 
+@pytest.mark.parametrize("solver", SOLVERS)
 @pytest.mark.parametrize("model", ["xu_zhang_1988", "puma560"])
 @pytest.mark.parametrize("N,seeds", SIZES)
-def test_random_pose_sets_agree_with_clarabel(model, N, seeds):
-    _sweep(model, N, seeds)
+def test_random_pose_sets_agree_with_clarabel(model, N, seeds, solver):
+    _sweep(model, N, seeds, solver)
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("solver", SOLVERS)
 @pytest.mark.parametrize("model", ["xu_zhang_1988", "puma560"])
 @pytest.mark.parametrize("N,seeds", SLOW_SIZES)
-def test_random_pose_sets_agree_with_clarabel_large(model, N, seeds):
-    _sweep(model, N, seeds)
+def test_random_pose_sets_agree_with_clarabel_large(model, N, seeds, solver):
+    _sweep(model, N, seeds, solver)
 
 
-def _grid(models, Rs, ps, alphas):
+def _grid(models, Rs, ps, alphas, solver):
     for model in models:
         mech = tolsynth.load_model(model)
         pose = reference_pose(mech)
         for R, p, a, d in itertools.product(Rs, ps, alphas, ("uniform", "normal")):
             try:
-                res = tolsynth.synthesize(mech, R=R, p=p, distribution=d, alpha=a, pose=pose)
+                res = tolsynth.synthesize(mech, R=R, p=p, distribution=d, alpha=a, pose=pose, solver=solver)
             except tolsynth.InfeasibleSpecificationError:
                 # infeasible only if even the lower bounds fail (checked independently)
                 spec = make_specification(mech, R, p, d, a, pose=pose)
@@ -124,30 +129,34 @@ def _grid(models, Rs, ps, alphas):
             assert res.gap <= 1e-6 * res.cost
 
 
-def test_default_bounds_grid_where_upper_bounds_become_active():
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_default_bounds_grid_where_upper_bounds_become_active(solver):
     """R up to 10 mm, p 0.5..0.9999, alpha 0.3..3 on every bundled model (upper bounds active)."""
-    _grid(tolsynth.bundled_models(), [0.5, 10.0], [0.5, 0.9999], [0.3, 3.0])
+    _grid(tolsynth.bundled_models(), [0.5, 10.0], [0.5, 0.9999], [0.3, 3.0], solver)
 
 
 @pytest.mark.slow
-def test_default_bounds_grid_full():
-    _grid(tolsynth.bundled_models(), [0.05, 0.5, 2.0, 5.0, 10.0], [0.5, 0.9, 0.99, 0.9999], [0.3, 0.7, 1.0, 3.0])
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_default_bounds_grid_full(solver):
+    _grid(tolsynth.bundled_models(), [0.05, 0.5, 2.0, 5.0, 10.0], [0.5, 0.9, 0.99, 0.9999], [0.3, 0.7, 1.0, 3.0], solver)
 
 
-def test_upper_bound_active_case_from_the_issue():
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_upper_bound_active_case_from_the_issue(solver):
     """planar_2r, R = 5 mm, p = 0.5, alpha 0.7 ended at the iteration limit with the factor form."""
     mech = tolsynth.load_model("planar_2r")
-    res = tolsynth.synthesize(mech, R=5, p=0.5, alpha=0.7, pose=reference_pose(mech))
+    res = tolsynth.synthesize(mech, R=5, p=0.5, alpha=0.7, pose=reference_pose(mech), solver=solver)
     assert res.success and res.bounds_active
     ref = clarabel_cost(mech, 5, 0.5, "uniform", 0.7, [reference_pose(mech)])
     assert res.cost == pytest.approx(ref, rel=1e-6)
 
 
-def test_extreme_scales_are_solved_not_misreported():
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_extreme_scales_are_solved_not_misreported(solver):
     """k = 1e-3, R = 1000 mm, alpha 3, bounds 1e-12..1e6: reported optimal with gap/cost 1.0 before."""
     mech = tolsynth.load_model("planar_2r")
     pose = reference_pose(mech)
-    res = tolsynth.synthesize(mech, R=1000, p=0.5, alpha=3, k=0.001, bounds=(1e-12, 1e6), pose=pose)
+    res = tolsynth.synthesize(mech, R=1000, p=0.5, alpha=3, k=0.001, bounds=(1e-12, 1e6), pose=pose, solver=solver)
     assert res.success and res.gap <= 1e-6 * res.cost
     assert res.max_constraint == pytest.approx(1.0, abs=1e-6)  # no bound active: the constraint binds
     from scipy.optimize import minimize
@@ -167,9 +176,10 @@ def test_extreme_scales_are_solved_not_misreported():
     assert res.cost <= f(best.x) * (1 + 1e-6)
 
 
-def test_loose_options_never_report_a_false_optimum():
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_loose_options_never_report_a_false_optimum(solver):
     """tol = 1 and constr_viol_tol = 1 used to give success with sigma z / R = 1.31."""
-    res = tolsynth.synthesize("xu_zhang_1988", R=0.5, p=0.99, options={"tol": 1, "constr_viol_tol": 1})
+    res = tolsynth.synthesize("xu_zhang_1988", R=0.5, p=0.99, options={"tol": 1, "constr_viol_tol": 1}, solver=solver)
     if res.success:
         assert res.max_constraint <= 1 + 1e-6 and res.gap <= 1e-6 * res.cost
     else:
@@ -190,7 +200,7 @@ def test_sumt_accepts_specifications_close_to_their_limit():
     V = A @ np.diag(spec.lower**2 / spec.c) @ A.T
     R0 = math.sqrt(np.linalg.eigvalsh(V).max()) * spec.z  # the smallest feasible R
     R = 1.2 * R0
-    ipopt = tolsynth.synthesize(mech, R=R, p=0.99, pose=pose)
+    ipopt = tolsynth.synthesize(mech, R=R, p=0.99, pose=pose, solver="ipopt")
     sumt = tolsynth.synthesize(mech, R=R, p=0.99, pose=pose, solver="sumt")
     assert ipopt.success
     assert sumt.cost == pytest.approx(ipopt.cost, rel=1e-5)

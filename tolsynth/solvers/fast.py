@@ -109,16 +109,16 @@ def solve_fast(nlp: ToleranceNLP, **options):
     :data:`ACCEPT` or its point is not feasible (the caller then runs IPOPT).
 
     Options (IPOPT's names): ``tol`` (the method's target for the largest primal residual and the
-    complementarity relative to the cost, default 1e-10), ``feas_tol`` (largest ``sigma z / R - 1``
-    accepted at the returned point, default ``min(1e-9, 10 tol)``), ``max_iter`` (per solve of the
+    complementarity relative to the cost, default and at most 1e-10), ``feas_tol`` (largest ``sigma z / R - 1``
+    accepted at the returned point, default 1e-9), ``max_iter`` (per solve of the
     method, at most 100), ``max_rounds`` (exchange rounds over blocks) and ``warm_start`` (False:
     the first working set of a problem with many blocks from the start point, not from the last
     solve of the same blocks); ``constr_viol_tol`` is IPOPT's alone.
     """
     spec = nlp.spec
-    tol = float(options.get("tol", 1e-10))
+    tol = min(float(options.get("tol", 1e-10)), 1e-10)  # the method is cheap: never looser than 1e-10
     feas_tol = options.get("feas_tol")
-    feas_tol = min(1e-9, 10.0 * tol) if feas_tol is None else float(feas_tol)
+    feas_tol = 1e-9 if feas_tol is None else float(feas_tol)
     max_iter = min(int(options.get("max_iter", 100)), 100)
     max_rounds = min(int(options.get("max_rounds", MAX_ROUNDS)), MAX_ROUNDS)
     t_start = time.perf_counter()
