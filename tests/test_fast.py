@@ -166,6 +166,11 @@ def test_extreme_scales_and_upper_bounds_active():
     assert top.solver == "ipm" and top.success
     np.testing.assert_array_equal(top.x, mech.bounds[1])
     assert set(top.bounds_active.values()) == {"upper"}
+    # every tolerance locked: nothing to choose; the cost is k eps^-alpha at the locks
+    locked = tolsynth.synthesize(mech, R=5.0, p=0.9, alpha=0.7, pose="worst",
+                                 locks={n: 0.01 for n in mech.error_parameters})
+    assert locked.solver == "ipm" and locked.success and locked.gap == pytest.approx(0.0, abs=1e-12)
+    assert locked.cost == pytest.approx(float(np.sum(mech.k * 0.01**-0.7)), rel=1e-12)
 
 
 @pytest.mark.parametrize("all_blocks,N", [(8, 24), pytest.param(None, fast.ALL_BLOCKS + 72, marks=pytest.mark.slow)])

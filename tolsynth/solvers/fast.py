@@ -124,6 +124,12 @@ def solve_fast(nlp: ToleranceNLP, **options):
     t_start = time.perf_counter()
     m, n = len(spec.blocks), spec.n
     lo, hi = spec.lower, spec.upper
+    if not (lo < hi).any():  # every tolerance locked: nothing to choose, the multipliers are 0
+        vals = nlp.block_values(lo)[0][:, 0]
+        if not float(vals.max()) <= 1.0 + feas_tol:
+            return None, "every tolerance is locked and the locks break the specification"
+        return assemble("ipm", nlp, lo, np.zeros((m, 3, 3)), np.zeros(n), Status.OPTIMAL,
+                        "every tolerance locked: nothing to optimise", 0, 0, time.perf_counter() - t_start, []), None
     # the cost in y = eps^2, divided by what it can fall by from the middle of the bounds to the
     # upper bounds (a locked parameter, or one held near its upper bound, adds a constant that may
     # be most of the cost and says nothing of the multipliers' size; the method's iterates do not
