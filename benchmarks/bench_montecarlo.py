@@ -39,8 +39,8 @@ import casadi as ca  # noqa: E402
 import numpy as np  # noqa: E402
 
 import tolsynth  # noqa: E402
-from tolsynth.analysis.montecarlo import DEFAULT_BATCH, NumpyEvaluator, monte_carlo  # noqa: E402
 from tolsynth import probability_map, worst_pose  # noqa: E402
+from tolsynth.analysis.montecarlo import DEFAULT_BATCH, NumpyEvaluator, monte_carlo  # noqa: E402
 
 
 def median_time(fn, repeats: int) -> float:

@@ -28,8 +28,8 @@ import time
 
 import tolsynth
 from tolsynth import synthesize
-from tolsynth.synthesis.reproduce import reproduce
 from tolsynth.solvers import cpowell
+from tolsynth.synthesis.reproduce import reproduce
 
 
 def command():

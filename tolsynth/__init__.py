@@ -10,42 +10,47 @@ mm and 1e-2 rad); cost in the paper's units (sum of k * eps**-alpha on those num
 """
 
 from tolsynth.interrupts import guard_start as _guard_start; _guard_start()  # noqa: E702,I001  (Ctrl-C while the command starts: one line)
+from tolsynth.analysis.contributions import Contributions, contributions
+from tolsynth.analysis.montecarlo import MonteCarloResult, monte_carlo
+from tolsynth.analysis.plot import plot_map
+from tolsynth.analysis.pose_search import WorstPose, worst_pose
+from tolsynth.analysis.validation import ValidationResult, validate
+from tolsynth.analysis.verify import Verification
+from tolsynth.analysis.workspace_map import ProbabilityMap, probability_map
 from tolsynth.errors import (
     InfeasibleSpecificationError,
     InputError,
     LoopClosureError,
+    MissingDependencyError,
     ModelFileError,
     OutOfRangeError,
-    MissingDependencyError,
     SolverError,
     TolsynthError,
     UnknownNameError,
     UnsupportedJointError,
 )
-from tolsynth.kinematics.mechanism import Analysis, Mechanism, load_model, load_urdf
-from tolsynth.model.reader import bundled_models
-from tolsynth.problem.result import Status, SynthesisResult
-from tolsynth.probability.stats import p_ball, p_components, p_cone, z_of_p
-from tolsynth.analysis.montecarlo import MonteCarloResult, monte_carlo
-from tolsynth.analysis.validation import ValidationResult, validate
-from tolsynth.analysis.pose_search import WorstPose, worst_pose
-from tolsynth.analysis.workspace_map import ProbabilityMap, probability_map
-from tolsynth.analysis.plot import plot_map
-from tolsynth.analysis.contributions import Contributions, contributions
-from tolsynth.synthesis.processes import Process, ProcessChoice, synthesize_processes
-from tolsynth.synthesis.grades import GradeChoice, round_to_grades
-from tolsynth.synthesis.budget import BudgetResult, best_accuracy
-from tolsynth.synthesis.pareto import ParetoFront, pareto_front
-from tolsynth.synthesis.single import Comparison, compare, synthesize
-from tolsynth.synthesis.workspace import WorkspaceSynthesis, synthesize_workspace
-from tolsynth.io.tables import read_table, write_table
-from tolsynth.synthesis.sweeps import sweep
-from tolsynth.synthesis.options import DesignSpec, SolverOptions
-from tolsynth.model.joint_errors import JointError
 from tolsynth.io.reports import DesignReport, report
-from tolsynth.probability.exact import ExactProbabilityError, ball_probability, cone_probability, direction_probability, worst_direction
-from tolsynth.analysis.verify import Verification
-
+from tolsynth.io.tables import read_table, write_table
+from tolsynth.kinematics.mechanism import Analysis, Mechanism, load_model, load_urdf
+from tolsynth.model.joint_errors import JointError
+from tolsynth.model.reader import bundled_models
+from tolsynth.probability.exact import (
+    ExactProbabilityError,
+    ball_probability,
+    cone_probability,
+    direction_probability,
+    worst_direction,
+)
+from tolsynth.probability.stats import p_ball, p_components, p_cone, z_of_p
+from tolsynth.problem.result import Status, SynthesisResult
+from tolsynth.synthesis.budget import BudgetResult, best_accuracy
+from tolsynth.synthesis.grades import GradeChoice, round_to_grades
+from tolsynth.synthesis.options import DesignSpec, SolverOptions
+from tolsynth.synthesis.pareto import ParetoFront, pareto_front
+from tolsynth.synthesis.processes import Process, ProcessChoice, synthesize_processes
+from tolsynth.synthesis.single import Comparison, compare, synthesize
+from tolsynth.synthesis.sweeps import sweep
+from tolsynth.synthesis.workspace import WorkspaceSynthesis, synthesize_workspace
 from tolsynth.version import __version__  # noqa: F401  (the package version, as tolsynth.__version__)
 
 __all__ = [

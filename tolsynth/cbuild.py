@@ -21,7 +21,6 @@ import subprocess
 import tempfile
 import threading
 from pathlib import Path
-
 from typing import Any, Callable
 
 import casadi as ca

@@ -189,8 +189,8 @@ def contributions(source, tolerances=None, *, pose="worst", poses=None, distribu
     Contributions
     """
     from tolsynth.kinematics.mechanism import Mechanism, load_model
-    from tolsynth.problem.result import SynthesisResult
     from tolsynth.probability.stats import check_positive, principal, variance_divisor
+    from tolsynth.problem.result import SynthesisResult
 
     if isinstance(source, SynthesisResult):
         spec = source.spec

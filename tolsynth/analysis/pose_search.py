@@ -22,9 +22,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from tolsynth.kinematics.batch_stats import _criterion_batch, principal_std_batch
 from tolsynth.checks import check_count, check_mapping, check_positive, check_real, check_seed
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
+from tolsynth.kinematics.batch_stats import _criterion_batch, principal_std_batch
 from tolsynth.kinematics.joint_space import MODEL_REFERENCE, _feasible, _limits, _reference
 from tolsynth.probability.stats import p_ball
 from tolsynth.tabular import Tabular

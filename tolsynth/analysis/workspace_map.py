@@ -16,16 +16,16 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from tolsynth.kinematics.batch_stats import _evaluator, principal_std_batch
 from tolsynth.checks import check_count, check_mapping, check_real, check_vector
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
+from tolsynth.kinematics.batch_stats import _evaluator, principal_std_batch
 from tolsynth.kinematics.ik import PLANES, _GridIK, _ik_evaluator
+from tolsynth.kinematics.joint_space import MODEL_REFERENCE, _limits, _reference
 from tolsynth.kinematics.parallel_ik import ParallelGridIK
 from tolsynth.model.parallel import is_parallel
-from tolsynth.kinematics.joint_space import MODEL_REFERENCE, _limits, _reference
+from tolsynth.probability.stats import check_positive, p_ball_batch
 from tolsynth.progress import make_bar
 from tolsynth.tabular import Tabular
-from tolsynth.probability.stats import check_positive, p_ball_batch
 
 __all__ = ["ProbabilityMap", "probability_map", "PLANES"]
 
@@ -198,8 +198,8 @@ def probability_map(
     ProbabilityMap
     """
     t0 = time.perf_counter()
-    from tolsynth.probability.distributions import resolve
     from tolsynth.kinematics.mechanism import as_mechanism
+    from tolsynth.probability.distributions import resolve
 
     mechanism = as_mechanism(mechanism)
     R = check_positive(R, "R")

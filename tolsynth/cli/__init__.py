@@ -21,11 +21,23 @@ import signal
 import sys
 import warnings
 
+from tolsynth.cli import (
+    analyze,
+    budget,
+    grades,
+    models,
+    montecarlo,
+    pareto,
+    processes,
+    report,
+    reproduce,
+    solve,
+    sweep,
+    workspace,
+)
+from tolsynth.cli.args import HelpFormatter, add_pose_arguments, emit_json, parse_pose, parse_tolerances, version
 from tolsynth.errors import TolsynthError
 from tolsynth.interrupts import Interrupts, QuietCasadiInterrupt, started_as_command
-from tolsynth.cli import analyze, montecarlo, report, reproduce, solve, sweep, workspace
-from tolsynth.cli import budget, grades, models, pareto, processes
-from tolsynth.cli.args import HelpFormatter, add_pose_arguments, emit_json, parse_pose, parse_tolerances, version
 
 __all__ = ["main", "build_parser", "add_pose_arguments", "parse_pose", "parse_tolerances", "emit_json"]
 

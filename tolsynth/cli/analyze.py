@@ -2,8 +2,18 @@
 
 from __future__ import annotations
 
+from tolsynth.cli.args import (
+    add_pose_arguments,
+    default_pose,
+    dist_for,
+    emit_json,
+    inputs_record,
+    parse_pose,
+    parse_tolerances,
+    pose_label,
+)
+from tolsynth.cli.args import fmt_vec as _fmt_vec
 from tolsynth.kinematics.mechanism import load_model
-from tolsynth.cli.args import dist_for, add_pose_arguments, default_pose, emit_json, fmt_vec as _fmt_vec, inputs_record, parse_pose, parse_tolerances, pose_label
 
 __all__ = ["register"]
 

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from tolsynth.kinematics.mechanism import load_model
 from tolsynth.analysis.montecarlo import DEFAULT_BATCH, monte_carlo
 from tolsynth.cli.args import (  # noqa: I001
-    dist_for,
     add_pose_arguments,
     add_table_out_argument,
     check_table_out,
     default_pose,
+    dist_for,
     emit_json,
     inputs_record,
     number,
@@ -18,6 +17,7 @@ from tolsynth.cli.args import (  # noqa: I001
     pose_label,
     write_out,
 )
+from tolsynth.kinematics.mechanism import load_model
 
 __all__ = ["register"]
 

@@ -4,9 +4,6 @@ from __future__ import annotations
 
 import sys
 
-from tolsynth.errors import InputError
-from tolsynth.progress import Working
-from tolsynth.kinematics.mechanism import load_model
 from tolsynth.cli.args import (  # noqa: I001
     add_specification_arguments,
     dist_for,
@@ -17,6 +14,9 @@ from tolsynth.cli.args import (  # noqa: I001
 )
 from tolsynth.cli.solve import _parse_locks, _spec_kwargs
 from tolsynth.cli.workspace import _hand_axis
+from tolsynth.errors import InputError
+from tolsynth.kinematics.mechanism import load_model
+from tolsynth.progress import Working
 
 __all__ = ["register"]
 

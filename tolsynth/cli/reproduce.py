@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+from tolsynth.cli.args import emit_json, inputs_record
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
-from tolsynth.cli.args import emit_json, inputs_record
 from tolsynth.progress import interactive
 
 __all__ = ["register"]

@@ -6,10 +6,9 @@ from __future__ import annotations
 
 import sys
 
-from tolsynth.errors import InputError
-from tolsynth.kinematics.mechanism import load_model
 from tolsynth.cli.args import (
     POSE_HELP,
+    _number,  # the InputError form of number(), for comma-separated items
     add_table_out_argument,
     angle_rad,
     check_table_out,
@@ -24,7 +23,8 @@ from tolsynth.cli.args import (
     split_items,
     write_out,
 )
-from tolsynth.cli.args import _number  # the InputError form of number(), for comma-separated items
+from tolsynth.errors import InputError
+from tolsynth.kinematics.mechanism import load_model
 
 __all__ = ["register", "GRID_KEYS", "read_grid_file"]
 

@@ -6,19 +6,16 @@ import math
 
 import numpy as np
 
-from tolsynth.errors import InputError
-from tolsynth.progress import Working
-from tolsynth.kinematics.mechanism import load_model
 from tolsynth.analysis.pose_search import worst_pose
 from tolsynth.analysis.workspace_map import PLANES, ProbabilityMap, probability_map
 from tolsynth.cli.args import (  # noqa: I001
-    dist_for,
     TOLERANCES_HELP,
     add_dist_argument,
     add_model_argument,
     add_table_out_argument,
     check_figure_path,
     check_table_out,
+    dist_for,
     emit_json,
     inputs_record,
     length_mm,
@@ -29,6 +26,9 @@ from tolsynth.cli.args import (  # noqa: I001
     split_items,
     write_out,
 )
+from tolsynth.errors import InputError
+from tolsynth.kinematics.mechanism import load_model
+from tolsynth.progress import Working
 
 __all__ = ["register"]
 

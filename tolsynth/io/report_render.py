@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import html
 
-
-
 _CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,Helvetica,Arial,sans-serif;max-width:1100px;
 margin:2em auto;padding:0 1.2em;color:#1d232b;line-height:1.45}

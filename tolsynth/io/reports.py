@@ -241,8 +241,8 @@ def report(
     """
     from tolsynth.checks import check_count
     from tolsynth.kinematics.mechanism import as_mechanism
-    from tolsynth.synthesis.processes import ProcessChoice
     from tolsynth.problem.result import SynthesisResult
+    from tolsynth.synthesis.processes import ProcessChoice
 
     t0 = time.perf_counter()
     if path is not None:

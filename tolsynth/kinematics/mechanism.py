@@ -23,10 +23,10 @@ from tolsynth.errors import InputError, LoopClosureError, OutOfRangeError, Unkno
 from tolsynth.kinematics.graphs import Graphs, build_graphs
 from tolsynth.kinematics.parallel import ParallelGraphs, build_parallel_graphs
 from tolsynth.model.dh import dh_spec
-from tolsynth.model.urdf import urdf_spec
-from tolsynth.model.reader import model_path, read_model_file
 from tolsynth.model.parallel import is_parallel
+from tolsynth.model.reader import model_path, read_model_file
 from tolsynth.model.spec import ErrorParameter, MechanismSpec
+from tolsynth.model.urdf import urdf_spec
 from tolsynth.probability.stats import (
     check_positive,
     covariance,

@@ -8,14 +8,12 @@ from __future__ import annotations
 
 import difflib
 import math
+from collections.abc import Mapping
 from typing import Any
 
 from tolsynth.checks import HUGE, TINY
 from tolsynth.errors import ModelFileError, UnknownNameError
 from tolsynth.units import ANGLE_UNITS, LENGTH_UNITS, allowed_units, to_base, unit_kind
-
-from collections.abc import Mapping
-
 
 __all__ = ["FORMAT", "DEFAULT_K", "DEFAULT_BOUNDS", "DEFAULT_TOLERANCE_UNITS"]
 

@@ -23,15 +23,23 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 from tolsynth.checks import P_MAX, P_MIN, TINY
 from tolsynth.errors import UnknownNameError
-from tolsynth.units import ANGLE_UNITS, LENGTH_UNITS, to_base
-
+from tolsynth.model.fields import _check_configurations, _nearest, _Reader, _tolerance_sets, _type_name, _unique
+from tolsynth.model.parallel import _parse_parallel_model
 from tolsynth.model.spec import (
-    CONVENTIONS, ELEMENTARY, _LENGTH_FIELDS, Configuration, ErrorParameter, FourBarLoop, Joint,
-    JointConstraint, Link, MechanismSpec, ReferenceResult,
+    _LENGTH_FIELDS,
+    CONVENTIONS,
+    ELEMENTARY,
+    Configuration,
+    ErrorParameter,
+    FourBarLoop,
+    Joint,
+    JointConstraint,
+    Link,
+    MechanismSpec,
+    ReferenceResult,
 )
 from tolsynth.model.urdf import _parse_urdf_model
-from tolsynth.model.parallel import _parse_parallel_model
-from tolsynth.model.fields import _check_configurations, _nearest, _Reader, _tolerance_sets, _type_name, _unique
+from tolsynth.units import ANGLE_UNITS, LENGTH_UNITS, to_base
 
 __all__ = ["bundled_models", "model_path", "read_model_file"]
 
@@ -318,8 +326,8 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
         if dist is not None:
             if not isinstance(dist, str):
                 raise r.fail(f"{where}.distribution", f"expected a string, got {_type_name(dist)}")
-            from tolsynth.probability.distributions import shape
             from tolsynth.errors import OutOfRangeError as _OOR
+            from tolsynth.probability.distributions import shape
 
             try:
                 dist = shape(dist).name
@@ -414,8 +422,8 @@ def _joint_errors(r, raw, spec):
 
 def _designer_fields(r, raw: dict, where: str):
     """The optional cost model, processes and lock of one error parameter."""
-    from tolsynth.model.cost import cost_model
     from tolsynth.errors import InputError
+    from tolsynth.model.cost import cost_model
     from tolsynth.model.process import Process
 
     cost = procs = lock = None

@@ -17,8 +17,8 @@ import numpy as np
 
 from tolsynth.kinematics.mechanism import Mechanism, load_model
 from tolsynth.problem.nlp import ToleranceNLP
-from tolsynth.problem.specification import make_specification
 from tolsynth.problem.result import SynthesisResult
+from tolsynth.problem.specification import make_specification
 from tolsynth.synthesis.single import synthesize
 
 __all__ = ["reproduce", "ColumnReport", "Reading", "format_report"]

@@ -15,12 +15,12 @@ import numpy as np
 
 from tolsynth.checks import TINY, check_count, check_mapping, check_options, check_time_limit, check_vector
 from tolsynth.errors import InputError, TimeLimitError
-from tolsynth.solvers.exact import PROBABILITIES
 from tolsynth.kinematics.mechanism import as_mechanism
 from tolsynth.problem.nlp import ToleranceNLP
-from tolsynth.problem.specification import SPHERE_NODES, make_specification
 from tolsynth.problem.result import Status, SynthesisResult
+from tolsynth.problem.specification import SPHERE_NODES, make_specification
 from tolsynth.progress import time_limit as deadline
+from tolsynth.solvers.exact import PROBABILITIES
 from tolsynth.synthesis.options import DesignSpec, SolverOptions, merge_groups
 from tolsynth.tabular import Tabular
 

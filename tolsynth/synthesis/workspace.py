@@ -12,8 +12,8 @@ import numpy as np
 
 from tolsynth.checks import check_count, check_mapping, check_positive
 from tolsynth.errors import InputError
-from tolsynth.problem.result import SynthesisResult
 from tolsynth.probability.stats import z_of_p
+from tolsynth.problem.result import SynthesisResult
 from tolsynth.synthesis.single import COARSE_STEP_TOL, synthesize
 from tolsynth.tabular import Tabular
 
@@ -116,8 +116,8 @@ def synthesize_workspace(
     from the worst pose the search finds at tolerances in the middle of the bounds, so that a model
     without a ``worst`` configuration works too.
     """
-    from tolsynth.kinematics.mechanism import as_mechanism
     from tolsynth.analysis.pose_search import worst_pose
+    from tolsynth.kinematics.mechanism import as_mechanism
 
     mechanism = as_mechanism(mechanism)
     z = z_of_p(p)
