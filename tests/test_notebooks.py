@@ -31,11 +31,9 @@ def test_notebooks_found():
     assert {"01", "02", "03", "04", "07", "09"} <= {p.name[:2] for p in NOTEBOOKS}
 
 
-#: notebooks of several minutes run with the slow tests (CI runs them, and the docs build executes them)
-SLOW = {"11_exact_probability"}
-
-
-@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW else p for p in NOTEBOOKS],
+#: every notebook runs with the slow tests: together they take minutes, more than the default run's
+#: budget, and CI's slow step executes each once and keeps its outputs for the docs build
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) for p in NOTEBOOKS],
                          ids=[p.stem for p in NOTEBOOKS])
 def test_notebook_executes(path, monkeypatch):
     # the kernel inherits this process's environment: figures as inline outputs (the docs' pages
