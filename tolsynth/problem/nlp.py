@@ -370,9 +370,11 @@ class ToleranceNLP:
         if m == 0:
             return np.zeros(n), 0.0
         Zs = np.asarray(Z, dtype=float).reshape(m, 3, 3)
-        lam, vec = eigh(0.5 * (Zs + Zs.transpose(0, 2, 1)))
-        lam = np.maximum(lam, 0.0)
-        Zp = (vec * lam[:, None, :]) @ vec.transpose(0, 2, 1)  # the PSD projection
+        Zp = 0.5 * (Zs + Zs.transpose(0, 2, 1))
+        lam, vec = eigh(Zp)
+        if lam.min() < 0.0:  # the PSD projection (a PSD Z is its own)
+            lam = np.maximum(lam, 0.0)
+            Zp = (vec * lam[:, None, :]) @ vec.transpose(0, 2, 1)
         # w_i = sum_b (scale_b a_bi)^T Zp_b (scale_b a_bi) / c; tr Zp_b = sum of its eigenvalues
         w = ((Zp @ self.As) * self.As).sum(axis=(0, 1)) / self.spec.c
         return w, float(lam.sum())

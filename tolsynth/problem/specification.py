@@ -207,7 +207,7 @@ def make_specification(
         lo, hi = mechanism.bounds  # copies
     elif isinstance(bounds, Mapping):
         lo, hi = mechanism.bounds
-        for key, pair in bounds.items():
+        for key, pair in _plain_pairs(bounds, mechanism, lo, hi):
             try:
                 a, b = pair
             except (TypeError, ValueError):
@@ -273,6 +273,21 @@ def make_specification(
         shapes=shapes,
         col_scale=col_scale,
     )
+
+
+def _plain_pairs(bounds: Mapping, mechanism, lo: np.ndarray, hi: np.ndarray) -> list:
+    """Write the pairs of ``bounds`` that are plain finite floats (what
+    :func:`tolsynth.model.locks.apply_locks` gives, a lock sweep's every step) into ``lo``, ``hi``
+    at once; the others are returned for the checks of the caller, which name the field."""
+    rest = []
+    for key, pair in bounds.items():
+        if type(pair) is tuple and len(pair) == 2 and type(pair[0]) is float and type(pair[1]) is float \
+                and -HUGE <= pair[0] <= HUGE and -HUGE <= pair[1] <= HUGE:
+            i = mechanism.index(key)
+            lo[i], hi[i] = pair
+        else:
+            rest.append((key, pair))
+    return rest
 
 
 #: pose lists at least this long are remembered per mechanism (a sweep re-solves the same poses)

@@ -9,12 +9,12 @@ models, no compiler, a run of the method that does not reach its accuracy) goes 
 :func:`tolsynth.solvers.ipopt.solve_ipopt`, which stays the general path and the cross-check
 (``solver="ipopt"`` always runs it).
 
-What is returned does not rest on the compiled code: the primal point is recomputed here from
-the method's multipliers ``Z`` (the closed-form Lagrangian minimiser,
-:meth:`tolsynth.model.cost_set.CostSet.dual_min`), every block is checked at it by NumPy's
-eigensolver, and :func:`tolsynth.solvers.common.assemble` certifies it with the dual bound of
-``Z`` (PSD-projected) exactly as for IPOPT: ``success`` needs the point feasible and the gap within
-1e-6 of the cost.
+What is returned does not rest on the compiled code's word: every block is checked at the
+method's point by NumPy's eigensolver, and :func:`tolsynth.solvers.common.assemble` certifies the
+point with the dual bound of the method's multipliers ``Z`` (PSD-projected, the Lagrangian
+minimised in closed form by :meth:`tolsynth.model.cost_set.CostSet.dual_min`), exactly as for
+IPOPT: ``success`` needs the point feasible and the gap within 1e-6 of the cost (the method closes
+it to about 1e-11).
 
 Many poses.  Up to :data:`ALL_BLOCKS` blocks the method takes them all at once (one solve, the
 same whatever ran before).  Beyond, it works on a set of blocks (an exchange method over poses):
@@ -62,13 +62,24 @@ MODES = (False, True)
 #: ... the first at most this many iterations (it converges in 8-30 where it converges at all)
 FIRST_MODE_ITER = 40
 
-#: the active blocks of recent solves, by the blocks' sensitivity rows (free of R, p and the cost)
-_ACTIVE: "OrderedDict[bytes, np.ndarray]" = OrderedDict()
-_ACTIVE_SIZE = 64
+#: the last solve of recent block sets, by the blocks' sensitivity rows (free of R, p and the cost):
+#: (the active blocks of a problem with many, else None; the final state on them; its cost
+#: scale; its bounds of y; its k, alpha and blocks' scales)
+_MEMORY: "OrderedDict[tuple, tuple]" = OrderedDict()
+_MEMORY_SIZE = 64
+#: a warm start's distance from the cones' boundary (in the scaled multipliers and slacks)
+WARM_SHIFT = 1e-4
+#: ... taken only where the problem is this close to the remembered one (:func:`_distance`): a
+#: sweep's step (a few per cent) halves the iterations; from farther an optimum is a worse start
+#: than the cold one
+WARM_DISTANCE = 0.05
+#: a parameter whose bounds moved starts this far inside them (in ln y) at most
+START_PAD = 0.1
 
 
-def applies(nlp: ToleranceNLP) -> str | None:
-    """None if the interior-point method takes this problem, else why not (a sentence)."""
+def applies(nlp: ToleranceNLP, compiled=None) -> str | None:
+    """None if the interior-point method takes this problem, else why not (a sentence);
+    ``compiled``: the kernel if the caller has asked for it already."""
     spec = nlp.spec
     if spec.sphere_blocks:
         return "the sphere criterion"
@@ -76,7 +87,7 @@ def applies(nlp: ToleranceNLP) -> str | None:
         return "a cost model other than the power law"
     if not spec.blocks:
         return "no accuracy block"
-    if kernel() is None:
+    if (compiled or kernel()) is None:
         return f"the compiled interior-point method is not available ({kernel_status()['reason']})"
     return None
 
@@ -93,9 +104,10 @@ def solve_auto(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             from tolsynth.errors import InputError
 
             raise InputError("options", f"unknown option(s) {sorted(unknown)}", ", ".join(DEFAULT_OPTIONS))
-    why = applies(nlp)
+    compiled = kernel()
+    why = applies(nlp, compiled)
     if why is None:
-        result, why = solve_fast(nlp, **options)
+        result, why = solve_fast(nlp, compiled, **options)
         if result is not None:
             return result
     from dataclasses import replace
@@ -104,16 +116,17 @@ def solve_auto(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
     return replace(result, message=f"{result.message} (IPOPT: {why})")
 
 
-def solve_fast(nlp: ToleranceNLP, **options):
+def solve_fast(nlp: ToleranceNLP, compiled=None, **options):
     """``(result, None)`` from the interior-point method, or ``(None, why)`` where it did not reach
-    :data:`ACCEPT` or its point is not feasible (the caller then runs IPOPT).
+    :data:`ACCEPT` or its point is not feasible (the caller then runs IPOPT); ``compiled``: the
+    kernel (:func:`tolsynth.solvers.fast_ipm.kernel`), if the caller has it.
 
     Options (IPOPT's names): ``tol`` (the method's target for the largest primal residual and the
-    complementarity relative to the cost, default and at most 1e-10), ``feas_tol`` (largest ``sigma z / R - 1``
-    accepted at the returned point, default 1e-9), ``max_iter`` (per solve of the
-    method, at most 100), ``max_rounds`` (exchange rounds over blocks) and ``warm_start`` (False:
-    the first working set of a problem with many blocks from the start point, not from the last
-    solve of the same blocks); ``constr_viol_tol`` is IPOPT's alone.
+    complementarity relative to the cost, default and at most 1e-10), ``feas_tol`` (largest
+    ``sigma z / R - 1`` accepted at the returned point, default 1e-9), ``max_iter`` (per solve of
+    the method, at most 100), ``max_rounds`` (exchange rounds over blocks) and ``warm_start``
+    (False: the first working set of a problem with many blocks from the start point, not from the
+    last solve of the same blocks); ``constr_viol_tol`` is IPOPT's alone.
     """
     spec = nlp.spec
     tol = min(float(options.get("tol", 1e-10)), 1e-10)  # the method is cheap: never looser than 1e-10
@@ -139,38 +152,51 @@ def solve_fast(nlp: ToleranceNLP, **options):
     f_ref = float(excess.sum())
     if not f_ref > 0.0:
         f_ref = float(k.sum())
-    par = np.concatenate([k / f_ref, alpha, lo * lo, hi * hi])
+    L, U = lo * lo, hi * hi
+    par = np.concatenate([k / f_ref, alpha, L, U])
     A_all = nlp.As * (1.0 / math.sqrt(spec.c))  # block b: A_b diag(eps^2) A_b^T = (z/R)^2 V_b
-    if m <= ALL_BLOCKS:
-        J, key = None, None
+    key = (n, m, b"".join(b.A.tobytes() for b in spec.blocks))
+    scales = nlp.scales * (1.0 / math.sqrt(spec.c))  # each block's factor on its rows
+    memo = _MEMORY.get(key) if options.get("warm_start", True) else None
+    if memo is not None and _distance(memo, k, alpha, L, U, scales) > WARM_DISTANCE:
+        memo_start = None  # too far from the last solve for its optimum to help: its working set only
     else:
-        key = b"".join(b.A.tobytes() for b in spec.blocks)
-        J = _ACTIVE.get(key) if options.get("warm_start", True) else None
-        if J is None:
-            J = _start_set(nlp)
-    solve = kernel().solve
+        memo_start = memo
+    if m <= ALL_BLOCKS:
+        J = None
+    else:
+        J = memo[0] if memo is not None else _start_set(nlp)
+    solve = (compiled or kernel()).solve
     iterations, history, rounds = 0, [], 0
     while True:
         rounds += 1
         A = A_all if J is None else np.ascontiguousarray(A_all[J])
         if remaining() <= 0:  # the time limit (tolsynth.progress.time_limit): IPOPT reports it
             return None, "the time limit passed"
-        for primal in MODES:
+        # from the last solve of the same blocks where there is one (its optimum, moved back into
+        # the interior), then cold in each mode
+        attempts = [(False, None)] + [(primal, None) for primal in MODES]
+        if rounds == 1 and memo_start is not None:
+            attempts[0] = (False, _warm_state(memo_start, f_ref, L, U))
+        else:
+            attempts = attempts[1:]
+        for primal, start in attempts:
             limit = max_iter if primal else min(max_iter, FIRST_MODE_ITER)
-            status, state, zb, info = solve(A, par, None, tol, limit, primal=primal)
+            status, state, zb, info = solve(A, par, start, tol, limit, primal=primal)
             iterations += int(info[6])
-            Z, _, y = unpack(state, A.shape[0], n)
-            eps = np.minimum(np.maximum(np.sqrt(y), lo), hi)  # as assemble clips it (the same memo)
-            # one entry per run of the method: its best iterate's cost, primal residual and
-            # complementarity relative to the cost
-            history.append({"round": rounds, "mode": "iterate" if primal else "minimiser",
-                            "iteration": int(info[0]), "objective": nlp.cost(eps), "inf_pr": float(info[4]),
+            # one entry per run of the method: its best iterate's primal residual and complementarity
+            # relative to the cost (the objective: the returned point's cost, filled in below)
+            history.append({"round": rounds, "mode": ("warm " if start is not None else "")
+                            + ("iterate" if primal else "minimiser"), "iteration": int(info[0]),
+                            "objective": math.nan, "inf_pr": float(info[4]),
                             "inf_du": float(info[3]) / max(float(info[2]), 1e-300)})
             if status < 2 and info[1] <= max(ACCEPT, tol):
                 break
         else:
             return None, (f"the interior-point method stopped at error {info[1]:.1e} > {max(ACCEPT, tol):g} "
                           f"(status {status}, round {rounds})")
+        Z, _, y = unpack(state, A.shape[0], n)
+        eps = np.minimum(np.maximum(np.sqrt(y), lo), hi)  # as assemble clips it (the same memo)
         vals = nlp.block_values(eps)[0][:, 0]
         worst = float(vals.max())
         if worst <= 1.0 + feas_tol or J is None or len(J) == m:
@@ -184,16 +210,65 @@ def solve_fast(nlp: ToleranceNLP, **options):
         return None, f"largest sigma z/R - 1 = {worst - 1:.1e} > {feas_tol:g} at the method's point"
     if J is None:
         Zs = Z * f_ref
+        _remember(key, (None, state, f_ref, L, U, k, alpha, scales))
     else:
         Zs = np.zeros((m, 3, 3))
         Zs[J] = Z * f_ref
         tr = np.trace(Z, axis1=1, axis2=2)
-        _remember(key, J[tr > ACTIVE_Z * max(float(tr.max()), 1e-300)])
+        keep = tr > ACTIVE_Z * max(float(tr.max()), 1e-300)
+        # the active blocks and the state restricted to them (dropping inactive blocks from an
+        # optimum leaves an optimum)
+        sub = np.concatenate([Z[keep].ravel(), _S_of(state, len(J))[keep].ravel(), state[18 * len(J):]])
+        _remember(key, (J[keep], sub, f_ref, L, U, k, alpha, scales))
     lam_u = (2.0 * f_ref) * y * zb  # the bounds' multipliers in u = ln eps (d/du = 2 y d/dy)
     message = (f"interior point: {iterations} iterations, {rounds} round(s), {m if J is None else len(J)} of "
                f"{m} block(s); primal residual {info[4]:.1e}")
-    return assemble("ipm", nlp, eps, Zs, lam_u, Status.OPTIMAL, message, iterations, iterations + rounds, wall,
-                    history), None
+    result = assemble("ipm", nlp, eps, Zs, lam_u, Status.OPTIMAL, message, iterations, iterations + rounds, wall,
+                      history)
+    history[-1]["objective"] = result.cost
+    return result, None
+
+
+def _S_of(state: np.ndarray, m: int) -> np.ndarray:
+    return state[9 * m : 18 * m].reshape(m, 3, 3)
+
+
+def _distance(memo: tuple, k, alpha, L, U, scales) -> float:
+    """How far this problem is from the one remembered: the largest change of a block's scale, of
+    a parameter's bounds (in ln eps) or exponent, and the spread of the changes of ln k (a common
+    factor on k moves no optimum)."""
+    _, _, _, L_old, U_old, k_old, alpha_old, scales_old = memo
+    dk = np.log(k / k_old)
+    return max(float(np.abs(np.log(scales / scales_old)).max()), float(dk.max() - dk.min()),
+               float(np.abs(alpha - alpha_old).max()),
+               0.5 * float(np.abs(np.log(L / L_old)).max()), 0.5 * float(np.abs(np.log(U / U_old)).max()))
+
+
+def _warm_state(memo: tuple, f_ref: float, L: np.ndarray, U: np.ndarray) -> np.ndarray:
+    """The start of a solve of the same blocks from the last one's final state: the multipliers in
+    this solve's cost scale, ``Z`` and ``S`` moved :data:`WARM_SHIFT` into the interior (an
+    optimum sits on the cones' boundary, where an interior-point method cannot start), the barrier
+    weight at least ``WARM_SHIFT^2``; a parameter whose bounds moved is held inside them."""
+    _, old, f_old, L_old, U_old = memo[:5]
+    n = len(L)
+    mb = (len(old) - 3 * n - 1) // 18
+    x = old.copy()
+    scale = f_old / f_ref
+    eye = np.tile(np.eye(3).ravel(), mb)
+    x[: 9 * mb] *= scale
+    x[: 9 * mb] += WARM_SHIFT * eye
+    x[9 * mb : 18 * mb] += WARM_SHIFT * eye
+    x[-1] = max(x[-1] * scale, WARM_SHIFT**2)
+    moved = (L != L_old) | (U != U_old)
+    if moved.any():
+        y, sL, sU = x[18 * mb : 18 * mb + n], x[18 * mb + n : 18 * mb + 2 * n], x[18 * mb + 2 * n : 18 * mb + 3 * n]
+        lnL, lnU = np.log(L[moved]), np.log(U[moved])
+        pad = np.minimum(START_PAD, 0.25 * (lnU - lnL))
+        yi = np.exp(np.clip(np.log(y[moved]), lnL + pad, lnU - pad))
+        y[moved], sL[moved], sU[moved] = yi, yi - L[moved], U[moved] - yi
+        locked = moved & (L == U)  # held at its value exactly (the method reads y there, never moves it)
+        y[locked] = L[locked]
+    return x
 
 
 def _start_set(nlp: ToleranceNLP) -> np.ndarray:
@@ -204,8 +279,8 @@ def _start_set(nlp: ToleranceNLP) -> np.ndarray:
     return np.sort(order[vals[order] >= START_FRACTION * vals[order[0]]])
 
 
-def _remember(key: bytes, active: np.ndarray) -> None:
-    _ACTIVE[key] = active
-    _ACTIVE.move_to_end(key)
-    while len(_ACTIVE) > _ACTIVE_SIZE:
-        _ACTIVE.popitem(last=False)
+def _remember(key: tuple, memo: tuple) -> None:
+    _MEMORY[key] = memo
+    _MEMORY.move_to_end(key)
+    while len(_MEMORY) > _MEMORY_SIZE:
+        _MEMORY.popitem(last=False)

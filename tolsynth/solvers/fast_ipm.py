@@ -423,9 +423,10 @@ int ts_ipm_solve(int m, int n, const double *A, const double *par, double *x, do
     ts_direction(&p, x, T, dnu, dZ, dS, dy);
     amax = fmin(ts_step(&p, dZ, dS, dZh, dSh), ts_bound_step(&p, x, dy));
     a = fmin(1.0, tau*amax);
-    /* the step, halved while the primal residual it reaches is not within half the predicted
-       decrease (plus the relative complementarity): y(w) is nonlinear, and where w changes by
-       large factors its linear model no longer holds */
+    /* the step, halved while the residual it reaches (the larger of the primal and the relative
+       dual one) has not fallen by half the predicted amount (give or take the relative
+       complementarity): the cost is a power of y, and where y or w change by large factors the
+       linear model of the Newton step no longer holds */
     for (ls = 0; ; ls++) {
       double rt = 0, rdt = 0, ct, ft;
       memcpy(xt, x, len*sizeof(double));
