@@ -92,6 +92,8 @@ _GRID = 4097
 def _positive(value, field_name: str, allow_zero: bool = False) -> float:
     from tolsynth.checks import HUGE, is_real
 
+    if type(value) is float and 0.0 < value <= HUGE:  # the common case (NaN and inf fail here)
+        return value
     if not is_real(value):
         raise InputError(field_name, f"expected a number, got {value!r}", "a finite positive number")
     v = float(value)

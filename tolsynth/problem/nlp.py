@@ -141,7 +141,6 @@ class ToleranceNLP:
     def __init__(self, spec: Specification, sphere_nodes: int = SPHERE_NODES):
         self.spec = spec
         self.costs = spec.costs
-        self.theta = self.costs.theta  # the cost models' numbers, parameter of cost_graph
         self.lu = np.log(spec.lower)
         self.uu = np.log(spec.upper)
         self.sphere_nodes = sphere_nodes
@@ -152,6 +151,12 @@ class ToleranceNLP:
                    if spec.blocks else np.zeros((0, 3, spec.n)))
         self._graphs = None
         self._values_memo = None  # (eps bytes, block_values at eps): the last point asked
+
+    @property
+    def theta(self) -> np.ndarray:
+        """The cost models' numbers, the parameter of :func:`cost_graph` (the interior-point
+        method reads the power law's arrays instead)."""
+        return self.costs.theta
 
     # the graphs' parameter vectors, built on first use (IPOPT's exchange method reads neither)
     @cached_property
