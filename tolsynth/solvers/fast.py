@@ -26,6 +26,7 @@ changes the time, not the answer.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import time
 from collections import OrderedDict
@@ -155,7 +156,8 @@ def solve_fast(nlp: ToleranceNLP, compiled=None, **options):
     L, U = lo * lo, hi * hi
     par = np.concatenate([k / f_ref, alpha, L, U])
     A_all = nlp.As * (1.0 / math.sqrt(spec.c))  # block b: A_b diag(eps^2) A_b^T = (z/R)^2 V_b
-    key = (n, m, b"".join(b.A.tobytes() for b in spec.blocks))
+    # a digest, not the rows themselves: a thousand poses' rows are half a megabyte
+    key = (n, m, hashlib.blake2b(b"".join(b.A.tobytes() for b in spec.blocks), digest_size=16).digest())
     scales = nlp.scales * (1.0 / math.sqrt(spec.c))  # each block's factor on its rows
     memo = _MEMORY.get(key) if options.get("warm_start", True) else None
     if memo is not None and _distance(memo, k, alpha, L, U, scales) > WARM_DISTANCE:
