@@ -30,6 +30,7 @@ import hashlib
 import math
 import time
 from collections import OrderedDict
+from functools import lru_cache
 
 import numpy as np
 
@@ -240,10 +241,11 @@ def _distance(memo: tuple, k, alpha, L, U, scales) -> float:
     a parameter's bounds (in ln eps) or exponent, and the spread of the changes of ln k (a common
     factor on k moves no optimum)."""
     _, _, _, L_old, U_old, k_old, alpha_old, scales_old = memo
-    dk = np.log(k / k_old)
-    return max(float(np.abs(np.log(scales / scales_old)).max()), float(dk.max() - dk.min()),
-               float(np.abs(alpha - alpha_old).max()),
-               0.5 * float(np.abs(np.log(L / L_old)).max()), 0.5 * float(np.abs(np.log(U / U_old)).max()))
+    n = len(k)
+    # one logarithm of every ratio: k's, the bounds' (halved: y = eps^2), the scales'
+    r = np.log(np.concatenate([k / k_old, np.sqrt(np.concatenate([L / L_old, U / U_old])), scales / scales_old]))
+    dk = r[:n]
+    return max(float(dk.max() - dk.min()), float(np.abs(r[n:]).max()), float(np.abs(alpha - alpha_old).max()))
 
 
 def _warm_state(memo: tuple, f_ref: float, L: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -256,7 +258,7 @@ def _warm_state(memo: tuple, f_ref: float, L: np.ndarray, U: np.ndarray) -> np.n
     mb = (len(old) - 3 * n - 1) // 18
     x = old.copy()
     scale = f_old / f_ref
-    eye = np.tile(np.eye(3).ravel(), mb)
+    eye = _eyes(mb)
     x[: 9 * mb] *= scale
     x[: 9 * mb] += WARM_SHIFT * eye
     x[9 * mb : 18 * mb] += WARM_SHIFT * eye
@@ -271,6 +273,14 @@ def _warm_state(memo: tuple, f_ref: float, L: np.ndarray, U: np.ndarray) -> np.n
         locked = moved & (L == U)  # held at its value exactly (the method reads y there, never moves it)
         y[locked] = L[locked]
     return x
+
+
+@lru_cache(maxsize=16)
+def _eyes(mb: int) -> np.ndarray:
+    """``mb`` 3 x 3 identities, row-major, one after the other (read-only)."""
+    eye = np.tile(np.eye(3).ravel(), mb)
+    eye.setflags(write=False)
+    return eye
 
 
 def _start_set(nlp: ToleranceNLP) -> np.ndarray:
