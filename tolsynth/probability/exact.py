@@ -48,8 +48,8 @@ from typing import Sequence
 import numpy as np
 
 from tolsynth.checks import check_positive
-from tolsynth.probability.distributions import Shape, shape
 from tolsynth.errors import OutOfRangeError, TolsynthError
+from tolsynth.probability.distributions import Shape, shape
 
 __all__ = [
     "ExactProbabilityError",
