@@ -73,13 +73,10 @@ def panda():
 # the same robot as its model file
 # ---------------------------------------------------------------------------------------------
 def _solve_cold(m, pose):
-    """Synthesize without IPOPT's warm start: it would start the second of two solves of the same
-    blocks from the first's remembered optimum, and warm and cold solves of one model differ by up
-    to 2e-7 relative in the tolerances (measured on panda: the optimum is met to IPOPT's tol)."""
-    from tolsynth.solvers import ipopt
-
-    ipopt._CUT_CACHE.clear()
-    return tolsynth.synthesize(m, R=0.5, p=0.99, pose=pose)
+    """Synthesize without a warm start: it would start the second of two solves of the same blocks
+    from the first's remembered optimum, and warm and cold solves of one model differ by up to 2e-7
+    relative in the tolerances (measured on panda: the optimum is met to the solver's tol)."""
+    return tolsynth.synthesize(m, R=0.5, p=0.99, pose=pose, options={"warm_start": False})
 
 
 @pytest.mark.parametrize("build, name", [(puma, "puma560"), (ur5_in_mm, "ur5"), (panda, "panda")])
