@@ -161,10 +161,13 @@ def solve_fast(nlp: ToleranceNLP, compiled=None, **options):
     key = (n, m, hashlib.blake2b(b"".join(b.A.tobytes() for b in spec.blocks), digest_size=16).digest())
     scales = nlp.scales * (1.0 / math.sqrt(spec.c))  # each block's factor on its rows
     memo = _MEMORY.get(key) if options.get("warm_start", True) else None
-    if memo is not None and _distance(memo, k, alpha, L, U, scales) > WARM_DISTANCE:
-        memo_start = None  # too far from the last solve for its optimum to help: its working set only
-    else:
-        memo_start = memo
+    memo_start, shift = memo, WARM_SHIFT
+    if memo is not None:
+        d = _distance(memo, k, alpha, L, U, scales)
+        if d > WARM_DISTANCE:
+            memo_start = None  # too far from the last solve for its optimum to help: its working set only
+        elif d == 0.0 and memo[1] is not None and memo[0] is None:
+            shift = 0.0  # the same problem again: its optimum, as it was, is the answer (checked below)
     if m <= ALL_BLOCKS:
         J = None
     else:
@@ -180,7 +183,7 @@ def solve_fast(nlp: ToleranceNLP, compiled=None, **options):
         # the interior), then cold in each mode
         attempts = [(False, None)] + [(primal, None) for primal in MODES]
         if rounds == 1 and memo_start is not None:
-            attempts[0] = (False, _warm_state(memo_start, f_ref, L, U))
+            attempts[0] = (False, _warm_state(memo_start, f_ref, L, U, shift))
         else:
             attempts = attempts[1:]
         for primal, start in attempts:
@@ -248,11 +251,11 @@ def _distance(memo: tuple, k, alpha, L, U, scales) -> float:
     return max(float(dk.max() - dk.min()), float(np.abs(r[n:]).max()), float(np.abs(alpha - alpha_old).max()))
 
 
-def _warm_state(memo: tuple, f_ref: float, L: np.ndarray, U: np.ndarray) -> np.ndarray:
+def _warm_state(memo: tuple, f_ref: float, L: np.ndarray, U: np.ndarray, shift: float = WARM_SHIFT) -> np.ndarray:
     """The start of a solve of the same blocks from the last one's final state: the multipliers in
-    this solve's cost scale, ``Z`` and ``S`` moved :data:`WARM_SHIFT` into the interior (an
-    optimum sits on the cones' boundary, where an interior-point method cannot start), the barrier
-    weight at least ``WARM_SHIFT^2``; a parameter whose bounds moved is held inside them."""
+    this solve's cost scale, ``Z`` and ``S`` moved ``shift`` into the interior (an optimum sits on
+    the cones' boundary, where an interior-point method cannot start on another problem), the
+    barrier weight at least ``shift^2``; a parameter whose bounds moved is held inside them."""
     _, old, f_old, L_old, U_old = memo[:5]
     n = len(L)
     mb = (len(old) - 3 * n - 1) // 18
@@ -260,9 +263,10 @@ def _warm_state(memo: tuple, f_ref: float, L: np.ndarray, U: np.ndarray) -> np.n
     scale = f_old / f_ref
     eye = _eyes(mb)
     x[: 9 * mb] *= scale
-    x[: 9 * mb] += WARM_SHIFT * eye
-    x[9 * mb : 18 * mb] += WARM_SHIFT * eye
-    x[-1] = max(x[-1] * scale, WARM_SHIFT**2)
+    if shift:
+        x[: 9 * mb] += shift * eye
+        x[9 * mb : 18 * mb] += shift * eye
+    x[-1] = max(x[-1] * scale, shift**2)
     moved = (L != L_old) | (U != U_old)
     if moved.any():
         y, sL, sU = x[18 * mb : 18 * mb + n], x[18 * mb + n : 18 * mb + 2 * n], x[18 * mb + 2 * n : 18 * mb + 3 * n]
