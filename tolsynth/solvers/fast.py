@@ -16,12 +16,19 @@ minimised in closed form by :meth:`tolsynth.model.cost_set.CostSet.dual_min`), e
 IPOPT: ``success`` needs the point feasible and the gap within 1e-6 of the cost (the method closes
 it to about 1e-11).
 
-Many poses.  Up to :data:`ALL_BLOCKS` blocks the method takes them all at once (one solve, the
-same whatever ran before).  Beyond, it works on a set of blocks (an exchange method over poses):
-those active at the last solve of the same poses (a sweep re-solves the same poses), else those
-nearest to their limit at the start point; every block is checked at each round's optimum and the
-violated ones join the set.  Each round is solved to the same accuracy, so the working set
-changes the time, not the answer.
+Warm starts.  The last solve of each set of blocks (the same poses and rows, whatever R, p, k,
+alpha, the bounds or the locks) is remembered; a solve close to it (a sweep's step: every change a
+few per cent at most) starts from its optimum moved slightly into the interior, and takes 4-5
+iterations instead of 8-12; the very same problem again takes none.
+
+Many poses.  Up to :data:`ALL_BLOCKS` blocks the method takes them all at once.  Beyond, it works
+on a set of blocks (an exchange method over poses): those active at the last solve of the same
+poses, else those nearest to their limit at the start point; every block is checked at each
+round's optimum and the violated ones join the set.
+
+Every run is solved to the same accuracy, so a warm start or a working set changes the time, not
+the answer (the same optimum to about 1e-11 of the cost; ``options={"warm_start": False}`` solves
+from scratch).
 """
 
 from __future__ import annotations
@@ -127,8 +134,8 @@ def solve_fast(nlp: ToleranceNLP, compiled=None, **options):
     complementarity relative to the cost, default and at most 1e-10), ``feas_tol`` (largest
     ``sigma z / R - 1`` accepted at the returned point, default 1e-9), ``max_iter`` (per solve of
     the method, at most 100), ``max_rounds`` (exchange rounds over blocks) and ``warm_start``
-    (False: the first working set of a problem with many blocks from the start point, not from the
-    last solve of the same blocks); ``constr_viol_tol`` is IPOPT's alone.
+    (False: nothing from the last solve of the same blocks, neither its optimum as the start nor
+    its active blocks as the working set); ``constr_viol_tol`` is IPOPT's alone.
     """
     spec = nlp.spec
     tol = min(float(options.get("tol", 1e-10)), 1e-10)  # the method is cheap: never looser than 1e-10
