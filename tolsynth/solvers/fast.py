@@ -274,15 +274,16 @@ def _warm_state(memo: tuple, f_ref: float, L: np.ndarray, U: np.ndarray, shift: 
         x[: 9 * mb] += shift * eye
         x[9 * mb : 18 * mb] += shift * eye
     x[-1] = max(x[-1] * scale, shift**2)
-    moved = (L != L_old) | (U != U_old)
-    if moved.any():
-        y, sL, sU = x[18 * mb : 18 * mb + n], x[18 * mb + n : 18 * mb + 2 * n], x[18 * mb + 2 * n : 18 * mb + 3 * n]
-        lnL, lnU = np.log(L[moved]), np.log(U[moved])
-        pad = np.minimum(START_PAD, 0.25 * (lnU - lnL))
-        yi = np.exp(np.clip(np.log(y[moved]), lnL + pad, lnU - pad))
-        y[moved], sL[moved], sU[moved] = yi, yi - L[moved], U[moved] - yi
-        locked = moved & (L == U)  # held at its value exactly (the method reads y there, never moves it)
-        y[locked] = L[locked]
+    base = 18 * mb
+    # a sweep moves one or two parameters' bounds: one at a time, in plain floats
+    for i in ((L != L_old) | (U != U_old)).nonzero()[0].tolist():
+        lo, hi = float(L[i]), float(U[i])
+        if lo == hi:  # locked: held at its value exactly (the method reads y there, never moves it)
+            yi = lo
+        else:
+            pad = min(START_PAD, 0.25 * math.log(hi / lo))
+            yi = min(max(float(x[base + i]), lo * math.exp(pad)), hi * math.exp(-pad))
+        x[base + i], x[base + n + i], x[base + 2 * n + i] = yi, yi - lo, hi - yi
     return x
 
 
