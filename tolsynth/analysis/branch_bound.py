@@ -135,11 +135,15 @@ class _Search:
                 if np.all(h < 1e-12 * self.scale):
                     break
 
-    def push(self, lo, hi, ub, feasible, min_width, g_lo=None, g_hi=None):
+    def push(self, lo, hi, ub, feasible, min_width, g_lo=None, g_hi=None, split=None):
         thr = self.threshold()
         widths = (hi - lo) / self.scale
         side = np.argmax(widths, axis=1)
-        if g_lo is not None:
+        if split is not None:
+            # the bound function's own measure of how much each side widens the bound
+            ok = np.isfinite(split).all(axis=1) & (split.max(axis=1, initial=0.0) > 0.0) & (hi > lo).any(axis=1)
+            side = np.where(ok, np.argmax(np.where(hi > lo, split, -1.0), axis=1), side)
+        elif g_lo is not None:
             # a box proven feasible is halved where the gradient makes the bound loosest (its
             # smear); one across the constraints' boundary along its widest side, to settle it
             with np.errstate(invalid="ignore"):
@@ -161,15 +165,19 @@ class _Search:
 
 
 def _bounds(bound_fn, lo, hi):
-    """Upper bounds (NaN read as +inf) and, when bound_fn gives them, gradient bounds."""
+    """Upper bounds (NaN read as +inf) and, when bound_fn gives them, gradient bounds and split
+    weights."""
     r = bound_fn(lo, hi)
-    g_lo = g_hi = None
+    g_lo = g_hi = split = None
     if isinstance(r, tuple):
-        r, g_lo, g_hi = r
-        g_lo = np.asarray(g_lo, dtype=float).reshape(lo.shape)
-        g_hi = np.asarray(g_hi, dtype=float).reshape(lo.shape)
+        r, g_lo, g_hi, *rest = r
+        if g_lo is not None:
+            g_lo = np.asarray(g_lo, dtype=float).reshape(lo.shape)
+            g_hi = np.asarray(g_hi, dtype=float).reshape(lo.shape)
+        if rest and rest[0] is not None:
+            split = np.asarray(rest[0], dtype=float).reshape(lo.shape)
     ub = np.asarray(r, dtype=float).reshape(len(lo))
-    return np.where(np.isnan(ub), np.inf, ub), g_lo, g_hi
+    return np.where(np.isnan(ub), np.inf, ub), g_lo, g_hi, split
 
 
 def _monotone_faces(lo, hi, g_lo, g_hi, usable):
@@ -205,6 +213,7 @@ def maximize(
     local_steps: int = 40,
     min_width: float = 1e-12,
     callback=None,
+    stop=None,
 ) -> MaximizeResult:
     """Certified maximum of an objective over the box ``lo <= x <= hi`` (and ``g(x) <= 0``).
 
@@ -244,6 +253,9 @@ def maximize(
         Boxes narrower than this (relative to ``scale``) on every side are not split further.
     callback : callable, optional
         ``callback(boxes_processed, upper_bound, best_value)`` after every round.
+    stop : callable, optional
+        ``stop() -> str``: checked after every round; a non-empty string ends the search, not
+        certified unless the gap has closed, with that string as the reason (a time limit).
 
     Returns
     -------
@@ -276,10 +288,15 @@ def maximize(
         seeds.append(np.clip(np.atleast_2d(np.asarray(x0, dtype=float)).reshape(-1, d), lo, hi))
     if s.consider(np.vstack(seeds)):
         s.polish(local_steps)
-    ub, g_lo, g_hi = _bounds(bound_fn, L, H)
-    s.push(L, H, ub, feasible, min_width, g_lo, g_hi)
+    ub, g_lo, g_hi, split = _bounds(bound_fn, L, H)
+    s.push(L, H, ub, feasible, min_width, g_lo, g_hi, split)
 
+    stopped = ""
     while s.heap and processed < max_boxes:
+        if stop is not None:
+            stopped = stop() or ""
+            if stopped:
+                break
         thr = s.threshold()
         if -s.heap[0][0] <= thr:  # nothing left can beat the best by more than the tolerance
             s.dropped = max(s.dropped, -s.heap[0][0])
@@ -300,7 +317,7 @@ def maximize(
         B_lo[rows, k] = mid
         C_lo, C_hi = np.concatenate([P_lo, B_lo]), np.concatenate([A_hi, P_hi])
         C_feas = np.concatenate([P_feas, P_feas])
-        ub, g_lo, g_hi = _bounds(bound_fn, C_lo, C_hi)
+        ub, g_lo, g_hi, split = _bounds(bound_fn, C_lo, C_hi)
         ub = np.minimum(ub, np.concatenate([P_ub, P_ub]))  # a parent's bound holds on its halves
         processed += len(C_lo)
         keep = np.ones(len(C_lo), dtype=bool)
@@ -312,7 +329,9 @@ def maximize(
         if g_lo is not None:
             C_lo, C_hi, red = _monotone_faces(C_lo, C_hi, g_lo, g_hi, keep & C_feas)
             if len(red):  # bound the shrunken boxes again: a thinner box has a tighter bound
-                ub2, g_lo[red], g_hi[red] = _bounds(bound_fn, C_lo[red], C_hi[red])
+                ub2, g_lo[red], g_hi[red], split2 = _bounds(bound_fn, C_lo[red], C_hi[red])
+                if split is not None and split2 is not None:
+                    split[red] = split2
                 ub[red] = np.minimum(ub[red], ub2)
                 processed += len(red)
         if s.consider(0.5 * (C_lo[keep] + C_hi[keep])):
@@ -325,6 +344,7 @@ def maximize(
             min_width,
             None if g_lo is None else g_lo[keep],
             None if g_hi is None else g_hi[keep],
+            None if split is None else split[keep],
         )
         if callback is not None:
             callback(processed, s.upper(), s.best)
@@ -340,9 +360,9 @@ def maximize(
         reason = ""
         if not certified:
             reason = (
-                f"box limit reached ({processed} boxes, {len(s.heap)} open)"
-                if s.heap
-                else f"boxes at the resolution limit (min_width={min_width}) still bound above the best"
+                stopped
+                or (f"box limit reached ({processed} boxes, {len(s.heap)} open)" if s.heap else "")
+                or f"boxes at the resolution limit (min_width={min_width}) still bound above the best"
             )
     return MaximizeResult(
         float(upper), float(s.best), s.best_x, processed, bool(certified), reason, len(s.heap), time.perf_counter() - t0

@@ -1,0 +1,390 @@
+"""Certified worst pose: a proven bound of the error statistics over the whole joint space.
+
+:func:`certify_worst_pose` runs a branch and bound (:func:`tolsynth.analysis.branch_bound.maximize`)
+over the joint ranges, inside the joint constraints (the paper's interference limit) and, for
+closed loops, the loop-closure condition ``closure(q, 0)^2 <= 1``.  What it returns is either a
+proof -- no pose anywhere in the joint space is worse than ``upper_bound`` (the largest principal
+standard deviation, mm) or ``probability_lower_bound`` (the smallest probability of one component
+of the hand error, along any direction, to stay within ``R``) -- together with the best pose it
+found, whose value lies within the search's tolerance of the bound; or, when the box limit or the
+time limit stops it first, the bound reached so far and ``certified = False``.
+
+Before splitting, facts proven on the graph shrink the search
+(:mod:`tolsynth.analysis.certify_structure`): error parameters without effect are dropped, joints
+without effect held, a joint that turns the error distribution rigidly about the base z axis held,
+and a joint range beyond one turn cut to one period where the joint enters only through sine and
+cosine.  The bounds are those of :mod:`tolsynth.analysis.certify_bounds` (Gaussian reading: the
+largest principal standard deviation) and :mod:`tolsynth.analysis.certify_exact` (the exact
+per-direction probability).  Units: mm and rad.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from tolsynth.analysis.branch_bound import maximize
+from tolsynth.analysis.certify_bounds import JointGraphs, PolygonSigmaBounds, SigmaBounds
+from tolsynth.analysis.certify_structure import structure, trig_polynomial
+from tolsynth.analysis.interval_ops import round_down as _dn
+from tolsynth.analysis.interval_ops import round_up as _up
+from tolsynth.analysis.intervals import IntervalFunction
+from tolsynth.checks import check_count, check_positive
+from tolsynth.errors import InputError, OutOfRangeError
+from tolsynth.kinematics.joint_space import _feasible, _limits
+from tolsynth.progress import Progress, remaining
+
+__all__ = ["Certificate", "certify_worst_pose", "DEFAULT_RTOL", "DEFAULT_MAX_BOXES"]
+
+#: relative gap between the certified bound and the best value found (sigma criterion)
+DEFAULT_RTOL = 5e-4
+#: boxes bounded before the search gives up (not certified, the bound so far reported)
+DEFAULT_MAX_BOXES = 400_000
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """Outcome of :func:`certify_worst_pose`.
+
+    Attributes
+    ----------
+    criterion : {"sigma", "components"}
+        Largest principal standard deviation, or smallest per-direction probability.
+    probability : {"gaussian", "exact"}
+        How ``probability_lower_bound`` reads the error: the Gaussian approximation (it follows
+        from the sigma bound) or the exact distribution of the linear model.
+    certified : bool
+        The bound is proven and the best pose found is within the tolerance of it.
+    upper_bound : float or None
+        Proven upper bound of the largest principal standard deviation over the joint space (mm);
+        None for the exact criterion.
+    probability_lower_bound : float or None
+        Proven lower bound of the smallest per-direction probability ``P(|u . dr| <= R)`` (with R).
+    best_value : float
+        The criterion at the best pose found (sigma in mm, or the probability).
+    q : ndarray
+        That pose (rad, every joint; held joints at their reference values).
+    direction : ndarray or None
+        For the exact criterion, the direction of the smallest probability there.
+    boxes, open_boxes : int
+        Boxes bounded, and left undecided at the end.
+    reason : str
+        Why not certified ("" when certified).
+    held : dict
+        Joint name -> why it was held (it cannot change the criterion).
+    searched : tuple of str
+        The joints searched.
+    dropped : tuple of str
+        Error parameters without effect on the hand position.
+    """
+
+    model: str
+    criterion: str
+    probability: str
+    R: float | None
+    tolerances: dict
+    certified: bool
+    upper_bound: float | None
+    probability_lower_bound: float | None
+    best_value: float
+    q: np.ndarray
+    direction: np.ndarray | None
+    boxes: int
+    open_boxes: int
+    elapsed_s: float
+    reason: str
+    rtol: float
+    held: dict = field(default_factory=dict)
+    searched: tuple = ()
+    dropped: tuple = ()
+    method: str = ""
+
+    @property
+    def gap(self) -> float:
+        """Bound minus best value (sigma, mm), or best value minus bound (probability)."""
+        if self.criterion == "sigma":
+            return float(self.upper_bound - self.best_value)
+        return float(self.best_value - self.probability_lower_bound)
+
+    def to_dict(self) -> dict:
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
+
+    def summary(self) -> str:
+        """One line per fact: the proof (or why not), the best pose, what was held and searched."""
+        head = "certified" if self.certified else "NOT certified"
+        lines = []
+        if self.upper_bound is not None:
+            lines.append(f"{head}: largest principal sigma <= {self.upper_bound:.6g} mm over the whole joint space; "
+                         f"{self.best_value if self.criterion == 'sigma' else self.upper_bound:.6g} mm reached")
+        if self.probability_lower_bound is not None:
+            lines.append(f"{head}: every component P(|u.dr| <= {self.R:g} mm) >= {self.probability_lower_bound:.8f} "
+                         f"({self.probability}); lowest found {self.best_value:.8f}" if self.criterion == "components"
+                         else f"  (Gaussian per-component probability >= {self.probability_lower_bound:.8f})")
+        lines.append(f"  pose (deg) ({', '.join(f'{v:.3f}' for v in np.degrees(self.q))}), {self.boxes} boxes, "
+                     f"{self.elapsed_s:.1f} s" + ("" if self.certified else f"; {self.reason}"))
+        if self.held:
+            lines.append("  held: " + "; ".join(f"{k} ({v})" for k, v in self.held.items()))
+        if self.dropped:
+            lines.append("  no effect on the hand position: " + ", ".join(self.dropped))
+        return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# the search domain
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class _Domain:
+    free: list
+    held: dict  # joint -> value (rad) in the reported pose
+    why: dict  # joint -> reason
+    lo: np.ndarray
+    hi: np.ndarray
+    constraint_fn: object
+
+
+def _domain(mech, st, base_q: np.ndarray) -> _Domain:
+    lo_q, hi_q = _limits(mech)
+    nq = len(lo_q)
+    names = list(mech.joint_names)
+    constrained = {names.index(jn) for c in mech.spec.joint_constraints for jn in c.terms}
+    free = [j for j in range(nq) if (j in st.joints and j != st.rotation) or j in constrained]
+    why = {}
+    for j in range(nq):
+        if j == st.rotation and j not in constrained:
+            why[j] = "turns the error distribution rigidly about the base z axis"
+        elif j not in free:
+            why[j] = "the hand position's sensitivity does not depend on it"
+    held = {j: float(np.clip(base_q[j], lo_q[j], hi_q[j])) for j in range(nq) if j not in free}
+    lo, hi = lo_q[free].copy(), hi_q[free].copy()
+    for i, j in enumerate(free):
+        if j in st.periodic and j not in constrained and hi[i] - lo[i] > 2 * math.pi:
+            hi[i] = lo[i] + 2 * math.pi  # one period: the joint enters only through sin and cos
+    return _Domain(free, held, why, lo, hi, _constraints(mech, free, held))
+
+
+def _constraints(mech, free, held):
+    """``g(x) <= 0`` on boxes of the searched joints: the linear joint constraints (two rows each)
+    and, for closed loops, ``c^2 - 1`` of every loop's closure argument at zero error.  On points
+    the package's own feasibility test decides (the one Mechanism.joints applies)."""
+    names = list(mech.joint_names)
+    rows = []
+    for c in mech.spec.joint_constraints:
+        a = np.zeros(len(free))
+        for jn, coef in c.terms.items():
+            a[free.index(names.index(jn))] = coef
+        rows.append((a, c.lower, c.upper))
+    clos = None
+    graphs = mech.graphs
+    if getattr(graphs, "closure", None) is not None and graphs.closure.numel_out(0) > 0:
+        x = ca.SX.sym("x", len(free))
+        q = [ca.SX(float(held.get(j, 0.0))) for j in range(len(names))]
+        for i, j in enumerate(free):
+            q[j] = x[i]
+        cl = graphs.closure
+        cl = cl if cl.is_a("SXFunction") else cl.expand()
+        c = cl.call([ca.vertcat(*q), ca.DM.zeros(cl.nnz_in(1))])[0]
+        clos = IntervalFunction(ca.Function("closure_margin", [x], [ca.densify(c * c - 1.0)]))
+    if not rows and clos is None:
+        return None
+    nq = len(names)
+
+    def fn(L, H):
+        parts_lo, parts_hi = [], []
+        for a, lower, upper in rows:
+            terms_lo = np.where(a > 0, a * L, a * H)
+            terms_hi = np.where(a > 0, a * H, a * L)
+            slack = 4.0 * len(a) * 2.0**-53 * np.abs(np.concatenate([terms_lo, terms_hi], axis=1)).sum(axis=1)
+            v_lo, v_hi = _dn(terms_lo.sum(axis=1) - slack), _up(terms_hi.sum(axis=1) + slack)
+            parts_lo += [v_lo - upper, lower - v_hi]
+            parts_hi += [v_hi - upper, lower - v_lo]
+        g_lo = np.array(parts_lo).T if parts_lo else np.zeros((len(L), 0))
+        g_hi = np.array(parts_hi).T if parts_hi else np.zeros((len(L), 0))
+        if clos is not None:
+            cl_lo, cl_hi, _ = clos.evaluate(L, H)
+            g_lo, g_hi = np.hstack([g_lo, cl_lo]), np.hstack([g_hi, cl_hi])
+        point = np.all(L == H, axis=1)
+        if point.any():  # a point: the package's own test of the limits and joint constraints
+            Q = np.empty((nq, int(point.sum())))
+            for j, v in held.items():
+                Q[j] = v
+            for i, j in enumerate(free):
+                Q[j] = L[point, i]
+            ok = _feasible(mech, Q)
+            g_hi[point, : 2 * len(rows)] = np.where(ok, 0.0, 1.0)[:, None]
+        return g_lo, g_hi
+
+    return fn
+
+
+def _full(dom: _Domain, x: np.ndarray, nq: int) -> np.ndarray:
+    q = np.empty(nq)
+    for j, v in dom.held.items():
+        q[j] = v
+    for i, j in enumerate(dom.free):
+        q[j] = x[i]
+    return q
+
+
+# ---------------------------------------------------------------------------------------------
+def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str = "sigma", R: float | None = None,
+                       probability: str = "gaussian", *, rtol: float | None = None, tol: float | None = None,
+                       max_boxes: int = DEFAULT_MAX_BOXES, x0=None, base_q=None, progress=None,
+                       time_limit: float | None = None) -> Certificate:
+    """A proven bound of the worst accuracy over the whole joint space (module docstring).
+
+    Parameters
+    ----------
+    mechanism : Mechanism
+    tolerances : str, dict or array
+        Tolerance set name or half-widths (tolerance units).
+    distribution : str or dict, optional
+        As :func:`tolsynth.synthesize` (default: the model file's, else uniform).
+    criterion : {"sigma", "components"}
+        Bound the largest principal standard deviation, or the smallest per-direction probability
+        ``P(|u . dr| <= R)`` (needs ``R``).
+    R : float, optional
+        Radius (mm), > 0.  With ``criterion="sigma"`` it adds the Gaussian per-component
+        probability bound.
+    probability : {"gaussian", "exact"}
+        The reading of the per-direction probability (exact: no Gaussian approximation,
+        :mod:`tolsynth.probability.exact`; only with ``criterion="components"``).
+    rtol : float, optional
+        Relative gap at which the search stops, certified (sigma; default :data:`DEFAULT_RTOL`).
+    tol : float, optional
+        Absolute gap in probability (exact criterion; default 2e-7).
+    max_boxes : int
+        Boxes to bound before giving up.
+    x0 : array_like, optional
+        Poses (rad, every joint) to evaluate first, e.g. the poses already known to be bad.
+    base_q : array_like, optional
+        Values of the held joints in the reported pose (default: the model's reference pose, else 0
+        clipped to the limits).
+    progress : None, bool or callable
+        A progress bar on stderr (None: on a terminal, for runs over a couple of seconds).
+    time_limit : float, optional
+        Seconds; also any enclosing :func:`tolsynth.progress.time_limit` block.
+
+    Returns
+    -------
+    Certificate
+
+    Examples
+    --------
+    >>> import tolsynth
+    >>> from tolsynth.analysis.certify import certify_worst_pose
+    >>> c = certify_worst_pose(tolsynth.load_model("planar_2r"), "coarse", progress=False)
+    >>> bool(c.certified), bool(c.best_value <= c.upper_bound <= c.best_value * (1 + 1e-3))
+    (True, True)
+    """
+    t0 = time.perf_counter()
+    from tolsynth.kinematics.joint_space import MODEL_REFERENCE, _reference
+    from tolsynth.kinematics.mechanism import as_mechanism
+    from tolsynth.probability.distributions import resolve
+    from tolsynth.probability.stats import variance_divisor
+
+    mech = as_mechanism(mechanism)
+    if criterion not in ("sigma", "components"):
+        raise OutOfRangeError("criterion", f"got {criterion!r}", "'sigma' or 'components'")
+    if probability not in ("gaussian", "exact"):
+        raise OutOfRangeError("probability", f"got {probability!r}", "'gaussian' or 'exact'")
+    if R is not None:
+        R = check_positive(R, "R")
+    elif criterion == "components":
+        raise InputError("R", "the per-component probability needs a radius", "a finite number > 0 (mm)")
+    if probability == "exact" and criterion != "components":
+        raise InputError("probability", "'exact' is a reading of the per-component probability",
+                         "criterion='components' with probability='exact', or probability='gaussian'")
+    max_boxes = check_count(max_boxes, "max_boxes", 1, 10**9)
+    rtol = DEFAULT_RTOL if rtol is None else check_positive(rtol, "rtol", "relative", upper=0.5, lower=1e-12)
+    distribution = resolve(distribution, mech)
+    eps = mech.tolerances(tolerances)
+    st = structure(mech)
+    nq = len(mech.joint_names)
+    names = list(mech.joint_names)
+    if base_q is None:
+        _, ref = _reference(mech, MODEL_REFERENCE)
+        base_q = ref if ref is not None else np.zeros(nq)
+    base_q = np.asarray(base_q, dtype=float)
+    dom = _domain(mech, st, base_q)
+    cols = list(st.columns)
+    seeds = None
+    if x0 is not None:
+        X0 = np.atleast_2d(np.asarray(x0, dtype=float))
+        if X0.shape[1] != nq:
+            raise InputError("x0", f"shape {X0.shape}", f"poses of {nq} joint values (rad)")
+        seeds = X0[:, dom.free]
+    deadline = time.monotonic() + (check_positive(time_limit, "time_limit", "s") if time_limit else math.inf)
+
+    def stop():
+        if remaining() <= 0 or time.monotonic() > deadline:
+            return "time limit reached"
+        return ""
+
+    bar = Progress(progress, max_boxes, f"certified worst pose ({mech.name})", "box")
+    done = [0]
+
+    def callback(n, ub, best):
+        bar.update(n, n - done[0])
+        done[0] = n
+
+    c = np.broadcast_to(np.asarray(variance_divisor(distribution, mech), dtype=float), (mech.n,))
+    direction = None
+    try:
+        if criterion == "sigma" or probability == "gaussian":
+            w = (eps**2 / c)[cols]
+            poly = trig_polynomial(st, dom.free, st.rotation) if st.rotation is None or st.rotation in dom.held else None
+            if poly is not None and all(j in st.joints for j in dom.free):
+                bounds = PolygonSigmaBounds(poly, dom.free, w)
+                method = "arc polygons of the exact trigonometric polynomial"
+            else:
+                held_zero = dict(dom.held)
+                if st.rotation is not None:
+                    held_zero[st.rotation] = 0.0
+                bounds = SigmaBounds(JointGraphs(st, nq, dom.free, held_zero), w)
+                method = "second-order Taylor corners" if bounds.g.use_hessian else "Taylor corners (interval Jacobian)"
+            r = maximize(lambda L, H: _with_split(bounds.bound(L, H)), bounds.point, dom.lo, dom.hi, tol=0.0,
+                         rtol=rtol, max_boxes=max_boxes, constraint_fn=dom.constraint_fn, x0=seeds,
+                         callback=callback, stop=stop, batch=128)
+            if not np.isfinite(r.best_value):
+                raise OutOfRangeError("joint limits", "no pose satisfies every joint limit and constraint",
+                                      "a non-empty feasible joint space")
+            ub = float(r.upper_bound)
+            q = _full(dom, r.best_x, nq)
+            best = float(r.best_value)
+            p_lb = None
+            if R is not None:
+                p_lb = _dn(math.erf(R / (math.sqrt(2.0) * ub)) - 1e-15) if ub > 0 else 1.0
+            if criterion == "components":
+                best = math.erf(R / (math.sqrt(2.0) * best)) if best > 0 else 1.0
+            cert = dict(certified=r.certified, upper_bound=ub, probability_lower_bound=p_lb, best_value=best,
+                        boxes=r.boxes_processed, open_boxes=r.open_boxes, reason=r.reason)
+        else:
+            from tolsynth.analysis.certify_exact import certify_components_exact
+
+            out = certify_components_exact(mech, st, dom, eps, distribution, R, tol=tol, max_boxes=max_boxes,
+                                           seeds=seeds, callback=callback, stop=stop)
+            q = _full(dom, out["x"], nq)
+            direction = out["direction"]
+            method = out["method"]
+            cert = {k: out[k] for k in ("certified", "probability_lower_bound", "best_value", "boxes", "open_boxes",
+                                        "reason")}
+            cert["upper_bound"] = None
+    finally:
+        bar.close()
+    return Certificate(
+        model=mech.name, criterion=criterion, probability=probability, R=R,
+        tolerances=dict(zip(mech.error_parameters, eps.tolist())), q=q, direction=direction,
+        elapsed_s=time.perf_counter() - t0, rtol=rtol,
+        held={names[j]: f"{math.degrees(v):g} deg, {dom.why[j]}" for j, v in dom.held.items()},
+        searched=tuple(names[j] for j in dom.free),
+        dropped=tuple(mech.error_parameters[i] for i in range(mech.n) if i not in st.columns),
+        method=method, **cert)
+
+
+def _with_split(res):
+    ub, split = res
+    return ub, None, None, split

@@ -1,0 +1,453 @@
+"""Rigorous bounds of the largest principal standard deviation over boxes of joint values.
+
+The certified worst-pose search (:mod:`tolsynth.analysis.certify`) splits the joint space into
+boxes; this module bounds ``sigma_1(q) = sqrt(lambda_max(A(q) W A(q)^T))`` from above on each box,
+where ``A(q)`` is the position sensitivity at zero error (only the columns that are not
+structurally zero, :mod:`tolsynth.analysis.certify_structure`) and ``W`` the diagonal of the
+variances per tolerance unit squared (``eps_i^2 / c_i``).  Two bounds, the smaller one used:
+
+* **natural**: interval enclosures of the entries of ``A`` on the box, ``A in [A_mid - R, A_mid + R]``,
+  and Weyl's inequality for singular values, ``sigma_1(A W^1/2) <= sigma_1(A_mid W^1/2) + ||R W^1/2||_2``
+  (``||D||_2 <= || |D| ||_2 <= ||R||_2`` for ``|D| <= R`` entrywise).  Good on large boxes.
+* **corners**: with ``c`` the box's centre and ``r`` its half-widths,
+  ``A(c + d) = A(c) + J(c) d + E`` with ``|E| <= 1/2 sum_jk |H_jk(B)| r_j r_k`` (Taylor's theorem with the
+  interval Hessian ``H(B)`` of every entry over the box; or ``sum_k |J_k(B) - J_k(c)| r_k`` from the
+  interval Jacobian, when the Hessian's graph is much larger).  ``sigma_1`` is a norm of ``A W^1/2``,
+  hence convex in ``A``, so its largest value over the affine image of the box is at one of the
+  ``2^k`` corners ``d = +-r``; the remainder adds at most ``||E W^1/2||_2``.  The excess over the
+  true maximum falls like the square of the box's width, so boxes around the worst pose stay few.
+
+Every floating-point step is rounded outward or covered by a stated error bound: the interval
+evaluations round outward (:mod:`tolsynth.analysis.intervals`), the corner matrices' rounding is
+added to ``E``, and an eigenvalue computed by LAPACK is raised by a bound on its backward error
+(``(m + 30) u ||M||_F^2`` for ``lambda_max(M M^T)``, ``M`` of size 3 x m, ``u`` the unit roundoff).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import casadi as ca
+import numpy as np
+
+from tolsynth.analysis.interval_ops import round_up as _up
+from tolsynth.analysis.intervals import IntervalFunction
+
+__all__ = ["JointGraphs", "SigmaBounds", "largest_singular_bound", "HESSIAN_FACTOR"]
+
+_U = 2.0**-53
+#: the Hessian's graph is used for the remainder when it has at most this many times the
+#: operations of the Jacobian's (else the interval Jacobian: half as tight, much cheaper there)
+HESSIAN_FACTOR = 4.0
+
+
+def _largest_root(a1, a2, a3):
+    """An upper bound of the largest real root of ``l^3 - a1 l^2 + a2 l - a3`` (arrays): Newton's
+    iteration from Fujiwara's bound on all roots (it stays above the largest root, where the cubic
+    is convex), then a check that the cubic and its first two derivatives are positive there
+    (beyond it they stay so: the third derivative is 6), with their rounding accounted for."""
+    lam = 2.0 * np.maximum(np.maximum(np.abs(a1), np.sqrt(np.abs(a2))), np.cbrt(np.abs(a3) / 2.0))
+    lam = np.maximum(lam, a1 / 3.0) + 1e-300
+    for _ in range(60):
+        p = ((lam - a1) * lam + a2) * lam - a3
+        dp = (3.0 * lam - 2.0 * a1) * lam + a2
+        with np.errstate(all="ignore"):
+            step = np.where(dp > 0, p / dp, 0.0)
+        active = step > 1e-14 * lam
+        if not active.any():
+            break
+        lam = np.where(active, lam - step, lam)
+    lam = lam * (1.0 + 1e-12) + 1e-300
+    for t in range(8):
+        mag = ((lam + np.abs(a1)) * lam + np.abs(a2)) * lam + np.abs(a3)
+        p = ((lam - a1) * lam + a2) * lam - a3
+        dp = (3.0 * lam - 2.0 * a1) * lam + a2
+        ddp = 3.0 * lam - a1
+        ok = (p > 16 * _U * mag) & (dp > 16 * _U * (3.0 * lam * lam + 2.0 * np.abs(a1) * lam + np.abs(a2))) \
+            & (ddp > 16 * _U * (3.0 * lam + np.abs(a1)))
+        if ok.all():
+            return lam
+        lam = np.where(ok, lam, lam * (1.0 + 1e-9 * 8.0**t) + 1e-300)
+    return np.where(ok, lam, np.inf)
+
+
+def _char_poly(G):
+    """Coefficients of ``det(l I - G) = l^3 - c1 l^2 + c2 l - c3`` of symmetric 3 x 3 matrices,
+    each moved by a bound on its rounding in the direction that raises the largest root (it grows
+    with ``c1`` and ``c3`` and falls with ``c2``)."""
+    g00, g11, g22 = G[..., 0, 0], G[..., 1, 1], G[..., 2, 2]
+    g01, g02, g12 = G[..., 0, 1], G[..., 0, 2], G[..., 1, 2]
+    c1 = (g00 + g11 + g22) * (1.0 + 8.0 * _U)
+    p2 = [g00 * g11, g01 * g01, g00 * g22, g02 * g02, g11 * g22, g12 * g12]
+    c2 = p2[0] - p2[1] + p2[2] - p2[3] + p2[4] - p2[5]
+    c2 = c2 - 8.0 * _U * sum(np.abs(t) for t in p2)
+    p3 = [g00 * (g11 * g22), g00 * (g12 * g12), g01 * (g01 * g22), g01 * (g12 * g02), g02 * (g01 * g12),
+          g02 * (g11 * g02)]
+    c3 = p3[0] - p3[1] - p3[2] + p3[3] + p3[4] - p3[5]
+    c3 = c3 + 12.0 * _U * sum(np.abs(t) for t in p3)
+    return c1, c2, c3
+
+
+def _above_roots(lam, a1, a2, a3):
+    """Whether ``lam`` is proven above every real root: the cubic and its first two derivatives
+    positive there (beyond, they stay so: the third derivative is 6), rounding accounted for."""
+    mag = ((lam + np.abs(a1)) * lam + np.abs(a2)) * lam + np.abs(a3)
+    p = ((lam - a1) * lam + a2) * lam - a3
+    dp = (3.0 * lam - 2.0 * a1) * lam + a2
+    ddp = 3.0 * lam - a1
+    return (p > 16 * _U * mag) & (dp > 16 * _U * (3.0 * lam * lam + 2.0 * np.abs(a1) * lam + np.abs(a2))) \
+        & (ddp > 16 * _U * (3.0 * lam + np.abs(a1)))
+
+
+def largest_singular_bound(M: np.ndarray, reduce_last: bool = False) -> np.ndarray:
+    """Upper bounds of the largest singular value of each 3 x m matrix ``M[..., :, :]`` (finite
+    entries); with ``reduce_last``, of the largest over the last batch axis.
+
+    ``lambda_max(G)``, ``G = M M^T``, is the largest root of its characteristic polynomial, whose
+    coefficients are moved by their rounding error (:func:`_char_poly`); LAPACK's eigenvalue
+    (raised a little) is a candidate, proven by :func:`_above_roots` or else raised by Newton's
+    iteration from above (:func:`_largest_root`).  ``(m + 2) u ||M||_F^2`` covers the rounding of
+    ``G`` itself (Weyl)."""
+    m = M.shape[-1]
+    G = M @ np.swapaxes(M, -1, -2)
+    c1, c2, c3 = _char_poly(G)
+    frob = np.einsum("...ij,...ij->...", M, M)
+    lam = _eig_estimate(G)
+    if reduce_last:
+        lam = np.broadcast_to(lam.max(axis=-1, keepdims=True), lam.shape)
+    s = np.maximum(c1, 1e-300)  # the cubic scaled to a unit trace
+    a1, a2, a3 = c1 / s, c2 / (s * s), c3 / (s * s * s)
+    cand = np.maximum(lam / s, 0.0) * (1.0 + 1e-12) + 1e-13
+    ok = _above_roots(cand, a1, a2, a3)
+    if not ok.all():
+        cand = np.where(ok, cand, _largest_root(a1, a2, a3))
+    lam = cand * s * (1.0 + 8.0 * _U) + (m + 2) * 2.0 * _U * frob
+    out = _up(np.sqrt(np.maximum(lam, 0.0)))
+    return out.max(axis=-1) if reduce_last else out
+
+
+class JointGraphs:
+    """The interval functions of ``A`` for one set of searched joints (the others held).
+
+    Parameters
+    ----------
+    structure : Structure
+    nq : int
+        Number of joints.
+    free : sequence of int
+        The searched joints, in the order of the box coordinates.
+    held : dict
+        Joint index -> value (rad) of every other joint.
+    """
+
+    def __init__(self, structure, nq: int, free, held: dict):
+        self.free = tuple(int(j) for j in free)
+        self.k = len(self.free)
+        cols = list(structure.columns)
+        self.m = len(cols)
+        x = ca.SX.sym("x", self.k)
+        q = [ca.SX(float(held.get(j, 0.0))) for j in range(nq)]
+        for i, j in enumerate(self.free):
+            q[j] = x[i]
+        A = structure.A.call([ca.vertcat(*q)])[0][:, cols]
+        a = ca.densify(ca.vec(A))  # column-major: the 3 rows of column 0, then column 1, ...
+        self.na = a.numel()
+        J = ca.densify(ca.jacobian(a, x))
+        self.point_fn = ca.Function("A", [x], [a])
+        self.centre = IntervalFunction(ca.Function("aJ", [x], [a, J]))
+        H = ca.densify(ca.vertcat(*[ca.vec(ca.hessian(a[i], x)[0]) for i in range(self.na)])) if self.k else ca.SX(0, 1)
+        hess = IntervalFunction(ca.Function("aH", [x], [a, H]))
+        self.use_hessian = hess.n_operations <= HESSIAN_FACTOR * self.centre.n_operations
+        self.box = hess if self.use_hessian else self.centre
+        self.corners = np.array(list(itertools.product([-1.0, 1.0], repeat=self.k))) if self.k else np.zeros((1, 0))
+
+    def values(self, X: np.ndarray) -> np.ndarray:
+        """``A`` at the points X (n, k), shape (n, 3, m)."""
+        X = np.atleast_2d(X)
+        if len(X) == 0:
+            return np.zeros((0, 3, self.m))
+        a = np.array(self.point_fn.map(len(X))(X.T)).T.reshape(len(X), self.m, 3)
+        return a.transpose(0, 2, 1)
+
+
+def _mat(v: np.ndarray, m: int) -> np.ndarray:
+    """Column-major vectors (..., 3 m) as matrices (..., 3, m)."""
+    return np.swapaxes(v.reshape(v.shape[:-1] + (m, 3)), -1, -2)
+
+
+class SigmaBounds:
+    """Upper bounds of ``sigma_1`` on boxes of the searched joints, at one set of variances.
+
+    Parameters
+    ----------
+    graphs : JointGraphs
+    w : array_like
+        Variance per tolerance unit squared of every kept column, ``eps_i^2 / c_i`` (mm^2 per
+        unit^2 times units^2).
+    """
+
+    def __init__(self, graphs: JointGraphs, w):
+        self.g = graphs
+        self.sw = np.sqrt(np.asarray(w, dtype=float))
+
+    def point(self, X: np.ndarray) -> np.ndarray:
+        """``sigma_1`` at points (n, k) (plain floating point: the best value found, not a bound)."""
+        M = self.g.values(X) * self.sw
+        lam = np.linalg.eigvalsh(M @ np.swapaxes(M, -1, -2))[:, -1]
+        return np.sqrt(np.maximum(lam, 0.0))
+
+    def bound(self, L: np.ndarray, H: np.ndarray):
+        """``(ub, split)``: upper bounds (n,) of sigma_1 on the boxes ``L <= x <= H`` and, per box and
+        coordinate, that coordinate's share of the corner bound's remainder (where to halve)."""
+        g, m, k = self.g, self.g.m, self.g.k
+        nb = len(L)
+        C = np.minimum(np.maximum(0.5 * (L + H), L), H)
+        r = np.maximum(_up(H - C), _up(C - L))
+        with np.errstate(all="ignore"):
+            BL, BH, breg = g.box.evaluate(L, H)
+            na = g.na
+            aBl, aBh = BL[:, :na], BH[:, :na]
+            nat_ok = np.isfinite(aBl).all(axis=1) & np.isfinite(aBh).all(axis=1)
+            amid = np.where(nat_ok[:, None], 0.5 * (aBl + aBh), 0.0)
+            arad = np.where(nat_ok[:, None], _up(np.maximum(aBh - amid, amid - aBl)), 0.0)
+            nat = _up(largest_singular_bound(_mat(amid, m) * self.sw) + largest_singular_bound(_mat(arad, m) * self.sw))
+            nat = np.where(nat_ok, nat, np.inf)
+            if k == 0:
+                return nat, None
+            CL, CH, creg = g.centre.evaluate(C, C)
+            am = 0.5 * (CL[:, :na] + CH[:, :na])
+            Jl = CL[:, na:].reshape(nb, k, na)
+            Jh = CH[:, na:].reshape(nb, k, na)
+            Jm = 0.5 * (Jl + Jh)
+            # the centre's own enclosure widths and the rounding of am + Jm d, then the remainder
+            lin = np.einsum("bkn,bk->bn", np.maximum(Jh - Jm, Jm - Jl) + 4.0 * (k + 2) * _U * np.abs(Jm), r)
+            E = np.maximum(CH[:, :na] - am, am - CL[:, :na]) + lin + 4.0 * _U * np.abs(am)
+            if g.use_hessian:
+                Ha = np.maximum(np.abs(BL[:, na:]), np.abs(BH[:, na:])).reshape(nb, na, k, k)
+                share = 0.5 * np.einsum("bnjk,bj,bk->bnk", Ha, r, r)  # coordinate k's part of the remainder
+            else:
+                JBl = BL[:, na:].reshape(nb, k, na)
+                JBh = BH[:, na:].reshape(nb, k, na)
+                dev = np.maximum(np.abs(JBl - Jm), np.abs(JBh - Jm))
+                share = np.einsum("bkn,bk->bnk", dev, r)
+            E = _up(E + share.sum(axis=2) * (1.0 + 4.0 * (k + 2) * _U))
+            Y = am[:, None, :] + np.einsum("bkn,bck->bcn", Jm, g.corners[None] * r[:, None, :])
+            ok = breg & creg & np.isfinite(E).all(axis=1) & np.isfinite(Y).all(axis=(1, 2))
+            Y = np.where(ok[:, None, None], Y, 0.0)
+            E = np.where(ok[:, None], E, 0.0)
+            cor = largest_singular_bound(_mat(Y, m) * self.sw, reduce_last=True)
+            cor = _up(cor + largest_singular_bound(_mat(E, m) * self.sw))
+            cor = np.where(ok, cor, np.inf)
+            split = np.sqrt(np.einsum("bnk,n->bk", share**2, np.repeat(self.sw**2, 3)))
+        return np.fmin(nat, cor), np.where(ok[:, None], split, np.nan)
+
+
+# ---------------------------------------------------------------------------------------------
+# serial chains: A as an exact trigonometric polynomial, bounded over arc polygons
+# ---------------------------------------------------------------------------------------------
+def arc_polygons(a: np.ndarray, b: np.ndarray):
+    """Four points per arc ``[a, b]`` of the unit circle (arrays (n,)) whose convex hull holds the
+    arc: the end points and the two crossings of the tangents at the ends and the middle (arcs up
+    to a quarter turn), else the corners of the arc's bounding rectangle.  Returns ``(P, rad)``:
+    the points (n, 4, 2) and a bound of each coordinate's rounding (n, 4, 2)."""
+    # the arc widened by its end points' rounding, so that it holds the exact one
+    a = a - 4.0 * _U * (np.abs(a) + 1.0)
+    b = b + 4.0 * _U * (np.abs(b) + 1.0)
+    h = 0.5 * (b - a)
+    c = 0.5 * (a + b)
+    small = h <= np.pi / 4
+    rho = 1.0 / np.cos(np.minimum(h, np.pi / 4) / 2)
+    ang = np.stack([a, c - h / 2, c + h / 2, b], axis=1)
+    rad_ = np.stack([np.ones_like(a), rho, rho, np.ones_like(a)], axis=1)
+    P_small = np.stack([rad_ * np.cos(ang), rad_ * np.sin(ang)], axis=2)
+    # bounding rectangle: the extremes of cos and sin over [a, b], end points and the crossings
+    # of the axes inside
+    ca_, cb_, sa_, sb_ = np.cos(a), np.cos(b), np.sin(a), np.sin(b)
+
+    def hits(phase):
+        k = np.ceil((a - phase) / (2 * np.pi))
+        return phase + 2 * np.pi * k <= b
+
+    xmax = np.where(hits(0.0), 1.0, np.maximum(ca_, cb_))
+    xmin = np.where(hits(np.pi), -1.0, np.minimum(ca_, cb_))
+    ymax = np.where(hits(np.pi / 2), 1.0, np.maximum(sa_, sb_))
+    ymin = np.where(hits(-np.pi / 2), -1.0, np.minimum(sa_, sb_))
+    P_big = np.stack([np.stack([xmin, ymin], 1), np.stack([xmax, ymin], 1), np.stack([xmax, ymax], 1),
+                      np.stack([xmin, ymax], 1)], axis=1)
+    P = np.where(small[:, None, None], P_small, P_big)
+    # library sin/cos are within an ulp or two; the angles' own rounding moves a point along the
+    # tangent lines by at most the same relative amount: 64 units of roundoff cover both
+    rad = 64.0 * _U * (np.abs(P) + 1.0)
+    return P, rad
+
+
+#: per joint, the products of two factors (1, cos, sin) as the monomials (1, c, s, c^2, cs, s^2)
+_FOLD = np.zeros((3, 3, 6))
+for _a, _b, _mu in [(0, 0, 0), (0, 1, 1), (1, 0, 1), (0, 2, 2), (2, 0, 2), (1, 1, 3), (1, 2, 4), (2, 1, 4), (2, 2, 5)]:
+    _FOLD[_a, _b, _mu] = 1.0
+#: the six entries 00, 11, 22, 01, 02, 12 of a symmetric 3 x 3 matrix
+_SYM = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def _sym_matrix(g: np.ndarray) -> np.ndarray:
+    """(..., 6) entries in the order of ``_SYM`` -> (..., 3, 3)."""
+    G = np.empty(g.shape[:-1] + (3, 3))
+    for i, (r, c) in enumerate(_SYM):
+        G[..., r, c] = G[..., c, r] = g[..., i]
+    return G
+
+
+def _eig_estimate(G: np.ndarray) -> np.ndarray:
+    """The largest eigenvalue of symmetric 3 x 3 matrices by the closed form (Smith 1961), a
+    candidate only: the bound proves or raises it."""
+    q = (G[..., 0, 0] + G[..., 1, 1] + G[..., 2, 2]) / 3.0
+    off = G[..., 0, 1] ** 2 + G[..., 0, 2] ** 2 + G[..., 1, 2] ** 2
+    d0, d1, d2 = G[..., 0, 0] - q, G[..., 1, 1] - q, G[..., 2, 2] - q
+    p = np.sqrt(np.maximum((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0, 0.0))
+    with np.errstate(all="ignore"):
+        det = (d0 * (d1 * d2 - G[..., 1, 2] ** 2) - G[..., 0, 1] * (G[..., 0, 1] * d2 - G[..., 1, 2] * G[..., 0, 2])
+               + G[..., 0, 2] * (G[..., 0, 1] * G[..., 1, 2] - d1 * G[..., 0, 2]))
+        r = np.where(p > 0, det / (2.0 * p**3), 0.0)
+    phi = np.arccos(np.clip(r, -1.0, 1.0)) / 3.0
+    lam = q + 2.0 * p * np.cos(phi)
+    return np.where(np.isfinite(lam), lam, np.inf)
+
+
+def lambda_max_bound(G: np.ndarray, err: np.ndarray, reduce_last: bool = False) -> np.ndarray:
+    """Upper bounds of the largest eigenvalue of symmetric 3 x 3 matrices within ``err`` (entrywise,
+    (..., 6) in the order of ``_SYM``) of the computed ``G`` (..., 3, 3): the largest root of the
+    characteristic polynomial with its coefficients' rounding (:func:`_char_poly`), plus the
+    Frobenius norm of the error (Weyl).  With ``reduce_last``, one bound for the whole last batch
+    axis (the largest candidate is checked against every matrix)."""
+    c1, c2, c3 = _char_poly(G)
+    lam = _eig_estimate(G)
+    if reduce_last:
+        lam = np.broadcast_to(lam.max(axis=-1, keepdims=True), lam.shape)
+    s = np.maximum(np.abs(c1), 1e-300)
+    a1, a2, a3 = c1 / s, c2 / (s * s), c3 / (s * s * s)
+    cand = np.maximum(lam / s, 0.0) * (1.0 + 1e-12) + 1e-13
+    ok = _above_roots(cand, a1, a2, a3)
+    if not ok.all():
+        cand = np.where(ok, cand, _largest_root(a1, a2, a3))
+    frob = np.sqrt(err[..., 0] ** 2 + err[..., 1] ** 2 + err[..., 2] ** 2
+                   + 2.0 * (err[..., 3] ** 2 + err[..., 4] ** 2 + err[..., 5] ** 2))
+    out = _up(cand * s * (1.0 + 8.0 * _U) + frob * (1.0 + 8.0 * _U))
+    return out.max(axis=-1) if reduce_last else out
+
+
+class PolygonSigmaBounds:
+    """Upper bounds of ``sigma_1`` over boxes of joint angles for a serial chain, from the exact
+    trigonometric polynomial of ``A`` (:func:`tolsynth.analysis.certify_structure.trig_polynomial`).
+
+    ``A`` has degree one in each pair ``(cos t_j, sin t_j)``, so over a box it stays in the convex
+    hull of its values at the ``4^k`` tuples of polygon points that hold each joint's arc
+    (:func:`arc_polygons`; multi-affine maps send products of convex sets into the hull of the
+    images of their vertices), and ``sigma_1``, a norm of ``A W^1/2``, is largest at one of them.
+    The excess over the true maximum is a scaling of each joint's part of ``A`` by at most
+    ``1 / cos(h / 2) - 1 ~ h^2 / 8`` (h: the half-width): small where a joint moves little of the
+    error, which is where a Taylor bound is least efficient.
+
+    At the tuples only ``V = A W A^T`` is needed: its six entries are polynomials of degree two in
+    each pair, with coefficients ``Gamma`` formed once per set of variances from the exact ones of
+    ``A``; every floating-point step carries a bound on its rounding (from the same sums taken
+    over absolute values).
+    """
+
+    def __init__(self, poly, free, w):
+        T = np.vectorize(float, otypes=[float])(poly.coefficients)  # exact values, rounded to nearest
+        self.k = T.ndim - 1
+        self.na = T.shape[0]
+        self.m = self.na // 3
+        self.free = tuple(free)
+        self.offsets = np.array([float(o) for o in poly.offsets])
+        w = np.asarray(w, dtype=float)
+        self.sw = np.sqrt(w)
+        self.T = T
+        k, m = self.k, self.m
+        T3 = T.reshape(m, 3, 3**k)  # (column, row, monomial)
+        Tw = T3 * w[:, None, None]
+        gam, gabs = [], []
+        for r, c in _SYM:
+            P = Tw[:, r, :].T @ T3[:, c, :]  # (3^k, 3^k): coefficient of b_alpha b_beta
+            Pabs = (np.abs(Tw[:, r, :]).T @ np.abs(T3[:, c, :]))
+            gam.append(self._fold(P))
+            gabs.append(self._fold(Pabs))
+        self.gamma = np.stack(gam).reshape(6, 6**k)
+        # rounding of T (half an ulp each), of the products and sums above (m + 2k + 8 roundings)
+        self.gamma_abs = np.stack(gabs).reshape(6, 6**k) * (1.0 + (m + 2 * k + 12) * 2.0 * _U)
+        self.gamma_err = self.gamma_abs * ((m + 2 * k + 12) * 2.0 * _U)
+
+    def _fold(self, P: np.ndarray) -> np.ndarray:
+        """(3^k, 3^k) coefficients of ``b_alpha(t) b_beta(t)`` -> (6,)*k of the monomials per joint."""
+        k = self.k
+        X = P.reshape((3,) * (2 * k))
+        # interleave (alpha_1, beta_1, alpha_2, beta_2, ...) and fold each pair into 6 monomials
+        X = X.transpose([i // 2 + (k if i % 2 else 0) for i in range(2 * k)])
+        for j in range(k):
+            X = np.tensordot(X, _FOLD, axes=([0, 1], [0, 1]))  # the pair of joint j -> its 6, at the end
+        return X
+
+    def _contract(self, g, V):
+        """``g`` (6, 6^k) contracted per joint with ``V[j]`` (n, p, 6): shape (n, 6, p^k)."""
+        n = V[0].shape[0]
+        X = g.reshape(1, 6, 6**self.k, 1)
+        for j in range(self.k):
+            rest = 6 ** (self.k - j - 1)
+            X = X.reshape(X.shape[0], 6, 6, rest, X.shape[-1])
+            sub = "bairs,npi->narsp" if X.shape[0] == 1 else "nairs,npi->narsp"
+            X = np.einsum(sub, X, V[j], optimize=True).reshape(n, 6, rest, -1)
+        return X.reshape(n, 6, -1)
+
+    @staticmethod
+    def _monomials(x, y):
+        return np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)
+
+    def values(self, Q: np.ndarray) -> np.ndarray:
+        """``A`` at joint values Q (n, k) of the searched joints, shape (n, 3, m) (floating point)."""
+        t = np.atleast_2d(Q) + self.offsets
+        X = self.T.reshape(1, self.na, 3**self.k)
+        for j in range(self.k):
+            b = np.stack([np.ones(len(t)), np.cos(t[:, j]), np.sin(t[:, j])], axis=1)  # (n, 3)
+            X = X.reshape(X.shape[0], self.na, 3, -1)
+            X = np.einsum("bais,ni->nas", X, b) if X.shape[0] == 1 else np.einsum("nais,ni->nas", X, b)
+        return _mat(X.reshape(len(t), self.na), self.m)
+
+    def point(self, Q: np.ndarray) -> np.ndarray:
+        """``sigma_1`` at points (n, k) (floating point: the best value found, not a bound)."""
+        M = self.values(Q) * self.sw
+        return np.sqrt(np.maximum(np.linalg.eigvalsh(M @ np.swapaxes(M, -1, -2))[:, -1], 0.0))
+
+    def bound(self, L: np.ndarray, H: np.ndarray):
+        """``(ub, split)`` as :meth:`SigmaBounds.bound`."""
+        nb, k = len(L), self.k
+        a = L + self.offsets
+        b = H + self.offsets
+        V, Vabs = [], []
+        for j in range(k):
+            P, rad = arc_polygons(a[:, j], b[:, j])
+            x, y = P[..., 0], P[..., 1]
+            V.append(self._monomials(x, y))
+            Vabs.append(self._monomials(np.abs(x) + rad[..., 0], np.abs(y) + rad[..., 1]))
+        with np.errstate(all="ignore"):
+            g = self._contract(self.gamma, V)  # (nb, 6, 4^k)
+            # error: Gamma's own, the points' (64 u relative per coordinate, two per monomial),
+            # and the contraction's (two roundings per joint)
+            err = self._contract(self.gamma_err + self.gamma_abs * ((130.0 + 4.0) * (k + 1) * _U), Vabs)
+            g = np.moveaxis(g, 1, 2)
+            err = np.moveaxis(err, 1, 2)
+            lam = lambda_max_bound(_sym_matrix(g), err, reduce_last=True)
+            ub = _up(np.sqrt(np.maximum(lam, 0.0)))
+            # where to halve: each joint's derivative of V at the centre times the scaling it allows
+            c = 0.5 * (a + b)
+            cx, sx = np.cos(c), np.sin(c)
+            split = np.empty((nb, k))
+            for j in range(k):
+                Vc = [self._monomials(cx[:, i], sx[:, i])[:, None, :] for i in range(k)]
+                x, y = cx[:, j], sx[:, j]
+                Vc[j] = np.stack([np.zeros(nb), -y, x, -2 * x * y, x * x - y * y, 2 * x * y], axis=1)[:, None, :]
+                dV = self._contract(self.gamma, Vc)[:, :, 0]
+                h = 0.5 * (b[:, j] - a[:, j])
+                grow = np.where(h <= np.pi / 4, 1.0 / np.cos(np.minimum(h, np.pi / 4) / 2) - 1.0, 1.0 + h)
+                split[:, j] = grow * np.sqrt((dV**2).sum(axis=1))
+        ub = np.where(np.isfinite(ub), ub, np.inf)
+        return ub, split
