@@ -1,5 +1,7 @@
 """Exact probabilities of the linear error model (tolsynth.probability.exact) and the error shapes
-(tolsynth.probability.distributions), against closed forms, direct quadrature and Monte Carlo intervals."""
+(tolsynth.probability.distributions), against closed forms, direct quadrature and Monte Carlo
+intervals.  The hard inputs (dominant terms, coefficients near zero, thousands of terms, mixed
+shapes, history independence, speed) are in test_exact_hard.py; the references in test_exact_refs.py."""
 
 import math
 from math import comb, factorial
@@ -8,6 +10,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from test_exact_refs import olds, wilson
 from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.probability import stats
 from tolsynth.probability.distributions import divisors, shape, shapes_of
@@ -23,13 +26,7 @@ from tolsynth.probability.exact import (
 ALL = ["uniform", "normal", "triangular", "truncnormal", "truncnormal(3)", "truncnormal(0.5)"]
 
 
-def _mc_interval(hits, n, z=3.29):
-    """A 99.9 % Wilson interval for a binomial proportion."""
-    p = hits / n
-    d = 1 + z * z / n
-    c = (p + z * z / (2 * n)) / d
-    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
-    return c - h, c + h
+_mc_interval = wilson
 
 
 # ------------------------------------------------------------------------------------------ shapes
@@ -129,15 +126,16 @@ def test_mixed_direction_against_monte_carlo(rng):
     assert lo <= P <= hi
 
 
-def test_a_dominating_uniform_direction_reports_its_bound():
-    """One uniform dominating a direction (a second term 1e-5 of it) makes a near-jump in the
-    density: the series needs ~1/tol terms; beyond kmax the error is raised, or reported with
-    return_error."""
-    b = [1.0, 1e-5]
-    with pytest.raises(ExactProbabilityError):
-        direction_probability(b, ["uniform"] * 2, 0.3, tol=1e-9, kmax=1024)
-    P, err = direction_probability(b, ["uniform"] * 2, 0.3, tol=1e-9, kmax=1024, return_error=True)
-    assert err > 1e-9 and abs(P - 0.3) <= err  # exact: 0.3 (the flat part of a trapezoid)
+@pytest.mark.parametrize("small", [1e-3, 1e-5, 1e-9, 1e-13])
+@pytest.mark.parametrize("R", [0.3, 1.0 - 1e-6, 1.0, 1.0 + 1e-9, 1.2])
+def test_a_dominating_uniform_is_exact(small, R):
+    """One uniform dominating a direction (a second uniform ``small`` of it) makes a near-jump in
+    the density that a Fourier series cannot resolve; the vertex formula in exact arithmetic
+    can: against Olds' formula in rational arithmetic, to 1e-12, inside the flat part, at the
+    kink and beyond."""
+    P, err = direction_probability([1.0, small], ["uniform"] * 2, R, tol=1e-10, return_error=True)
+    assert err <= 1e-10
+    assert abs(P - float(olds([1.0, small], R))) <= 1e-12
 
 
 @pytest.mark.parametrize("name", ["uniform", "normal", "triangular", "truncnormal", "truncnormal(3)"])
@@ -149,7 +147,7 @@ def test_a_single_term_or_none_is_its_own_cdf(rng, name):
     P, err = direction_probability(b, ["uniform", name, "normal"], R, return_error=True)
     n = 1_000_000
     lo, hi = _mc_interval(np.count_nonzero(np.abs(0.7 * shape(name).sample(rng, n)) <= R), n)
-    assert err == 0.0 and lo <= P <= hi
+    assert err <= 1e-15 and lo <= P <= hi
     assert direction_probability(np.zeros(3), [name] * 3, R, return_error=True) == (1.0, 0.0)
     P2, err2 = direction_probability([0.7, 0.7e-15], [name, "uniform"], R, return_error=True)
     assert abs(P2 - P) <= err2 <= 1e-14
@@ -221,11 +219,36 @@ def test_ball_and_cone_uniform_against_monte_carlo(rng):
 
 
 def test_bad_input_is_typed():
+    """Every bad argument gets a typed error naming its field; a tolerance out of reach raises
+    ExactProbabilityError unless the bound is asked for."""
     with pytest.raises(OutOfRangeError, match="R"):
         direction_probability([1.0], ["uniform"], -1.0)
     with pytest.raises(OutOfRangeError, match="shapes"):
         direction_probability([1.0, 2.0], ["uniform"], 1.0)
+    with pytest.raises(InputError, match="shapes"):
+        direction_probability([1.0, 2.0], "uniform", 1.0)
+    with pytest.raises(OutOfRangeError, match="distribution"):
+        direction_probability([1.0], ["lognormal"], 1.0)
+    with pytest.raises(OutOfRangeError, match="b"):
+        direction_probability([1.0, float("nan")], ["uniform"] * 2, 1.0)
+    with pytest.raises(InputError, match="b"):
+        direction_probability(["a", "b"], ["uniform"] * 2, 1.0)
+    with pytest.raises(OutOfRangeError, match="tol"):
+        direction_probability([1.0], ["uniform"], 1.0, tol=0.0)
+    with pytest.raises(OutOfRangeError, match="kmax"):
+        direction_probability([1.0], ["uniform"], 1.0, kmax=2.5)
     with pytest.raises(OutOfRangeError, match="A"):
         ball_probability(np.ones((2, 3)), np.ones(3), ["uniform"] * 3, 1.0)
+    with pytest.raises(OutOfRangeError, match="eps"):
+        ball_probability(np.ones((3, 3)), -np.ones(3), ["uniform"] * 3, 1.0)
+    with pytest.raises(OutOfRangeError, match="max_nodes"):
+        ball_probability(np.ones((3, 3)), np.ones(3), ["uniform"] * 3, 1.0, max_nodes=4)
     with pytest.raises(OutOfRangeError, match="Phi"):
         cone_probability(np.ones((2, 3)), np.ones(3), ["uniform"] * 3, 0.0)
+    with pytest.raises(OutOfRangeError, match="start"):
+        worst_direction(np.eye(3), np.ones(3), ["uniform"] * 3, 1.0, start=[0.0, 0.0, 0.0])
+    A = np.random.default_rng(3).normal(size=(3, 6))
+    with pytest.raises(ExactProbabilityError, match="sphere"):
+        ball_probability(A, np.ones(6), ["uniform"] * 6, 1.0, tol=1e-12, max_nodes=16)
+    P, err = ball_probability(A, np.ones(6), ["uniform"] * 6, 1.0, tol=1e-12, max_nodes=16, return_error=True)
+    assert err > 1e-12 and 0.0 < P < 1.0
