@@ -93,10 +93,12 @@ class _Search:
         self.heap: list = []
         self.seq = 0
         self.dropped = -np.inf  # largest bound of a box dropped as unable to beat the best
+        self.target = None  # boxes bounded by it are dropped too (a decision)
         self.stuck = -np.inf  # largest bound of a box too small to split
 
     def threshold(self) -> float:
-        return self.best + self.tol + self.rtol * abs(self.best) if np.isfinite(self.best) else -np.inf
+        t = self.best + self.tol + self.rtol * abs(self.best) if np.isfinite(self.best) else -np.inf
+        return t if self.target is None else max(t, self.target)
 
     def feasible_points(self, x):
         if self.constraint_fn is None:
@@ -214,6 +216,8 @@ def maximize(
     min_width: float = 1e-12,
     callback=None,
     stop=None,
+    target: float | None = None,
+    stop_above: float | None = None,
 ) -> MaximizeResult:
     """Certified maximum of an objective over the box ``lo <= x <= hi`` (and ``g(x) <= 0``).
 
@@ -256,6 +260,13 @@ def maximize(
     stop : callable, optional
         ``stop() -> str``: checked after every round; a non-empty string ends the search, not
         certified unless the gap has closed, with that string as the reason (a time limit).
+    target : float, optional
+        A decision instead of the maximum: boxes that cannot exceed ``target`` are dropped, and the
+        result is certified when ``upper_bound <= target`` (the maximum is then proven below the
+        target, by a bound that need not be within ``tol`` of it).
+    stop_above : float, optional
+        End the search as soon as a feasible point exceeds this value (not certified; the point is
+        the answer to the decision).
 
     Returns
     -------
@@ -275,6 +286,7 @@ def maximize(
     if scale.shape != lo.shape or np.any(scale <= 0):
         raise InputError("scale", f"{scale}", f"{d} positive numbers")
     s = _Search(point_fn, constraint_fn, lo, hi, float(tol), float(rtol), scale)
+    s.target = None if target is None else float(target)
 
     L, H = lo[None, :], hi[None, :]
     feasible = np.array([constraint_fn is None])
@@ -293,6 +305,9 @@ def maximize(
 
     stopped = ""
     while s.heap and processed < max_boxes:
+        if stop_above is not None and s.best > stop_above:
+            stopped = f"a point above {stop_above:.9g} found"
+            break
         if stop is not None:
             stopped = stop() or ""
             if stopped:
@@ -356,7 +371,7 @@ def maximize(
     elif not np.isfinite(s.best):
         certified, reason = False, "no feasible point found"
     else:
-        certified = upper - s.best <= slack
+        certified = upper - s.best <= slack or (s.target is not None and upper <= s.target)
         reason = ""
         if not certified:
             reason = (

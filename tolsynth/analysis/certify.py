@@ -144,6 +144,7 @@ class _Domain:
     lo: np.ndarray
     hi: np.ndarray
     constraint_fn: object
+    linear: tuple  # (a, lower, upper) of each joint constraint, a over the searched joints
 
 
 def _domain(mech, st, base_q: np.ndarray) -> _Domain:
@@ -163,7 +164,13 @@ def _domain(mech, st, base_q: np.ndarray) -> _Domain:
     for i, j in enumerate(free):
         if j in st.periodic and j not in constrained and hi[i] - lo[i] > 2 * math.pi:
             hi[i] = lo[i] + 2 * math.pi  # one period: the joint enters only through sin and cos
-    return _Domain(free, held, why, lo, hi, _constraints(mech, free, held))
+    linear = []
+    for c in mech.spec.joint_constraints:
+        a = np.zeros(len(free))
+        for jn, coef in c.terms.items():
+            a[free.index(names.index(jn))] = coef
+        linear.append((a, c.lower, c.upper))
+    return _Domain(free, held, why, lo, hi, _constraints(mech, free, held), tuple(linear))
 
 
 def _constraints(mech, free, held):
@@ -233,7 +240,8 @@ def _full(dom: _Domain, x: np.ndarray, nq: int) -> np.ndarray:
 def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str = "sigma", R: float | None = None,
                        probability: str = "gaussian", *, rtol: float | None = None, tol: float | None = None,
                        max_boxes: int = DEFAULT_MAX_BOXES, x0=None, base_q=None, progress=None,
-                       time_limit: float | None = None) -> Certificate:
+                       time_limit: float | None = None, target: float | None = None,
+                       stop_at: float | None = None) -> Certificate:
     """A proven bound of the worst accuracy over the whole joint space (module docstring).
 
     Parameters
@@ -267,6 +275,12 @@ def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str 
         A progress bar on stderr (None: on a terminal, for runs over a couple of seconds).
     time_limit : float, optional
         Seconds; also any enclosing :func:`tolsynth.progress.time_limit` block.
+    target : float, optional
+        A decision: prove sigma_1 <= target (mm) everywhere (sigma), or the probability >= target
+        (exact components), not the tightest bound; ``certified`` then means the target is proven,
+        and the bound returned lies between the best value and the target.
+    stop_at : float, optional
+        Stop as soon as a pose worse than this is found (sigma above it, probability below it).
 
     Returns
     -------
@@ -344,11 +358,14 @@ def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str 
                 held_zero = dict(dom.held)
                 if st.rotation is not None:
                     held_zero[st.rotation] = 0.0
-                bounds = SigmaBounds(JointGraphs(st, nq, dom.free, held_zero), w)
+                bounds = SigmaBounds(JointGraphs(st, nq, dom.free, held_zero), w, dom.linear)
                 method = "second-order Taylor corners" if bounds.g.use_hessian else "Taylor corners (interval Jacobian)"
+            if criterion == "components" and (target is not None or stop_at is not None):
+                raise InputError("target", "given with the Gaussian per-component probability",
+                                 "criterion='sigma' with a target in mm")
             r = maximize(lambda L, H: _with_split(bounds.bound(L, H)), bounds.point, dom.lo, dom.hi, tol=0.0,
                          rtol=rtol, max_boxes=max_boxes, constraint_fn=dom.constraint_fn, x0=seeds,
-                         callback=callback, stop=stop, batch=128)
+                         callback=callback, stop=stop, batch=512, target=target, stop_above=stop_at)
             if not np.isfinite(r.best_value):
                 raise OutOfRangeError("joint limits", "no pose satisfies every joint limit and constraint",
                                       "a non-empty feasible joint space")
@@ -366,7 +383,7 @@ def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str 
             from tolsynth.analysis.certify_exact import certify_components_exact
 
             out = certify_components_exact(mech, st, dom, eps, distribution, R, tol=tol, max_boxes=max_boxes,
-                                           seeds=seeds, callback=callback, stop=stop)
+                                           seeds=seeds, callback=callback, stop=stop, target=target, stop_at=stop_at)
             q = _full(dom, out["x"], nq)
             direction = out["direction"]
             method = out["method"]

@@ -36,6 +36,8 @@ from tolsynth.analysis.intervals import IntervalFunction
 __all__ = ["JointGraphs", "SigmaBounds", "largest_singular_bound", "HESSIAN_FACTOR"]
 
 _U = 2.0**-53
+#: boxes wider than this (rad, on some side) also get the natural interval bound
+NATURAL_WIDTH = 0.2
 #: the Hessian's graph is used for the remainder when it has at most this many times the
 #: operations of the Jacobian's (else the interval Jacobian: half as tight, much cheaper there)
 HESSIAN_FACTOR = 4.0
@@ -99,6 +101,14 @@ def _above_roots(lam, a1, a2, a3):
         & (ddp > 16 * _U * (3.0 * lam + np.abs(a1)))
 
 
+def _prove(cand: np.ndarray, a1, a2, a3) -> None:
+    """Where ``cand`` is not proven above every root, replace it (in place) by Newton's bound."""
+    a1, a2, a3 = (np.broadcast_to(a, cand.shape) for a in (a1, a2, a3))
+    bad = ~_above_roots(cand, a1, a2, a3)
+    if bad.any():
+        cand[bad] = _largest_root(a1[bad], a2[bad], a3[bad])
+
+
 def largest_singular_bound(M: np.ndarray, reduce_last: bool = False) -> np.ndarray:
     """Upper bounds of the largest singular value of each 3 x m matrix ``M[..., :, :]`` (finite
     entries); with ``reduce_last``, of the largest over the last batch axis.
@@ -115,12 +125,10 @@ def largest_singular_bound(M: np.ndarray, reduce_last: bool = False) -> np.ndarr
     lam = _eig_estimate(G)
     if reduce_last:
         lam = np.broadcast_to(lam.max(axis=-1, keepdims=True), lam.shape)
-    s = np.maximum(c1, 1e-300)  # the cubic scaled to a unit trace
+    s = np.where(c1 > 1e-100, c1, 1.0)  # the cubic scaled to a unit trace (a zero matrix as it is)
     a1, a2, a3 = c1 / s, c2 / (s * s), c3 / (s * s * s)
     cand = np.maximum(lam / s, 0.0) * (1.0 + 1e-12) + 1e-13
-    ok = _above_roots(cand, a1, a2, a3)
-    if not ok.all():
-        cand = np.where(ok, cand, _largest_root(a1, a2, a3))
+    _prove(cand, a1, a2, a3)
     lam = cand * s * (1.0 + 8.0 * _U) + (m + 2) * 2.0 * _U * frob
     out = _up(np.sqrt(np.maximum(lam, 0.0)))
     return out.max(axis=-1) if reduce_last else out
@@ -170,6 +178,43 @@ class JointGraphs:
         return a.transpose(0, 2, 1)
 
 
+def polytope_vertices(C: np.ndarray, r: np.ndarray, linear=()):
+    """Points whose convex hull holds the part of each box ``C +- r`` (n, k) where the linear
+    constraints ``lo <= a . x <= hi`` hold: the box's corners that satisfy them and the crossings of
+    each constraint's planes with the box's edges.  Returns offsets ``d`` (n, P, k) from the centre
+    and a mask (n, P) of the points to use.  A convex function is largest at one of them; points
+    near a plane count when within a rounding slack of it (counting more points only raises the
+    maximum), so the hull holds the feasible part even as computed."""
+    n, k = C.shape
+    signs = np.array(list(itertools.product([-1.0, 1.0], repeat=k))) if k else np.zeros((1, 0))
+    pts = [signs[None] * r[:, None, :]]
+    if not linear:
+        return pts[0], np.ones(pts[0].shape[:2], dtype=bool)
+    planes = []
+    for a, lo, hi in linear:
+        g = C @ a
+        planes += [(a, lo - g), (a, hi - g)]  # a . d = gamma on each plane
+    for a, gam in planes:
+        for i in range(k):
+            if a[i] == 0.0:
+                continue
+            others = [j for j in range(k) if j != i]
+            sub = np.array(list(itertools.product([-1.0, 1.0], repeat=k - 1))) if k > 1 else np.zeros((1, 0))
+            d = np.zeros((n, len(sub), k))
+            d[:, :, others] = sub[None] * r[:, None, others]
+            d[:, :, i] = (gam[:, None] - d[:, :, others] @ a[others]) / a[i]
+            d[:, :, i] = np.where(np.abs(d[:, :, i]) <= r[:, None, i] * (1.0 + 1e-12), d[:, :, i], np.nan)
+            pts.append(d)
+    D = np.concatenate(pts, axis=1)
+    ok = np.isfinite(D).all(axis=2)
+    X = C[:, None, :] + np.where(ok[..., None], D, 0.0)
+    for a, lo, hi in linear:
+        v = X @ a
+        slack = 1e-9 * (np.abs(X) @ np.abs(a) + 1.0)
+        ok &= (v >= lo - slack) & (v <= hi + slack)
+    return np.where(ok[..., None], D, 0.0), ok
+
+
 def _mat(v: np.ndarray, m: int) -> np.ndarray:
     """Column-major vectors (..., 3 m) as matrices (..., 3, m)."""
     return np.swapaxes(v.reshape(v.shape[:-1] + (m, 3)), -1, -2)
@@ -186,9 +231,10 @@ class SigmaBounds:
         unit^2 times units^2).
     """
 
-    def __init__(self, graphs: JointGraphs, w):
+    def __init__(self, graphs: JointGraphs, w, linear=()):
         self.g = graphs
         self.sw = np.sqrt(np.asarray(w, dtype=float))
+        self.linear = tuple(linear)  # (a, lo, hi) of the joint constraints in box coordinates
 
     def point(self, X: np.ndarray) -> np.ndarray:
         """``sigma_1`` at points (n, k) (plain floating point: the best value found, not a bound)."""
@@ -210,10 +256,18 @@ class SigmaBounds:
             nat_ok = np.isfinite(aBl).all(axis=1) & np.isfinite(aBh).all(axis=1)
             amid = np.where(nat_ok[:, None], 0.5 * (aBl + aBh), 0.0)
             arad = np.where(nat_ok[:, None], _up(np.maximum(aBh - amid, amid - aBl)), 0.0)
-            nat = _up(largest_singular_bound(_mat(amid, m) * self.sw) + largest_singular_bound(_mat(arad, m) * self.sw))
-            nat = np.where(nat_ok, nat, np.inf)
+            nat = np.full(nb, np.inf)
+
+            def natural(rows):  # Weyl on the interval matrix; on small boxes the corners are tighter
+                rows = rows & nat_ok
+                if rows.any():
+                    nat[rows] = _up(largest_singular_bound(_mat(amid[rows], m) * self.sw)
+                                    + largest_singular_bound(_mat(arad[rows], m) * self.sw))
+
             if k == 0:
+                natural(np.ones(nb, dtype=bool))
                 return nat, None
+            natural((H - L).max(axis=1) > NATURAL_WIDTH)
             CL, CH, creg = g.centre.evaluate(C, C)
             am = 0.5 * (CL[:, :na] + CH[:, :na])
             Jl = CL[:, na:].reshape(nb, k, na)
@@ -231,13 +285,18 @@ class SigmaBounds:
                 dev = np.maximum(np.abs(JBl - Jm), np.abs(JBh - Jm))
                 share = np.einsum("bkn,bk->bnk", dev, r)
             E = _up(E + share.sum(axis=2) * (1.0 + 4.0 * (k + 2) * _U))
-            Y = am[:, None, :] + np.einsum("bkn,bck->bcn", Jm, g.corners[None] * r[:, None, :])
+            D, use = polytope_vertices(C, r, self.linear)
+            # the crossings are computed: their rounding moves the image by at most this much
+            E = E + 1e-12 * np.einsum("bkn,bk->bn", np.abs(Jm), r) if self.linear else E
+            Y = am[:, None, :] + np.einsum("bkn,bck->bcn", Jm, D)
             ok = breg & creg & np.isfinite(E).all(axis=1) & np.isfinite(Y).all(axis=(1, 2))
             Y = np.where(ok[:, None, None], Y, 0.0)
             E = np.where(ok[:, None], E, 0.0)
-            cor = largest_singular_bound(_mat(Y, m) * self.sw, reduce_last=True)
+            Y = np.where(use[..., None], Y, 0.0)  # points outside the constraints: a zero matrix
+            cor = np.where(use.any(axis=1), largest_singular_bound(_mat(Y, m) * self.sw, reduce_last=True), -np.inf)
             cor = _up(cor + largest_singular_bound(_mat(E, m) * self.sw))
             cor = np.where(ok, cor, np.inf)
+            natural(~ok & ~np.isfinite(nat))
             split = np.sqrt(np.einsum("bnk,n->bk", share**2, np.repeat(self.sw**2, 3)))
         return np.fmin(nat, cor), np.where(ok[:, None], split, np.nan)
 
@@ -323,12 +382,10 @@ def lambda_max_bound(G: np.ndarray, err: np.ndarray, reduce_last: bool = False) 
     lam = _eig_estimate(G)
     if reduce_last:
         lam = np.broadcast_to(lam.max(axis=-1, keepdims=True), lam.shape)
-    s = np.maximum(np.abs(c1), 1e-300)
+    s = np.where(np.abs(c1) > 1e-100, np.abs(c1), 1.0)
     a1, a2, a3 = c1 / s, c2 / (s * s), c3 / (s * s * s)
     cand = np.maximum(lam / s, 0.0) * (1.0 + 1e-12) + 1e-13
-    ok = _above_roots(cand, a1, a2, a3)
-    if not ok.all():
-        cand = np.where(ok, cand, _largest_root(a1, a2, a3))
+    _prove(cand, a1, a2, a3)
     frob = np.sqrt(err[..., 0] ** 2 + err[..., 1] ** 2 + err[..., 2] ** 2
                    + 2.0 * (err[..., 3] ** 2 + err[..., 4] ** 2 + err[..., 5] ** 2))
     out = _up(cand * s * (1.0 + 8.0 * _U) + frob * (1.0 + 8.0 * _U))

@@ -30,6 +30,7 @@ import casadi as ca
 import numpy as np
 
 from tolsynth.analysis.branch_bound import maximize
+from tolsynth.analysis.certify_bounds import polytope_vertices
 from tolsynth.analysis.interval_ops import round_up as _up
 from tolsynth.analysis.intervals import IntervalFunction
 from tolsynth.errors import OutOfRangeError
@@ -63,7 +64,7 @@ class ComponentBounds:
     R : float
     """
 
-    def __init__(self, st, nq: int, free, held: dict, eps, shapes, R: float):
+    def __init__(self, st, nq: int, free, held: dict, eps, shapes, R: float, linear=()):
         cols = list(st.columns)
         self.free = tuple(free)
         self.k = len(self.free)
@@ -89,6 +90,7 @@ class ComponentBounds:
         self.box = hess if self.use_hessian else self.centre
         self.corners = np.array(list(itertools.product([-1.0, 1.0], repeat=self.d)))
         self.threshold = np.inf  # boxes whose cheap bound is above this need no corners (kept current)
+        self.linear = tuple(linear)  # joint constraints (a, lo, hi) over the searched joints
 
     def coefficients(self, X: np.ndarray) -> np.ndarray:
         """``|u . a_i| eps_i`` at points X (n, d), shape (n, m)."""
@@ -139,10 +141,18 @@ class ComponentBounds:
             split = np.sqrt(np.einsum("bnk,n->bk", share**2, self.eps**2))
             todo = np.flatnonzero(ok & (lb < self.threshold))
             if len(todo):
-                Y = ym[todo, None, :] + np.einsum("bkn,bck->bcn", Jm[todo], self.corners[None] * r[todo, None, :])
-                Bc = _up((np.abs(Y) + E[todo, None, :]) * self.eps)
-                Pc = self._lower(Bc.reshape(-1, m)).reshape(len(todo), -1).min(axis=1)
-                lb[todo] = np.maximum(lb[todo], Pc)
+                k = self.k
+                Dq, use = polytope_vertices(C[todo, :k], r[todo, :k], self.linear)
+                du = np.array(list(itertools.product([-1.0, 1.0], repeat=2)))
+                D = np.concatenate([np.repeat(Dq, 4, axis=1), np.tile(du[None] * r[todo, None, k:], (1, Dq.shape[1], 1))],
+                                   axis=2)
+                use = np.repeat(use, 4, axis=1)
+                Et = E[todo] + (1e-12 * np.einsum("bkn,bk->bn", np.abs(Jm[todo]), r[todo]) if self.linear else 0.0)
+                Y = ym[todo, None, :] + np.einsum("bkn,bck->bcn", Jm[todo], D)
+                Bc = _up((np.abs(Y) + Et[:, None, :]) * self.eps)
+                Pc = np.full(use.shape, np.inf)
+                Pc[use] = self._lower(Bc[use])
+                lb[todo] = np.maximum(lb[todo], np.minimum(Pc.min(axis=1), 1.0))
         return lb, np.where(ok[:, None], split, np.nan)
 
 
@@ -164,7 +174,7 @@ def _signed_columns(B: ComponentBounds, x: np.ndarray) -> np.ndarray:
 
 
 def certify_components_exact(mech, st, dom, eps, distribution, R, *, tol=None, max_boxes, seeds=None, callback=None,
-                             stop=None) -> dict:
+                             stop=None, target=None, stop_at=None) -> dict:
     """The search of the module docstring on the domain of :func:`tolsynth.analysis.certify.certify_worst_pose`."""
     from tolsynth.probability.distributions import shapes_of
 
@@ -174,7 +184,7 @@ def certify_components_exact(mech, st, dom, eps, distribution, R, *, tol=None, m
     held = dict(dom.held)
     if st.rotation is not None and st.rotation in held:
         held[st.rotation] = 0.0  # the proven rotation: any value gives the same probabilities
-    B = ComponentBounds(st, nq, dom.free, held, eps, shapes, R)
+    B = ComponentBounds(st, nq, dom.free, held, eps, shapes, R, dom.linear)
     lo = np.concatenate([dom.lo, [0.0, -math.pi]])
     hi = np.concatenate([dom.hi, [math.pi / 2, math.pi]])
     k = len(dom.free)
@@ -191,12 +201,13 @@ def certify_components_exact(mech, st, dom, eps, distribution, R, *, tol=None, m
         return -lb, None, None, split
 
     def cb(n, ub, best):
-        B.threshold = -best - tol  # -best: the lowest probability found so far
+        B.threshold = -best - tol if target is None else min(-best - tol, float(target))
         if callback is not None:
             callback(n, ub, best)
 
     r = maximize(bound, lambda X: -B.point(X), lo, hi, tol=tol, max_boxes=max_boxes, constraint_fn=cfn, x0=x0,
-                 callback=cb, stop=stop, batch=128)
+                 callback=cb, stop=stop, batch=128, target=None if target is None else -float(target),
+                 stop_above=None if stop_at is None else -float(stop_at))
     if not np.isfinite(r.best_value):
         raise OutOfRangeError("joint limits", "no pose satisfies every joint limit and constraint",
                               "a non-empty feasible joint space")

@@ -81,6 +81,11 @@ class WorstPose(Tabular):
     n_grid, n_evaluations : int
         Feasible grid points and total poses evaluated.
     method : str
+    certified, upper_bound, probability_lower_bound, boxes, certificate
+        With ``certify=True``: whether the branch and bound proved its bound, the proven upper
+        bound of the largest principal sigma (mm) over the whole joint space, the proven lower
+        bound of the smallest per-component probability (with R), the boxes it bounded, and the
+        :class:`~tolsynth.analysis.certify.Certificate` itself (None without ``certify``).
     """
 
     model: str
@@ -105,15 +110,23 @@ class WorstPose(Tabular):
     n_evaluations: int
     elapsed_s: float
     method: str
+    certified: bool | None = None
+    upper_bound: float | None = None
+    probability_lower_bound: float | None = None
+    boxes: int | None = None
+    certificate: object = None
 
     def to_dict(self) -> dict:
         """Plain dict (arrays as lists) for JSON."""
-        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
+        out = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
+        out["certificate"] = self.certificate.to_dict() if self.certificate is not None else None
+        return out
 
     def report(self, joint_names: Sequence[str] | None = None, joint_units: Sequence[str] | None = None) -> str:
         """Readable table: the worst pose found beside the reference (joints in deg, or in mm where
         ``joint_units`` says so, as :attr:`tolsynth.Mechanism.joint_units` does; hand in mm)."""
-        unit = "mm (largest principal sigma)" if self.criterion == "sigma" else f"(P(|dr|<={self.R:g} mm))"
+        unit = {"sigma": "mm (largest principal sigma)", "probability": f"(P(|dr|<={self.R:g} mm))",
+                "components": f"(smallest P(|u.dr|<={self.R:g} mm))"}[self.criterion]
         names = joint_names or [f"q{i + 1}" for i in range(len(self.q))]
         units = tuple(joint_units or ["deg"] * len(self.q))
         lines = [f"worst pose   criterion {self.criterion} {unit}, {self.distribution} errors; {self.method}"]
@@ -131,6 +144,8 @@ class WorstPose(Tabular):
         if self.p_sphere is not None:
             lines.append(f"{'P(|dr|<=R)':22}{self.p_sphere:>42.6f}"
                          f"{self.reference_p_sphere if self.reference_p_sphere is not None else float('nan'):>40.6f}")
+        if self.certificate is not None:
+            lines.append("certificate  " + self.certificate.summary().replace("\n", "\n             "))
         lines.append("joint order  " + ", ".join(names))
         lines.append("held         " + (", ".join(f"{k} = {math.degrees(v):g} deg" for k, v in self.held_joints.items()) or "-"))
         lines.append("active       " + (", ".join(self.active) or "none (interior)"))
@@ -183,6 +198,12 @@ def worst_pose(
     step_tol: float = 1e-7,
     max_grid_points: int = 20000,
     seed: int = 0,
+    *,
+    certify: bool = False,
+    probability: str = "gaussian",
+    rtol: float | None = None,
+    max_boxes: int | None = None,
+    progress=None,
 ) -> WorstPose:
     """Search the joint space for the pose of worst accuracy at given tolerances.
 
@@ -203,8 +224,10 @@ def worst_pose(
     mechanism : Mechanism
     tolerances : str, dict or array
         Tolerance set name or half-widths (tolerance units).
-    criterion : {"sigma", "probability"}
-        Maximise the largest principal sigma (mm), or minimise ``P(|dr| <= R)`` (needs ``R``).
+    criterion : {"sigma", "probability", "components"}
+        Maximise the largest principal sigma (mm), or minimise ``P(|dr| <= R)`` (needs ``R``), or
+        minimise the smallest per-component probability ``P(|u . dr| <= R)`` over directions u
+        (needs ``R``; Gaussian: the pose of largest sigma).
     R : float, optional
         Radius (mm), > 0; required for ``"probability"``, reported otherwise if given.
     distribution : str or dict, optional
@@ -224,6 +247,17 @@ def worst_pose(
         Final step, as a fraction of each joint's range.
     seed : int
         Seed of the random poses used to detect invariant joints.
+    certify : bool
+        Also prove a bound over the whole continuous joint space (joint limits and constraints
+        included) by branch and bound (:func:`tolsynth.analysis.certify.certify_worst_pose`):
+        ``certified``, ``upper_bound`` (sigma, mm), ``probability_lower_bound`` (with ``R``) and
+        ``boxes`` are set, and the pose reported is the best the search found (the sampled one if
+        better).  For ``criterion="sigma"`` or ``"components"``; the sphere probability is not
+        certified.
+    probability : {"gaussian", "exact"}
+        Reading of the per-component probability (``criterion="components"``).
+    rtol, max_boxes, progress
+        Of the certified search (relative gap, box limit, progress bar).
 
     Returns
     -------
@@ -241,15 +275,20 @@ def worst_pose(
     from tolsynth.kinematics.mechanism import as_mechanism
 
     mechanism = as_mechanism(mechanism)
-    if criterion not in ("sigma", "probability"):
-        raise OutOfRangeError("criterion", f"got {criterion!r}", "'sigma' or 'probability'")
+    if criterion not in ("sigma", "probability", "components"):
+        raise OutOfRangeError("criterion", f"got {criterion!r}", "'sigma', 'probability' or 'components'")
+    if probability not in ("gaussian", "exact"):
+        raise OutOfRangeError("probability", f"got {probability!r}", "'gaussian' or 'exact'")
+    if certify and criterion == "probability":
+        raise InputError("certify", "the sphere probability P(|dr| <= R) has no certified search",
+                         "criterion 'sigma' or 'components' with certify=True")
     from tolsynth.probability.distributions import resolve
 
     distribution = resolve(distribution, mechanism)
     if R is not None:
         R = check_positive(R, "R")
-    elif criterion == "probability":
-        raise InputError("R", "criterion 'probability' needs a radius", "a finite number > 0 (mm)")
+    elif criterion in ("probability", "components"):
+        raise InputError("R", f"criterion {criterion!r} needs a radius", "a finite number > 0 (mm)")
     starts = check_count(starts, "starts", 1, 1000)
     step_tol = check_positive(step_tol, "step_tol", "fraction of each joint's range", upper=1.0)
     max_grid_points = check_count(max_grid_points, "max_grid_points", 1, MAX_GRID_POINTS)
@@ -264,6 +303,7 @@ def worst_pose(
     names = list(mechanism.joint_names)
     rng = np.random.default_rng(seed)
 
+    search_criterion = "sigma" if criterion == "components" else criterion  # the Gaussian ranking
     held: dict[int, float] = {}
     base_q = ref_q if ref_q is not None else np.clip(np.zeros(nq), lo, hi)
     for j in _invariant_joints(mechanism, eps, distribution, rng):
@@ -293,7 +333,7 @@ def worst_pose(
         ok = _feasible(mechanism, Q) & np.all((U >= 0) & (U <= 1), axis=0)
         val = np.full(U.shape[1], -np.inf)
         if np.any(ok):
-            val[ok] = _criterion_batch(mechanism, Q[:, ok], eps, distribution, criterion, R, tol)[0]
+            val[ok] = _criterion_batch(mechanism, Q[:, ok], eps, distribution, search_criterion, R, tol)[0]
             val[~np.isfinite(val)] = -np.inf  # a parallel robot's platform not assembled there
             n_eval += int(np.count_nonzero(ok))
         return val
@@ -352,7 +392,19 @@ def worst_pose(
         b = int(np.argmax(F))
         best_u = X[:, b]
     q = full(best_u[:, None])[:, 0]
-    value, sig, P = _criterion_batch(mechanism, q[:, None], eps, distribution, criterion, R)
+    cert = None
+    if certify:
+        from tolsynth.analysis.certify import certify_worst_pose
+
+        cert = certify_worst_pose(mechanism, eps, distribution, "components" if criterion == "components" else "sigma",
+                                  R, probability, rtol=rtol, max_boxes=max_boxes or 400_000, x0=[q],
+                                  base_q=base_q, progress=progress)
+        better = cert.best_value > _value_at(mechanism, q, eps, distribution, R, criterion, probability) \
+            if criterion == "sigma" else cert.best_value < _value_at(mechanism, q, eps, distribution, R, criterion,
+                                                                       probability)
+        if better:
+            q = cert.q
+    value, sig, P = _criterion_batch(mechanism, q[:, None], eps, distribution, search_criterion, R)
     p_sph = float(p_ball(sig[0] ** 2, R)) if R is not None else None
     position = np.asarray(mechanism.fk(q, check_limits=True))[:3, 3]
 
@@ -375,11 +427,12 @@ def worst_pose(
     ref = dict(reference_q=None, reference_position=None, reference_value=None,
                reference_principal_std=None, reference_p_sphere=None)
     if ref_q is not None:
-        rv, rs, rp = _criterion_batch(mechanism, ref_q[:, None], eps, distribution, criterion, R)
+        rv, rs, rp = _criterion_batch(mechanism, ref_q[:, None], eps, distribution, search_criterion, R)
         ref.update(
             reference_q=ref_q,
             reference_position=np.asarray(mechanism.fk(ref_name if ref_name != "given" else ref_q))[:3, 3],
-            reference_value=float(rs[0, 0]) if criterion == "sigma" else float(rp[0]),
+            reference_value=float(rs[0, 0]) if criterion == "sigma" else float(rp[0]) if criterion == "probability"
+            else _value_at(mechanism, ref_q, eps, distribution, R, criterion, probability),
             reference_principal_std=rs[0],
             reference_p_sphere=float(p_ball(rs[0] ** 2, R)) if R is not None else None,
         )
@@ -391,7 +444,8 @@ def worst_pose(
         tolerances=dict(zip(mechanism.error_parameters, eps.tolist())),
         q=q,
         position=position,
-        value=float(sig[0, 0]) if criterion == "sigma" else float(P[0]),
+        value=float(sig[0, 0]) if criterion == "sigma" else float(P[0]) if criterion == "probability"
+        else _value_at(mechanism, q, eps, distribution, R, criterion, probability),
         principal_std=sig[0],
         p_sphere=p_sph,
         reference=ref_name,
@@ -400,6 +454,27 @@ def worst_pose(
         n_grid=n_grid,
         n_evaluations=n_eval,
         elapsed_s=time.perf_counter() - t0,
-        method=f"grid {g}^{k} over {', '.join(names[j] for j in free) or '-'}, then pattern search from {len(picked)} starts",
+        method=f"grid {g}^{k} over {', '.join(names[j] for j in free) or '-'}, then pattern search from {len(picked)} starts"
+        + (f"; certified search: {cert.method}" if cert is not None else ""),
+        certified=None if cert is None else cert.certified,
+        upper_bound=None if cert is None else cert.upper_bound,
+        probability_lower_bound=None if cert is None else cert.probability_lower_bound,
+        boxes=None if cert is None else cert.boxes,
+        certificate=cert,
         **ref,
     )
+
+
+def _value_at(mech, q, eps, distribution, R, criterion, probability) -> float:
+    """The criterion at one pose: sigma_1 (mm), or the smallest per-component probability (Gaussian:
+    from sigma_1; exact: along the worst direction of a lattice and local search)."""
+    sig = principal_std_batch(mech, q[:, None], eps, distribution)[0, 0]
+    if criterion == "sigma":
+        return float(sig)
+    if probability == "gaussian":
+        return math.erf(R / (math.sqrt(2.0) * sig)) if sig > 0 else 1.0
+    from tolsynth.probability.distributions import shapes_of
+    from tolsynth.probability.exact import worst_direction
+
+    A = mech.sensitivity(q, check_limits=False)[:3]
+    return worst_direction(A, eps, shapes_of(distribution, mech.error_parameters, mech.index), R)[1]

@@ -34,13 +34,33 @@ class WorkspaceSynthesis(Tabular):
         Per round: ``n_poses``, ``cost``, ``worst_value`` (largest sigma z / R, or for the sphere
         criterion (1 - P)/(1 - p), found over the workspace at that round's optimum), ``worst_q`` (rad), ``worst_position`` (mm).
     converged : bool
-        True when the worst pose found meets the specification to ``tol``.
+        True when the worst pose found meets the specification to ``tol`` (with ``certify``: when
+        the proven bound does).
+    certified : bool or None
+        With ``certify=True``: the specification is proven to hold at every pose of the joint
+        space, to ``tol`` (Gaussian: ``upper_bound <= 1 + tol``; exact: ``probability_lower_bound
+        >= p - 1e-6``).  None without ``certify``.
+    upper_bound : float or None
+        Gaussian reading: the proven bound of ``max z sigma_1 / R`` over the joint space, at the
+        last solve's tolerances.
+    probability_lower_bound : float or None
+        The proven lower bound of the smallest per-component probability over the joint space
+        (exact or Gaussian reading, as solved).
+    certificate : Certificate or None
+        The last certified search (:class:`tolsynth.analysis.certify.Certificate`).
+    reason : str
+        Why not converged ("" when converged).
     """
 
     result: SynthesisResult
     poses: list
     rounds: list
     converged: bool
+    certified: bool | None = None
+    upper_bound: float | None = None
+    probability_lower_bound: float | None = None
+    certificate: object = None
+    reason: str = ""
 
     @property
     def success(self) -> bool:
@@ -66,6 +86,16 @@ class WorkspaceSynthesis(Tabular):
         return float(self.rounds[-1]["worst_value"]) if self.rounds else float("nan")
 
     @property
+    def binding_poses(self) -> list:
+        """The imposed poses (rad) whose constraint is active at the last solve (non-zero multiplier)."""
+        out = []
+        for q, b in zip(self.poses, self.result.constraints if self.result is not None else ()):
+            m = np.asarray(b.multipliers, dtype=float)
+            if np.any(m > 1e-9 * max(1.0, float(np.max(np.abs(m))))) or np.any(b.active):
+                out.append(q)
+        return out
+
+    @property
     def max_violation(self) -> float:
         """``max(0, worst_value - 1)``: how far the returned tolerances miss the specification at the
         worst pose the search found (0 where they meet it everywhere it looked)."""
@@ -84,13 +114,19 @@ class WorkspaceSynthesis(Tabular):
                      f"(valid at every pose), gap {self.gap:.2e}")
         lines.append(f"afterwards: largest value found anywhere {self.worst_value:.6f} "
                      f"(violation {self.max_violation:.2e})")
+        if self.certified is not None:
+            what = (f"max z sigma_1 / R <= {self.upper_bound:.6f}" if self.upper_bound is not None
+                    else f"every component probability >= {self.probability_lower_bound:.8f}")
+            lines.append(f"certificate over the whole joint space: {what} "
+                         f"({'proven to meet the specification' if self.certified else 'NOT proven: ' + self.reason})")
         lines.append(self.result.summary())
         return "\n".join(lines)
 
 
 def synthesize_workspace(
     mechanism, R: float, p: float, distribution=None, alpha=0.7, *, pose="worst",
-    tol: float = 1e-3, max_rounds: int = 12, search: dict | None = None, **kwargs
+    tol: float = 1e-3, max_rounds: int = 12, search: dict | None = None, certify: bool = False,
+    certify_options: dict | None = None, progress=None, **kwargs
 ) -> WorkspaceSynthesis:
     """Optimal tolerances with Eq. 20 imposed at *every* reachable pose, not one.
 
@@ -115,6 +151,17 @@ def synthesize_workspace(
     ``pose`` is where the exchange starts (a configuration name or joint values, rad); None starts
     from the worst pose the search finds at tolerances in the middle of the bounds, so that a model
     without a ``worst`` configuration works too.
+
+    With ``certify=True`` the sampled search is replaced by the certified one
+    (:func:`tolsynth.analysis.certify.certify_worst_pose`): after each solve a branch and bound over
+    the whole continuous joint space proves a bound (Gaussian: of ``max z sigma_1 / R``; exact: of
+    the smallest per-component probability) and returns the worst pose it found, which joins the
+    imposed poses unless the bound already meets the specification to ``tol`` (exact: the
+    probability to ``p - 1e-6``); then ``certified`` is True.  When the round limit is reached, or
+    the search cannot close its gap within its box limit, the result says so (``converged`` False,
+    ``reason``) with the bound reached.  ``certify_options``: ``rtol``, ``tol``, ``max_boxes`` and
+    ``time_limit`` of each certified search; ``progress`` its progress bar.  The sphere criterion
+    is not certified.
     """
     from tolsynth.analysis.pose_search import worst_pose
     from tolsynth.kinematics.mechanism import as_mechanism
@@ -155,6 +202,9 @@ def synthesize_workspace(
     # a pose to add needs no more than a coarse local search (final step 1e-4 of each joint's
     # range); the search that decides convergence is the full one (puma560: most of the time was
     # the pattern search's last halvings, round after round)
+    if certify:
+        return _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max_rounds, certify_options,
+                                   progress, sphere, kwargs)
     full = dict(search or {})
     coarse = full if "step_tol" in full else {**full, "step_tol": COARSE_STEP_TOL}
     for _ in range(max_rounds):
@@ -171,3 +221,61 @@ def synthesize_workspace(
             break
         poses = poses + [w.q]
     return WorkspaceSynthesis(res, poses, rounds, converged)
+
+
+#: how far below p the exact probability may be proven and still meet the specification
+EXACT_SLACK = 1e-6
+
+
+def _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max_rounds, options, progress, sphere,
+                        kwargs) -> WorkspaceSynthesis:
+    """The exchange of :func:`synthesize_workspace` with the certified search deciding (its docstring)."""
+    from tolsynth.analysis.certify import certify_worst_pose
+    from tolsynth.synthesis.single import DEFAULT_PROBABILITY
+
+    if sphere:
+        raise InputError("certify", "the sphere criterion has no certified search",
+                         "criterion 'components' (the default) with certify=True")
+    options = check_mapping(options, "certify_options", "keyword arguments of the certified search") or {}
+    for key in options:
+        if key not in ("rtol", "tol", "max_boxes", "time_limit"):
+            raise InputError("certify_options", f"unknown key {key!r}", "rtol, tol, max_boxes, time_limit")
+    probability = kwargs.get("probability") or DEFAULT_PROBABILITY
+    exact = probability == "exact"
+    rounds, res, cert = [], None, None
+    converged, reason = False, f"round limit ({max_rounds}) reached"
+    ub_ratio = p_lb = None
+    for _ in range(max_rounds):
+        res = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
+        if not res.success:
+            reason = f"the solve at {len(poses)} pose(s) did not succeed: {res.message}"
+            break
+        # a decision, not the tightest bound: prove the specification met to tol, or find a pose
+        # that misses it (which joins the imposed poses)
+        goal = p - EXACT_SLACK if exact else (1.0 + tol) * R / z
+        cert = certify_worst_pose(mechanism, res.x, distribution, "components" if exact else "sigma", R,
+                                  "exact" if exact else "gaussian", x0=np.array(poses), progress=progress,
+                                  target=goal, stop_at=goal, **options)
+        q = cert.q
+        if exact:
+            p_lb = cert.probability_lower_bound
+            worst = (1.0 - cert.best_value) / (1.0 - p)
+            meets, violated = p_lb >= p - EXACT_SLACK, cert.best_value < p - EXACT_SLACK / 2
+        else:
+            ub_ratio = cert.upper_bound * z / R
+            p_lb = cert.probability_lower_bound
+            worst = cert.best_value * z / R
+            meets, violated = ub_ratio <= 1 + tol, worst > 1 + tol / 2
+        rounds.append({"n_poses": len(poses), "cost": res.cost, "worst_value": worst, "worst_q": q,
+                       "worst_position": np.asarray(mechanism.fk(q, check_limits=False))[:3, 3],
+                       "upper_bound": ub_ratio, "probability_lower_bound": p_lb, "certified": cert.certified,
+                       "boxes": cert.boxes})
+        if meets:
+            converged, reason = True, ""
+            break
+        if not violated:
+            reason = f"the certified search did not close its gap ({cert.reason or 'bound above the specification'})"
+            break
+        poses = poses + [q]
+    return WorkspaceSynthesis(res, poses, rounds, converged, certified=converged, upper_bound=ub_ratio,
+                              probability_lower_bound=p_lb, certificate=cert, reason=reason)
