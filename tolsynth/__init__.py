@@ -39,6 +39,7 @@ from tolsynth.probability.exact import (
     ball_probability,
     cone_probability,
     direction_probability,
+    direction_probability_batch,
     worst_direction,
 )
 from tolsynth.probability.stats import p_ball, p_components, p_cone, z_of_p
@@ -57,6 +58,7 @@ __all__ = [
     "DesignSpec",
     "SolverOptions",
     "direction_probability",
+    "direction_probability_batch",
     "ball_probability",
     "cone_probability",
     "worst_direction",

@@ -97,8 +97,9 @@ class _Search:
         self.stuck = -np.inf  # largest bound of a box too small to split
 
     def threshold(self) -> float:
-        t = self.best + self.tol + self.rtol * abs(self.best) if np.isfinite(self.best) else -np.inf
-        return t if self.target is None else max(t, self.target)
+        if self.target is not None and not self.best > self.target:
+            return self.target  # the decision: only boxes that may exceed the target matter
+        return self.best + self.tol + self.rtol * abs(self.best) if np.isfinite(self.best) else -np.inf
 
     def feasible_points(self, x):
         if self.constraint_fn is None:
@@ -261,9 +262,11 @@ def maximize(
         ``stop() -> str``: checked after every round; a non-empty string ends the search, not
         certified unless the gap has closed, with that string as the reason (a time limit).
     target : float, optional
-        A decision instead of the maximum: boxes that cannot exceed ``target`` are dropped, and the
-        result is certified when ``upper_bound <= target`` (the maximum is then proven below the
-        target, by a bound that need not be within ``tol`` of it).
+        A decision instead of the maximum: while no point above ``target`` is known, boxes that
+        cannot exceed it are dropped (and only those), and the result is certified when
+        ``upper_bound <= target`` (the maximum proven below the target, by a bound that need not
+        be within ``tol`` of it); once a point above it is found, the search goes on to the
+        maximum within the tolerance.
     stop_above : float, optional
         End the search as soon as a feasible point exceeds this value (not certified; the point is
         the answer to the decision).

@@ -15,16 +15,18 @@ splits a single box it reads four facts off that graph:
 * **a joint that turns the error distribution rigidly about the base z axis** (the waist of the
   paper's robot and of most arms): ``A(q) = Rz(q_j + k) A(q with Rz = I)`` for every pose.  Then
   every principal standard deviation and every per-direction probability is the same at every
-  value of ``q_j`` (a rotation of the directions), and the search holds that joint.  The proof:
-  the graph is rebuilt with ``cos(q_j + k)``, ``sin(q_j + k)`` replaced by symbols ``C, S``,
-  every other sine and cosine by its own pair of symbols and every other non-polynomial
-  operation (square root, arc cosine, a division by a variable, ...) by a symbol of its own.
-  What is left is a polynomial with the graph's own floating-point constants as exact rational
-  coefficients.  The difference ``D = A(C, S) - Rz(C, S) A(1, 0)`` must vanish identically; it
-  is checked to have degree at most one in each group of symbols (structurally), and a
-  polynomial of that kind vanishes identically when it vanishes on the grid of corner points of
-  its groups, which is evaluated in exact rational arithmetic.  An identity in independent
-  symbols holds a fortiori when the symbols are the functions of ``q`` they stand for.
+  value of ``q_j`` (a rotation of the directions), and the search holds that joint.  The proof
+  reads the graph's own instructions as exact polynomials (:class:`_PolyWalk`): ``cos(q_j + k)``,
+  ``sin(q_j + k)`` become variables ``C, S``, every other sine and cosine a pair of its own, every
+  other non-polynomial operation (square root, arc cosine, a division by a variable, ...) a
+  variable of its own (the same operation of the same exact arguments the same variable), and
+  the graph's floating-point constants exact rationals.  The identity ``A(C, S) = Rz(C, S) A(1, 0)``
+  must then hold term by term; an identity in independent variables holds a fortiori when the
+  variables are the functions of ``q`` they stand for.
+
+The same reading gives, for a serial chain, ``A`` as an exact polynomial of degree one in each
+joint's ``(cos, sin)`` (:func:`trig_polynomial`), which the bounds of
+:mod:`tolsynth.analysis.certify_bounds` use.
 
 Everything here is about the real-valued function the graph defines; nothing is sampled.  A fact
 that cannot be proven is simply not used (the search is then slower, never wrong).
@@ -45,8 +47,6 @@ from tolsynth.errors import InputError
 __all__ = ["Structure", "structure", "position_sensitivity"]
 
 
-_POLY_UNARY = {ca.OP_NEG, ca.OP_SQ, ca.OP_TWICE, ca.OP_ASSIGN}
-_POLY_BINARY = {ca.OP_ADD, ca.OP_SUB, ca.OP_MUL}
 
 
 @dataclass(frozen=True)
@@ -195,258 +195,204 @@ def _periodic(f: ca.Function, j: int) -> bool:
     return True
 
 
-class _Rebuilt:
-    """The graph of ``f(q)`` rebuilt as a polynomial in symbols (module docstring)."""
-
-    def __init__(self, f: ca.Function, j: int | None, atoms: bool = True):
-        self.ok, self.why = False, ""
-        self.allow_atoms = atoms
-        self.pairs: dict = {}  # (joint, exact offset) -> (C, S)
-        self.groups: list[list[ca.SX]] = []  # symbols, one group per pair or atom
-        self.cs = None  # (key, (C, S)) of joint j
-        self.atoms: dict = {}  # (operation, argument key) -> symbol
-        self.constants: dict = {}  # name -> (symbol, exact value) of constants CasADi cannot hold
-        try:
-            self.expr = self._walk(f, j)
-            self.ok = self.expr is not None
-        except _NoProof as err:
-            self.why = str(err)
-
-    def _pair(self, pairs: dict, key, j: int):
-        if key[0] == j and self.cs is not None and self.cs[0] != key:
-            raise _NoProof("the joint enters with two different offsets")
-        if key not in pairs:
-            pairs[key] = (ca.SX.sym(f"c{len(pairs)}"), ca.SX.sym(f"s{len(pairs)}"))
-            self.groups.append(list(pairs[key]))
-            if key[0] == j:
-                self.cs = (key, pairs[key])
-        return pairs[key]
-
-    def _variable(self, key, j: int) -> ca.SX:
-        """q_i + offset used polynomially: a symbol of its own (never the joint j)."""
-        jj, off = key
-        if jj == j:
-            raise _NoProof("the joint enters other than through sin and cos of itself")
-        if Fraction(float(off)) != off:
-            raise _NoProof("an offset not exactly representable")
-        v = ca.SX.sym(f"q{jj}")
-        self.groups.append([v])
-        return v + float(off) if off else v
-
-    def _walk(self, f: ca.Function, j: int | None):
-        pairs = self.pairs
-        val: dict = {}  # work slot -> SX
-        ang: dict = {}  # work slot -> (joint, exact offset) for q_i + constant
-        outs_ = {}
-        for k in range(f.n_instructions()):
-            op, ins, outs = f.instruction_id(k), f.instruction_input(k), f.instruction_output(k)
-            if op == ca.OP_OUTPUT:
-                outs_[outs[1]] = self._variable(ang[ins[0]], j) if ins[0] in ang else val[ins[0]]
-                continue
-            res_val = res_ang = None
-            if op == ca.OP_INPUT:
-                res_ang = (ins[1], Fraction(0))
-            elif op == ca.OP_CONST:
-                res_val = ca.SX(f.instruction_constant(k))
-            else:
-                unary = op in UNARY or op == ca.OP_ASSIGN
-                args = ins[:1] if unary else ins[:2]
-                a_ang = [a in ang for a in args]
-                if op == ca.OP_ASSIGN:
-                    res_ang, res_val = (ang[args[0]], None) if a_ang[0] else (None, val[args[0]])
-                elif a_ang[0] and op in (ca.OP_SIN, ca.OP_COS):
-                    cs = self._pair(pairs, ang[args[0]], j)
-                    res_val = cs[0 if op == ca.OP_COS else 1]
-                elif (op in (ca.OP_ADD, ca.OP_SUB) and sum(a_ang) == 1 and val[args[a_ang.index(False)]].is_constant()
-                      and (op == ca.OP_ADD or a_ang[0])):
-                    jj, off = ang[args[a_ang.index(True)]]
-                    c = Fraction(float(val[args[a_ang.index(False)]]))
-                    res_ang = (jj, off + c if op == ca.OP_ADD else off - c)
-                else:
-                    xs = [self._variable(ang[a], j) if u else val[a] for a, u in zip(args, a_ang)]
-                    res_val = self._operation(op, xs, unary)
-            ang.pop(outs[0], None)
-            val.pop(outs[0], None)
-            if res_ang is not None:
-                ang[outs[0]] = res_ang
-            else:
-                val[outs[0]] = res_val
-        if self.cs is None and j is not None:
-            raise _NoProof("the joint does not enter through sin and cos")
-        sp = f.sparsity_out(0)
-        out = ca.SX(sp.size1(), sp.size2())
-        for kk, (r, c) in enumerate(zip(*sp.get_triplet())):
-            out[r, c] = outs_[kk]
-        return out
-
-    def _operation(self, op, xs, unary) -> ca.SX:
-        if all(x.is_constant() for x in xs):
-            return self._constant(op, xs)
-        if op in _POLY_UNARY or op in _POLY_BINARY or (op == ca.OP_DIV and xs[1].is_constant()):
-            return ca.SX.unary(op, xs[0]) if unary else ca.SX.binary(op, xs[0], xs[1])
-        if op not in UNARY and op not in BINARY:
-            raise _NoProof(f"operation {op} has no symbolic treatment here")
-        cs = ca.vertcat(*self.cs[1]) if self.cs is not None else None
-        if op == ca.OP_DIV and cs is not None and not ca.depends_on(xs[1], cs):
-            # x / y = x * (1 / y), the reciprocal an atom of y alone
-            return xs[0] * self._atom((ca.OP_INV, _key(xs[1])))
-        if cs is not None and any(ca.depends_on(x, cs) for x in xs):
-            raise _NoProof("the joint enters a non-polynomial operation")
-        return self._atom((op,) + tuple(_key(x) for x in xs))  # a non-polynomial operation of variables
-
-    def _constant(self, op, xs) -> ca.SX:
-        """An operation of constants, which CasADi would fold in floating point: its exact rational
-        value as a symbol with that value (polynomial operations), else an atom."""
-        v = [Fraction(float(x)) for x in xs]
-        exact = {ca.OP_ADD: lambda: v[0] + v[1], ca.OP_SUB: lambda: v[0] - v[1], ca.OP_MUL: lambda: v[0] * v[1],
-                 ca.OP_NEG: lambda: -v[0], ca.OP_SQ: lambda: v[0] * v[0], ca.OP_TWICE: lambda: 2 * v[0],
-                 ca.OP_ASSIGN: lambda: v[0]}
-        if op == ca.OP_DIV and v[1] != 0:
-            value = v[0] / v[1]
-        elif op in exact:
-            value = exact[op]()
-        else:
-            return self._atom((op,) + tuple(x.hex() for x in map(float, v)))
-        if Fraction(float(value)) == value:
-            return ca.SX(float(value))
-        sym = ca.SX.sym(f"k{len(self.constants)}")
-        self.constants[sym.name()] = (sym, value)
-        return sym
-
-    def _atom(self, key) -> ca.SX:
-        """The symbol standing for one non-polynomial value; the same operation of structurally
-        equal arguments (the graph may compute a value twice) is the same symbol."""
-        if not self.allow_atoms:
-            raise _NoProof("a non-polynomial operation of the joints")
-        if key not in self.atoms:
-            self.atoms[key] = ca.SX.sym(f"t{len(self.groups)}")
-            self.groups.append([self.atoms[key]])
-        return self.atoms[key]
-
-
 class _NoProof(Exception):
     pass
 
 
-def _key(x: ca.SX) -> tuple:
-    """An exact structural key of a scalar expression: its free symbols' names and its algorithm,
-    constants in hexadecimal (printing rounds them).  Equal keys mean the same function."""
-    if x.is_constant():
-        return ("const", float(x).hex())
-    syms = ca.symvar(x)
-    f = ca.Function("key", syms, [x])
-    body = []
-    for k in range(f.n_instructions()):
-        op = f.instruction_id(k)
-        c = f.instruction_constant(k).hex() if op == ca.OP_CONST else None
-        body.append((op, tuple(f.instruction_input(k)), tuple(f.instruction_output(k)), c))
-    return (tuple(s.name() for s in syms), tuple(body))
-
-
-def _rotation_proof(f: ca.Function, j: int) -> tuple[bool, str]:
-    """Whether ``A(q) = Rz(q_j + k) A(q_j = -k)`` holds identically (module docstring)."""
-    rb = _Rebuilt(f, j)
-    if not rb.ok:
-        return False, rb.why
-    _, (C, S) = rb.cs
-    A = rb.expr
-    # A at the joint's zero by renamed symbols, set to exactly (1, 0) below: a numeric substitution
-    # would fold products of constants in floating point, which is not the graph's arithmetic
-    C1, S1 = ca.SX.sym("c_zero"), ca.SX.sym("s_zero")
-    A1 = ca.substitute(A, ca.vertcat(C, S), ca.vertcat(C1, S1))
-    Rz = ca.SX(3, 3)
-    Rz[0, 0], Rz[0, 1], Rz[1, 0], Rz[1, 1], Rz[2, 2] = C, -S, S, C, 1.0
-    D = ca.densify(ca.vec(A - ca.mtimes(Rz, A1)))
-    consts = list(rb.constants.values())
-    syms = [s for g in rb.groups for s in g] + [C1, S1] + [c for c, _ in consts]
-    Fd = ca.Function("D", [ca.vertcat(*syms)], [D])
-    n_free = len(syms) - len(consts)
-    fixed = {n_free - 2: {(): Fraction(1)}, n_free - 1: {}}  # A at (C, S) = (1, 0)
-    fixed.update({n_free + i: {(): v} for i, (_, v) in enumerate(consts)})
-    try:
-        polys = _expand(Fd, fixed)
-    except _NoProof as err:
-        return False, str(err)
-    if any(polys):
-        return False, "the sensitivity does not turn rigidly with the joint"
-    return True, ""
-
-
-#: largest number of terms of one expanded node in the rotation proof
+#: largest number of terms of one expanded node
 MAX_TERMS = 50000
 
 
-def _expand(f: ca.Function, fixed: dict) -> list:
-    """The outputs of a polynomial SX Function as sparse polynomials in its inputs, with exact
-    rational coefficients: ``{monomial: Fraction}``, a monomial a sorted tuple of (input, power).
-    Inputs in ``fixed`` are replaced by the given polynomials.  Nothing is rounded."""
-    w: dict = {}
-    out = [None] * f.nnz_out(0)
+def _padd(a: dict, b: dict, sign: int = 1) -> dict:
+    r = dict(a)
+    for m, c in b.items():
+        v = r.get(m, 0) + sign * c
+        if v:
+            r[m] = v
+        else:
+            r.pop(m, None)
+    return r
 
-    def mul(a, b):
-        r: dict = {}
-        for ma, ca_ in a.items():
-            for mb, cb in b.items():
-                if len(ma) == 0:
-                    m = mb
-                elif len(mb) == 0:
-                    m = ma
-                else:
-                    d = dict(ma)
-                    for v, e in mb:
-                        d[v] = d.get(v, 0) + e
-                    m = tuple(sorted(d.items()))
-                c = r.get(m, 0) + ca_ * cb
-                if c:
-                    r[m] = c
-                else:
-                    r.pop(m, None)
-        if len(r) > MAX_TERMS:
-            raise _NoProof(f"the expansion exceeds {MAX_TERMS} terms")
-        return r
 
-    def add(a, b, sign=1):
-        r = dict(a)
-        for m, c in b.items():
-            v = r.get(m, 0) + sign * c
-            if v:
-                r[m] = v
+def _pmul(a: dict, b: dict) -> dict:
+    r: dict = {}
+    for ma, ca_ in a.items():
+        for mb, cb in b.items():
+            if not ma:
+                m = mb
+            elif not mb:
+                m = ma
+            else:
+                d = dict(ma)
+                for v, e in mb:
+                    d[v] = d.get(v, 0) + e
+                m = tuple(sorted(d.items()))
+            c = r.get(m, 0) + ca_ * cb
+            if c:
+                r[m] = c
             else:
                 r.pop(m, None)
-        return r
+    if len(r) > MAX_TERMS:
+        raise _NoProof(f"the expansion exceeds {MAX_TERMS} terms")
+    return r
 
-    for k in range(f.n_instructions()):
-        op, ins, outs = f.instruction_id(k), f.instruction_input(k), f.instruction_output(k)
-        if op == ca.OP_INPUT:
-            i = ins[1]
-            r = fixed[i] if i in fixed else {((i, 1),): Fraction(1)}
-        elif op == ca.OP_OUTPUT:
-            out[outs[1]] = w[ins[0]]
-            continue
-        elif op == ca.OP_CONST:
-            c = Fraction(f.instruction_constant(k))
-            r = {(): c} if c else {}
-        elif op == ca.OP_ASSIGN:
-            r = w[ins[0]]
-        elif op == ca.OP_ADD:
-            r = add(w[ins[0]], w[ins[1]])
-        elif op == ca.OP_SUB:
-            r = add(w[ins[0]], w[ins[1]], -1)
-        elif op == ca.OP_MUL:
-            r = mul(w[ins[0]], w[ins[1]])
-        elif op == ca.OP_SQ:
-            r = mul(w[ins[0]], w[ins[0]])
-        elif op == ca.OP_NEG:
-            r = {m: -c for m, c in w[ins[0]].items()}
-        elif op == ca.OP_TWICE:
-            r = {m: 2 * c for m, c in w[ins[0]].items()}
-        elif op == ca.OP_DIV and set(w[ins[1]]) <= {()} and w[ins[1]]:
-            d = w[ins[1]][()]
-            r = {m: c / d for m, c in w[ins[0]].items()}
-        else:
-            raise _NoProof(f"operation {op} in what should be a polynomial")
-        w[outs[0]] = r
-    return out
+
+def _constant(p: dict):
+    """The value of a constant polynomial, else None."""
+    return p.get((), Fraction(0)) if set(p) <= {()} else None
+
+
+class _PolyWalk:
+    """The graph of ``f(q)`` read as exact polynomials (module docstring): every node a sparse
+    polynomial ``{monomial: Fraction}`` (a monomial a sorted tuple of (variable, power)) in
+    variables that stand for ``cos`` and ``sin`` of a joint plus a constant (a pair per joint and
+    offset), a joint used otherwise, or an atom: a non-polynomial operation of polynomial
+    arguments, one variable per operation and exact arguments.  The graph's own instructions are
+    read, so nothing is rounded or re-associated on the way."""
+
+    def __init__(self, f: ca.Function, target: int | None = None, atoms: bool = True):
+        self.target, self.allow_atoms = target, atoms
+        self.vars: list = []  # description of each variable
+        self._index: dict = {}
+        self.pairs: dict = {}  # (joint, offset) -> (index of cos, index of sin)
+        self.outputs = self._walk(f)
+
+    def var(self, desc) -> int:
+        if desc not in self._index:
+            self._index[desc] = len(self.vars)
+            self.vars.append(desc)
+        return self._index[desc]
+
+    def _pair(self, key):
+        j, off = key
+        if j == self.target and any(k[0] == j and k != key for k in self.pairs):
+            raise _NoProof("the joint enters with two different offsets")
+        if key not in self.pairs:
+            self.pairs[key] = (self.var(("cos", j, off)), self.var(("sin", j, off)))
+        return self.pairs[key]
+
+    def _joint(self, key) -> dict:
+        """q_j + offset used other than in sin and cos: the joint as a variable (never the target)."""
+        j, off = key
+        if j == self.target:
+            raise _NoProof("the joint enters other than through sin and cos of itself")
+        p = {((self.var(("q", j)), 1),): Fraction(1)}
+        return _padd(p, {(): off}) if off else p
+
+    def _target_vars(self) -> set:
+        return {i for k, pair in self.pairs.items() if k[0] == self.target for i in pair}
+
+    def _atom(self, op, args) -> dict:
+        if not self.allow_atoms:
+            raise _NoProof("a non-polynomial operation of the joints")
+        tv = self._target_vars()
+        if any(v in tv for a in args for m in a for v, _ in m):
+            raise _NoProof("the joint enters a non-polynomial operation")
+        key = ("atom", op) + tuple(frozenset(a.items()) for a in args)
+        return {((self.var(key), 1),): Fraction(1)}
+
+    def _walk(self, f: ca.Function) -> list:
+        w: dict = {}  # work slot -> ("ang", (joint, offset)) or ("p", polynomial)
+        out = [None] * f.nnz_out(0)
+        for k in range(f.n_instructions()):
+            op, ins, outs = f.instruction_id(k), f.instruction_input(k), f.instruction_output(k)
+            if op == ca.OP_OUTPUT:
+                t, v = w[ins[0]]
+                out[outs[1]] = self._joint(v) if t == "ang" else v
+                continue
+            if op == ca.OP_INPUT:
+                r = ("ang", (ins[1], Fraction(0)))
+            elif op == ca.OP_CONST:
+                c = Fraction(f.instruction_constant(k))
+                r = ("p", {(): c} if c else {})
+            elif op == ca.OP_ASSIGN:
+                r = w[ins[0]]
+            else:
+                args = [w[i] for i in (ins[:1] if op in UNARY else ins[:2])]
+                r = self._operation(op, args)
+            w[outs[0]] = r
+        return out
+
+    def _operation(self, op, args):
+        kinds = [t for t, _ in args]
+        if kinds[0] == "ang" and op in (ca.OP_SIN, ca.OP_COS):
+            c, s = self._pair(args[0][1])
+            return ("p", {((c if op == ca.OP_COS else s, 1),): Fraction(1)})
+        if op in (ca.OP_ADD, ca.OP_SUB) and kinds.count("ang") == 1:
+            i = kinds.index("ang")
+            other = _constant(args[1 - i][1])
+            if other is not None and (op == ca.OP_ADD or i == 0):
+                j, off = args[i][1]
+                return ("ang", (j, off + other if op == ca.OP_ADD else off - other))
+        ps = [self._joint(v) if t == "ang" else v for t, v in args]
+        if op == ca.OP_ADD:
+            return ("p", _padd(ps[0], ps[1]))
+        if op == ca.OP_SUB:
+            return ("p", _padd(ps[0], ps[1], -1))
+        if op == ca.OP_MUL:
+            return ("p", _pmul(ps[0], ps[1]))
+        if op == ca.OP_SQ:
+            return ("p", _pmul(ps[0], ps[0]))
+        if op == ca.OP_NEG:
+            return ("p", {m: -c for m, c in ps[0].items()})
+        if op == ca.OP_TWICE:
+            return ("p", {m: 2 * c for m, c in ps[0].items()})
+        if op == ca.OP_DIV:
+            d = _constant(ps[1])
+            if d:
+                return ("p", {m: c / d for m, c in ps[0].items()})
+            # x / y = x * (1 / y), the reciprocal an atom of y alone
+            return ("p", _pmul(ps[0], self._atom(ca.OP_INV, [ps[1]])))
+        if op not in UNARY and op not in BINARY:
+            raise _NoProof(f"operation {op} has no symbolic treatment here")
+        return ("p", self._atom(op, ps))
+
+
+def _substitute(p: dict, values: dict) -> dict:
+    """The polynomial with the variables of ``values`` set to exact numbers."""
+    r: dict = {}
+    for mono, c in p.items():
+        keep = []
+        for v, e in mono:
+            if v in values:
+                c = c * values[v] ** e
+            else:
+                keep.append((v, e))
+        if c:
+            m = tuple(keep)
+            r[m] = r.get(m, 0) + c
+            if not r[m]:
+                del r[m]
+    return r
+
+
+def _rotation_proof(f: ca.Function, j: int) -> tuple[bool, str]:
+    """Whether ``A(q) = Rz(q_j + k) A(q_j = -k)`` holds identically (module docstring): with ``C, S``
+    the variables of ``cos, sin(q_j + k)``, the polynomial identity ``A(C, S) = Rz(C, S) A(1, 0)``
+    in independent variables, checked in exact arithmetic."""
+    try:
+        pw = _PolyWalk(f, target=j)
+    except _NoProof as err:
+        return False, str(err)
+    pair = [v for k, v in pw.pairs.items() if k[0] == j]
+    if not pair:
+        return False, "the joint does not enter through sin and cos"
+    C, S = pair[0]
+    A = pw.outputs  # column-major 3 x n
+    try:
+        for col in range(len(A) // 3):
+            x, y, zz = A[3 * col: 3 * col + 3]
+            x1, y1, z1 = (_substitute(p, {C: 1, S: 0}) for p in (x, y, zz))
+            cv, sv = {((C, 1),): Fraction(1)}, {((S, 1),): Fraction(1)}
+            # Rz(C, S) (x1, y1, z1) - (x, y, z) must vanish term by term
+            dx = _padd(_padd(_pmul(cv, x1), _pmul(sv, y1), -1), x, -1)
+            dy = _padd(_padd(_pmul(sv, x1), _pmul(cv, y1)), y, -1)
+            dz = _padd(z1, zz, -1)
+            if dx or dy or dz:
+                return False, "the sensitivity does not turn rigidly with the joint"
+    except _NoProof as err:
+        return False, str(err)
+    return True, ""
 
 
 @dataclass(frozen=True)
@@ -466,43 +412,39 @@ class TrigPolynomial:
 def trig_polynomial(st: Structure, free, held_rotation) -> TrigPolynomial | None:
     """The exact trigonometric polynomial of ``A`` over the joints ``free`` (None where the graph
     is not one: closed loops, joint values outside sine and cosine, two offsets of one joint)."""
-    f = ca.Function("A_kept", [st.A.sx_in(0)], [st.A.call([st.A.sx_in(0)])[0][:, list(st.columns)]])
-    rb = _Rebuilt(f, None, atoms=False)
-    if not rb.ok or rb.constants:
+    cols = list(st.columns)
+    try:
+        pw = _PolyWalk(st.A, None, atoms=False)
+    except _NoProof:
         return None
     by_joint: dict = {}
-    for (jj, off), cs in rb.pairs.items():
+    for (jj, off), cs in pw.pairs.items():
         if jj in by_joint:
             return None
         by_joint[jj] = (off, cs)
     free = list(free)
     if any(jj not in free and jj != held_rotation for jj in by_joint) or any(j not in by_joint for j in free):
         return None
-    syms = [s for j in free for s in by_joint[j][1]]
+    if any(d[0] == "q" for d in pw.vars):
+        return None
     fixed = {}
-    extra = []
     if held_rotation is not None and held_rotation in by_joint:
-        extra = list(by_joint[held_rotation][1])
-        fixed = {len(syms): {(): Fraction(1)}, len(syms) + 1: {}}
-    expr = ca.densify(ca.vec(rb.expr))
-    F = ca.Function("A_poly", [ca.vertcat(*(syms + extra))], [expr])
-    if F.n_instructions() and any(F.instruction_id(k) not in (ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST, ca.OP_ASSIGN,
-                                                              *(_POLY_UNARY | _POLY_BINARY), ca.OP_DIV)
-                                  for k in range(F.n_instructions())):
-        return None
-    try:
-        polys = _expand(F, fixed)
-    except _NoProof:
-        return None
+        c, s = by_joint[held_rotation][1]
+        fixed = {c: 1, s: 0}  # the held rotation at its zero: cos 1, sin 0
+    axis = {}
+    for i, j in enumerate(free):
+        c, s = by_joint[j][1]
+        axis[c], axis[s] = (i, 1), (i, 2)
     k = len(free)
-    T = np.full((len(polys),) + (3,) * k, Fraction(0), dtype=object)
-    for e, poly in enumerate(polys):
-        for mono, c in (poly or {}).items():
+    entries = [pw.outputs[3 * c + r] for c in cols for r in range(3)]
+    T = np.full((len(entries),) + (3,) * k, Fraction(0), dtype=object)
+    for e, poly in enumerate(entries):
+        for mono, coef in _substitute(poly or {}, fixed).items():
             idx = [0] * k
             for v, power in mono:
-                joint, which = divmod(v, 2)
-                if power != 1 or idx[joint] != 0:
+                i, which = axis[v]
+                if power != 1 or idx[i] != 0:
                     return None  # not of degree one in the pair
-                idx[joint] = 1 + which
-            T[(e, *idx)] = c
+                idx[i] = which
+            T[(e, *idx)] = coef
     return TrigPolynomial(T, tuple(by_joint[j][0] for j in free))

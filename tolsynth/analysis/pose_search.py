@@ -125,8 +125,8 @@ class WorstPose(Tabular):
     def report(self, joint_names: Sequence[str] | None = None, joint_units: Sequence[str] | None = None) -> str:
         """Readable table: the worst pose found beside the reference (joints in deg, or in mm where
         ``joint_units`` says so, as :attr:`tolsynth.Mechanism.joint_units` does; hand in mm)."""
-        unit = {"sigma": "mm (largest principal sigma)", "probability": f"(P(|dr|<={self.R:g} mm))",
-                "components": f"(smallest P(|u.dr|<={self.R:g} mm))"}[self.criterion]
+        unit = {"sigma": "mm (largest principal sigma)", "probability": "(P(|dr|<={R:g} mm))",
+                "components": "(smallest P(|u.dr|<={R:g} mm))"}[self.criterion].format(R=self.R)
         names = joint_names or [f"q{i + 1}" for i in range(len(self.q))]
         units = tuple(joint_units or ["deg"] * len(self.q))
         lines = [f"worst pose   criterion {self.criterion} {unit}, {self.distribution} errors; {self.method}"]

@@ -14,6 +14,7 @@ from tolsynth.cli.args import (  # noqa: I001
     dist_label,
     emit_json,
     inputs_record,
+    number,
     parse_bounds,
     parse_per_parameter,
     parse_poses,
@@ -153,8 +154,10 @@ def cmd_solve(args) -> int:
         else:
             name, q = _reference(mech, parse_reference(mech, args.reference))
             start = name if (name is not None and name != "given") else q  # None: the search's worst pose
+        ex = {k: v for k, v in (("certify", args.certify or None), ("max_rounds", args.max_rounds), ("tol", args.tol))
+              if v is not None}
         with Working("tolsynth solve: the design for every reachable pose (exchange rounds with the worst-pose search)"):
-            w = synthesize_workspace(mech, args.R, args.p, args.dist, alpha, solver=args.solver, pose=start, **kw)
+            w = synthesize_workspace(mech, args.R, args.p, args.dist, alpha, solver=args.solver, pose=start, **ex, **kw)
         reps = _contributions(args, {"the design": w.result})
         if args.out:  # the tolerance table; the exchange's rounds beside the summary
             frame = w.result.to_frame()
@@ -164,7 +167,8 @@ def cmd_solve(args) -> int:
         if args.json:
             out = w.result.to_dict()
             out.update(converged=w.converged, rounds=w.rounds, poses=w.poses, worst_value=w.worst_value,
-                       max_violation=w.max_violation)
+                       max_violation=w.max_violation, certified=w.certified, upper_bound=w.upper_bound,
+                       probability_lower_bound=w.probability_lower_bound, reason=w.reason)
             if reps:
                 out["contributions"] = reps["the design"].to_dict()
             out["inputs"] = inputs_record(args, mech, start_pose=pose_label(start) if start is not None else None,
@@ -178,12 +182,18 @@ def cmd_solve(args) -> int:
             print(f"  certificate: lower bound {w.lower_bound:.8g} (valid at every pose), gap {w.gap:.2e}; "
                   f"afterwards the largest value found anywhere is {w.worst_value:.6f} "
                   f"(violation {w.max_violation:.2e})")
+            if w.certified is not None:  # the certified search's proof (or why there is none)
+                print("  " + w.certificate_line())
             print(w.result.summary())
             _print_contributions(reps)
         if not w.success:
             print("tolsynth solve: no convergence over the workspace; the numbers above are not an optimum", file=sys.stderr)
             return 1
         return 0
+    for flag, given in (("--certify", args.certify), ("--max-rounds", args.max_rounds is not None),
+                        ("--tol", args.tol is not None)):
+        if given:
+            raise InputError(flag, "only used with --everywhere", "--everywhere " + flag)
     if args.reference is not None:
         raise InputError("--reference", "only used with --everywhere (the pose the search starts from)",
                          "--pose for the poses of a single solve")
@@ -278,6 +288,14 @@ def register(sub) -> None:
                    help="with --everywhere: the pose the exchange method starts from: NAME, none (the search's "
                         "worst pose at mid-bound tolerances), or joint values in deg; default: the model's "
                         "reference pose (its 'worst' configuration if it has one, else none)")
+    p.add_argument("--certify", action="store_true",
+                   help="with --everywhere: prove the specification at every pose of the continuous joint space "
+                        "(branch and bound) instead of a sampled search; not proven: exit status 1")
+    p.add_argument("--max-rounds", type=number("--max-rounds", "an integer >= 1", lambda v: v >= 1, integer=True),
+                   default=None,
+                   help="with --everywhere: exchange rounds before giving up (default 12); reached: not converged")
+    p.add_argument("--tol", type=number("--tol", "a number in (0, 1]", lambda v: 0 < v <= 1), default=None,
+                   help="with --everywhere: relative tolerance on the specification (default 1e-3)")
     p.add_argument("--contributions", action="store_true",
                    help="also report each parameter's share of each principal variance and of 1 - P(sphere)")
     add_table_out_argument(p, "the tolerance table (with --solver both: side by side)")

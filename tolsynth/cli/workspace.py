@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 
@@ -129,9 +130,11 @@ def _cmd_worst(args) -> int:
     if hasattr(args, "dist"):
         args.dist = dist_for(args, mech)
     eps, label = _tolerances(mech, args.tolerances)
-    with Working("tolsynth worst-pose: the grid and pattern search"):
+    what = "the grid and pattern search" + (", then the certified branch and bound" if args.certify else "")
+    with Working(f"tolsynth worst-pose: {what}"):
         w = worst_pose(mech, eps, criterion=args.criterion, R=args.R, distribution=args.dist, grid=args.grid,
-                       reference=parse_reference(mech, args.reference))
+                       reference=parse_reference(mech, args.reference), certify=args.certify,
+                       probability=args.probability)
     record = dict(tolerances=w.tolerances, distribution=args.dist, R_mm=args.R, criterion=args.criterion,
                   reference=w.reference)
     if args.out:
@@ -143,6 +146,10 @@ def _cmd_worst(args) -> int:
     else:
         print(f"tolerances   {label}")
         print(w.report(mech.joint_names, mech.joint_units))
+    if args.certify and not w.certified:
+        print(f"tolsynth worst-pose: the bound is not certified ({w.certificate.reason}); it holds, the gap did not "
+              "close", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -183,8 +190,14 @@ def register(sub) -> None:
                    help=TOLERANCES_HELP + "; default: the model's figure3 set (the paper's model), else its first "
                                           "tolerance set, else the geometric middle of the bounds (said in the output)")
     add_dist_argument(p)
-    p.add_argument("--criterion", choices=["sigma", "probability"], default="sigma",
-                   help="largest principal standard deviation, or lowest P(|dr| <= R) (needs --R)")
+    p.add_argument("--criterion", choices=["sigma", "probability", "components"], default="sigma",
+                   help="largest principal standard deviation, lowest P(|dr| <= R), or lowest per-component "
+                        "probability P(|u.dr| <= R) over directions u (the last two need --R)")
+    p.add_argument("--certify", action="store_true",
+                   help="also prove a bound over the whole continuous joint space (branch and bound; sigma or "
+                        "components); not proven: exit status 1")
+    p.add_argument("--probability", choices=["gaussian", "exact"], default="gaussian",
+                   help="reading of the per-component probability (--criterion components)")
     p.add_argument("--R", type=length_mm("--R"), default=None,
                    help="radius, mm (suffixes allowed); needed for --criterion probability; default: none")
     p.add_argument("--grid", type=number("--grid", "an integer >= 2", integer=True), default=None,

@@ -339,6 +339,8 @@ def solve_worst_case(spec, eps0=None, options=None) -> WorstCaseResult:
                         "status": raw, "cost": costs.cost(eps), "worst": worst_all})
         if status is not Status.OPTIMAL:
             ok = False
+            if status is getattr(Status, "TIME_LIMIT", None):  # IPOPT's own clock is the same limit
+                message += f"; stopped by the time limit ({limit:g} s) after {rnd + 1} exchange rounds"
             break
         ok = True
         if not added:

@@ -101,6 +101,19 @@ class WorkspaceSynthesis(Tabular):
         worst pose the search found (0 where they meet it everywhere it looked)."""
         return max(0.0, self.worst_value - 1.0) if self.rounds else float("nan")
 
+    def certificate_line(self) -> str:
+        """The certified search's proven bound over the whole joint space, or why there is none."""
+        if self.certified is None:
+            return "no certified search (certify=False): the worst pose is sampled"
+        if self.upper_bound is not None:
+            what = f"max z sigma_1 / R <= {self.upper_bound:.6f}"
+        elif self.probability_lower_bound is not None:
+            what = f"every component probability >= {self.probability_lower_bound:.8f}"
+        else:
+            what = "no bound"
+        state = "the specification is proven to hold" if self.certified else "NOT proven: " + self.reason
+        return f"certificate over the whole joint space: {what} ({state})"
+
     def summary(self) -> str:
         """Readable summary: the exchange's rounds, the certificate, the largest value found after
         the last solve, and the last solve's own summary."""
@@ -115,10 +128,7 @@ class WorkspaceSynthesis(Tabular):
         lines.append(f"afterwards: largest value found anywhere {self.worst_value:.6f} "
                      f"(violation {self.max_violation:.2e})")
         if self.certified is not None:
-            what = (f"max z sigma_1 / R <= {self.upper_bound:.6f}" if self.upper_bound is not None
-                    else f"every component probability >= {self.probability_lower_bound:.8f}")
-            lines.append(f"certificate over the whole joint space: {what} "
-                         f"({'proven to meet the specification' if self.certified else 'NOT proven: ' + self.reason})")
+            lines.append(self.certificate_line())
         lines.append(self.result.summary())
         return "\n".join(lines)
 
@@ -202,11 +212,11 @@ def synthesize_workspace(
     # a pose to add needs no more than a coarse local search (final step 1e-4 of each joint's
     # range); the search that decides convergence is the full one (puma560: most of the time was
     # the pattern search's last halvings, round after round)
-    if certify:
-        return _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max_rounds, certify_options,
-                                   progress, sphere, kwargs)
     full = dict(search or {})
     coarse = full if "step_tol" in full else {**full, "step_tol": COARSE_STEP_TOL}
+    if certify:
+        return _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max_rounds, certify_options,
+                                   progress, sphere, kwargs, lambda eps: search_at(eps, coarse))
     for _ in range(max_rounds):
         res = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
         if not res.success:
@@ -228,8 +238,13 @@ EXACT_SLACK = 1e-6
 
 
 def _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max_rounds, options, progress, sphere,
-                        kwargs) -> WorkspaceSynthesis:
-    """The exchange of :func:`synthesize_workspace` with the certified search deciding (its docstring)."""
+                        kwargs, sampled) -> WorkspaceSynthesis:
+    """The exchange of :func:`synthesize_workspace` with the certified search deciding (its docstring).
+
+    A round whose sampled search (``sampled(eps) -> (WorstPose, value)``, cheap) finds the
+    specification missed adds that pose, as the uncertified exchange does; only when it finds none
+    does the certified search run, which either proves the specification met or returns the worst
+    pose it found (within its tolerance of the worst anywhere), to be added in turn."""
     from tolsynth.analysis.certify import certify_worst_pose
     from tolsynth.synthesis.single import DEFAULT_PROBABILITY
 
@@ -245,17 +260,24 @@ def _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max
     rounds, res, cert = [], None, None
     converged, reason = False, f"round limit ({max_rounds}) reached"
     ub_ratio = p_lb = None
-    for _ in range(max_rounds):
+    for k in range(max_rounds):
         res = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
         if not res.success:
             reason = f"the solve at {len(poses)} pose(s) did not succeed: {res.message}"
             break
-        # a decision, not the tightest bound: prove the specification met to tol, or find a pose
-        # that misses it (which joins the imposed poses)
+        w, g = sampled(res.x)
+        if g > 1 + tol and k < max_rounds - 1:  # missed at a sampled pose: no proof needed to go on
+            rounds.append({"n_poses": len(poses), "cost": res.cost, "worst_value": g, "worst_q": w.q,
+                           "worst_position": w.position, "upper_bound": None, "probability_lower_bound": None,
+                           "certified": None, "boxes": 0})
+            poses = poses + [w.q]
+            continue
+        # a decision, not the tightest bound: prove the specification met to tol, or find the worst
+        # pose (to the search's tolerance), which joins the imposed poses
         goal = p - EXACT_SLACK if exact else (1.0 + tol) * R / z
         cert = certify_worst_pose(mechanism, res.x, distribution, "components" if exact else "sigma", R,
-                                  "exact" if exact else "gaussian", x0=np.array(poses), progress=progress,
-                                  target=goal, stop_at=goal, **options)
+                                  "exact" if exact else "gaussian", x0=np.array(poses + [w.q]), progress=progress,
+                                  target=goal, **options)
         q = cert.q
         if exact:
             p_lb = cert.probability_lower_bound

@@ -1,0 +1,369 @@
+"""The certified worst pose: facts proven on the graphs, sound bounds, tight results.
+
+References are independent of the code under test: the sensitivity evaluated numerically at poses
+(``Mechanism.sensitivity``) with NumPy's eigensolver, dense random searches refined by SciPy's
+local optimisers, closed forms for the planar arm, and exact rational arithmetic checked against
+floating point.
+"""
+
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import tolsynth
+from tolsynth.analysis.certify import certify_worst_pose
+from tolsynth.analysis.certify_bounds import (
+    JointGraphs,
+    PolygonSigmaBounds,
+    SigmaBounds,
+    arc_polygons,
+    lambda_max_bound,
+    largest_singular_bound,
+    polytope_vertices,
+)
+from tolsynth.analysis.certify_structure import _PolyWalk, structure, trig_polynomial
+from tolsynth.errors import InputError
+from tolsynth.kinematics.joint_space import _limits
+from tolsynth.probability.stats import z_of_p
+
+
+def _sigma(mech, Q, eps, c=3.0):
+    """Largest principal sigma at poses Q (n, nq), from the numeric sensitivity and NumPy."""
+    out = []
+    for q in np.atleast_2d(Q):
+        A = mech.sensitivity(q, check_limits=False)[:3]
+        out.append(math.sqrt(max(np.linalg.eigvalsh((A * (eps**2 / c)) @ A.T)[-1], 0.0)))
+    return np.array(out)
+
+
+@pytest.fixture(scope="module")
+def models():
+    return {n: tolsynth.load_model(n) for n in ("planar_2r", "xu_zhang_1988", "puma560", "ur5", "panda")}
+
+
+# ------------------------------------------------------------------------------------------------
+# facts proven on the graph, checked numerically
+# ------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name, rotation", [("planar_2r", 0), ("xu_zhang_1988", 0), ("puma560", 0), ("ur5", 0),
+                                            ("panda", None)])
+def test_base_rotation_proof_matches_the_numbers(models, name, rotation):
+    """Where the proof holds, turning the joint turns every column of A by Rz at random poses; panda
+    has link-1 errors before its first joint (h1, alpha1), so its waist changes sigma and is not held."""
+    m = models[name]
+    st = structure(m)
+    assert st.rotation == rotation
+    rng = np.random.default_rng(1)
+    lo, hi = _limits(m)
+    eps = m.tolerances(next(iter(m.tolerance_sets)) if m.tolerance_sets else np.sqrt(m.bounds[0] * m.bounds[1]))
+    Q = lo + (hi - lo) * rng.random((20, len(lo)))
+    Q2 = Q.copy()
+    Q2[:, 0] = lo[0] + (hi[0] - lo[0]) * rng.random(20)
+    s1, s2 = _sigma(m, Q, eps), _sigma(m, Q2, eps)
+    if rotation is not None:
+        for q, q2 in zip(Q[:3], Q2[:3]):
+            t = q2[0] - q[0]
+            Rz = np.array([[math.cos(t), -math.sin(t), 0], [math.sin(t), math.cos(t), 0], [0, 0, 1]])
+            A, A2 = m.sensitivity(q, check_limits=False)[:3], m.sensitivity(q2, check_limits=False)[:3]
+            assert np.abs(Rz @ A - A2).max() <= 1e-9 * np.abs(A).max()
+        assert np.abs(s1 - s2).max() <= 1e-10 * s1.max()
+    else:
+        assert np.abs(s1 - s2).max() > 1e-6 * s1.max()
+
+
+def test_rotation_proof_refuses_an_error_before_the_first_joint():
+    """A toleranced base offset along x (an error acting before joint 1) breaks the symmetry: no
+    proof, and sigma does change with the first joint; without it the proof holds."""
+    links = [{"a": 300.0, "limits": (-170, 170)}, {"a": 200.0, "limits": (-150, 150)}]
+    off = tolsynth.Mechanism.from_dh(links=links, angle_unit="deg", base=[("Tx", 50.0, "bx")], name="offset2r")
+    plain = tolsynth.Mechanism.from_dh(links=links, angle_unit="deg", name="plain2r")
+    assert structure(off).rotation is None and structure(plain).rotation == 0
+    eps = np.full(off.n, 0.05)
+    q1, q2 = np.radians([[10.0, 60.0], [100.0, 60.0]])
+    assert abs(_sigma(off, q1, eps)[0] - _sigma(off, q2, eps)[0]) > 1e-6
+
+
+def test_dropped_columns_and_joints_have_no_effect(models):
+    """puma560's wrist angle errors act on the wrist centre (its hand point): zero columns; xu_zhang's
+    roll joint theta5 turns the hand about its own point: A does not depend on it."""
+    pm = models["puma560"]
+    st = structure(pm)
+    dropped = [i for i in range(pm.n) if i not in st.columns]
+    assert [pm.error_parameters[i] for i in dropped] == ["alpha4", "o4", "alpha5", "o5", "alpha6", "o6"]
+    rng = np.random.default_rng(2)
+    lo, hi = _limits(pm)
+    for q in lo + (hi - lo) * rng.random((5, 6)):
+        assert np.abs(pm.sensitivity(q, check_limits=False)[:3, dropped]).max() < 1e-12
+    xz = models["xu_zhang_1988"]
+    sx = structure(xz)
+    assert 4 not in sx.joints and set(sx.periodic) == {0, 3}
+    q = np.radians([10.0, 160.0, 90.0, 20.0, 0.0])
+    q2 = q.copy()
+    q2[4] = 1.3
+    assert np.abs(xz.sensitivity(q, check_limits=False)[:3] - xz.sensitivity(q2, check_limits=False)[:3]).max() < 1e-12
+
+
+def test_exact_reading_against_floating_point():
+    """The exact polynomial reading of a small graph equals NumPy at random points, and keeps what
+    floating point loses: CasADi folds (x * 0.1) * 3 into x * fl(0.3 + ulp), which is not x * 0.3."""
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("f", [x], [ca.vertcat((x[0] + 0.5 * x[1]) ** 2 - x[0] * x[1] / 4.0, x[0] * 0.1 * 3 - x[0] * 0.3)])
+    pw = _PolyWalk(f)
+    q = {pw.var(("q", 0)): 0, pw.var(("q", 1)): 1}
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        v = rng.normal(size=2)
+        num = sum(float(c) * np.prod([v[q[i]] ** e for i, e in mono]) for mono, c in pw.outputs[0].items())
+        assert abs(num - ((v[0] + 0.5 * v[1]) ** 2 - v[0] * v[1] / 4.0)) < 1e-12
+    (mono, c), = pw.outputs[1].items()  # one term left, exact and not zero
+    assert c == Fraction(0.1 * 3) - Fraction(0.3) and c != 0
+
+
+def test_trig_polynomial_reproduces_the_sensitivity(models):
+    for name in ("planar_2r", "puma560", "panda"):
+        m = models[name]
+        st = structure(m)
+        free = [j for j in st.joints if j != st.rotation]
+        poly = trig_polynomial(st, free, st.rotation)
+        B = PolygonSigmaBounds(poly, free, np.ones(len(st.columns)))
+        Q = np.random.default_rng(4).uniform(-3, 3, (4, len(free)))
+        for q, A in zip(Q, B.values(Q)):
+            full = np.zeros(len(m.joint_names))
+            full[free] = q
+            ref = m.sensitivity(full, check_limits=False)[:3][:, list(st.columns)]
+            assert np.abs(A - ref).max() <= 1e-12 * np.abs(ref).max()
+    assert trig_polynomial(structure(models["xu_zhang_1988"]), [1, 2, 3], 0) is None  # the loop: no polynomial
+
+
+# ------------------------------------------------------------------------------------------------
+# sound bounds
+# ------------------------------------------------------------------------------------------------
+def test_rigorous_eigenvalue_bounds():
+    rng = np.random.default_rng(5)
+    M = rng.normal(size=(400, 3, 7))
+    M[::7, 2] = M[::7, 1]  # rank-deficient ones
+    M[::11] *= 1e-9
+    sv = np.linalg.svd(M, compute_uv=False)[:, 0]
+    ub = largest_singular_bound(M)
+    assert np.all(ub >= sv) and np.max((ub - sv) / sv) < 1e-9
+    G = M @ np.swapaxes(M, 1, 2)
+    sym = np.stack([G[:, 0, 0], G[:, 1, 1], G[:, 2, 2], G[:, 0, 1], G[:, 0, 2], G[:, 1, 2]], axis=1)
+    err = 1e-3 * np.abs(sym)
+    lam = lambda_max_bound(G, err)
+    assert np.all(lam >= np.linalg.eigvalsh(G)[:, -1] + np.sqrt((err[:, :3] ** 2).sum(1) + 2 * (err[:, 3:] ** 2).sum(1))
+                  * (1 - 1e-12))
+
+
+def test_arc_polygons_hold_their_arcs():
+    rng = np.random.default_rng(6)
+    a = rng.uniform(-7, 7, 300)
+    b = a + np.concatenate([rng.uniform(0, 0.1, 100), rng.uniform(0, 1.5, 100), rng.uniform(0, 7, 100)])
+    P, rad = arc_polygons(a, b)
+    t = a[:, None] + (b - a)[:, None] * np.linspace(0, 1, 200)[None]
+    pts = np.stack([np.cos(t), np.sin(t)], axis=2)
+    for k in range(len(a)):  # every arc point inside the polygon (convex, counter-clockwise or a rectangle)
+        hull = P[k]
+        c = hull.mean(axis=0)
+        order = np.argsort(np.arctan2(hull[:, 1] - c[1], hull[:, 0] - c[0]))
+        hull = hull[order]
+        for i in range(4):
+            e = hull[(i + 1) % 4] - hull[i]
+            cross = e[0] * (pts[k, :, 1] - hull[i, 1]) - e[1] * (pts[k, :, 0] - hull[i, 0])
+            assert np.all(cross >= -1e-12)
+
+
+def test_polytope_vertices_cover_the_feasible_part():
+    rng = np.random.default_rng(7)
+    linear = ((np.array([1.0, -1.0, 0.0]), 0.2, 0.9),)
+    C = rng.uniform(-1, 1, (50, 3))
+    r = rng.uniform(0.05, 0.6, (50, 3))
+    D, use = polytope_vertices(C, r, linear)
+    w = rng.normal(size=3)
+    X = C[:, None] + r[:, None] * rng.uniform(-1, 1, (50, 2000, 3))
+    g = X[..., 0] - X[..., 1]
+    feas = (g >= 0.2) & (g <= 0.9)
+    for k in range(50):  # a linear function's maximum over the feasible part is at a listed point
+        if feas[k].any():
+            assert np.max(((C[k] + D[k]) @ w)[use[k]]) >= np.max(X[k][feas[k]] @ w) - 1e-12
+
+
+@pytest.mark.parametrize("name, polygon", [("xu_zhang_1988", False), ("puma560", True), ("puma560", False),
+                                           ("panda", True)])
+def test_sigma_bounds_are_sound_on_random_boxes(models, name, polygon):
+    m = models[name]
+    st = structure(m)
+    nq = len(m.joint_names)
+    free = [j for j in st.joints if j != st.rotation]
+    held = {j: 0.0 for j in range(nq) if j not in free}
+    eps = m.tolerances("figure3" if name == "xu_zhang_1988" else "fine")
+    w = (eps**2 / 3.0)[list(st.columns)]
+    if polygon:
+        B = PolygonSigmaBounds(trig_polynomial(st, free, st.rotation), free, w)
+    else:
+        B = SigmaBounds(JointGraphs(st, nq, free, held), w)
+    lo, hi = _limits(m)
+    rng = np.random.default_rng(8)
+    n = 12
+    for h in (0.5, 0.05, 0.005):
+        C = lo[free] + (hi[free] - lo[free]) * rng.random((n, len(free)))
+        L, H = C - h, C + h
+        ub, _ = B.bound(L, H)
+        X = L[:, None] + (H - L)[:, None] * rng.random((n, 60, len(free)))
+        Q = np.zeros((n * 60, nq))
+        for j, v in held.items():
+            Q[:, j] = v
+        Q[:, free] = X.reshape(-1, len(free))
+        ref = _sigma(m, Q, eps).reshape(n, 60).max(axis=1)
+        assert np.all(ub >= ref * (1 - 1e-12))
+        if h == 0.005:
+            assert np.max((ub - ref) / ref) < 0.03  # and tight on small boxes (excess ~ width^2)
+
+
+def test_exact_component_bounds_are_sound_and_quasi_concave():
+    """Lower bounds of the exact per-direction probability on random (joint, direction) boxes stay
+    below the probability at sampled points; and the fact behind the corners: P along a segment of
+    coefficient vectors is never below both ends (quasi-concavity, GUARANTEES section 1)."""
+    from tolsynth.analysis.certify_exact import ComponentBounds
+    from tolsynth.probability.distributions import shapes_of
+    from tolsynth.probability.exact import direction_probability_batch
+
+    m = tolsynth.load_model("xu_zhang_1988")
+    st = structure(m)
+    eps = m.tolerances("figure3")
+    shapes = shapes_of("uniform", m.error_parameters, m.index)
+    B = ComponentBounds(st, 5, [1, 2, 3], {0: 0.0, 4: 0.0}, eps, shapes, 0.7)
+    rng = np.random.default_rng(9)
+    lo = np.radians([140.0, 50.0, -110.0, 0.0, -180.0])
+    hi = np.radians([200.0, 130.0, 110.0, 90.0, 180.0])
+    for h in (0.3, 0.02):
+        C = lo + (hi - lo) * rng.random((10, 5))
+        lb, _ = B.bound(C - h, C + h)
+        X = (C - h)[:, None] + 2 * h * rng.random((10, 40, 5))
+        P = B.point(X.reshape(-1, 5)).reshape(10, 40)
+        assert np.all(lb <= P.min(axis=1) + 1e-12)
+    a, b = rng.uniform(-0.2, 0.2, (2, 200, 11))
+    t = rng.random((200, 1))
+    Pa, _ = direction_probability_batch(a, ["uniform"] * 11, 0.6)
+    Pb, _ = direction_probability_batch(b, ["uniform"] * 11, 0.6)
+    Pt, _ = direction_probability_batch(t * a + (1 - t) * b, ["uniform"] * 11, 0.6)
+    assert np.all(Pt >= np.minimum(Pa, Pb) - 1e-9)
+
+
+# ------------------------------------------------------------------------------------------------
+# certified maxima against closed forms and independent searches
+# ------------------------------------------------------------------------------------------------
+def test_planar_2r_against_the_closed_form(models):
+    """sigma_1 of the planar arm depends on q2 only (the waist turns it rigidly); the reference is the
+    2 x 2 eigenvalue in closed form on a 200 001-point grid of q2, refined by SciPy."""
+    from scipy.optimize import minimize_scalar
+
+    m = models["planar_2r"]
+    eps = m.tolerances("coarse")
+    c = certify_worst_pose(m, eps, "uniform", progress=False, rtol=1e-6)
+    lo, hi = _limits(m)
+
+    def sigma(q2):
+        q2 = np.atleast_1d(q2)
+        A = np.array([m.sensitivity([0.0, v], check_limits=False)[:2] for v in q2])  # planar rows x, y
+        V = np.einsum("nij,j,nkj->nik", A, eps**2 / 3.0, A)
+        tr, det = V[:, 0, 0] + V[:, 1, 1], V[:, 0, 0] * V[:, 1, 1] - V[:, 0, 1] ** 2
+        return np.sqrt(tr / 2 + np.sqrt(np.maximum(tr**2 / 4 - det, 0.0)))
+
+    grid = np.linspace(lo[1], hi[1], 2001)
+    vals = sigma(grid)
+    k = int(np.argmax(vals))
+    res = minimize_scalar(lambda v: -sigma(v)[0], bounds=(grid[max(k - 1, 0)], grid[min(k + 1, 2000)]),
+                          method="bounded", options={"xatol": 1e-12})
+    ref = max(vals.max(), -res.fun)
+    assert c.certified and ref <= c.upper_bound and c.upper_bound - ref <= 1e-6 * ref
+    assert abs(c.best_value - ref) <= 1e-6 * ref
+
+
+def _dense_then_local(m, eps, n, seed, fixed=None):
+    """Largest sigma_1: n random feasible poses, the best 5 refined by SLSQP inside the limits and
+    the joint constraints (numeric sensitivity, NumPy eigenvalues)."""
+    from scipy.optimize import minimize
+
+    from tolsynth.kinematics.joint_space import _feasible
+
+    lo, hi = _limits(m)
+    rng = np.random.default_rng(seed)
+    Q = lo + (hi - lo) * rng.random((n, len(lo)))
+    if fixed:
+        for j, v in fixed.items():
+            Q[:, j] = v
+    Q = Q[_feasible(m, Q.T)]
+    vals = _sigma(m, Q, eps)
+    names = list(m.joint_names)
+    cons = []
+    for c in m.spec.joint_constraints:
+        a = np.zeros(len(lo))
+        for jn, coef in c.terms.items():
+            a[names.index(jn)] = coef
+        cons += [{"type": "ineq", "fun": lambda q, a=a, u=c.upper: u - a @ q},
+                 {"type": "ineq", "fun": lambda q, a=a, l_=c.lower: a @ q - l_}]
+    best = vals.max()
+    for q0 in Q[np.argsort(vals)[-5:]]:
+        r = minimize(lambda q: -_sigma(m, q, eps)[0], q0, bounds=list(zip(lo, hi)), constraints=cons, method="SLSQP",
+                     options={"ftol": 1e-14, "maxiter": 300})
+        if r.success or r.status in (8, 9):
+            q = np.clip(r.x, lo, hi)
+            if _feasible(m, q[:, None])[0]:
+                best = max(best, _sigma(m, q, eps)[0])
+    return best
+
+
+def test_paper_robot_certified_against_a_dense_search(models):
+    m = models["xu_zhang_1988"]
+    eps = m.tolerances("figure3")
+    c = certify_worst_pose(m, eps, "uniform", progress=False, rtol=1e-4)
+    ref = _dense_then_local(m, eps, 20000, 10, fixed={0: 0.0, 4: 0.0})
+    assert c.certified
+    assert ref <= c.upper_bound and (c.upper_bound - ref) / ref <= 1e-4 + 1e-9
+    assert c.held.keys() == {"theta1", "theta5"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["puma560", "ur5", "panda"])
+def test_six_joint_arms_bound_a_dense_search(models, name):
+    """A box budget: the bound holds whether or not the gap closed, above an independent search."""
+    m = models[name]
+    eps = m.tolerances("fine")
+    c = certify_worst_pose(m, eps, "uniform", progress=False, max_boxes=20000)
+    ref = _dense_then_local(m, eps, 20000, 11)
+    assert ref <= c.upper_bound
+    assert c.best_value <= ref * (1 + 1e-9) or c.best_value >= ref * (1 - 1e-3)
+
+
+def test_interference_corner_found_where_the_sampled_exchange_missed_it(models):
+    """The sampled exchange's design on the paper's robot: the certified search proves its largest
+    sigma z / R, above what the sampled search saw, at a pose on the interference limit."""
+    m = models["xu_zhang_1988"]
+    R, p = 0.5, 0.99
+    w = tolsynth.synthesize_workspace(m, R, p, "uniform", 0.7, probability="gaussian")
+    z = z_of_p(p)
+    c = certify_worst_pose(m, w.result.x, "uniform", progress=False, rtol=1e-5)
+    found = c.best_value * z / R
+    assert found > w.worst_value + 1e-4  # the sampled search stopped short of it
+    assert c.upper_bound * z / R - found <= 2e-5
+    gamma = c.q[1] - c.q[2]
+    assert min(abs(gamma - math.radians(50)), abs(gamma - math.radians(130))) < 1e-6  # on the interference limit
+    assert found == pytest.approx(_sigma(m, c.q, w.result.x)[0] * z / R, rel=1e-12)
+
+
+def test_bad_inputs_raise_typed_errors(models):
+    m = models["planar_2r"]
+    with pytest.raises(InputError):
+        certify_worst_pose(m, "coarse", criterion="sphere")
+    with pytest.raises(InputError):
+        certify_worst_pose(m, "coarse", criterion="components")  # no R
+    with pytest.raises(InputError):
+        certify_worst_pose(m, "coarse", probability="exact")  # exact needs components
+    with pytest.raises(InputError):
+        tolsynth.worst_pose(m, "coarse", criterion="probability", R=0.1, certify=True)
+    with pytest.raises(InputError):
+        tolsynth.synthesize_workspace(m, 0.1, 0.99, certify=True, criterion="sphere")
