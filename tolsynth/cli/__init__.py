@@ -36,8 +36,9 @@ from tolsynth.cli import (
     workspace,
 )
 from tolsynth.cli.args import HelpFormatter, add_pose_arguments, emit_json, parse_pose, parse_tolerances, version
+from tolsynth.cli.interrupts import Interrupts, QuietCasadiInterrupt
 from tolsynth.errors import TolsynthError
-from tolsynth.interrupts import Interrupts, QuietCasadiInterrupt, started_as_command
+from tolsynth.interrupts import started_as_command
 
 __all__ = ["main", "build_parser", "add_pose_arguments", "parse_pose", "parse_tolerances", "emit_json"]
 
