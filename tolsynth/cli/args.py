@@ -523,7 +523,8 @@ def _verify_arg(text: str):
     return n
 
 
-def add_specification_arguments(p: argparse.ArgumentParser, solvers=("ipopt", "sumt"), worst_case: bool = False) -> None:
+def add_specification_arguments(p: argparse.ArgumentParser, solvers=("auto", "ipopt", "sumt"),
+                                worst_case: bool = False) -> None:
     """The arguments of one tolerance specification, shared by ``solve`` and ``report``: model, R, p,
     distribution, cost (alpha, k, bounds), solver, poses, orientation, criterion, probability,
     verification and locked tolerances.  ``solvers``: the ``--solver`` choices; ``worst_case``:
@@ -545,9 +546,9 @@ def add_specification_arguments(p: argparse.ArgumentParser, solvers=("ipopt", "s
                    help="tolerance bounds LOW:HIGH (either side may be empty: the model's), for every parameter "
                         "or as name=LOW:HIGH / pattern=LOW:HIGH; in each parameter's tolerance unit or with a "
                         "suffix (h*=5um:0.2mm); default: the model's")
-    both = ", or both side by side" if "both" in solvers else ""
-    p.add_argument("--solver", choices=list(solvers), default="ipopt",
-                   help=f"IPOPT (exact derivatives), the paper's SUMT + Powell{both}")
+    both = "; both: IPOPT and SUMT + Powell side by side" if "both" in solvers else ""
+    p.add_argument("--solver", choices=list(solvers), default="auto",
+                   help=f"{SOLVER_HELP}{both}")
     p.add_argument("--pose", action="append", default=None,
                    help=POSE_HELP + "; repeat the option for several poses (the constraints hold at each); "
                         "default: the model's reference pose")
@@ -571,6 +572,10 @@ def add_specification_arguments(p: argparse.ArgumentParser, solvers=("ipopt", "s
                    help="fix a tolerance at VALUE (its tolerance unit); repeatable; the others are optimised around it")
 
 
+#: what each ``--solver`` value runs (solve, report and sweep say the same)
+SOLVER_HELP = ("auto: the compiled interior-point method where it applies (per-component Gaussian criterion, "
+               "power-law costs), IPOPT elsewhere; ipopt: IPOPT with exact derivatives always; sumt: the "
+               "paper's SUMT + Powell; every result certified the same way")
 TOLERANCES_HELP = ("SET | VALUE | name=VALUE,... | SET,name=VALUE,...; patterns such as *=0.02 or h*=0.01; "
                    "bare numbers in each parameter's tolerance unit, or with a unit suffix (0.1mm, 5um, 2mrad, 0.01deg)")
 POSE_HELP = "configuration name, or joint values in deg, comma-separated (a suffix such as 1.2rad allowed)"

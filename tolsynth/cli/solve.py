@@ -1,4 +1,5 @@
-"""``tolsynth solve``: optimal tolerances for one specification (IPOPT, SUMT + Powell, or both)."""
+"""``tolsynth solve``: optimal tolerances for one specification (auto: the compiled interior-point
+method where it applies, else IPOPT; IPOPT; SUMT + Powell; or IPOPT and SUMT + Powell side by side)."""
 
 from __future__ import annotations
 
@@ -146,7 +147,7 @@ def cmd_solve(args) -> int:
         from tolsynth.synthesis.workspace import synthesize_workspace
 
         if args.solver == "both":
-            raise InputError("--solver", "'both' does not combine with --everywhere", "ipopt or sumt")
+            raise InputError("--solver", "'both' does not combine with --everywhere", "auto, ipopt or sumt")
         if args.pose and len(args.pose) > 1:
             raise InputError("--pose", "given more than once with --everywhere", "one starting pose, or --reference")
         if args.pose:
@@ -219,7 +220,7 @@ def cmd_solve(args) -> int:
             _print_contributions(reps)
         ok = c.ipopt.success and c.sumt.success
     else:
-        with Working(f"tolsynth solve: the {args.solver.upper()} solve" + (f" ({args.probability.replace('_', '-')} probabilities)" if args.probability != "gaussian" else "")):
+        with Working(f"tolsynth solve: {SOLVER_LABELS[args.solver]}" + (f" ({args.probability.replace('_', '-')} probabilities)" if args.probability != "gaussian" else "")):
             res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
         reps = _contributions(args, {"the optimum": res})
         if args.out:
@@ -247,6 +248,10 @@ def cmd_solve(args) -> int:
         print("tolsynth solve: the solver did not converge; the numbers above are not an optimum", file=sys.stderr)
         return 1
     return 0
+
+
+#: the progress line's name of each ``--solver`` value
+SOLVER_LABELS = {"auto": "the solve", "ipopt": "the IPOPT solve", "sumt": "the SUMT + Powell solve"}
 
 
 def _parse_locks(mech, items) -> dict:
@@ -281,7 +286,7 @@ def register(sub) -> None:
         description="Cheapest tolerances such that each principal component of the hand position error "
                     "stays within R with probability p (the paper's Eq. 20), or the sphere P(|dr| <= R) >= p; "
                     "at one or more poses, or at every reachable pose (--everywhere).")
-    add_specification_arguments(p, ("ipopt", "sumt", "both"), worst_case=True)
+    add_specification_arguments(p, ("auto", "ipopt", "sumt", "both"), worst_case=True)
     p.add_argument("--everywhere", action="store_true",
                    help="impose the constraint at every reachable pose (exchange method with the worst-pose search)")
     p.add_argument("--reference", default=None,

@@ -8,6 +8,7 @@ import sys
 
 from tolsynth.cli.args import (
     POSE_HELP,
+    SOLVER_HELP,
     _number,  # the InputError form of number(), for comma-separated items
     add_table_out_argument,
     angle_rad,
@@ -36,7 +37,7 @@ GRID_KEYS = {
     "alpha": "cost exponent > 0",
     "distribution": "\"uniform\", \"normal\", \"triangular\", \"truncnormal\" or \"truncnormal(beta)\"",
     "criterion": "\"components\" or \"sphere\"",
-    "solver": "\"ipopt\" or \"sumt\"",
+    "solver": "\"auto\", \"ipopt\" or \"sumt\"",
 }
 
 
@@ -162,7 +163,8 @@ def register(sub) -> None:
     p.add_argument("--dist", default=None, help="distributions, comma-separated: uniform, normal, triangular, truncnormal, truncnormal(beta) "
                         "(one shape for every error per row); default: uniform")
     p.add_argument("--criterion", default=None, help="criteria, comma-separated: components, sphere; default: components")
-    p.add_argument("--solver", default=None, help="solvers, comma-separated: ipopt, sumt; default: ipopt")
+    p.add_argument("--solver", default=None, help="solvers, comma-separated: auto, ipopt, sumt (" + SOLVER_HELP
+                   + "); default: auto")
     p.add_argument("--k", default=None,
                    help="cost factors k for every row: VALUE, name=VALUE, pattern=VALUE; default: the model's")
     p.add_argument("--bounds", default=None,
