@@ -51,6 +51,8 @@ import tolsynth
 R, P, DIST, ALPHA = 0.5, 0.99, "uniform", 0.7
 TARGET = 3.0  # cvxpy time / tolsynth time asked of every workload
 RTOL = 1e-6  # the same optimum: relative cost difference
+#: readable names of ``SynthesisResult.solver`` (the engine solver="auto" chose)
+ENGINES = {"ipm": "compiled interior point", "ipopt": "IPOPT", "sumt": "SUMT + Powell"}
 
 
 def fmt_t(t: float) -> str:
@@ -63,6 +65,7 @@ class Row:
     def __init__(self, label: str, target: str = f">= {TARGET:g}x"):
         self.label, self.target = label, target
         self.ts, self.lean, self.rel, self.its, self.lean_its = [], [], [], [], []
+        self.engines = {}  # result.solver -> count: which engine the default solver="auto" ran
         self.failures, self.signed, self.retried, self.inaccurate = [], [], 0, 0
         self.above = 0  # pairs beyond 1e-6 where the lean cost lies above a certified tolsynth optimum
 
@@ -84,6 +87,7 @@ class Row:
         self.retried += r_lean.retried
         self.inaccurate += r_lean.status == "optimal_inaccurate"
         self.its.append(r_ts.iterations)
+        self.engines[r_ts.solver] = self.engines.get(r_ts.solver, 0) + 1
         self.lean_its.append(r_lean.iterations)
 
     @property
@@ -110,8 +114,15 @@ class Row:
         return (f"| {self.label} | {fmt_t(self.t_ts)} | {fmt_t(self.t_lean)} | {self.ratio:.2f}x | {same} | "
                 f"{self.target}: {'yes' if self.met() else 'no'} |")
 
+    def engine(self) -> str:
+        """Which engine ran the tolsynth side: one name, or each with its count where they differ."""
+        if len(self.engines) == 1:
+            return ENGINES.get(next(iter(self.engines)), next(iter(self.engines)))
+        return ", ".join(f"{ENGINES.get(k, k)} {n}x" for k, n in sorted(self.engines.items()))
+
     def detail(self) -> str:
-        return (f"  {self.label}: tolsynth {fmt_t(self.t_ts)} (IPOPT iterations median {statistics.median(self.its):g}), "
+        return (f"  {self.label}: tolsynth {fmt_t(self.t_ts)} ({self.engine()}; iterations median "
+                f"{statistics.median(self.its):g}), "
                 f"lean {fmt_t(self.t_lean)} (Clarabel iterations median {statistics.median(self.lean_its):g}), "
                 f"{self.ratio:.2f}x over {len(self.ts)} pairs; cost (lean - tolsynth) / tolsynth from "
                 f"{min(self.signed):.1e} to {max(self.signed):.1e}"

@@ -1,7 +1,8 @@
 """Sweep throughput: rows per second of tolsynth.sweep on each engine, in one run.
 
 The grid: xu_zhang_1988 (11 parameters), R x p x alpha x distribution = --size values each of
-R and p, two alphas, two distributions (default 6 x 6 x 2 x 2 = 144 IPOPT solves).  Engines: this
+R and p, two alphas, two distributions (default 6 x 6 x 2 x 2 = 144 solves by the default
+solver).  Engines: this
 process (serial), local processes (ProcessPoolExecutor, --workers), the default (client=None:
 processes only if the grid pays for starting them), and a dask.distributed
 LocalCluster with threads in this process (processes=False) and with --workers worker processes.
@@ -22,6 +23,26 @@ import numpy as np
 import tolsynth
 
 
+def grid_of(size: int) -> dict:
+    """The sweep's axes: ``size`` values each of R and p, two alphas, two distributions."""
+    return dict(R=list(np.linspace(0.2, 1.0, size)), p=list(np.linspace(0.9, 0.995, size)), alpha=[0.5, 0.7],
+                distribution=["uniform", "normal"])
+
+
+def throughput(m, grid: dict, client, repeat: int, **kw) -> tuple[float, float, int]:
+    """Median over ``repeat`` runs of ``tolsynth.sweep`` on ``grid``: (rows/s, s, failed rows); the
+    whole call is timed (scheduling, pickling and start-up included)."""
+    n = int(np.prod([len(v) for v in grid.values()]))
+    times, failed = [], 0
+    for _ in range(repeat):
+        t = time.perf_counter()
+        df = tolsynth.sweep(m, **grid, client=client, progress=False, **kw)
+        times.append(time.perf_counter() - t)
+        failed = int((~df["success"]).sum())
+    t = statistics.median(times)
+    return n / t, t, failed
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", type=int, default=6)
@@ -30,22 +51,14 @@ def main():
     a = ap.parse_args()
     logging.getLogger("distributed").setLevel(logging.CRITICAL)  # no shutdown chatter in the table
     m = tolsynth.load_model("xu_zhang_1988")
-    grid = dict(R=list(np.linspace(0.2, 1.0, a.size)), p=list(np.linspace(0.9, 0.995, a.size)), alpha=[0.5, 0.7],
-                distribution=["uniform", "normal"])
+    grid = grid_of(a.size)
     n = a.size * a.size * 4
-    print(f"sweep of {n} solves (xu_zhang_1988, IPOPT), median of {a.repeat} runs, {os.cpu_count()} CPUs, "
+    print(f"sweep of {n} solves (xu_zhang_1988, default solver), median of {a.repeat} runs, {os.cpu_count()} CPUs, "
           f"load average {os.getloadavg()[0]:.1f} at the start")
     print(f"{'engine':<42} {'rows/s':>8} {'s':>7} {'vs serial':>10} {'failed':>7}")
 
     def run(label, client, **kw):
-        times, failed = [], 0
-        for _ in range(a.repeat):
-            t = time.perf_counter()
-            df = tolsynth.sweep(m, **grid, client=client, progress=False, **kw)
-            times.append(time.perf_counter() - t)
-            failed = int((~df["success"]).sum())
-        t = statistics.median(times)
-        return label, n / t, t, failed
+        return (label, *throughput(m, grid, client, a.repeat, **kw))
 
     rows = [run("serial (this process)", "serial"),
             run(f"processes ({a.workers}, ProcessPoolExecutor)", "processes", workers=a.workers),
