@@ -236,6 +236,28 @@ class _Reader:
             raise self.fail(where, f"unit {value!r} is not a unit of {kind}")
         return value
 
+    # ---- the sections every model file starts with
+    def model_table(self, data: dict) -> tuple[str, str, str, list, str]:
+        """``[model]``: name, title (default: the name), source, assumptions and notes."""
+        meta = self.table(data["model"], "model", "model")
+        name = self.get(meta, "name", "model", str)
+        title = self.get(meta, "title", "model", str, default=name)
+        source = self.get(meta, "source", "model", str)
+        assumptions = self.get(meta, "assumptions", "model", list)
+        for i, a in enumerate(assumptions):
+            self.name(a, f"model.assumptions[{i}]")
+        notes = meta.get("notes", "")
+        if not isinstance(notes, str):
+            raise self.fail("model.notes", f"expected a string, got {_type_name(notes)}")
+        return name, title, source, assumptions, notes
+
+    def unit_factors(self, data: dict) -> tuple[float, float]:
+        """``[units]``: the factors that take the file's lengths to mm and its angles to rad."""
+        units = self.table(data["units"], "units", "units")
+        length_unit = self.unit(self.get(units, "length", "units"), "units.length", "length")
+        angle_unit = self.unit(self.get(units, "angle", "units"), "units.angle", "angle")
+        return LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
+
     def pair(self, value: Any, where: str) -> tuple[float, float]:
         if not isinstance(value, list) or len(value) != 2:
             raise self.fail(where, f"expected [lower, upper], got {value!r:.60}")

@@ -45,7 +45,7 @@ from tolsynth.model.fields import (
     _unique,
 )
 from tolsynth.model.spec import Configuration, ErrorParameter, Joint, MechanismSpec
-from tolsynth.units import ANGLE_UNITS, LENGTH_UNITS, to_base
+from tolsynth.units import to_base
 
 __all__ = ["ParallelSpec", "Leg", "POSE_COORDINATES", "LEG_FIELDS", "FIELD_GROUPS", "is_parallel"]
 
@@ -266,20 +266,8 @@ def _expand_tolerance_sets(r: _Reader, raw_sets: Any, eparams: list[ErrorParamet
 def _parse_parallel_model(data: dict, r: _Reader) -> ParallelSpec:
     """A ``[[leg]]`` model file as a :class:`ParallelSpec` (strict: every defect names its field)."""
     r.table(data, "", "parallel")
-    meta = r.table(data["model"], "model", "model")
-    name = r.get(meta, "name", "model", str)
-    title = r.get(meta, "title", "model", str, default=name)
-    source = r.get(meta, "source", "model", str)
-    assumptions = r.get(meta, "assumptions", "model", list)
-    for i, a in enumerate(assumptions):
-        r.name(a, f"model.assumptions[{i}]")
-    notes = meta.get("notes", "")
-    if not isinstance(notes, str):
-        raise r.fail("model.notes", f"expected a string, got {_type_name(notes)}")
-    units = r.table(data["units"], "units", "units")
-    lu = r.unit(r.get(units, "length", "units"), "units.length", "length")
-    au = r.unit(r.get(units, "angle", "units"), "units.angle", "angle")
-    lf, af = LENGTH_UNITS[lu], ANGLE_UNITS[au]
+    name, title, source, assumptions, notes = r.model_table(data)
+    lf, af = r.unit_factors(data)
 
     legs, joints, symbols, kinds = _parse_legs(r, data, lf, af)
     dof, assembly, tool = _parse_platform(r, data, len(legs), lf, af)

@@ -39,7 +39,7 @@ from tolsynth.model.spec import (
     ReferenceResult,
 )
 from tolsynth.model.urdf import _parse_urdf_model
-from tolsynth.units import ANGLE_UNITS, LENGTH_UNITS, to_base
+from tolsynth.units import to_base
 
 __all__ = ["bundled_models", "model_path", "read_model_file"]
 
@@ -107,21 +107,8 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
     if isinstance(data, dict) and "leg" in data:  # a parallel robot
         return _parse_parallel_model(data, r)
     r.table(data, "", "")
-    meta = r.table(data["model"], "model", "model")
-    name = r.get(meta, "name", "model", str)
-    title = r.get(meta, "title", "model", str, default=name)
-    source = r.get(meta, "source", "model", str)
-    assumptions = r.get(meta, "assumptions", "model", list)
-    for i, a in enumerate(assumptions):
-        r.name(a, f"model.assumptions[{i}]")
-    notes = meta.get("notes", "")
-    if not isinstance(notes, str):
-        raise r.fail("model.notes", f"expected a string, got {_type_name(notes)}")
-
-    units = r.table(data["units"], "units", "units")
-    length_unit = r.unit(r.get(units, "length", "units"), "units.length", "length")
-    angle_unit = r.unit(r.get(units, "angle", "units"), "units.angle", "angle")
-    lf, af = LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
+    name, title, source, assumptions, notes = r.model_table(data)
+    lf, af = r.unit_factors(data)
 
     # ---- chain ------------------------------------------------------------------------------
     chain = r.table(data["chain"], "chain", "chain")

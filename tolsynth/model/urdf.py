@@ -82,7 +82,7 @@ from tolsynth.model.fields import (
     _type_name,
 )
 from tolsynth.model.spec import Configuration, ErrorParameter, Joint, Link, MechanismSpec
-from tolsynth.units import ANGLE_UNITS, LENGTH_UNITS, to_base
+from tolsynth.units import to_base
 
 __all__ = ["urdf_spec", "URDF_FORMAT", "URDF_INSTALL", "ORIGIN_FIELDS", "AXIS_FIELDS", "GROUPS"]
 
@@ -389,10 +389,7 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
     r.keys(data, "", list(spec_keys), [k for k, req in spec_keys.items() if req])
     chain = r.table(data["chain"], "chain", extra=())
     r.keys(chain, "chain", list(URDF_FORMAT["chain"]), [k for k, req in URDF_FORMAT["chain"].items() if req])
-    units = r.table(data["units"], "units", "units")
-    length_unit = r.unit(r.get(units, "length", "units"), "units.length", "length")
-    angle_unit = r.unit(r.get(units, "angle", "units"), "units.angle", "angle")
-    lf, af = LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
+    lf, af = r.unit_factors(data)
 
     # ---- the file ---------------------------------------------------------------------------
     file = r.name(chain["urdf"], "chain.urdf")
