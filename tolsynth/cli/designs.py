@@ -1,8 +1,13 @@
-"""Arguments shared by ``tolsynth pareto``, ``budget`` and ``processes``: the model, the
+"""What ``tolsynth pareto``, ``budget``, ``processes`` and ``grades`` share: the model, the
 specification's fixed parts (distribution, alpha, poses, orientation, probability) and the
-keyword arguments of the library call they become."""
+keyword arguments of the library call they become; their output options, the table files they
+read, and how each of them ends (the table, the JSON object or the report, and the exit status)."""
 
 from __future__ import annotations
+
+import json
+import os
+import sys
 
 import numpy as np
 
@@ -10,15 +15,22 @@ from tolsynth.cli.args import (
     POSE_HELP,
     add_dist_argument,
     add_model_argument,
+    add_table_out_argument,
     angle_rad,
     dist_for,
+    emit_json,
+    inputs_record,
+    length_mm,
+    number,
     parse_per_parameter,
     parse_poses,
     pose_label,
+    write_out,
 )
 from tolsynth.errors import InputError
 
-__all__ = ["add_design_arguments", "design_kwargs", "parse_range"]
+__all__ = ["design_command", "add_design_arguments", "add_R_p_arguments", "add_max_nodes_argument", "add_output_arguments",
+           "design_kwargs", "parse_range", "read_table_file", "finish"]
 
 #: the probabilities these commands accept (the library's default when not given)
 PROBABILITIES = ("gaussian", "exact")
@@ -37,6 +49,76 @@ def add_design_arguments(p) -> None:
     p.add_argument("--probability", choices=list(PROBABILITIES), default=None,
                    help="gaussian (the paper's) or exact (the exact probabilities of the linear error model); "
                         "default: the library's (tolsynth.synthesize)")
+
+
+def design_command(sub, name: str, help: str, description: str, R_and_p: bool = True):
+    """A sub-command's parser with the design arguments (and --R, --p, both required, unless the
+    command reads them its own way)."""
+    p = sub.add_parser(name, help=help, description=description)
+    add_design_arguments(p)
+    if R_and_p:
+        add_R_p_arguments(p)
+    return p
+
+
+def add_R_p_arguments(p) -> None:
+    """--R and --p, both required: the specification a design meets."""
+    p.add_argument("--R", type=length_mm("--R"), required=True, help="position accuracy radius, mm (suffixes: 500um)")
+    p.add_argument("--p", type=number("--p", "0 < p < 1", lambda v: 0 < v < 1), required=True,
+                   help="probability per principal component, 0 < p < 1")
+
+
+def add_max_nodes_argument(p, default: int, what: str) -> None:
+    """--max-nodes: the limit of a proven search (past it the choice is not proven optimal)."""
+    p.add_argument("--max-nodes", dest="max_nodes", type=number("--max-nodes", "a whole number >= 1",
+                                                                lambda v: v >= 1, integer=True), default=default,
+                   help=f"limit on {what} (then the optimum is not proven)")
+
+
+def add_output_arguments(p, table: str, printed: str = "the report") -> None:
+    """--out (a table of ``table``) and --json (one JSON object instead of ``printed``)."""
+    add_table_out_argument(p, table)
+    p.add_argument("--json", action="store_true", help=f"print one JSON object (inputs recorded) instead of {printed}")
+
+
+def read_table_file(path: str, field: str, shape: str, what: str = "table") -> dict:
+    """The one table (a mapping) of a TOML or JSON file (by its suffix); a typed error naming the
+    file and ``shape`` when it is missing, unreadable or empty."""
+    if not os.path.isfile(path):
+        raise InputError(field, f"{path!r} is not a file", shape)
+    try:
+        if path.lower().endswith(".json"):
+            with open(path, encoding="utf-8") as fh:
+                data = json.load(fh)
+        else:
+            try:
+                import tomllib
+            except ImportError:  # pragma: no cover - Python 3.10
+                import tomli as tomllib
+            with open(path, "rb") as fh:
+                data = tomllib.load(fh)
+    except (OSError, UnicodeDecodeError, ValueError) as exc:  # TOML and JSON decode errors are ValueErrors
+        raise InputError(field, f"{path!r} cannot be read: {exc}", shape) from None
+    if not isinstance(data, dict) or not data:
+        raise InputError(field, f"{path!r} holds no {what}", shape)
+    return data
+
+
+def finish(args, mech, record: dict, *, frame, data, text, ok: bool, failure: str) -> int:
+    """How a design command ends: ``frame()`` to --out, then ``data()`` as one JSON object with the
+    inputs recorded (--json) or the readable ``text()``; exit status 1 with ``failure`` on stderr
+    when ``ok`` is false, since a number that is not a proven optimum must not pass for one.  The
+    three are called only when their output is asked for (a report may run checks of its own)."""
+    if args.out:
+        write_out(frame(), args, mech, **record)
+    if args.json:
+        emit_json(dict(data(), inputs=inputs_record(args, mech, **record)))
+    else:
+        print(text())
+    if not ok:
+        print(f"tolsynth {args.command}: {failure}", file=sys.stderr)
+        return 1
+    return 0
 
 
 def design_kwargs(mech, args) -> tuple[dict, dict]:

@@ -14,21 +14,18 @@ sizes in mm.  ``--grades FILE`` (TOML or JSON) is a grade table: parameter name 
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 
-from tolsynth.cli.args import (
-    add_table_out_argument,
-    check_table_out,
-    emit_json,
-    inputs_record,
-    length_mm,
-    number,
-    quantity,
-    write_out,
+from tolsynth.cli.args import check_table_out, quantity
+from tolsynth.cli.designs import (
+    add_max_nodes_argument,
+    add_output_arguments,
+    design_command,
+    design_kwargs,
+    finish,
+    read_table_file,
 )
-from tolsynth.cli.designs import add_design_arguments, design_kwargs
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
 
@@ -37,31 +34,13 @@ __all__ = ["register", "cmd_grades", "parse_sizes"]
 _SIZES = "SIZE (mm, or with a suffix) for every length, name=SIZE,... or a TOML/JSON file name -> mm"
 
 
-def _read_mapping(path: str, field: str, shape: str) -> dict:
-    """A TOML or JSON file holding one table; typed errors naming the file otherwise."""
-    try:
-        if path.lower().endswith(".json"):
-            with open(path, encoding="utf-8") as fh:
-                data = json.load(fh)
-        else:
-            import tomllib
-
-            with open(path, "rb") as fh:
-                data = tomllib.load(fh)
-    except (OSError, UnicodeDecodeError, ValueError) as exc:  # TOML and JSON decode errors are ValueErrors
-        raise InputError(field, f"{path!r} cannot be read: {exc}", shape) from None
-    if not isinstance(data, dict) or not data:
-        raise InputError(field, f"{path!r} holds no table", shape)
-    return data
-
-
 def parse_sizes(text):
     """``--sizes``: None, one length (mm), a dict name -> mm from ``name=SIZE,...`` or from a file."""
     if text is None:
         return None
     text = str(text).strip()
     if os.path.isfile(text):
-        data = _read_mapping(text, "--sizes", _SIZES)
+        data = read_table_file(text, "--sizes", _SIZES)
         return {str(k): quantity(str(v), f"--sizes {k}", "length", "mm") for k, v in data.items()}
     if "=" not in text:
         return quantity(text, "--sizes", "length", "mm")
@@ -85,10 +64,8 @@ def cmd_grades(args) -> int:
     sizes = parse_sizes(args.sizes)
     table = None
     if args.grades is not None:
-        shape = "a TOML or JSON file: parameter name or pattern -> {grade label: tolerance}"
-        if not os.path.isfile(args.grades):
-            raise InputError("--grades", f"{args.grades!r} is not a file", shape)
-        table = _read_mapping(args.grades, "--grades", shape)
+        table = read_table_file(args.grades, "--grades",
+                                "a TOML or JSON file: parameter name or pattern -> {grade label: tolerance}")
     kw, record = design_kwargs(mech, args)
     res = synthesize(mech, args.R, args.p, **kw)
     if not res.success:
@@ -97,39 +74,23 @@ def cmd_grades(args) -> int:
         return 1
     g = round_to_grades(mech, res, sizes=sizes, table=table, max_nodes=args.max_nodes)
     record.update(R_mm=args.R, p=args.p, sizes=sizes, grades_file=args.grades, max_nodes=args.max_nodes)
-    if args.out:
-        write_out(g.to_frame(), args, mech, **record)
-    if args.json:
-        d = g.to_dict()
-        d.update(continuous=res.to_dict(), inputs=inputs_record(args, mech, **record))
-        emit_json(d)
-    else:
-        print(f"{mech.name}: R = {args.R:g} mm, p = {args.p:g}; the continuous optimum costs {res.cost:.8g}")
-        print(g.summary())
-    if not g.proven:
-        print("tolsynth grades: the grade choice is not proven optimal (node limit)", file=sys.stderr)
-        return 1
-    return 0
+    return finish(args, mech, record, frame=g.to_frame, data=lambda: dict(g.to_dict(), continuous=res.to_dict()),
+                  text=lambda: f"{mech.name}: R = {args.R:g} mm, p = {args.p:g}; the continuous optimum costs "
+                               f"{res.cost:.8g}\n{g.summary()}",
+                  ok=g.proven, failure="the grade choice is not proven optimal (node limit)")
 
 
 def register(sub) -> None:
     """Add ``tolsynth grades`` to the sub-command parser."""
-    p = sub.add_parser("grades", help="optimal tolerances rounded to standard grades, with a proven optimum",
-                       description="The continuous optimum rounded to ISO 286 IT grades (lengths, at their nominal "
-                                   "sizes) or to a grade table of your own (angles): the cheapest combination that "
-                                   "still meets the specification (tolsynth.round_to_grades).")
-    add_design_arguments(p)
-    p.add_argument("--R", type=length_mm("--R"), required=True, help="position accuracy radius, mm (suffixes: 500um)")
-    p.add_argument("--p", type=number("--p", "0 < p < 1", lambda v: 0 < v < 1), required=True,
-                   help="probability per principal component, 0 < p < 1")
+    p = design_command(sub, "grades", "optimal tolerances rounded to standard grades, with a proven optimum",
+                       "The continuous optimum rounded to ISO 286 IT grades (lengths, at their nominal "
+                       "sizes) or to a grade table of your own (angles): the cheapest combination that "
+                       "still meets the specification (tolsynth.round_to_grades).")
     p.add_argument("--sizes", default=None,
                    help=f"nominal sizes of the lengths: {_SIZES}; default: each dimension's nominal value")
     p.add_argument("--grades", default=None, metavar="FILE",
                    help="grade table, TOML or JSON: parameter or pattern -> {label: tolerance in its unit}; "
                         "needed for angles (ISO 286 has none); default: ISO 286 only")
-    p.add_argument("--max-nodes", dest="max_nodes", type=number("--max-nodes", "a whole number >= 1",
-                                                                lambda v: v >= 1, integer=True), default=5000,
-                   help="limit on the search's solves and checks (then the optimum is not proven)")
-    add_table_out_argument(p, "the chosen grades and tolerances")
-    p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
+    add_max_nodes_argument(p, 5000, "the search's solves and checks")
+    add_output_arguments(p, "the chosen grades and tolerances")
     p.set_defaults(func=cmd_grades, task="the grade choice")

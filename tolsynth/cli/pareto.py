@@ -4,18 +4,9 @@ each point a certified optimum (:func:`tolsynth.pareto_front`)."""
 from __future__ import annotations
 
 import math
-import sys
 
-from tolsynth.cli.args import (
-    _number,
-    add_table_out_argument,
-    check_table_out,
-    emit_json,
-    inputs_record,
-    quantity,
-    write_out,
-)
-from tolsynth.cli.designs import add_design_arguments, design_kwargs, parse_range
+from tolsynth.cli.args import _number, check_table_out, quantity
+from tolsynth.cli.designs import add_output_arguments, design_command, design_kwargs, finish, parse_range
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
 
@@ -50,40 +41,36 @@ def cmd_pareto(args) -> int:
     record.update(R_mm=R, p=p, axis=front.axis)
     units = {"R": "mm", "cost": "the paper's cost units", "lower_bound": "the paper's cost units"}
     rows = [{k: v for k, v in r.items() if k != "processes"} for r in front.rows]
-    if args.out:
-        write_out(make_frame(rows, "ParetoFront", record, {"axis": front.axis, "reference": front.reference,
-                                                          "wall_time_s": front.wall_time}, units), args, mech)
     failed = [r for r in front.rows if not r["success"] and math.isfinite(r["cost"])]
-    if args.json:
-        emit_json({"axis": front.axis, "rows": front.rows, "reference": front.reference, "wall_time": front.wall_time,
-                   "inputs": inputs_record(args, mech, **record)})
-    else:
-        print(f"{mech.name}: optimal cost against {front.axis} "
-              + (f"at p = {p:g}" if front.axis == "R" else f"at R = {R:g} mm"))
-        print(f"{'R, mm':>12} {'p':>10} {'cost':>14} {'lower bound':>14}  status")
+
+    def text():
+        lines = [f"{mech.name}: optimal cost against {front.axis} "
+                 + (f"at p = {p:g}" if front.axis == "R" else f"at R = {R:g} mm"),
+                 f"{'R, mm':>12} {'p':>10} {'cost':>14} {'lower bound':>14}  status"]
         for r in front.rows:
             status = "optimal" if r["success"] else ("infeasible" if not math.isfinite(r["cost"]) else "NOT certified")
-            print(f"{r['R']:>12.6g} {r['p']:>10.6g} {r['cost']:>14.8g} {r['lower_bound']:>14.8g}  {status}")
-        for ref in front.reference:
-            print(f"  the paper's {ref['table']} at R = {ref['R']:g}, p = {ref['p']:g}: printed tolerances cost "
-                  f"{ref['cost']:.8g}")
-        print(f"{len(front.rows)} solves in {front.wall_time:.2f} s")
-    if failed:
-        print(f"tolsynth pareto: {len(failed)} point(s) not certified; their numbers are not optima", file=sys.stderr)
-        return 1
-    return 0
+            lines.append(f"{r['R']:>12.6g} {r['p']:>10.6g} {r['cost']:>14.8g} {r['lower_bound']:>14.8g}  {status}")
+        lines += [f"  the paper's {ref['table']} at R = {ref['R']:g}, p = {ref['p']:g}: printed tolerances cost "
+                  f"{ref['cost']:.8g}" for ref in front.reference]
+        lines.append(f"{len(front.rows)} solves in {front.wall_time:.2f} s")
+        return "\n".join(lines)
+
+    return finish(args, mech, record,
+                  frame=lambda: make_frame(rows, "ParetoFront", record, {"axis": front.axis, "reference": front.reference,
+                                                                         "wall_time_s": front.wall_time}, units),
+                  data=lambda: {"axis": front.axis, "rows": front.rows, "reference": front.reference,
+                                "wall_time": front.wall_time},
+                  text=text, ok=not failed, failure=f"{len(failed)} point(s) not certified; their numbers are not optima")
 
 
 def register(sub) -> None:
     """Add ``tolsynth pareto`` to the sub-command parser."""
-    p = sub.add_parser("pareto", help="optimal cost against R (or p): a Pareto front",
-                       description="Certified optima along a sweep of the radius R at a fixed p, or of p at a fixed "
-                                   "R (tolsynth.pareto_front); each solve starts from the previous point.")
-    add_design_arguments(p)
+    p = design_command(sub, "pareto", "optimal cost against R (or p): a Pareto front",
+                       "Certified optima along a sweep of the radius R at a fixed p, or of p at a fixed "
+                       "R (tolsynth.pareto_front); each solve starts from the previous point.", R_and_p=False)
     p.add_argument("--R", required=True, help="radius, mm: START:STOP:N (N evenly spaced values), comma-separated "
                                               "values, or one value when --p is the range (suffixes allowed: 500um)")
     p.add_argument("--p", required=True, help="probability, 0 < p < 1: one value, or START:STOP:N / comma-separated "
                                               "values when R is fixed")
-    add_table_out_argument(p, "the front (one row per point)")
-    p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the table")
+    add_output_arguments(p, "the front (one row per point)", printed="the table")
     p.set_defaults(func=cmd_pareto, task="the Pareto sweep")
