@@ -82,6 +82,6 @@ def test_readme_is_short_and_its_links_resolve():
     # the speed section is one delimited block that the benchmark's table can replace whole
     speed = README.split("## Speed\n", 1)[1].split("\n## ", 1)[0]
     assert speed.count("<!-- speed table start -->") == 1 and speed.count("<!-- speed table end -->") == 1
-    assert "benchmarks/bench_synthesis.py" in speed
+    assert "benchmarks/speed_table.py" in speed
     links = re.findall(r"\]\(([^)#:]+)\)", README)
     assert links and all((ROOT / link).exists() for link in links), [x for x in links if not (ROOT / x).exists()]
