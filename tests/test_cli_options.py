@@ -100,6 +100,29 @@ def test_solve_reaches_alpha_k_bounds_poses_and_p_orientation(capsys):
     assert text.count("mm [upper]") == 2  # the marker in both columns
 
 
+def test_solver_defaults_to_auto_with_ipopt_and_sumt_on_request(capsys):
+    """The command line's default engine is the API's (auto: the compiled interior-point method where
+    a compiler is found), on solve, report and sweep; --solver ipopt and sumt still run those
+    algorithms, and all three reach the same optimum."""
+    import argparse
+
+    from tolsynth.solvers.fast_ipm import kernel_status
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    for name in ("solve", "report"):
+        action = next(a for a in sub.choices[name]._actions if "--solver" in a.option_strings)
+        assert action.default == "auto" and {"auto", "ipopt", "sumt"} <= set(action.choices), name
+    sweep_help = next(a for a in sub.choices["sweep"]._actions if "--solver" in a.option_strings).help
+    assert "default: auto" in sweep_help
+    base = ["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--json"]
+    runs = {s: _json(capsys, base + ([] if s == "auto" else ["--solver", s])) for s in ("auto", "ipopt", "sumt")}
+    assert runs["auto"]["inputs"]["solver"] == "auto"
+    assert runs["auto"]["solver"] == ("ipm" if kernel_status()["backend"] == "compiled" else "ipopt")
+    assert runs["ipopt"]["solver"] == "ipopt" and runs["sumt"]["solver"] == "sumt"
+    for s in ("ipopt", "sumt"):  # other algorithms, the same optimum
+        assert runs["auto"]["cost"] == pytest.approx(runs[s]["cost"], rel=1e-6), s
+
+
 def test_solve_rejects_p_orientation_without_phi(capsys):
     assert main(["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--p-orientation", "0.9"]) == 2
     assert "--p-orientation" in capsys.readouterr().err
