@@ -30,7 +30,8 @@ cost factors and bounds as Parameters, the Problem built once and re-solved).
    machine without a C compiler runs);
 5. ``worst_pose(criterion="probability")`` (figure3 tolerances, R = 0.2 mm).
 
-Ends with a Markdown table of every figure against its target (what the README shows).
+Ends with a Markdown table of every figure against its target (the README's speed table is
+``speed_table.py``'s, which reuses this script's SLSQP and timing helpers).
 ``--quick`` keeps the whole run to about half a minute; the default run takes about a minute here.
 
 Run: ``python benchmarks/bench_synthesis.py [--quick]`` (needs the ``bench`` extra: cvxpy,
