@@ -27,10 +27,10 @@ from __future__ import annotations
 import math
 from functools import lru_cache
 
-import casadi as ca
 import numpy as np
 
 from tolsynth.probability.distributions import Shape
+from tolsynth.probability.truncnormal import cf3 as truncnormal_cf3
 
 __all__ = ["Rows", "probability", "derivatives", "NORMAL_REACH"]
 
@@ -59,18 +59,6 @@ def _d1_sup(shp: Shape) -> float:
     normal ``(t^2/9) e^{-t^2/18} <= 2/e``; truncated normal ``|E[tY sin tY]| <= 1 + 4 f(0)``
     (integration by parts against the density ``f``, which is unimodal on [-1, 1])."""
     return {"uniform": 2.0, "triangular": 4.0, "normal": 2.0 / math.e}.get(shp.kind, 1.0 + 4.0 * shp.peak)
-
-
-@lru_cache(maxsize=None)
-def _tn_function(beta: float) -> ca.Function:
-    """``t -> (phi, t phi', t (t phi')')`` of the truncated normal, by CasADi's AD of its cf."""
-    from tolsynth.probability.distributions import shape
-
-    t = ca.SX.sym("t")
-    phi = shape(f"truncnormal({beta:g})").cf(t, lib=ca)
-    d1 = t * ca.jacobian(phi, t)
-    d2 = t * ca.jacobian(d1, t)
-    return ca.Function("tn", [t], [phi, d1, d2])
 
 
 def _cf3(shp: Shape, t: np.ndarray, order: int):
@@ -105,12 +93,7 @@ def _cf3(shp: Shape, t: np.ndarray, order: int):
             return phi, d1, None
         he = np.where(small, -2.0 * h * h / 3.0, -h * np.sin(h) - e)  # h d/dh (h s')
         return phi, d1, 2.0 * e * e + 2.0 * s * he
-    if order == 0:
-        return shp.cf(t), None, None
-    f = _tn_function(shp.beta)
-    out = f(np.ravel(t)[None, :])
-    phi, d1, d2 = (np.array(o).reshape(t.shape) for o in out)
-    return phi, d1, (d2 if order > 1 else None)
+    return truncnormal_cf3(t, shp.beta, order)
 
 
 class Rows:
@@ -254,7 +237,7 @@ def _products(b: np.ndarray, L: np.ndarray, K: int, rw: "Rows") -> np.ndarray:
             out *= np.exp(-np.sum(th**2, axis=1)[:, None] * (k * k)[None, :] / 18.0)
             continue
         if shp.kind not in ("uniform", "triangular"):
-            out *= np.prod(shp.cf(k[None, :, None] * th[:, None, :]), axis=2)
+            out *= np.prod(truncnormal_cf3(k[None, :, None] * th[:, None, :], shp.beta)[0], axis=2)
             continue
         half = 0.5 if shp.kind == "triangular" else 1.0
         th = half * th
