@@ -1,4 +1,5 @@
-"""Helpers of the model-file tests: a bundled model as a dict, and a dict back to TOML text.
+"""Helpers of the model-file tests: a bundled model as a dict, a dict back to TOML text, and the
+small edits the strict-reading tests make to a model's dict before loading it again.
 
 The writer is deliberately small (inline tables and arrays only, which TOML allows anywhere) so
 that the tests need no TOML-writing package; it writes what the fuzz tests produce, including
@@ -7,6 +8,7 @@ NaN, infinities and empty tables.
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 from pathlib import Path
@@ -52,3 +54,39 @@ def _value(v) -> str:
 def toml_text(data: dict) -> str:
     """TOML text whose parse is ``data`` (top-level keys as ``key = value`` lines)."""
     return "".join(f"{_key(k)} = {_value(v)}\n" for k, v in data.items())
+
+
+def load_dict(tmp_path, data: dict, name: str = "m.toml"):
+    """``data`` written as a model file under ``tmp_path`` and loaded by the package."""
+    import tolsynth
+
+    path = tmp_path / name
+    path.write_text(toml_text(data))
+    return tolsynth.load_model(path)
+
+
+def edited(model: str, fn) -> dict:
+    """The bundled model's dict with ``fn`` applied to a deep copy of it."""
+    data = copy.deepcopy(model_dict(model))
+    fn(data)
+    return data
+
+
+def _parent(data: dict, path):
+    for key in path[:-1]:
+        data = data[key]
+    return data
+
+
+def set_at(path, value):
+    """An edit that sets ``data[path[0]][path[1]]...`` to ``value``."""
+    def fn(data):
+        _parent(data, path)[path[-1]] = value
+    return fn
+
+
+def drop_at(path):
+    """An edit that deletes ``data[path[0]][path[1]]...``."""
+    def fn(data):
+        del _parent(data, path)[path[-1]]
+    return fn

@@ -14,21 +14,12 @@ import math
 import pytest
 
 import tolsynth
-from model_text import model_dict, toml_text
+from model_text import edited as _edit
+from model_text import load_dict as _load
+from model_text import model_dict
+from model_text import set_at as _set
 from tolsynth.errors import ModelFileError
 from tolsynth.model.fields import FORMAT
-
-
-def _load(tmp_path, data, name="m.toml"):
-    path = tmp_path / name
-    path.write_text(toml_text(data))
-    return tolsynth.load_model(path)
-
-
-def _edit(model, fn):
-    data = copy.deepcopy(model_dict(model))
-    fn(data)
-    return data
 
 
 def _rename(table, old, new):
@@ -37,15 +28,6 @@ def _rename(table, old, new):
 
 def _dup_loop(d):
     d["loops"].append(copy.deepcopy(d["loops"][0]))
-
-
-def _set(path, value):
-    def fn(d):
-        t = d
-        for key in path[:-1]:
-            t = t[key]
-        t[path[-1]] = value
-    return fn
 
 
 CASES = [
@@ -143,15 +125,6 @@ def test_format_table_lists_every_key_the_bundled_models_use():
         for section in ("joints", "loops", "joint_constraints", "error_parameters", "reference_results", "leg"):
             for item in d.get(section, []):
                 assert set(item) <= set(FORMAT[section]), (name, section)
-
-
-def _set(path_keys, value):
-    def fn(d):
-        t = d
-        for k in path_keys[:-1]:
-            t = t[k]
-        t[path_keys[-1]] = value
-    return fn
 
 
 @pytest.mark.parametrize("model, edit, field, fragment", [

@@ -9,45 +9,16 @@ against the forward kinematics.
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 import pytest
 
 import tolsynth
-from model_text import model_dict, toml_text
+from model_text import drop_at as _drop
+from model_text import edited as _edit
+from model_text import load_dict as _load
+from model_text import set_at as _set
 from tolsynth.errors import InputError, ModelFileError
 from tolsynth.probability.stats import z_of_p
-
-
-def _load(tmp_path, data):
-    path = tmp_path / "m.toml"
-    path.write_text(toml_text(data))
-    return tolsynth.load_model(path)
-
-
-def _edit(model, fn):
-    d = copy.deepcopy(model_dict(model))
-    fn(d)
-    return d
-
-
-def _set(path, value):
-    def fn(d):
-        t = d
-        for k in path[:-1]:
-            t = t[k]
-        t[path[-1]] = value
-    return fn
-
-
-def _drop(path):
-    def fn(d):
-        t = d
-        for k in path[:-1]:
-            t = t[k]
-        del t[path[-1]]
-    return fn
 
 
 def _far_strut(d):
