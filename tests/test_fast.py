@@ -10,14 +10,13 @@ Independent references:
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pytest
 
 import tolsynth
+from convex_reference import clarabel, random_poses
 from tolsynth.errors import InputError
-from tolsynth.kinematics.joint_space import _feasible, _limits
+from tolsynth.kinematics.joint_space import _limits
 from tolsynth.model.cost import Chase
 from tolsynth.probability.stats import z_of_p
 from tolsynth.problem.nlp import ToleranceNLP
@@ -29,38 +28,6 @@ cp = pytest.importorskip("cvxpy")
 pytestmark = pytest.mark.skipif(kernel() is None, reason=f"no compiled kernel: {kernel_status()['reason']}")
 
 R, P, ALPHA = 0.5, 0.99, 0.7
-
-
-def random_poses(mech, N: int, seed: int) -> list[np.ndarray]:
-    """N joint vectors (rad) drawn uniformly inside the joint limits and joint constraints."""
-    rng = np.random.default_rng(seed)
-    lo, hi = _limits(mech)
-    out: list[np.ndarray] = []
-    while len(out) < N:
-        Q = lo[:, None] + (hi - lo)[:, None] * rng.random((len(lo), 4 * N))
-        out += [Q[:, j] for j in np.nonzero(_feasible(mech, Q))[0]]
-    return out[:N]
-
-
-def clarabel(spec) -> float | None:
-    """The optimal cost of the specification's convex form by cvxpy + Clarabel (None where Clarabel
-    does not report optimal)."""
-    n = spec.n
-    v = cp.Variable(n)
-    cons = [v >= spec.lower**2, v <= spec.upper**2]
-    for b in spec.blocks:
-        As = b.scale * b.A
-        M = sum(v[i] * np.outer(As[:, i], As[:, i]) / spec.c for i in range(n))
-        cons.append(np.eye(3) - (M + M.T) / 2 >> 0)
-    cost = sum(spec.k[i] * cp.power(v[i], -spec.alpha[i] / 2, approx=False) for i in range(n))
-    prob = cp.Problem(cp.Minimize(cost), cons)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            prob.solve(solver="CLARABEL")
-    except cp.error.SolverError:
-        return None
-    return float(prob.value) if prob.status == "optimal" else None
 
 
 def assert_feasible(mech, res, tol=1e-9):

@@ -15,48 +15,21 @@ from __future__ import annotations
 
 import itertools
 import math
-import warnings
 
 import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth.kinematics.joint_space import _feasible, _limits
+from convex_reference import clarabel, random_poses
 from tolsynth.probability.stats import z_of_p
 from tolsynth.problem.specification import make_specification
 
 cp = pytest.importorskip("cvxpy")
 
 
-def random_poses(mech, N: int, rng) -> list[np.ndarray]:
-    """N joint vectors (rad) drawn uniformly inside the joint limits and joint constraints."""
-    lo, hi = _limits(mech)
-    out: list[np.ndarray] = []
-    while len(out) < N:
-        Q = lo[:, None] + (hi - lo)[:, None] * rng.random((len(lo), 4 * N))
-        out += [Q[:, j] for j in np.nonzero(_feasible(mech, Q))[0]]
-    return out[:N]
-
-
 def clarabel_cost(mech, R, p, distribution, alpha, poses, **kw) -> float | None:
     """The optimal cost by cvxpy + Clarabel, or None where Clarabel does not report optimal."""
-    spec = make_specification(mech, R, p, distribution, alpha, poses=poses, **kw)
-    n = spec.n
-    v = cp.Variable(n)
-    cons = [v >= spec.lower**2, v <= spec.upper**2]
-    for b in spec.blocks:
-        As = b.scale * b.A
-        M = sum(v[i] * np.outer(As[:, i], As[:, i]) / spec.c for i in range(n))
-        cons.append(np.eye(3) - (M + M.T) / 2 >> 0)
-    cost = sum(spec.k[i] * cp.power(v[i], -spec.alpha[i] / 2, approx=False) for i in range(n))
-    prob = cp.Problem(cp.Minimize(cost), cons)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # cvxpy warns where Clarabel is inaccurate: skipped below
-            prob.solve(solver="CLARABEL")
-    except cp.error.SolverError:
-        return None
-    return float(prob.value) if prob.status == "optimal" else None
+    return clarabel(make_specification(mech, R, p, distribution, alpha, poses=poses, **kw))
 
 
 def assert_meets_spec(mech, res, R, p, distribution, poses, tol=1e-6):
