@@ -111,6 +111,14 @@ def _worst_ok(spec, eps):
     return True
 
 
+def _planar_design(probability: str):
+    """planar_2r's continuous optimum at R = 0.5 mm (p = 0.99, uniform errors, or the worst case)."""
+    m = tolsynth.load_model("planar_2r")
+    kw = {"p": 0.99, "probability": "gaussian", "distribution": "uniform"} if probability == "gaussian" \
+        else {"probability": "worst_case"}
+    return m, tolsynth.synthesize(m, R=0.5, **kw)
+
+
 def _brute(res, choices, ok):
     names = list(res.tolerances)
     best = (math.inf, None)
@@ -124,10 +132,7 @@ def _brute(res, choices, ok):
 
 @pytest.mark.parametrize("probability", ["gaussian", "worst_case"])
 def test_grade_choice_matches_brute_force(probability):
-    m = tolsynth.load_model("planar_2r")
-    kw = {"p": 0.99, "probability": "gaussian", "distribution": "uniform"} if probability == "gaussian" \
-        else {"probability": "worst_case"}
-    res = tolsynth.synthesize(m, R=0.5, **kw)
+    m, res = _planar_design(probability)
     g = round_to_grades(m, res, table=ANGLES)
     choices = {n: {k: v for k, v in ANGLES["o*"].items()} for n in ("o1", "o2")}
     for n, size in (("l1", 500.0), ("l2", 300.0)):  # the nominal link lengths, ISO 286 in mm
@@ -194,10 +199,7 @@ def test_lagrangian_bound_holds_at_every_feasible_point(probability):
     # weak duality, checked on random points that meet the specification (independent checks)
     from tolsynth.synthesis.grades import _Search, grade_candidates
 
-    m = tolsynth.load_model("planar_2r")
-    kw = {"p": 0.99, "probability": "gaussian", "distribution": "uniform"} if probability == "gaussian" \
-        else {"probability": "worst_case"}
-    res = tolsynth.synthesize(m, R=0.5, **kw)
+    m, res = _planar_design(probability)
     search = _Search(m, res, res.spec, probability, grade_candidates(m, None, {"o1": ANGLES["o*"], "o2": ANGLES["o*"]}))
     w, q, T = search.lagrangian(res.x)
     assert np.all(w >= 0)
