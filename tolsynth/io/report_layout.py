@@ -3,21 +3,19 @@ HTML or Markdown by :mod:`tolsynth.io.report_render`: one layout, every format."
 
 from __future__ import annotations
 
-import io
 import json
 import math
 
 import numpy as np
-
-from tolsynth.errors import MissingDependencyError
 
 PLOT_INSTALL = 'pip install "tolsynth[plot]"'
 
 
 def _is_exact(res) -> bool:
     """Whether ``res`` was designed with ``probability="exact"``."""
-    return (getattr(res, "inputs", None) or {}).get("probability") == "exact" or \
-        any(b.kind.endswith("(exact)") for b in res.constraints)
+    return (getattr(res, "inputs", None) or {}).get("probability") == "exact" or any(
+        b.kind.endswith("(exact)") for b in res.constraints
+    )
 
 
 def _exact_certificate(res, spec, rel: float) -> tuple:
@@ -25,16 +23,25 @@ def _exact_certificate(res, spec, rel: float) -> tuple:
     success, gap and message), so that the report never claims more than the solver proved."""
     said = f"The solver says: {res.status}: {res.message}"
     if spec.criterion == "sphere":
-        return ("note", "Exact probabilities, sphere criterion: the problem is not known to be convex, so the gap is "
-                        "no certificate of global optimality; the lower bound is the certified optimum of the "
-                        f"per-component problem at the same p (the sphere lies in every slab). {said}")
+        return (
+            "note",
+            "Exact probabilities, sphere criterion: the problem is not known to be convex, so the gap is "
+            "no certificate of global optimality; the lower bound is the certified optimum of the "
+            f"per-component problem at the same p (the sphere lies in every slab). {said}",
+        )
     if res.success:
-        return ("ok", f"Exact probabilities, certified optimum: every direction of every pose is proven to meet p "
-                      f"(to 1e-7), the feasible set is convex (independent errors with symmetric log-concave "
-                      f"densities), and the lower bound leaves a gap of {rel:.1e} of the cost: no tolerances inside "
-                      f"the bounds meet the specification at a lower cost (to that margin). {said}")
-    return ("note", f"Exact probabilities, NOT certified: the numbers are the solver's last design and the lower "
-                    f"bound is not proven tight. {said}")
+        return (
+            "ok",
+            f"Exact probabilities, certified optimum: every direction of every pose is proven to meet p "
+            f"(to 1e-7), the feasible set is convex (independent errors with symmetric log-concave "
+            f"densities), and the lower bound leaves a gap of {rel:.1e} of the cost: no tolerances inside "
+            f"the bounds meet the specification at a lower cost (to that margin). {said}",
+        )
+    return (
+        "note",
+        f"Exact probabilities, NOT certified: the numbers are the solver's last design and the lower "
+        f"bound is not proven tight. {said}",
+    )
 
 
 def _asked_p(res, spec) -> str:
@@ -64,34 +71,64 @@ def _layout(rep) -> list[tuple]:
     mech, res, spec = rep.mechanism, rep.result, rep.result.spec
     B: list[tuple] = []
     B.append(("h", 1, f"Design review: {mech.title}"))
-    B.append(("p", f"Optimal manufacturing tolerances for the model {mech.name}, computed by tolsynth "
-                   f"{__version__} on {rep.created} in {rep.elapsed_s:.1f} s. Units: lengths mm, angles rad "
-                   "unless stated; each tolerance in its parameter's own unit; cost in the model's cost units."))
+    B.append(
+        (
+            "p",
+            f"Optimal manufacturing tolerances for the model {mech.name}, computed by tolsynth "
+            f"{__version__} on {rep.created} in {rep.elapsed_s:.1f} s. Units: lengths mm, angles rad "
+            "unless stated; each tolerance in its parameter's own unit; cost in the model's cost units.",
+        )
+    )
     if not res.success:
-        B.append(("note", f"The solver did not converge ({res.status}: {res.message}). The numbers below are its "
-                          "last iterate, not an optimum."))
+        B.append(
+            (
+                "note",
+                f"The solver did not converge ({res.status}: {res.message}). The numbers below are its "
+                "last iterate, not an optimum.",
+            )
+        )
 
     # 1. specification
     B.append(("h", 2, "1. Specification"))
     alpha = np.asarray(spec.alpha, dtype=float)
-    alpha_txt = f"{alpha[0]:g} (every parameter)" if np.all(alpha == alpha[0]) else \
-        ", ".join(f"{n} {a:g}" for n, a in zip(spec.names, alpha))
-    kv = [("model", f"{mech.name}: {mech.title}"),
-          ("position accuracy R", f"{spec.R:g} mm"),
-          ("probability p", _asked_p(res, spec) + (" per principal component (the paper's Eq. 20)"
-                                                   if spec.criterion == "components" else " of the sphere P(|dr| <= R)")),
-          ("criterion", spec.criterion),
-          ("probability model", "exact (the linear error model's own probabilities, no Gaussian reading)"
-           if _is_exact(res) else "gaussian (the paper's: each principal component read as normal)"),
-          ("z(p)", f"{spec.z:.6g}"),
-          ("error distribution", f"{label(spec.distribution)}: {describe(spec.distribution)}"),
-          ("cost exponent alpha", alpha_txt)]
+    alpha_txt = (
+        f"{alpha[0]:g} (every parameter)"
+        if np.all(alpha == alpha[0])
+        else ", ".join(f"{n} {a:g}" for n, a in zip(spec.names, alpha))
+    )
+    kv = [
+        ("model", f"{mech.name}: {mech.title}"),
+        ("position accuracy R", f"{spec.R:g} mm"),
+        (
+            "probability p",
+            _asked_p(res, spec)
+            + (
+                " per principal component (the paper's Eq. 20)"
+                if spec.criterion == "components"
+                else " of the sphere P(|dr| <= R)"
+            ),
+        ),
+        ("criterion", spec.criterion),
+        (
+            "probability model",
+            "exact (the linear error model's own probabilities, no Gaussian reading)"
+            if _is_exact(res)
+            else "gaussian (the paper's: each principal component read as normal)",
+        ),
+        ("z(p)", f"{spec.z:.6g}"),
+        ("error distribution", f"{label(spec.distribution)}: {describe(spec.distribution)}"),
+        ("cost exponent alpha", alpha_txt),
+    ]
     if spec.Phi is not None:
         kv.append(("orientation accuracy Phi", f"{spec.Phi:g} rad, probability {spec.p_orientation:g}"))
     for lbl, q in spec.poses.items():
         kv.append((f"pose '{lbl}'", f"joints {mech.format_joints(q)} ({', '.join(mech.joint_names)})"))
-    kv.append(("solver", f"{res.solver}: {res.status} ({res.message}); {res.iterations} iterations, "
-                         f"{res.wall_time * 1e3:.1f} ms"))
+    kv.append(
+        (
+            "solver",
+            f"{res.solver}: {res.status} ({res.message}); {res.iterations} iterations, {res.wall_time * 1e3:.1f} ms",
+        )
+    )
     locks = (res.inputs or {}).get("locks")
     if locks:
         kv.append(("fixed tolerances", ", ".join(f"{k} = {v:g}" for k, v in locks.items())))
@@ -100,9 +137,18 @@ def _layout(rep) -> list[tuple]:
     # 2. model
     B.append(("h", 2, "2. Model"))
     path = getattr(mech.spec, "path", None)
-    B.append(("kv", [("name", mech.name), ("title", mech.title), ("file", str(path) if path else "(in memory)"),
-                     ("joints", ", ".join(mech.joint_names)),
-                     ("error parameters", f"{len(mech.error_parameters)}: " + ", ".join(mech.error_parameters))]))
+    B.append(
+        (
+            "kv",
+            [
+                ("name", mech.name),
+                ("title", mech.title),
+                ("file", str(path) if path else "(in memory)"),
+                ("joints", ", ".join(mech.joint_names)),
+                ("error parameters", f"{len(mech.error_parameters)}: " + ", ".join(mech.error_parameters)),
+            ],
+        )
+    )
     B.append(("h", 3, "Source"))
     B.append(("p", " ".join(str(mech.source).split())))
     B.append(("h", 3, "Assumptions"))
@@ -114,51 +160,125 @@ def _layout(rep) -> list[tuple]:
 
     # 3. tolerances
     B.append(("h", 2, "3. Optimal tolerances"))
-    B.append(("p", f"Total cost {res.cost:.8g} (cost units). Bounds and tolerances in each parameter's unit; "
-                   "'active' marks a tolerance held at a bound, 'fixed' one locked by the user or the model."))
+    B.append(
+        (
+            "p",
+            f"Total cost {res.cost:.8g} (cost units). Bounds and tolerances in each parameter's unit; "
+            "'active' marks a tolerance held at a bound, 'fixed' one locked by the user or the model.",
+        )
+    )
     fixed = {n for n, lo, hi in zip(spec.names, spec.lower, spec.upper) if lo == hi}
     models = spec.costs.models
     rows = []
     for i, (name, eps) in enumerate(res.tolerances.items()):
         act = "fixed" if name in fixed else res.bounds_active.get(name, "")
-        how = f"{rep.processes[name]} ({models[i].describe()})" if rep.processes and name in rep.processes \
+        how = (
+            f"{rep.processes[name]} ({models[i].describe()})"
+            if rep.processes and name in rep.processes
             else models[i].describe()
-        rows.append([name, f"{eps:.6g}", res.units[name], f"{spec.lower[i]:.6g}", f"{spec.upper[i]:.6g}", act, how,
-                     f"{float(models[i].cost(eps)):.6g}", f"{res.bound_multipliers.get(name, 0.0):.4g}"])
-    B.append(("table", ["parameter", "tolerance +-", "unit", "lower bound", "upper bound", "active bound",
-                        "process / cost model", "cost", "bound multiplier"], rows,
-              [False, True, False, True, True, False, False, True, True], None))
+        )
+        rows.append(
+            [
+                name,
+                f"{eps:.6g}",
+                res.units[name],
+                f"{spec.lower[i]:.6g}",
+                f"{spec.upper[i]:.6g}",
+                act,
+                how,
+                f"{float(models[i].cost(eps)):.6g}",
+                f"{res.bound_multipliers.get(name, 0.0):.4g}",
+            ]
+        )
+    B.append(
+        (
+            "table",
+            [
+                "parameter",
+                "tolerance +-",
+                "unit",
+                "lower bound",
+                "upper bound",
+                "active bound",
+                "process / cost model",
+                "cost",
+                "bound multiplier",
+            ],
+            rows,
+            [False, True, False, True, True, False, False, True, True],
+            None,
+        )
+    )
     if rep.process_choice is not None:
         pc = rep.process_choice
-        B.append(("p", f"Processes chosen by branch and bound over {pc.combinations} combinations ({pc.nodes} solves): "
-                       f"lower bound over every choice {pc.lower_bound:.8g}, "
-                       + ("proven optimal." if pc.proven else "NOT proven optimal (node limit).")))
+        B.append(
+            (
+                "p",
+                f"Processes chosen by branch and bound over {pc.combinations} combinations ({pc.nodes} solves): "
+                f"lower bound over every choice {pc.lower_bound:.8g}, "
+                + ("proven optimal." if pc.proven else "NOT proven optimal (node limit)."),
+            )
+        )
 
     # 4. certificate
     B.append(("h", 2, "4. Certificate"))
     rel = res.gap / abs(res.cost) if res.cost else float("nan")
-    B.append(("kv", [("cost", f"{res.cost:.8g}"), ("dual lower bound", f"{res.lower_bound:.8g}"),
-                     ("gap (cost - bound)", f"{res.gap:.2e}"), ("relative gap", f"{rel:.2e}"),
-                     ("largest (1-P)/(1-p)" if _is_exact(res) else "largest sigma z / limit",
-                      f"{res.max_constraint:.6f} (<= 1 meets the specification)")]))
+    B.append(
+        (
+            "kv",
+            [
+                ("cost", f"{res.cost:.8g}"),
+                ("dual lower bound", f"{res.lower_bound:.8g}"),
+                ("gap (cost - bound)", f"{res.gap:.2e}"),
+                ("relative gap", f"{rel:.2e}"),
+                (
+                    "largest (1-P)/(1-p)" if _is_exact(res) else "largest sigma z / limit",
+                    f"{res.max_constraint:.6f} (<= 1 meets the specification)",
+                ),
+            ],
+        )
+    )
     if _is_exact(res):
         B.append(_exact_certificate(res, spec, rel))
     elif spec.criterion == "sphere":
-        B.append(("p", "The sphere criterion is not known to be convex: the bound is the optimum of the per-component "
-                       "relaxation, valid but not tight."))
+        B.append(
+            (
+                "p",
+                "The sphere criterion is not known to be convex: the bound is the optimum of the per-component "
+                "relaxation, valid but not tight.",
+            )
+        )
     elif not spec.convex:
-        B.append(("note", "A cost model is not convex in eps^2 on its range: the bound is valid but certifies no "
-                          "global optimum."))
+        B.append(
+            (
+                "note",
+                "A cost model is not convex in eps^2 on its range: the bound is valid but certifies no global optimum.",
+            )
+        )
     elif res.success and rel <= 1e-4:
-        B.append(("ok", f"The problem is convex and the gap is {rel:.1e} of the cost: no tolerances inside the "
-                        "bounds meet the specification at a lower cost (to that margin)."))
+        B.append(
+            (
+                "ok",
+                f"The problem is convex and the gap is {rel:.1e} of the cost: no tolerances inside the "
+                "bounds meet the specification at a lower cost (to that margin).",
+            )
+        )
     crow = []
     for b in res.constraints:
         what = "(1-P)/(1-p)" if b.kind.startswith("sphere") or _is_exact(res) else "sigma z / limit"
         for j, val in enumerate(b.values):
-            crow.append([b.label, f"{j + 1}", what, f"{val:.6f}", "yes" if b.active[j] else "", f"{b.multipliers[j]:.4g}"])
-    B.append(("table", ["constraint block", "#", "quantity", "value", "active", "multiplier"], crow,
-              [False, True, False, True, False, True], "values <= 1 meet the specification; multipliers in cost units."))
+            crow.append(
+                [b.label, f"{j + 1}", what, f"{val:.6f}", "yes" if b.active[j] else "", f"{b.multipliers[j]:.4g}"]
+            )
+    B.append(
+        (
+            "table",
+            ["constraint block", "#", "quantity", "value", "active", "multiplier"],
+            crow,
+            [False, True, False, True, False, True],
+            "values <= 1 meet the specification; multipliers in cost units.",
+        )
+    )
     ws = getattr(res, "workspace", None)
     if ws is not None:  # how the design does away from the poses it was made for (a sample, not a proof)
         import warnings
@@ -170,10 +290,15 @@ def _layout(rep) -> list[tuple]:
     # 5. contributions
     c = rep.contributions
     B.append(("h", 2, "5. Contributions"))
-    B.append(("p", "Each parameter's share of each principal variance of the hand position (exact: the shares add "
-                   "to 100 %), of the total variance tr V and, with R, of the sphere probability's loss 1 - P(|dr| <= R) "
-                   "(normalised elasticities). Where two principal sigma coincide (two active constraints) the split "
-                   "between them is arbitrary; their sum is not."))
+    B.append(
+        (
+            "p",
+            "Each parameter's share of each principal variance of the hand position (exact: the shares add "
+            "to 100 %), of the total variance tr V and, with R, of the sphere probability's loss 1 - P(|dr| <= R) "
+            "(normalised elasticities). Where two principal sigma coincide (two active constraints) the split "
+            "between them is arbitrary; their sum is not.",
+        )
+    )
     for b, pose in enumerate(c.poses):
         head = f"pose '{pose}': principal sigma {_vec(c.sigma[b], '.4g')} mm"
         if c.P_sphere is not None:
@@ -181,8 +306,11 @@ def _layout(rep) -> list[tuple]:
         B.append(("h", 3, head))
         rows = []
         for i in np.argsort(-c.shares[b, :, 0], kind="stable"):
-            row = [c.names[i], f"{c.tolerances[i]:.4g} {c.units[i]}"] + [f"{100 * v:.2f}" for v in c.shares[b, i]] \
+            row = (
+                [c.names[i], f"{c.tolerances[i]:.4g} {c.units[i]}"]
+                + [f"{100 * v:.2f}" for v in c.shares[b, i]]
                 + [f"{100 * c.total_share[b, i]:.2f}"]
+            )
             if c.sphere_share is not None:
                 row.append(f"{100 * c.sphere_share[b, i]:.2f}")
             rows.append(row)
@@ -190,8 +318,14 @@ def _layout(rep) -> list[tuple]:
         if c.sphere_share is not None:
             head_cols.append("1 - P %")
         B.append(("table", head_cols, rows, [False, True] + [True] * (len(head_cols) - 2), None))
-        B.append(("fig", f"contributions_{b}", f"contributions at pose {pose}",
-                  f"Shares at pose '{pose}', largest principal variance first."))
+        B.append(
+            (
+                "fig",
+                f"contributions_{b}",
+                f"contributions at pose {pose}",
+                f"Shares at pose '{pose}', largest principal variance first.",
+            )
+        )
 
     # 6. Monte Carlo
     B.append(("h", 2, "6. Monte Carlo validation"))
@@ -201,65 +335,153 @@ def _layout(rep) -> list[tuple]:
         mc = v.montecarlo
         pct = int(round(100 * mc.confidence))
         B.append(("h", 3, f"pose '{lbl}': hand {_vec(mc.position)} mm"))
-        B.append(("p", f"{v.n} samples of the errors ({label(v.distribution)}, seed {v.seed}) through the nonlinear "
-                       f"kinematics; {pct} % {mc.ci_method} intervals; {mc.n_loop_failures} loop failures "
-                       "(counted as outside). The components w_j are along the analytic principal directions."))
+        B.append(
+            (
+                "p",
+                f"{v.n} samples of the errors ({label(v.distribution)}, seed {v.seed}) through the nonlinear "
+                f"kinematics; {pct} % {mc.ci_method} intervals; {mc.n_loop_failures} loop failures "
+                "(counted as outside). The components w_j are along the analytic principal directions.",
+            )
+        )
         rows = []
         sphere = spec.criterion == "sphere"  # then the sphere is the specification, the components are not
         for j in range(3):
             lo, hi = v.p_components_ci[j]
-            rows.append([f"P(|w{j + 1}| <= R)", "-" if sphere else f"{v.p:g}", f"{v.p_components[j]:.5f}",
-                         f"[{lo:.5f}, {hi:.5f}]", f"{v.p_components_analytic[j]:.5f}",
-                         "-" if sphere else _verdict(v.p_components[j], hi, v.p)])
+            rows.append(
+                [
+                    f"P(|w{j + 1}| <= R)",
+                    "-" if sphere else f"{v.p:g}",
+                    f"{v.p_components[j]:.5f}",
+                    f"[{lo:.5f}, {hi:.5f}]",
+                    f"{v.p_components_analytic[j]:.5f}",
+                    "-" if sphere else _verdict(v.p_components[j], hi, v.p),
+                ]
+            )
         lo, hi = v.p_sphere_ci
-        rows.append(["P(|dr| <= R)", f"{v.p:g}" if sphere else "-", f"{v.p_sphere:.5f}", f"[{lo:.5f}, {hi:.5f}]",
-                     f"{v.p_sphere_analytic:.5f}", _verdict(v.p_sphere, hi, v.p) if sphere else
-                     ("reaches p" if v.sphere_met else "below p (the sphere is stricter than Eq. 20)")])
+        rows.append(
+            [
+                "P(|dr| <= R)",
+                f"{v.p:g}" if sphere else "-",
+                f"{v.p_sphere:.5f}",
+                f"[{lo:.5f}, {hi:.5f}]",
+                f"{v.p_sphere_analytic:.5f}",
+                _verdict(v.p_sphere, hi, v.p)
+                if sphere
+                else ("reaches p" if v.sphere_met else "below p (the sphere is stricter than Eq. 20)"),
+            ]
+        )
         if mc.Phi is not None:
             po = spec.p_orientation
             for j in range(3):
                 lo, hi = mc.p_orientation_components_ci[j]
-                rows.append([f"P(|phi{j + 1}| <= Phi)", f"{po:g}", f"{mc.p_orientation_components[j]:.5f}",
-                             f"[{lo:.5f}, {hi:.5f}]", f"{mc.p_orientation_components_analytic[j]:.5f}",
-                             _verdict(mc.p_orientation_components[j], hi, po)])
+                rows.append(
+                    [
+                        f"P(|phi{j + 1}| <= Phi)",
+                        f"{po:g}",
+                        f"{mc.p_orientation_components[j]:.5f}",
+                        f"[{lo:.5f}, {hi:.5f}]",
+                        f"{mc.p_orientation_components_analytic[j]:.5f}",
+                        _verdict(mc.p_orientation_components[j], hi, po),
+                    ]
+                )
             lo, hi = mc.p_cone_ci
-            rows.append(["P(z axis tilt <= Phi)", "-", f"{mc.p_cone:.5f}", f"[{lo:.5f}, {hi:.5f}]",
-                         f"{mc.p_cone_analytic:.5f}", "-"])
-        B.append(("table", ["probability", "asked", "Monte Carlo", f"{pct} % interval", "linear model", "verdict"], rows,
-                  [False, True, True, True, True, False],
-                  f"R = {v.R:g} mm" + (f"; Phi = {mc.Phi:g} rad, phi_j along the analytic orientation principal directions, the tilt "
-                                         "is the angle between the actual and nominal hand z axes"
-                                       if mc.Phi is not None else "") + "."))
-        srows = [[f"w{j + 1}", _vec(mc.principal_directions[:, j]), f"{mc.principal_std[j]:.5f}",
-                  f"{mc.principal_std_analytic[j]:.5f}", f"{mc.kurtosis[j]:+.3f}"] for j in range(3)]
-        B.append(("table", ["component", "direction (base frame)", "sigma sampled, mm", "sigma linear, mm",
-                            "excess kurtosis"], srows, [False, False, True, True, True],
-                  f"Excess kurtosis 0 for a Gaussian (standard error {mc.kurtosis_se:.3f})."))
+            rows.append(
+                [
+                    "P(z axis tilt <= Phi)",
+                    "-",
+                    f"{mc.p_cone:.5f}",
+                    f"[{lo:.5f}, {hi:.5f}]",
+                    f"{mc.p_cone_analytic:.5f}",
+                    "-",
+                ]
+            )
+        B.append(
+            (
+                "table",
+                ["probability", "asked", "Monte Carlo", f"{pct} % interval", "linear model", "verdict"],
+                rows,
+                [False, True, True, True, True, False],
+                f"R = {v.R:g} mm"
+                + (
+                    f"; Phi = {mc.Phi:g} rad, phi_j along the analytic orientation principal directions, the tilt "
+                    "is the angle between the actual and nominal hand z axes"
+                    if mc.Phi is not None
+                    else ""
+                )
+                + ".",
+            )
+        )
+        srows = [
+            [
+                f"w{j + 1}",
+                _vec(mc.principal_directions[:, j]),
+                f"{mc.principal_std[j]:.5f}",
+                f"{mc.principal_std_analytic[j]:.5f}",
+                f"{mc.kurtosis[j]:+.3f}",
+            ]
+            for j in range(3)
+        ]
+        B.append(
+            (
+                "table",
+                ["component", "direction (base frame)", "sigma sampled, mm", "sigma linear, mm", "excess kurtosis"],
+                srows,
+                [False, False, True, True, True],
+                f"Excess kurtosis 0 for a Gaussian (standard error {mc.kurtosis_se:.3f}).",
+            )
+        )
 
     ver = getattr(res, "verification", None)
     if ver is not None:  # synthesize(..., verify=...): the closed loop's own Monte Carlo
         lo, hi = ver.ci
         B.append(("h", 3, "Closed loop (verify)"))
-        B.append(("ok" if ver.verified else "note",
-                  f"Nonlinear Monte Carlo at the design, n = {ver.n} per pose, {round(100 * ver.confidence)} % Wilson "
-                  f"interval: achieved {ver.achieved:.5f} [{lo:.5f}, {hi:.5f}] against p = {ver.p:g} asked; "
-                  + ("verified (the lower end reaches p)" if ver.verified else "NOT verified (the lower end is below p)")
-                  + f"; design target p = {ver.p_target:.6g} after {len(ver.rounds)} round(s)."))
-        B.append(("table", ["round", "target p", "cost", "Monte Carlo P", "interval", "pose"],
-                  [[f"{r['round']}", f"{r['p_target']:.6g}", f"{r['cost']:.6g}", f"{r['estimate']:.5f}",
-                    f"[{r['ci'][0]:.5f}, {r['ci'][1]:.5f}]", str(r["pose"])] for r in ver.rounds],
-                  [True, True, True, True, False, False], None))
+        B.append(
+            (
+                "ok" if ver.verified else "note",
+                f"Nonlinear Monte Carlo at the design, n = {ver.n} per pose, {round(100 * ver.confidence)} % Wilson "
+                f"interval: achieved {ver.achieved:.5f} [{lo:.5f}, {hi:.5f}] against p = {ver.p:g} asked; "
+                + ("verified (the lower end reaches p)" if ver.verified else "NOT verified (the lower end is below p)")
+                + f"; design target p = {ver.p_target:.6g} after {len(ver.rounds)} round(s).",
+            )
+        )
+        B.append(
+            (
+                "table",
+                ["round", "target p", "cost", "Monte Carlo P", "interval", "pose"],
+                [
+                    [
+                        f"{r['round']}",
+                        f"{r['p_target']:.6g}",
+                        f"{r['cost']:.6g}",
+                        f"{r['estimate']:.5f}",
+                        f"[{r['ci'][0]:.5f}, {r['ci'][1]:.5f}]",
+                        str(r["pose"]),
+                    ]
+                    for r in ver.rounds
+                ],
+                [True, True, True, True, False, False],
+                None,
+            )
+        )
 
     # 7. workspace
     B.append(("h", 2, "7. Workspace"))
     if rep.map is not None:
         pm = rep.map
         wu, wv, wp = pm.worst
-        B.append(("p", f"P(|dr| <= {pm.R:g} mm) of the linear, Gaussian model at the optimal tolerances over the "
-                       f"reachable part of the {pm.plane} plane ({len(pm.u)} x {len(pm.v)} points, "
-                       f"{int(pm.reachable.sum())} reachable). Lowest on the map: {wp:.4f} at ({wu:.1f}, {wv:.1f}) mm."
-                       + (f" At the configuration '{pm.reference}': {pm.reference_P:.4f}." if pm.reference_P is not None
-                          else "")))
+        B.append(
+            (
+                "p",
+                f"P(|dr| <= {pm.R:g} mm) of the linear, Gaussian model at the optimal tolerances over the "
+                f"reachable part of the {pm.plane} plane ({len(pm.u)} x {len(pm.v)} points, "
+                f"{int(pm.reachable.sum())} reachable). Lowest on the map: {wp:.4f} at ({wu:.1f}, {wv:.1f}) mm."
+                + (
+                    f" At the configuration '{pm.reference}': {pm.reference_P:.4f}."
+                    if pm.reference_P is not None
+                    else ""
+                ),
+            )
+        )
         B.append(("fig", "map", "workspace map", "The map (tolsynth.plot_map); blank = not reachable."))
     else:
         B.append(("note", "Workspace map: " + rep.skipped.get("map", "not drawn")))
@@ -267,32 +489,74 @@ def _layout(rep) -> list[tuple]:
         w = rep.worst
         zr = spec.z / spec.R
         B.append(("h", 3, "Worst pose"))
-        B.append(("p", f"Search over the joint space inside every limit and constraint ({w.method}) for the largest "
-                       "principal sigma at the optimal tolerances."))
-        rows = [["joints", mech.format_joints(w.q), mech.format_joints(w.reference_q) if w.reference_q is not None else "-"],
-                ["hand, mm", _vec(w.position), _vec(w.reference_position) if w.reference_position is not None else "-"],
-                ["principal sigma, mm", _vec(w.principal_std, ".4f"),
-                 _vec(w.reference_principal_std, ".4f") if w.reference_principal_std is not None else "-"],
-                ["largest sigma z / R", f"{w.value * zr:.4f}",
-                 f"{w.reference_value * zr:.4f}" if w.reference_value is not None else "-"]]
+        B.append(
+            (
+                "p",
+                f"Search over the joint space inside every limit and constraint ({w.method}) for the largest "
+                "principal sigma at the optimal tolerances.",
+            )
+        )
+        rows = [
+            [
+                "joints",
+                mech.format_joints(w.q),
+                mech.format_joints(w.reference_q) if w.reference_q is not None else "-",
+            ],
+            ["hand, mm", _vec(w.position), _vec(w.reference_position) if w.reference_position is not None else "-"],
+            [
+                "principal sigma, mm",
+                _vec(w.principal_std, ".4f"),
+                _vec(w.reference_principal_std, ".4f") if w.reference_principal_std is not None else "-",
+            ],
+            [
+                "largest sigma z / R",
+                f"{w.value * zr:.4f}",
+                f"{w.reference_value * zr:.4f}" if w.reference_value is not None else "-",
+            ],
+        ]
         if w.p_sphere is not None:
-            rows.append(["P(|dr| <= R)", f"{w.p_sphere:.4f}",
-                         f"{w.reference_p_sphere:.4f}" if w.reference_p_sphere is not None else "-"])
-        B.append(("table", ["", "worst pose found", f"reference '{w.reference}'"], rows, [False, True, True],
-                  "Held: " + (", ".join(f"{k} = {math.degrees(v):g} deg" for k, v in w.held_joints.items()) or "none")
-                  + "; active: " + (", ".join(w.active) or "none (interior)") + "."))
+            rows.append(
+                [
+                    "P(|dr| <= R)",
+                    f"{w.p_sphere:.4f}",
+                    f"{w.reference_p_sphere:.4f}" if w.reference_p_sphere is not None else "-",
+                ]
+            )
+        B.append(
+            (
+                "table",
+                ["", "worst pose found", f"reference '{w.reference}'"],
+                rows,
+                [False, True, True],
+                "Held: "
+                + (", ".join(f"{k} = {math.degrees(v):g} deg" for k, v in w.held_joints.items()) or "none")
+                + "; active: "
+                + (", ".join(w.active) or "none (interior)")
+                + ".",
+            )
+        )
         if w.value * zr > 1 + 1e-6:
-            B.append(("note", f"At the worst pose found the largest sigma z / R is {w.value * zr:.4f} > 1: the "
-                              "specification is met at the specification's pose(s) but not everywhere in the workspace. "
-                              "tolsynth solve --everywhere (synthesize_workspace) imposes it at every reachable pose."))
+            B.append(
+                (
+                    "note",
+                    f"At the worst pose found the largest sigma z / R is {w.value * zr:.4f} > 1: the "
+                    "specification is met at the specification's pose(s) but not everywhere in the workspace. "
+                    "tolsynth solve --everywhere (synthesize_workspace) imposes it at every reachable pose.",
+                )
+            )
         else:
-            B.append(("ok", f"At the worst pose found the largest sigma z / R is {w.value * zr:.4f} <= 1: the "
-                            "specification holds over the searched workspace."))
+            B.append(
+                (
+                    "ok",
+                    f"At the worst pose found the largest sigma z / R is {w.value * zr:.4f} <= 1: the "
+                    "specification holds over the searched workspace.",
+                )
+            )
     else:
         B.append(("note", "Worst pose: " + rep.skipped.get("worst", "not searched")))
 
     # inputs
-    from tolsynth.io.tables import _synthesis_inputs, jsonable
+    from tolsynth.tabular import _synthesis_inputs, jsonable
 
     B.append(("h", 2, "Inputs recorded"))
     rec = {"tolsynth_version": __version__, "report_settings": rep.settings, "synthesis": _synthesis_inputs(res)}
@@ -306,37 +570,3 @@ def _layout(rep) -> list[tuple]:
 def _verdict(estimate: float, upper: float, p: float) -> str:
     """Met (estimate >= p), SHORT (the interval's upper end < p) or within noise."""
     return "met" if estimate >= p else ("SHORT" if upper < p else "below p (within noise)")
-
-
-def _figures(rep, dpi: int) -> dict[str, bytes]:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
-    except ImportError:
-        raise MissingDependencyError("matplotlib", "the report's figures", PLOT_INSTALL) from None
-
-    out = {}
-
-    def png(fig) -> bytes:
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
-        plt.close(fig)
-        return buf.getvalue()
-
-    c = rep.contributions
-    for b in range(len(c.poses)):
-        fig, ax = plt.subplots(figsize=(min(11.0, max(6.0, 0.75 * len(c.names))), 3.4))
-        c.plot(pose=b, ax=ax)
-        ax.legend(fontsize="small", ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.12), frameon=False)
-        if len(c.names) > 12:
-            ax.tick_params(axis="x", labelrotation=90)
-        out[f"contributions_{b}"] = png(fig)
-    if rep.map is not None:
-        from dataclasses import replace
-
-        from tolsynth.analysis.plot import plot_map
-
-        out["map"] = png(plot_map(replace(rep.map, tolerance_label="optimal")))
-    return out

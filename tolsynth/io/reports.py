@@ -31,14 +31,14 @@ import numpy as np
 
 from tolsynth.checks import check_writable_path
 from tolsynth.errors import InputError, MissingDependencyError, TolsynthError
-from tolsynth.io.report_layout import PLOT_INSTALL, _figures, _layout
+from tolsynth.io.report_figures import _figures
+from tolsynth.io.report_layout import PLOT_INSTALL, _layout
 from tolsynth.io.report_render import _render_html, _render_markdown
 
 __all__ = ["DesignReport", "report", "FORMATS"]
 
 #: output formats: one self-contained HTML file, or Markdown with PNG files beside it
 FORMATS = ("html", "md")
-
 
 
 # ---------------------------------------------------------------------------------------------
@@ -148,14 +148,20 @@ def check_report_path(path, format: str | None = None, field: str = "path") -> s
     if format is not None and format not in FORMATS:
         raise InputError("format", f"{format!r}", " or ".join(repr(f) for f in FORMATS))
     if implied is None:
-        raise InputError(field, f"{path!r}: a report cannot be written as {suffix or '(no suffix)'}",
-                         "a file name ending in .html or .htm (HTML, figures embedded; print it to PDF from a "
-                         "browser) or .md or .markdown (Markdown, figures as PNG beside it)")
+        raise InputError(
+            field,
+            f"{path!r}: a report cannot be written as {suffix or '(no suffix)'}",
+            "a file name ending in .html or .htm (HTML, figures embedded; print it to PDF from a "
+            "browser) or .md or .markdown (Markdown, figures as PNG beside it)",
+        )
     if format is None:
         format = implied
     if implied != format:  # a Markdown file named .html (or the reverse) misleads
-        raise InputError(field, f"{path!r} is named as {implied} but the format asked is {format}",
-                         f"a file ending in .{'md' if format == 'md' else 'html'} for format {format!r}")
+        raise InputError(
+            field,
+            f"{path!r} is named as {implied} but the format asked is {format}",
+            f"a file ending in .{'md' if format == 'md' else 'html'} for format {format!r}",
+        )
     try:
         import matplotlib  # noqa: F401
     except ImportError:
@@ -260,9 +266,11 @@ def report(
     choice = None
     if isinstance(source, (SynthesisResult, ProcessChoice)):
         if R is not None or p is not None or kwargs or processes is not None:
-            raise InputError("source", "a solved result was given together with a specification "
-                                       "(R, p, processes or synthesize arguments)",
-                             "either a result, or a model with R and p")
+            raise InputError(
+                "source",
+                "a solved result was given together with a specification (R, p, processes or synthesize arguments)",
+                "either a result, or a model with R and p",
+            )
         if isinstance(source, ProcessChoice):
             choice, result = source, source.result
         else:
@@ -279,8 +287,11 @@ def report(
 
             procs = None if processes is True else processes
             if procs is None and not mech.processes:
-                raise InputError("processes", f"the model {mech.name} declares no processes",
-                                 "a dict parameter -> list of Process, or a model file with processes")
+                raise InputError(
+                    "processes",
+                    f"the model {mech.name} declares no processes",
+                    "a dict parameter -> list of Process, or a model file with processes",
+                )
             choice = synthesize_processes(mech, R, p, procs, distribution, alpha=alpha, **kwargs)
             result = choice.result
         else:
@@ -289,9 +300,15 @@ def report(
             result = synthesize(mech, R, p, distribution, alpha, **kwargs)
     spec = result.spec
     skipped: dict[str, str] = {}
-    settings = dict(mc_samples=mc_samples, seed=seed, confidence=confidence, map_n=map_n, map_plane=map_plane,
-                    map_hand_axis=None if map_hand_axis is None else [float(x) for x in map_hand_axis],
-                    worst_grid=worst_grid)
+    settings = dict(
+        mc_samples=mc_samples,
+        seed=seed,
+        confidence=confidence,
+        map_n=map_n,
+        map_plane=map_plane,
+        map_hand_axis=None if map_hand_axis is None else [float(x) for x in map_hand_axis],
+        worst_grid=worst_grid,
+    )
 
     from tolsynth.analysis.contributions import contributions
 
@@ -306,8 +323,17 @@ def report(
 
         for label, q in spec.poses.items():
             asked = result.verification.p if getattr(result, "verification", None) is not None else None
-            v = validate(mech, result, p=asked, pose=np.asarray(q, dtype=float), n=mc_samples, seed=seed,
-                         confidence=confidence, progress=False, Phi=spec.Phi)  # p: as asked, not the loop's target
+            v = validate(
+                mech,
+                result,
+                p=asked,
+                pose=np.asarray(q, dtype=float),
+                n=mc_samples,
+                seed=seed,
+                confidence=confidence,
+                progress=False,
+                Phi=spec.Phi,
+            )  # p: as asked, not the loop's target
             validations.append((label, v))
     pmap = None
     if map_n == 0:
@@ -316,12 +342,21 @@ def report(
         from tolsynth.analysis.workspace_map import probability_map
 
         try:
-            pmap = probability_map(mech, result.tolerances, R=spec.R, distribution=spec.distribution, n=map_n,
-                                   plane=map_plane, hand_axis=map_hand_axis, check_points=min(200, 2 * map_n),
-                                   progress=False)
+            pmap = probability_map(
+                mech,
+                result.tolerances,
+                R=spec.R,
+                distribution=spec.distribution,
+                n=map_n,
+                plane=map_plane,
+                hand_axis=map_hand_axis,
+                check_points=min(200, 2 * map_n),
+                progress=False,
+            )
             if not pmap.reachable.any():
-                skipped["map"] = (f"no point of the {map_plane} plane is reachable with the hand axis "
-                                  f"{settings['map_hand_axis']}")
+                skipped["map"] = (
+                    f"no point of the {map_plane} plane is reachable with the hand axis {settings['map_hand_axis']}"
+                )
                 pmap = None
         except TolsynthError as exc:  # a model the map cannot be drawn for: said in the report
             if isinstance(exc, InputError) and exc.field in ("plane", "hand_axis", "n"):
@@ -334,14 +369,25 @@ def report(
         from tolsynth.analysis.pose_search import worst_pose
 
         try:
-            worst = worst_pose(mech, result.tolerances, criterion="sigma", R=spec.R, distribution=spec.distribution,
-                               grid=worst_grid)
+            worst = worst_pose(
+                mech, result.tolerances, criterion="sigma", R=spec.R, distribution=spec.distribution, grid=worst_grid
+            )
         except TolsynthError as exc:
             skipped["worst"] = f"not searched: {exc}"
     procs = dict(choice.processes) if choice is not None else None
-    rep = DesignReport(mechanism=mech, result=result, contributions=contrib, validations=tuple(validations),
-                       map=pmap, worst=worst, skipped=skipped, settings=settings,
-                       elapsed_s=time.perf_counter() - t0, processes=procs, process_choice=choice)
+    rep = DesignReport(
+        mechanism=mech,
+        result=result,
+        contributions=contrib,
+        validations=tuple(validations),
+        map=pmap,
+        worst=worst,
+        skipped=skipped,
+        settings=settings,
+        elapsed_s=time.perf_counter() - t0,
+        processes=procs,
+        process_choice=choice,
+    )
     if path is not None:
         rep.write(path, format)
     return rep
@@ -355,6 +401,9 @@ def _mechanism_of(result):
     if not ref:
         raise InputError("mechanism", "the result records no model", "the Mechanism the result was solved on")
     if (result.inputs or {}).get("joint_errors"):
-        raise InputError("mechanism", "the result has joint errors added in memory (with_joint_errors)",
-                         "the Mechanism the result was solved on, as mechanism=")
+        raise InputError(
+            "mechanism",
+            "the result has joint errors added in memory (with_joint_errors)",
+            "the Mechanism the result was solved on, as mechanism=",
+        )
     return load_model(ref)
