@@ -95,6 +95,12 @@ def test_worst_pose_sigma_beats_the_paper_and_respects_limits(xz, rng):
     text = w.report(xz.joint_names)
     assert "reference (worst)" in text and "925.000" in text
     json.dumps(w.to_dict())
+    # without a reference pose the table has the found column only (no column of dashes and nan)
+    bare = worst_pose(xz, "figure3", criterion="sigma", R=0.2, reference=None)
+    assert bare.value == pytest.approx(w.value, rel=1e-9)
+    text = bare.report(xz.joint_names)
+    assert "reference" not in text and "nan" not in text and " -\n" not in text
+    assert all(len(line) <= 22 + 42 for line in text.splitlines()[1:6]), text
 
 
 def test_worst_pose_probability(xz, rng):

@@ -130,20 +130,23 @@ class WorstPose(Tabular):
         names = joint_names or [f"q{i + 1}" for i in range(len(self.q))]
         units = tuple(joint_units or ["deg"] * len(self.q))
         lines = [f"worst pose   criterion {self.criterion} {unit}, {self.distribution} errors; {self.method}"]
-        lines.append(f"{'':22}{'found':>42}{'reference (' + str(self.reference) + ')':>40}")
+        has_ref = self.reference is not None  # without one, no column of dashes
         fmt = lambda v: "(" + ", ".join(f"{x:.3f}" for x in v) + ")"  # noqa: E731
         shown = lambda q: [x if u == "mm" else math.degrees(x) for x, u in zip(q, units)]  # noqa: E731
-        lines.append(f"{'joints (' + '/'.join(sorted(set(units))) + ')':22}{fmt(shown(self.q)):>42}"
-                     f"{fmt(shown(self.reference_q)) if self.reference_q is not None else '-':>40}")
-        lines.append(f"{'hand (mm)':22}{fmt(self.position):>42}"
-                     f"{fmt(self.reference_position) if self.reference_position is not None else '-':>40}")
-        lines.append(f"{'criterion':22}{self.value:>42.6f}"
-                     f"{self.reference_value if self.reference_value is not None else float('nan'):>40.6f}")
-        lines.append(f"{'principal sigma (mm)':22}{fmt(self.principal_std):>42}"
-                     f"{fmt(self.reference_principal_std) if self.reference_principal_std is not None else '-':>40}")
+
+        def row(label: str, found: str, ref: str | None) -> None:
+            lines.append(f"{label:22}{found:>42}" + (f"  {'-' if ref is None else ref:>38}" if has_ref else ""))
+
+        row("", "found", f"reference ({self.reference})")
+        row("joints (" + "/".join(sorted(set(units))) + ")", fmt(shown(self.q)),
+            None if self.reference_q is None else fmt(shown(self.reference_q)))
+        row("hand (mm)", fmt(self.position), None if self.reference_position is None else fmt(self.reference_position))
+        row("criterion", f"{self.value:.6f}", None if self.reference_value is None else f"{self.reference_value:.6f}")
+        row("principal sigma (mm)", fmt(self.principal_std),
+            None if self.reference_principal_std is None else fmt(self.reference_principal_std))
         if self.p_sphere is not None:
-            lines.append(f"{'P(|dr|<=R)':22}{self.p_sphere:>42.6f}"
-                         f"{self.reference_p_sphere if self.reference_p_sphere is not None else float('nan'):>40.6f}")
+            row("P(|dr|<=R)", f"{self.p_sphere:.6f}",
+                None if self.reference_p_sphere is None else f"{self.reference_p_sphere:.6f}")
         if self.certificate is not None:
             lines.append("certificate  " + self.certificate.summary().replace("\n", "\n             "))
         lines.append("joint order  " + ", ".join(names))
