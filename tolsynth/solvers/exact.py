@@ -22,7 +22,10 @@ the cut problem solved by a primal-dual interior-point Newton method on the exac
 every direction of every pose is examined by a branch and bound over direction patches
 (:func:`.exact_certify.cover`): a patch is either proven to meet ``p - 1e-7`` or split, and a
 patch centre below p, refined to a local minimum of P by Newton's method on the sphere,
-becomes a new cut.  When no direction is short, the cuts' supporting
+becomes a new cut.  The cuts at local minima track them (:mod:`.exact_cuts`): along each Newton
+step of the tolerances their directions take the joint Newton step, and their Hessians are those
+of ``min_w P``, so the exchange converges with the inner solve rather than one cut nearer per
+round.  When no direction is short, the cuts' supporting
 half-spaces give a rigorous lower bound (:func:`.exact_certify.half_space_bound`).  A result is
 ``success`` only when every pose is proven and the gap is within ``1e-6`` of the cost.
 
@@ -48,9 +51,10 @@ from tolsynth.errors import InfeasibleSpecificationError
 from tolsynth.problem.nlp import ToleranceNLP
 from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult
 from tolsynth.solvers.exact_certify import LOG_CONCAVE, cover, half_space_bound, refine_direction
+from tolsynth.solvers.exact_cuts import Cuts, minimise_directions
 from tolsynth.solvers.exact_newton import Barrier
 from tolsynth.solvers.exact_newton import cost_function as _cost_fn
-from tolsynth.solvers.exact_series import derivatives, probability
+from tolsynth.solvers.exact_series import probability
 
 __all__ = ["solve_exact", "exact_margin", "PROBABILITIES", "EXACT_TOL", "DEFAULT_OPTIONS", "certifiable"]
 
@@ -107,45 +111,6 @@ def certifiable(shapes, spec) -> tuple[bool, str]:
     return True, ""
 
 
-class _Cuts:
-    """The cut set: rows ``c = |w . a_i|`` (per tolerance unit), their R, p, block and direction."""
-
-    def __init__(self, shapes):
-        self.shapes = shapes
-        self.c: list = []
-        self.R: list = []
-        self.p: list = []
-        self.block: list = []
-        self.w: list = []
-
-    def add(self, blk_index: int, blk: _Block, w: np.ndarray) -> bool:
-        """Add the cut unless its pose has one within :data:`SAME_CUT` rad (up to sign); True if added."""
-        w = np.asarray(w, dtype=float) / np.linalg.norm(w)
-        if any(b == blk_index and abs(float(v @ w)) > math.cos(SAME_CUT) for b, v in zip(self.block, self.w)):
-            return False
-        self.c.append(np.abs(w @ blk.A))
-        self.R.append(blk.R)
-        self.p.append(blk.p)
-        self.block.append(blk_index)
-        self.w.append(w)
-        return True
-
-    def arrays(self):
-        return np.array(self.c), np.array(self.R), np.array(self.p)
-
-    def __call__(self, u, order):
-        """``g = (P - p)/(1 - p)`` per cut, and (order 2) its Jacobian and Hessians in u."""
-        if not self.c:
-            return np.zeros(0), np.zeros((0, u.size)), np.zeros((0, u.size, u.size))
-        C, R, p = self.arrays()
-        if order == 0:
-            P, _ = probability(C * np.exp(u)[None, :], self.shapes, R, 1e-11)
-            return (P - p) / (1 - p), None, None
-        P, G, H, _, _ = derivatives(C, u, self.shapes, R, tol=1e-11)
-        s = 1.0 / (1 - p)
-        return (P - p) * s, G * s[:, None], H * s[:, None, None]
-
-
 def _lattice(m: int) -> np.ndarray:
     """m nearly uniform unit vectors on the upper hemisphere (a Fibonacci lattice)."""
     i = np.arange(m) + 0.5
@@ -154,21 +119,19 @@ def _lattice(m: int) -> np.ndarray:
     return np.column_stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z])
 
 
-def _local_minima(M: np.ndarray, shapes, R: float, p: float, count: int = 3) -> list:
-    """The lowest few local minima of P over directions (a lattice, then a local search from the
-    best points at least 0.3 rad apart)."""
+def _local_minima(A: np.ndarray, u: np.ndarray, shapes, R: float, count: int = 3) -> np.ndarray:
+    """The lowest few local minima of P over directions at ``eps = e^u`` (a lattice, then Newton's
+    method on the sphere from the best points at least 0.3 rad apart), as rows."""
     D = _lattice(300)
-    P, _ = probability(np.abs(D @ M), shapes, R, 1e-6)
+    P, _ = probability(np.abs(D @ (A * np.exp(u))), shapes, R, 1e-6)
     starts: list = []
     for j in np.argsort(P):
         if all(abs(float(D[j] @ D[k])) < math.cos(0.3) for k in starts):
             starts.append(j)
         if len(starts) >= count:
             break
-    out = []
-    for j in starts:
-        out.append(refine_direction(M, shapes, R, D[j])[0])
-    return out
+    W, _ = minimise_directions(np.repeat(A[None], len(starts), axis=0), D[starts], u, shapes, R)
+    return W
 
 
 def _deadline(what: str) -> None:
@@ -179,25 +142,31 @@ def _deadline(what: str) -> None:
         check(what)
 
 
-def _feasible_start(cuts: _Cuts, u: np.ndarray, lu: np.ndarray, uu: np.ndarray, blocks) -> np.ndarray:
-    """``u`` shrunk (every tolerance by one factor: every P rises) until every cut holds strictly."""
+def _feasible_start(cuts: Cuts, u: np.ndarray, lu: np.ndarray, uu: np.ndarray, blocks) -> np.ndarray:
+    """``u`` shrunk (every tolerance by one factor: every P rises) until every cut holds strictly:
+    the cuts that fail at ``u`` evaluated at a ladder of factors in one batch."""
     free = uu - lu > 1e-12
-    s = 0.0
-    for _ in range(60):
-        v = np.where(free, np.clip(u - s, lu, uu), lu)
-        g = cuts(v, 0)[0]
-        if not g.size or np.all(g > 1e-3):
-            return v
-        if np.all(v[free] <= lu[free]):
-            j = int(np.argmin(g))
-            blk = blocks[cuts.block[j]]
-            P = g[j] * (1 - blk.p) + blk.p
-            raise InfeasibleSpecificationError(
-                blk.label, float(P), f"infeasible specification: the {blk.label} fails even with every tolerance "
-                f"at its lower bound: exact P = {P:.6g} < p = {blk.p:g} along a direction.  Lower the bounds, "
-                "or relax R/Phi or p.")
-        s = 1e-4 if s == 0 else 2 * s
-    return v
+    g = cuts(np.where(free, np.clip(u, lu, uu), lu), 0)[0]
+    if not g.size or np.all(g > 1e-3):
+        return np.where(free, np.clip(u, lu, uu), lu)
+    bad = np.flatnonzero(g <= 1e-3)
+    C, Rc, pc = (x[bad] for x in cuts.arrays())
+    V = [np.where(free, np.clip(u - 1e-4 * 2.0**k, lu, uu), lu) for k in range(40)]
+    last = next((k for k, v in enumerate(V) if np.all(v[free] <= lu[free])), len(V) - 1)
+    for a in range(0, last + 1, 8):  # the barrier checks the start itself: 1e-9 is plenty against 1e-3
+        Vk = np.array(V[a : min(a + 8, last + 1)])
+        rows = (C[None, :, :] * np.exp(Vk)[:, None, :]).reshape(-1, C.shape[1])
+        P, _ = probability(rows, cuts.shapes, np.tile(Rc, len(Vk)), 1e-9)
+        ok = np.all(((P.reshape(len(Vk), -1) - pc) / (1 - pc)) > 1e-3, axis=1)
+        if ok.any():
+            return Vk[int(np.argmax(ok))]
+    Pl = P.reshape(len(Vk), -1)[-1]
+    j = int(np.argmin((Pl - pc) / (1 - pc)))
+    blk = blocks[cuts.block[bad[j]]]
+    raise InfeasibleSpecificationError(
+        blk.label, float(Pl[j]), f"infeasible specification: the {blk.label} fails even with every tolerance "
+        f"at its lower bound: exact P = {Pl[j]:.6g} < p = {blk.p:g} along a direction.  Lower the bounds, "
+        "or relax R/Phi or p.")
 
 
 def solve_exact(nlp: ToleranceNLP, shapes: tuple, solver: str = "ipopt", eps0=None, options=None,
@@ -268,17 +237,17 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
     blocks = _blocks(spec)
     lu, uu = nlp.lu, nlp.uu
     eps_g = _gaussian_start(nlp, solver, eps0)
-    cuts = _Cuts(shapes)
+    cuts = Cuts(shapes, SAME_CUT)
     vals, dirs = nlp.block_values(eps_g)
     for i, blk in enumerate(blocks):
         if vals[i, 0] >= START_CUTS:  # all three axes (a free axis would let its errors grow far) and
-            for j in range(3):        # the exact worst directions at the Gaussian design
-                cuts.add(i, blk, dirs[i][:, j])
-            for w in _local_minima(blk.A * eps_g, shapes, blk.R, blk.p):
-                cuts.add(i, blk, w)
-    if not cuts.c:  # nothing near its limit: the worst block still starts the cut set
+            for j in range(3):        # the exact worst directions at the Gaussian design, which track
+                cuts.add(i, blk.A, blk.R, blk.p, dirs[i][:, j], moving=True)  # the worst directions from then on
+            for w in _local_minima(blk.A, np.log(eps_g), shapes, blk.R):
+                cuts.add(i, blk.A, blk.R, blk.p, w, moving=True)
+    if not len(cuts):  # nothing near its limit: the worst block still starts the cut set
         i = int(np.argmax(vals[:, 0]))
-        cuts.add(i, blocks[i], dirs[i][:, 0])
+        cuts.add(i, blocks[i].A, blocks[i].R, blocks[i].p, dirs[i][:, 0])
     cost_fn = _cost_fn(nlp)
     u = np.log(eps_g)
     lam = None
@@ -287,23 +256,27 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
     for rnd in range(int(opts["max_rounds"])):
         _deadline("the exact solve")
         u_start = _feasible_start(cuts, u, lu, uu, blocks)
-        lam0 = None if lam is None else np.concatenate([lam, np.zeros(len(cuts.c) - lam.size)])
+        lam0 = None if lam is None else np.concatenate([lam, np.zeros(len(cuts) - lam.size)])
         res = Barrier(cost_fn, cuts, lu, uu).solve(u_start, lam0, max_iter=int(opts["max_iter"]),
-                                                   tau0=None if rnd == 0 else 1e-3 * cost_fn(u_start)[0] / (len(cuts.c) + spec.n))
+                                                   tau0=None if rnd == 0 else 1e-3 * cost_fn(u_start)[0] / (len(cuts) + spec.n))
         iters += res.iterations
         u, lam, zb, ok, message = res.u, res.lam, res.z, res.ok, res.message
         eps = np.exp(u)
-        covers, added = [], 0
+        covers, starts = [], []
         for i, blk in enumerate(blocks):
             cv = cover(blk.A * eps, shapes, blk.R, blk.p, EXACT_TOL, CUT_TOL, int(opts["max_patches"]))
             evals += cv.evaluations
             covers.append(cv)
-            if cv.certified:  # proven to p - EXACT_TOL: what the result claims, whatever is short of p itself
-                continue
-            for w, _ in cv.violations[:NEW_CUTS]:
-                w2, _ = refine_direction(blk.A * eps, shapes, blk.R, w)
-                added += cuts.add(i, blk, w2)
-        history.append({"round": rnd, "cuts": len(cuts.c), "newton": res.iterations, "added": added,
+            if not cv.certified:  # proven to p - EXACT_TOL: what the result claims, whatever is short of p itself
+                starts += [(i, w) for w, _ in cv.violations[:NEW_CUTS]]
+        added = 0
+        if starts:  # the violations' local minima, all in one batch, become tracking cuts
+            idx = [i for i, _ in starts]
+            W, _ = minimise_directions(np.array([blocks[i].A for i in idx]), np.array([w for _, w in starts]), u,
+                                       shapes, np.array([blocks[i].R for i in idx]))
+            for i, w in zip(idx, W):
+                added += cuts.add(i, blocks[i].A, blocks[i].R, blocks[i].p, w, moving=True)
+        history.append({"round": rnd, "cuts": len(cuts), "newton": res.iterations, "added": added,
                         "cost": nlp.cost(eps), "inner": message,
                         "proven": min((c.proven for c in covers), default=1.0)})
         if verbose:
@@ -344,7 +317,7 @@ def _assemble(nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, inner, covers
     gap = cost - lower
     proven = all(c.certified for c in covers) and len(covers) == len(blocks)
     can, why = certifiable(shapes, spec)
-    detail = (f"{len(cuts.c)} direction cuts, {len(history)} rounds; every direction of every pose "
+    detail = (f"{len(cuts)} direction cuts, {len(history)} rounds; every direction of every pose "
               + (f"proven P >= p - {EXACT_TOL:g} by the branch and bound ({sum(c.patches for c in covers)} patches)"
                  if proven else "NOT proven")
               + f"; lower bound from the active cuts' half-spaces, gap {gap:.2e} ({gap / abs(cost):.1e} of the cost); "

@@ -51,10 +51,14 @@ START_GRID = 4
 #: series tolerance of the patch evaluations: loose first, tight where the bound is near p
 EVAL_TOL = 1e-10
 LOOSE_TOL = 1e-6
+#: the tighter tolerances a patch evaluation takes in turn while it is not clear of the level
+MID_TOLS = (1e-8, EVAL_TOL)
 #: truncation tolerance of the gradients that tilt the lower bound's half-spaces
 GRAD_TOL = 1e-9
 #: a patch smaller than this (1 - d) that still fails is reported as not certified
 MIN_SIZE = 1e-15
+#: grid points' face coordinates as integers in units of 2^-_GRID_BITS (exact for the dyadic splits)
+_GRID_BITS = 28
 
 
 @dataclass
@@ -81,20 +85,31 @@ def _unit(v):
 
 
 def _lower(rows: np.ndarray, shapes: tuple, R: float, q: float) -> np.ndarray:
-    """``P - error`` per row: to a loose tolerance, then tightly where that is not clear of ``q``."""
+    """``P - error`` per row: to a loose tolerance, then tighter only where the last value is not
+    clear of ``q`` (rows with a few dominant terms need many series terms at the tightest)."""
     P, e = probability(rows, shapes, R, LOOSE_TOL)
     out = P - e
-    near = np.flatnonzero(np.abs(out - q) < 2 * LOOSE_TOL)
-    if near.size:
-        P2, e2 = probability(rows[near], shapes, R, EVAL_TOL)
+    last = LOOSE_TOL
+    for tol in MID_TOLS:
+        near = np.flatnonzero(np.abs(out - q) < 2 * last)
+        if not near.size:
+            break
+        P2, e2 = probability(rows[near], shapes, R, tol)
         out[near] = P2 - e2
+        last = tol
     return out
 
 
 def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, cut_tol: float = 1e-8,
           max_patches: int = 200_000, gauge: bool = True) -> Cover:
     """Branch and bound over direction patches (see the module docstring): is ``P(|w . dr| <= R)
-    >= p - tol`` proven for every unit w, with ``dr = M Y`` (M 3 x n)?"""
+    >= p - tol`` proven for every unit w, with ``dr = M Y`` (M 3 x n)?
+
+    Neighbouring patches share corners, and a split keeps its parent's: each grid point's gauge
+    value ``P(|v . dr| <= R d)`` is kept with its ``d``, and serves every patch whose own ``d`` is
+    at least that (P grows with the radius); a point is evaluated again only where its value is
+    short of the level and the patch's ``d`` is larger.  The monotone bound is tried while it
+    still proves patches."""
     q = p - tol
     g = np.linspace(-1.0, 1.0, START_GRID + 1)
     S0, T0 = np.meshgrid(g[:-1], g[:-1], indexing="ij")
@@ -105,29 +120,61 @@ def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, c
     proven = math.inf
     violations: list = []
     patches = evaluations = 0
+    # grid points evaluated so far (face and coordinates packed in one integer), sorted, with the
+    # d of their evaluation and the lower bound on P(|v . dr| <= R d) found there
+    kk, kd_, kv_ = np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0)
+    mono_on = True
     while face.size:
         patches += face.size
         if patches > max_patches:
             return Cover(False, -math.inf, violations, patches, evaluations)
         F = _FRAMES[face]  # (N, 3, 3)
-        corners = []
+        cs, ct, corners = [], [], []
         for ds, dt in ((0, 0), (1, 0), (0, 1), (1, 1)):
-            v = F[:, 0] + (s0 + ds * h)[:, None] * F[:, 1] + (t0 + dt * h)[:, None] * F[:, 2]
-            corners.append(_unit(v))
+            cs.append(s0 + ds * h)
+            ct.append(t0 + dt * h)
+            corners.append(_unit(F[:, 0] + cs[-1][:, None] * F[:, 1] + ct[-1][:, None] * F[:, 2]))
         V = np.stack(corners, axis=1)  # (N, 4, 3)
         c = _unit(V.sum(axis=1))
         d = np.min(np.einsum("nkx,nx->nk", V, c), axis=1)  # (N,)
         X = np.abs(V @ M)  # (N, 4, n): |v_k . a_i| eps_i
-        mono = X.max(axis=1) / d[:, None]
-        bound = _lower(mono, shapes, R, q)
-        evaluations += face.size
+        bound = np.full(face.size, -math.inf)
+        if mono_on:
+            bound = _lower(X.max(axis=1) / d[:, None], shapes, R, q)
+            evaluations += face.size
+            mono_on = np.count_nonzero(bound >= q) >= 0.2 * face.size
         fail = bound < q
         if gauge and fail.any():
             idx = np.flatnonzero(fail)
-            rows = (X[idx] / d[idx, None, None]).reshape(-1, M.shape[1])
-            gb = _lower(rows, shapes, R, q).reshape(-1, 4).min(axis=1)
-            evaluations += rows.shape[0]
-            bound[idx] = np.maximum(bound[idx], gb)
+            keys = (face[idx, None] << 60) | (np.rint((np.stack(cs, 1)[idx] + 1.0) * 2.0**_GRID_BITS).astype(np.int64) << 30) \
+                | np.rint((np.stack(ct, 1)[idx] + 1.0) * 2.0**_GRID_BITS).astype(np.int64)  # (m, 4)
+            dj = np.repeat(d[idx, None], 4, axis=1)
+            pos = np.minimum(np.searchsorted(kk, keys), max(kk.size - 1, 0))
+            found = (kk[pos] == keys) if kk.size else np.zeros(keys.shape, dtype=bool)
+            kd = np.where(found, kd_[pos] if kk.size else 0.0, math.inf)
+            kv = np.where(found, kv_[pos] if kk.size else 0.0, -math.inf)
+            # a kept value serves a patch whose d is at least its own; it is taken again only where
+            # it is short of the level and this patch's d is larger
+            serves = kd <= dj
+            need = ~(serves & ((kv >= q) | (kd >= dj)))
+            val = np.where(serves, kv, -math.inf)
+            if need.any():
+                uk, first, inv = np.unique(keys[need], return_index=True, return_inverse=True)
+                dd = np.full(uk.size, math.inf)
+                np.minimum.at(dd, inv, dj[need])
+                r = np.flatnonzero(need.ravel())[first]
+                vals = _lower(X[idx[r // 4], r % 4] / dd[:, None], shapes, R, q)
+                evaluations += uk.size
+                val[need] = np.maximum(val[need], np.where(dd[inv] <= dj[need], vals[inv], -math.inf))
+                # keep the value at the larger d (deeper patches have larger d)
+                kpos = np.minimum(np.searchsorted(kk, uk), max(kk.size - 1, 0))
+                kfound = (kk[kpos] == uk) if kk.size else np.zeros(uk.size, dtype=bool)
+                better = kfound & (dd >= kd_[kpos] if kk.size else False)
+                kd_[kpos[better]], kv_[kpos[better]] = dd[better], vals[better]
+                kk, kd_, kv_ = (np.concatenate([a, b[~kfound]]) for a, b in ((kk, uk), (kd_, dd), (kv_, vals)))
+                order = np.argsort(kk, kind="stable")
+                kk, kd_, kv_ = kk[order], kd_[order], kv_[order]
+            bound[idx] = np.maximum(bound[idx], val.min(axis=1))
             fail = bound < q
         proven = min(proven, float(np.min(bound[~fail], initial=math.inf)))
         if not fail.any():
@@ -142,7 +189,7 @@ def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, c
         if bad.any():
             violations.sort(key=lambda v: v[1])
             return Cover(False, min(proven, float(np.min(Pc[bad]))), violations, patches, evaluations)
-        tiny = (1.0 - d[idx]) < MIN_SIZE
+        tiny = ((1.0 - d[idx]) < MIN_SIZE) | (h[idx] < 2.0 ** (2 - _GRID_BITS))
         if tiny.any():
             return Cover(False, min(proven, float(np.min(bound[idx[tiny]]))), violations, patches, evaluations)
         # split each failing patch in four

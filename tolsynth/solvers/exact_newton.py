@@ -72,6 +72,7 @@ class Barrier:
             lam = _safeguard(np.asarray(lam0, dtype=float), tau, g)
         zl = np.where(free, tau / np.maximum(sl, 1e-300), 0.0)
         zu = np.where(free, tau / np.maximum(su, 1e-300), 0.0)
+        plan, at = getattr(self.cuts, "plan", None), getattr(self.cuts, "at", None)
         it = 0
         for it in range(1, max_iter + 1):
             # Newton step on the reduced system (multipliers eliminated)
@@ -84,6 +85,18 @@ class Barrier:
             du = np.zeros_like(u)
             du[free] = _solve_pd(Wf, rhs[free])
             Jdu = J @ du if g.size else np.zeros(0)
+            slope = float(df @ du - tau * (Jdu / g).sum() - tau * np.sum(np.where(free, du / np.maximum(sl, 1e-300)
+                                                                                     - du / np.maximum(su, 1e-300), 0.0)))
+            # cuts whose directions follow the worst one turn along the step: g's derivative along
+            # the path gains their term (the joint Newton step, or only the turn that follows the
+            # minimiser where chasing it would take more than half of the step's decrease)
+            turn = np.zeros(g.size)
+            if plan is not None and g.size:
+                turn = plan(u, du)
+                if slope - tau * float((turn / g).sum()) > 0.5 * slope:
+                    turn = plan(u, du, newton=False)
+            path_slope = slope - tau * float((turn / g).sum()) if g.size else slope
+            Jdu = Jdu + turn
             # the multipliers' Newton steps, and the fraction to the boundary on the bounds and on them
             dlam = (tau - lam * g - lam * Jdu) / g if g.size else np.zeros(0)
             dzl = np.where(free, (tau - zl * sl - zl * du) / np.maximum(sl, 1e-300), 0.0)
@@ -99,8 +112,6 @@ class Barrier:
                 if neg.any():
                     ad = min(ad, FTB * float(np.min(-v[neg] / d[neg])))
             phi0 = self._phi(f, g, sl, su, tau)
-            slope = float(df @ du - tau * (Jdu / g).sum() - tau * np.sum(np.where(free, du / np.maximum(sl, 1e-300)
-                                                                                     - du / np.maximum(su, 1e-300), 0.0)))
             # the Newton decrement of phi / tau (self-concordant): small means on the central path
             if -slope <= DECREMENT * tau:
                 if tau <= tau_end:
@@ -111,18 +122,22 @@ class Barrier:
             accepted = False
             for _ in range(40):
                 un = u + a * du
+                if at is not None:
+                    at(a)
                 gn = self.cuts(un, 0)[0]
                 if not gn.size or (np.all(gn > 0) and np.all(gn >= (1.0 - FTB) * g)):  # no cut approached too fast
                     fn, dfn, d2fn = self.cost(un)
                     sln, sun = un - lu, uu - un
                     phin = self._phi(fn, gn, sln, sun, tau)
-                    if phin <= phi0 + 1e-4 * a * min(slope, 0.0) + 1e-15 * abs(phi0):
+                    if phin <= phi0 + 1e-4 * a * min(path_slope, 0.0) + 1e-15 * abs(phi0):
                         accepted = True
                         break
                 a *= 0.5
             if DEBUG:
                 print(f"    it {it} tau {tau:.1e} a {a:.1e} dec {-slope / tau:.2e} g {gn if accepted else None}")
             if not accepted:
+                if at is not None:
+                    at(0.0)
                 return BarrierResult(u, lam, zu - zl, it, tau <= 1e3 * tau_end,
                                      f"line search failed at tau {tau:.1e} (Newton decrement {-slope / tau:.1e})")
             u, f, df, d2f, sl, su = un, fn, dfn, d2fn, sln, sun

@@ -1,0 +1,225 @@
+"""The exact solver's cut set: (pose, direction) constraints ``P(|w . dr| <= R) >= p`` whose
+directions follow the worst one while the interior-point method moves the tolerances.
+
+A cut at a fixed direction ``w`` approximates the pose's constraint ``min_w P(w, u) >= p`` with a
+gradient error proportional to the distance of ``w`` from the minimiser: an exchange of fixed cuts
+closes on the optimum only linearly (a new cut per round, each a little nearer).  A *tracking* cut
+instead stands for ``h(u) = min_w P(w, u)`` over directions near its own: at a local minimum
+``w*(u)`` on the sphere, ``grad h = dP/du`` there (P is stationary in w) and
+``hess h = P_uu - P_ut Hr^-1 P_tu`` (``Hr`` the Riemannian Hessian in w, ``t`` two tangent
+coordinates).  Along a Newton step ``du`` of the tolerances the direction takes the joint Newton
+step ``dt = -Hr^-1 (grad_t P + P_tu du)``, so the minimiser and the optimum converge together.
+None of this enters the certificate: the branch and bound proves every direction afresh, and the
+lower bound is valid for any set of directions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from tolsynth.solvers.exact_series import derivatives, probability
+
+__all__ = ["Cuts", "sphere_model", "minimise_directions"]
+
+#: derivatives' truncation tolerance for the cuts (the barrier's margins stay far above it)
+CUT_EVAL_TOL = 1e-11
+#: largest direction step (rad) of one Newton step on the sphere
+MAX_TURN = 0.2
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _tangent(W: np.ndarray) -> np.ndarray:
+    """An orthonormal tangent basis (m, 3, 2) at each unit row of W."""
+    e = np.eye(3)[np.argmin(np.abs(W), axis=1)]
+    e1 = _unit(np.cross(W, e))
+    return np.stack([e1, np.cross(W, e1)], axis=2)
+
+
+def sphere_model(A3: np.ndarray, W: np.ndarray, G: np.ndarray, H: np.ndarray):
+    """For rows ``c = |W_j . A3_j|`` with their derivatives in u (G (m, n), H (m, n, n)): the
+    tangent basis E (m, 3, 2), the tangent gradient gt (m, 2) and Riemannian Hessian Hr (m, 2, 2) of
+    P in w, and the mixed derivatives B = P_ut (m, n, 2).  ``d ln b_i / dw = a_i / y_i`` with
+    ``y_i = w . a_i``; a term with y_i near 0 (P is even in it) is left out."""
+    y = np.einsum("mxn,mx->mn", A3, W)
+    big = np.abs(y) > 1e-9 * np.maximum(np.abs(y).max(axis=1, keepdims=True), 1e-300)
+    inv = np.where(big, 1.0 / np.where(big, y, 1.0), 0.0)
+    Mi = A3 * inv[:, None, :]  # (m, 3, n)
+    gw = np.einsum("mxn,mn->mx", Mi, G)
+    Hg = H - G[:, :, None] * np.eye(G.shape[1])[None]
+    Hw = np.einsum("mxn,mnk,myk->mxy", Mi, Hg, Mi)
+    E = _tangent(W)
+    gt = np.einsum("mxa,mx->ma", E, gw)
+    Hr = np.einsum("mxa,mxy,myb->mab", E, Hw, E) - np.einsum("mx,mx->m", W, gw)[:, None, None] * np.eye(2)[None]
+    B = np.einsum("mnk,myk,mya->mna", H, Mi, E)
+    return E, gt, Hr, B
+
+
+def _positive(Hr: np.ndarray) -> np.ndarray:
+    ev = np.linalg.eigvalsh(Hr)
+    return ev[:, 0] > 1e-12 * np.maximum(np.abs(ev[:, 1]), 1e-300)
+
+
+def minimise_directions(A3: np.ndarray, W0: np.ndarray, u: np.ndarray, shapes: tuple, R, steps: int = 20,
+                        tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
+    """Local minima of P over unit directions from each row of W0 (A3 (m, 3, n) the rows' blocks,
+    R one per row or a number), all rows at once: Newton's method on the sphere (a short gradient
+    step where the Riemannian Hessian is not positive definite), steps at most :data:`MAX_TURN`,
+    halved where P does not fall.  Returns the directions and their P."""
+    W = _unit(np.asarray(W0, dtype=float))
+    m = W.shape[0]
+    Rv = np.broadcast_to(np.asarray(R, dtype=float), (m,)).copy()
+    A3 = np.asarray(A3, dtype=float)
+    P, G, H, _, _ = derivatives(np.abs(np.einsum("mxn,mx->mn", A3, W)), u, shapes, Rv, tol=tol)
+    scale = np.ones(m)
+    live = np.ones(m, dtype=bool)
+    for _ in range(steps):
+        idx = np.flatnonzero(live)
+        if not idx.size:
+            break
+        E, gt, Hr, _ = sphere_model(A3[idx], W[idx], G[idx], H[idx])
+        pd = _positive(Hr)
+        d = np.empty_like(gt)
+        if pd.any():
+            d[pd] = -np.linalg.solve(Hr[pd], gt[pd][:, :, None])[:, :, 0]
+        ng = np.maximum(np.linalg.norm(gt, axis=1), 1e-300)
+        d[~pd] = -gt[~pd] * (0.05 / ng[~pd])[:, None]
+        nd = np.linalg.norm(d, axis=1)
+        d *= (np.minimum(1.0, MAX_TURN / np.maximum(nd, 1e-300)) * scale[idx])[:, None]
+        nd = np.linalg.norm(d, axis=1)
+        done = nd < 1e-9
+        live[idx[done]] = False
+        idx, E, d, nd = idx[~done], E[~done], d[~done], nd[~done]
+        if not idx.size:
+            break
+        Wt = _unit(W[idx] + np.einsum("mxa,ma->mx", E, d))
+        Pt, Gt, Ht, _, _ = derivatives(np.abs(np.einsum("mxn,mx->mn", A3[idx], Wt)), u, shapes, Rv[idx], tol=tol)
+        better = Pt < P[idx]
+        acc = idx[better]
+        W[acc], P[acc], G[acc], H[acc] = Wt[better], Pt[better], Gt[better], Ht[better]
+        scale[acc] = 1.0
+        rej = idx[~better]
+        scale[rej] *= 0.5
+        live[rej[nd[~better] < 1e-10]] = False
+    return W, P
+
+
+class Cuts:
+    """The cut set: per cut its block's rows ``A`` (3 x n per tolerance unit), R, p, block index,
+    direction ``w`` and whether the direction tracks a local minimum of P.  Called as
+    ``cuts(u, order)`` it gives ``g = (P - p) / (1 - p)`` per cut and (order 2) the Jacobian and
+    Hessians in u (the tracking cuts' Hessians those of ``min_w P``); :meth:`plan` and :meth:`at`
+    let the interior-point line search move the tracking directions with the tolerances."""
+
+    def __init__(self, shapes, same_cut: float):
+        self.shapes = tuple(shapes)
+        self.same_cut = same_cut
+        self.A: list = []
+        self.R: list = []
+        self.p: list = []
+        self.block: list = []
+        self.w: list = []
+        self.moving: list = []
+        self._model = None  # (u_ref, E, Hr^-1, gt, B) of the tracking cuts at the last order-2 evaluation
+        self._dt = None  # the tracking cuts' tangent steps for a whole Newton step
+        self._a = 0.0
+
+    def __len__(self) -> int:
+        return len(self.w)
+
+    def add(self, blk_index: int, A: np.ndarray, R: float, p: float, w: np.ndarray, moving: bool = False) -> bool:
+        """Add the cut unless its pose has one within ``same_cut`` rad (up to sign) or one with the
+        same row ``|w . a_i|`` (a mirror direction of a symmetric pose); True if added."""
+        w = np.asarray(w, dtype=float) / np.linalg.norm(w)
+        c = np.abs(w @ A)
+        cmax = max(float(c.max()), 1e-300)
+        for b, v, Ak in zip(self.block, self.w, self.A):
+            if b != blk_index:
+                continue
+            if abs(float(v @ w)) > math.cos(self.same_cut) or np.max(np.abs(np.abs(v @ Ak) - c)) <= 1e-12 * cmax:
+                return False
+        self.A.append(np.asarray(A, dtype=float))
+        self.R.append(float(R))
+        self.p.append(float(p))
+        self.block.append(blk_index)
+        self.w.append(w)
+        self.moving.append(bool(moving))
+        self._model = self._dt = None
+        return True
+
+    def rows(self, W=None) -> np.ndarray:
+        W = np.array(self.w) if W is None else W
+        return np.abs(np.einsum("mxn,mx->mn", np.array(self.A), W))
+
+    def arrays(self):
+        return self.rows(), np.array(self.R), np.array(self.p)
+
+    # ---------------------------------------------------------------------- tracking directions
+    def _directions(self) -> np.ndarray:
+        """The directions at the current step fraction of the planned step."""
+        W = np.array(self.w)
+        if self._dt is None or self._a == 0.0:
+            return W
+        mv = np.flatnonzero(self.moving)
+        E = self._model[1]
+        W[mv] = _unit(W[mv] + self._a * np.einsum("mxa,ma->mx", E, self._dt))
+        return W
+
+    def plan(self, u: np.ndarray, du: np.ndarray, newton: bool = True) -> np.ndarray:
+        """Fix the tracking directions' path for the Newton step ``du`` from ``u`` and return each
+        cut's derivative of g along it due to the turning (zero for fixed cuts): the joint Newton
+        step, or (``newton=False``) only the turn that follows the minimiser's shift."""
+        self._a = 0.0
+        self._dt = None
+        extra = np.zeros(len(self.w))
+        if self._model is None or not np.array_equal(self._model[0], u):
+            return extra
+        _, E, Hinv, gt, B, pd = self._model
+        Bdu = np.einsum("mna,n->ma", B, du)
+        dt = -np.einsum("mab,mb->ma", Hinv, gt + Bdu if newton else Bdu)
+        dt[~pd] = 0.0  # no turn where P is not at a local minimum in w
+        nd = np.linalg.norm(dt, axis=1)
+        dt *= np.minimum(1.0, MAX_TURN / np.maximum(nd, 1e-300))[:, None]
+        mv = np.flatnonzero(self.moving)
+        scale = 1.0 / (1.0 - np.array(self.p)[mv])
+        extra[mv] = np.einsum("ma,ma->m", gt, dt) * scale
+        self._dt = dt
+        return extra
+
+    def at(self, a: float) -> None:
+        """The fraction of the planned step that the next evaluations stand at."""
+        self._a = float(a)
+
+    def __call__(self, u, order):
+        """``g = (P - p)/(1 - p)`` per cut, and (order 2) its Jacobian and Hessians in u; an order-2
+        evaluation makes its directions the current ones."""
+        n = np.size(u)
+        if not self.w:
+            return np.zeros(0), np.zeros((0, n)), np.zeros((0, n, n))
+        W = self._directions()
+        C = self.rows(W)
+        R, p = np.array(self.R), np.array(self.p)
+        s = 1.0 / (1.0 - p)
+        if order == 0:
+            P, _ = probability(C * np.exp(u)[None, :], self.shapes, R, CUT_EVAL_TOL)
+            return (P - p) * s, None, None
+        P, G, H, _, _ = derivatives(C, u, self.shapes, R, tol=CUT_EVAL_TOL)
+        self.w = list(W)
+        self._dt, self._a = None, 0.0
+        mv = np.flatnonzero(self.moving)
+        Hh = H.copy()
+        if mv.size:
+            E, gt, Hr, B = sphere_model(np.array(self.A)[mv], W[mv], G[mv], H[mv])
+            pd = _positive(Hr)
+            Hinv = np.zeros_like(Hr)
+            if pd.any():
+                Hinv[pd] = np.linalg.inv(Hr[pd])
+            Hh[mv] = H[mv] - np.einsum("mna,mab,mkb->mnk", B, Hinv, B)
+            self._model = (np.array(u, dtype=float), E, Hinv, gt, B, pd)
+        else:
+            self._model = None
+        return (P - p) * s, G * s[:, None], Hh * s[:, None, None]
