@@ -45,11 +45,12 @@ from tolsynth.probability.exact import (
 from tolsynth.probability.stats import p_ball, p_components, p_cone, z_of_p
 from tolsynth.problem.result import Status, SynthesisResult
 from tolsynth.synthesis.budget import BudgetResult, best_accuracy
+from tolsynth.synthesis.compare import Comparison, compare
 from tolsynth.synthesis.grades import GradeChoice, round_to_grades
 from tolsynth.synthesis.options import DesignSpec, SolverOptions
 from tolsynth.synthesis.pareto import ParetoFront, pareto_front
 from tolsynth.synthesis.processes import Process, ProcessChoice, synthesize_processes
-from tolsynth.synthesis.single import Comparison, compare, synthesize
+from tolsynth.synthesis.single import synthesize
 from tolsynth.synthesis.sweeps import sweep
 from tolsynth.synthesis.workspace import WorkspaceSynthesis, synthesize_workspace
 from tolsynth.version import __version__  # noqa: F401  (the package version, as tolsynth.__version__)

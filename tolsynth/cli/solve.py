@@ -116,7 +116,8 @@ def _spec_kwargs(mech, args) -> tuple:
 
 
 def cmd_solve(args) -> int:
-    from tolsynth.synthesis.single import compare, synthesize
+    from tolsynth.synthesis.compare import compare
+    from tolsynth.synthesis.single import synthesize
 
     check_table_out(args)  # before any work
     mech = load_model(args.model)

@@ -36,7 +36,7 @@ import numpy as np
 from tolsynth.checks import check_count
 from tolsynth.errors import InfeasibleSpecificationError, InputError, OutOfRangeError
 from tolsynth.model import iso286
-from tolsynth.solvers.common import FEAS_TOL
+from tolsynth.synthesis.grades_eval import _achieved, constraint_values, meets
 from tolsynth.tabular import Tabular
 
 __all__ = ["GradeChoice", "round_to_grades", "grade_candidates", "constraint_values", "meets"]
@@ -98,27 +98,45 @@ class GradeChoice(Tabular):
         return self.cost_increase / self.continuous_cost
 
     def summary(self) -> str:
-        lines = [f"standard grades: cost {self.cost:.8g}, {100 * self.relative_increase:+.2f} % over the continuous "
-                 f"optimum {self.continuous_cost:.8g} (lower bound {self.lower_bound:.8g}, "
-                 f"{'proven' if self.proven else 'NOT proven'}); {self.nodes} solves and checks for "
-                 f"{self.combinations} combinations",
-                 f"rounding every tolerance down to the next finer grade instead: cost {self.rounded_down['cost']:.8g}",
-                 f"achieved ({self.probability} probability): {self.achieved:.8g}; largest constraint value "
-                 f"{max(self.values):.6f}"]
+        lines = [
+            f"standard grades: cost {self.cost:.8g}, {100 * self.relative_increase:+.2f} % over the continuous "
+            f"optimum {self.continuous_cost:.8g} (lower bound {self.lower_bound:.8g}, "
+            f"{'proven' if self.proven else 'NOT proven'}); {self.nodes} solves and checks for "
+            f"{self.combinations} combinations",
+            f"rounding every tolerance down to the next finer grade instead: cost {self.rounded_down['cost']:.8g}",
+            f"achieved ({self.probability} probability): {self.achieved:.8g}; largest constraint value "
+            f"{max(self.values):.6f}",
+        ]
         for name, g in self.grades.items():
             size = f" at {self.sizes[name]:g} mm" if name in self.sizes else ""
-            lines.append(f"  {name:>8}: {g:<8} eps = {self.tolerances[name]:.6g} {self.units[name]}{size} "
-                         f"(continuous {self.continuous[name]:.6g})")
+            lines.append(
+                f"  {name:>8}: {g:<8} eps = {self.tolerances[name]:.6g} {self.units[name]}{size} "
+                f"(continuous {self.continuous[name]:.6g})"
+            )
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
-        return {"grades": self.grades, "tolerances": self.tolerances, "units": self.units, "cost": self.cost,
-                "continuous_cost": self.continuous_cost, "cost_increase": self.cost_increase,
-                "relative_increase": self.relative_increase, "lower_bound": self.lower_bound, "gap": self.gap,
-                "proven": self.proven, "probability": self.probability, "achieved": self.achieved,
-                "values": list(self.values), "rounded_down": self.rounded_down, "nodes": self.nodes,
-                "combinations": self.combinations, "sizes": self.sizes, "continuous": self.continuous,
-                "wall_time": self.wall_time}
+        return {
+            "grades": self.grades,
+            "tolerances": self.tolerances,
+            "units": self.units,
+            "cost": self.cost,
+            "continuous_cost": self.continuous_cost,
+            "cost_increase": self.cost_increase,
+            "relative_increase": self.relative_increase,
+            "lower_bound": self.lower_bound,
+            "gap": self.gap,
+            "proven": self.proven,
+            "probability": self.probability,
+            "achieved": self.achieved,
+            "values": list(self.values),
+            "rounded_down": self.rounded_down,
+            "nodes": self.nodes,
+            "combinations": self.combinations,
+            "sizes": self.sizes,
+            "continuous": self.continuous,
+            "wall_time": self.wall_time,
+        }
 
 
 # ---------------------------------------------------------------------------------------------
@@ -133,8 +151,11 @@ def _table_for(table, name: str):
     if entry is None:
         return None
     if not isinstance(entry, Mapping) or not entry:
-        raise InputError(f"table[{name}]", f"got {entry!r}", "a non-empty dict grade label -> tolerance "
-                                                              "(the parameter's tolerance unit)")
+        raise InputError(
+            f"table[{name}]",
+            f"got {entry!r}",
+            "a non-empty dict grade label -> tolerance (the parameter's tolerance unit)",
+        )
     out = {}
     for label, value in entry.items():
         try:
@@ -163,9 +184,13 @@ def grade_candidates(mechanism, sizes=None, table=None) -> dict[str, dict[str, f
             out[par.name] = dict(sorted(own.items(), key=lambda kv: kv[1]))
             continue
         if par.kind != "length":
-            raise InputError(f"table[{par.name}]", f"{par.name} is an angle ({par.unit}) and ISO 286 grades are for "
-                                                   "linear sizes", "a user grade table for it: table={'" + par.name
-                             + "': {'A1': 0.01, ...}} in its tolerance unit (or '*' for every parameter)")
+            raise InputError(
+                f"table[{par.name}]",
+                f"{par.name} is an angle ({par.unit}) and ISO 286 grades are for linear sizes",
+                "a user grade table for it: table={'"
+                + par.name
+                + "': {'A1': 0.01, ...}} in its tolerance unit (or '*' for every parameter)",
+            )
         size = _size_of(mechanism, par, sizes)
         # ISO gives mm; the parameter's tolerance unit is par.scale mm
         out[par.name] = {g: v / par.scale for g, v in iso286.grades_for(size).items()}
@@ -180,83 +205,20 @@ def _size_of(mechanism, par, sizes) -> float:
     nominal = [abs(mechanism.spec.symbols.get(s, 0.0)) for s in par.perturbs]
     nominal = [v for v in nominal if v > 0]
     if not nominal:
-        raise InputError(f"sizes[{par.name}]", f"{par.name} perturbs a dimension of nominal size 0 "
-                                               f"({', '.join(par.perturbs) or 'a joint'})",
-                         "its nominal size in mm for the ISO 286 grade, e.g. sizes={'" + par.name + "': 50}")
+        raise InputError(
+            f"sizes[{par.name}]",
+            f"{par.name} perturbs a dimension of nominal size 0 ({', '.join(par.perturbs) or 'a joint'})",
+            "its nominal size in mm for the ISO 286 grade, e.g. sizes={'" + par.name + "': 50}",
+        )
     return max(nominal)
-
-
-# ---------------------------------------------------------------------------------------------
-# the specification at given tolerances
-# ---------------------------------------------------------------------------------------------
-def constraint_values(spec, probability: str, eps) -> np.ndarray:
-    """Every constraint block's value at ``eps`` (``<= 1`` meets it), in the reading of
-    ``probability``: Gaussian sigma z / limit (sphere (1 - P)/(1 - p)), exact (1 - P)/(1 - p) along
-    the worst direction found (in the sphere: its exact P), or the worst case's max |error| / limit;
-    :func:`meets` gives the verdict (for the exact reading a certified one)."""
-    return _evaluate(spec, probability, eps)[0]
-
-
-def meets(spec, probability: str, eps) -> bool:
-    """Does ``eps`` meet the specification, checked as the solver of ``probability`` checks an
-    optimum: every value within 1e-6 of 1, or for the exact probabilities every direction of
-    every pose proven to reach p - 1e-7 (the exact solver's branch and bound over directions)."""
-    return _evaluate(spec, probability, eps)[1]
-
-
-def _evaluate(spec, probability: str, eps) -> tuple[np.ndarray, bool]:
-    eps = np.asarray(eps, dtype=float)
-    if probability == "worst_case":
-        from tolsynth.solvers.worst_case import _blocks, worst_case_values
-
-        vals = np.array([v for v, _, _ in worst_case_values(_blocks(spec), eps)])
-        return vals, bool(vals.max() <= 1.0 + FEAS_TOL)
-    if probability == "gaussian":
-        from tolsynth.problem.nlp import ToleranceNLP
-
-        vals = np.array([float(v[0]) for v in ToleranceNLP(spec).all_values(eps)])
-        return vals, bool(vals.max() <= 1.0 + FEAS_TOL)
-    from tolsynth.probability import exact as ex
-    from tolsynth.solvers.exact import EXACT_TOL
-    from tolsynth.solvers.exact_certify import cover
-
-    out, ok = [], True
-    for b in spec.blocks:
-        limit, p = (spec.R, spec.p) if b.kind == "position" else (spec.Phi, spec.p_orientation)
-        A = np.asarray(b.A) / spec.col_scale
-        # the value: P along the worst direction found (what the design achieves); the verdict:
-        # the certified cover, whose own bound only needs to clear p and is not the achieved P
-        P = ex.worst_direction(A, eps, spec.shapes, limit, tol=1e-10)[1]
-        ok = ok and cover(A * eps, spec.shapes, limit, p, tol=EXACT_TOL).certified
-        out.append((1.0 - P) / (1.0 - p))
-    for b in spec.sphere_blocks:
-        P = ex.ball_probability(np.asarray(b.A) / spec.col_scale, eps, spec.shapes, b.R, tol=1e-8)
-        ok = ok and P >= b.p - EXACT_TOL
-        out.append((1.0 - P) / (1.0 - b.p))
-    return np.array(out), ok
-
-
-def _achieved(spec, probability: str, values: np.ndarray) -> float:
-    """The smallest probability any block achieves, from its constraint value."""
-    if probability == "worst_case":
-        return 1.0 if values.max() <= 1.0 + FEAS_TOL else 0.0
-    ps = []
-    for b, v in zip(spec.blocks, values):
-        if probability == "gaussian":
-            z = b.scale * (spec.R if b.kind == "position" else spec.Phi)
-            ps.append(math.erf(z / (v * math.sqrt(2.0))) if v > 0 else 1.0)
-        else:
-            ps.append(1.0 - v * (1.0 - (spec.p if b.kind == "position" else spec.p_orientation)))
-    for b, v in zip(spec.sphere_blocks, values[len(spec.blocks):]):
-        ps.append(1.0 - v * (1.0 - b.p))
-    return float(min(ps))
 
 
 # ---------------------------------------------------------------------------------------------
 # the search
 # ---------------------------------------------------------------------------------------------
-def round_to_grades(mechanism, result, sizes=None, table=None, *, rel_gap: float = 1e-6,
-                    max_nodes: int = 5000) -> GradeChoice:
+def round_to_grades(
+    mechanism, result, sizes=None, table=None, *, rel_gap: float = 1e-6, max_nodes: int = 5000
+) -> GradeChoice:
     """The cheapest standard grades meeting ``result``'s specification, with a proven optimum.
 
     Parameters
@@ -311,7 +273,9 @@ def _expand_patterns(mechanism, table):
         if key != "*" and any(c in str(key) for c in "*?["):
             hits = [n for n in mechanism.error_parameters if fnmatch.fnmatchcase(n, str(key))]
             if not hits:
-                raise InputError("table", f"pattern {key!r} matches no parameter", ", ".join(mechanism.error_parameters))
+                raise InputError(
+                    "table", f"pattern {key!r} matches no parameter", ", ".join(mechanism.error_parameters)
+                )
             out.update({h: value for h in hits})
         else:
             if key != "*":
@@ -330,13 +294,18 @@ class _Search:
         for i, name in enumerate(spec.names):
             if self.lower[i] == self.upper[i]:
                 continue  # locked: keeps its value
-            cand = [(g, v) for g, v in candidates[name].items()
-                    if self.lower[i] * (1 - 1e-12) <= v <= self.upper[i] * (1 + 1e-12)]
+            cand = [
+                (g, v)
+                for g, v in candidates[name].items()
+                if self.lower[i] * (1 - 1e-12) <= v <= self.upper[i] * (1 + 1e-12)
+            ]
             if not cand:
                 raise InfeasibleSpecificationError(
-                    f"grades[{name}]", float(self.eps_c[i]),
+                    f"grades[{name}]",
+                    float(self.eps_c[i]),
                     f"no grade of {name} lies within its bounds [{self.lower[i]:g}, {self.upper[i]:g}] "
-                    f"{spec.units[i]}: widen the bounds or give a grade table")
+                    f"{spec.units[i]}: widen the bounds or give a grade table",
+                )
             self.free.append(i)
             self.labels[i] = [g for g, _ in cand]
             self.values[i] = np.array([v for _, v in cand])
@@ -401,11 +370,19 @@ class _Search:
         # no x0: the parent's optimum clipped to the box breaks the specification and costs IPOPT
         # 40-80 iterations, where the solver's own warm start (its remembered cuts) needs about one
         cost = None if spec.costs.power_law() is not None else list(spec.costs.models)
-        kw = dict(bounds=(lo, hi), poses=list(spec.poses.values()), Phi=spec.Phi, alpha=spec.alpha, k=spec.k,
-                  cost=cost, probability=self.prob)
+        kw = dict(
+            bounds=(lo, hi),
+            poses=list(spec.poses.values()),
+            Phi=spec.Phi,
+            alpha=spec.alpha,
+            k=spec.k,
+            cost=cost,
+            probability=self.prob,
+        )
         if self.prob != "worst_case":
-            kw.update(p=spec.p, distribution=spec.distribution, p_orientation=spec.p_orientation,
-                      criterion=spec.criterion)
+            kw.update(
+                p=spec.p, distribution=spec.distribution, p_orientation=spec.p_orientation, criterion=spec.criterion
+            )
         self.solves += 1
         try:
             res = synthesize(self.mech, spec.R, **kw)
@@ -455,9 +432,12 @@ class _Search:
         down_cost = self.cost(down)
         if not self.feasible(down):
             raise InfeasibleSpecificationError(
-                "grades", down_cost, "the tolerances rounded down to the next finer grade do not meet the "
-                                     "specification: the continuous optimum is not feasible, or a tolerance lies "
-                                     "below every grade inside its bounds")
+                "grades",
+                down_cost,
+                "the tolerances rounded down to the next finer grade do not meet the "
+                "specification: the continuous optimum is not feasible, or a tolerance lies "
+                "below every grade inside its bounds",
+            )
         inc = self.improve(down)
         inc_cost = self.cost(inc)
         root = tuple((0, len(self.values[i]) - 1) for i in self.free)
@@ -512,14 +492,25 @@ class _Search:
         for i, j in zip(self.free, inc):
             grades[names[i]] = self.labels[i][j]
         return GradeChoice(
-            grades=grades, tolerances=dict(zip(names, map(float, eps))), units=dict(zip(names, self.spec.units)),
-            cost=inc_cost, continuous_cost=float(self.result.cost), lower_bound=lower, gap=gap,
-            proven=not heap and gap <= rel_gap * abs(inc_cost) + 1e-12, probability=self.prob,
-            achieved=_achieved(self.spec, self.prob, values), values=[float(v) for v in values],
+            grades=grades,
+            tolerances=dict(zip(names, map(float, eps))),
+            units=dict(zip(names, self.spec.units)),
+            cost=inc_cost,
+            continuous_cost=float(self.result.cost),
+            lower_bound=lower,
+            gap=gap,
+            proven=not heap and gap <= rel_gap * abs(inc_cost) + 1e-12,
+            probability=self.prob,
+            achieved=_achieved(self.spec, self.prob, values),
+            values=[float(v) for v in values],
             rounded_down={"grades": {names[i]: self.labels[i][j] for i, j in zip(self.free, down)}, "cost": down_cost},
-            nodes=self.solves + self.checks, combinations=combos, wall_time=time.perf_counter() - t0,
-            sizes=_sizes_used(self.mech, sizes, self.free), continuous=dict(zip(names, map(float, self.eps_c))),
-            log=log)
+            nodes=self.solves + self.checks,
+            combinations=combos,
+            wall_time=time.perf_counter() - t0,
+            sizes=_sizes_used(self.mech, sizes, self.free),
+            continuous=dict(zip(names, map(float, self.eps_c))),
+            log=log,
+        )
 
     def _branch(self, node, eps) -> tuple[int, int]:
         """The parameter whose rounding down costs most at the relaxation's point, split there."""

@@ -9,8 +9,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from tolsynth.checks import TINY, check_count, check_mapping, check_options, check_time_limit, check_vector
@@ -22,9 +20,8 @@ from tolsynth.problem.specification import SPHERE_NODES, make_specification
 from tolsynth.progress import time_limit as deadline
 from tolsynth.solvers.exact import PROBABILITIES
 from tolsynth.synthesis.options import DesignSpec, SolverOptions, merge_groups
-from tolsynth.tabular import Tabular
 
-__all__ = ["synthesize", "compare", "Comparison", "SOLVERS"]
+__all__ = ["synthesize", "SOLVERS"]
 
 
 def _auto(nlp, eps0, options):
@@ -189,16 +186,56 @@ def synthesize(
     """
     if spec is not None or isinstance(solver, SolverOptions):
         args = merge_groups(
-            dict(R=R, p=p, distribution=distribution, alpha=alpha, k=k, bounds=bounds, pose=pose, poses=poses,
-                 Phi=Phi, p_orientation=p_orientation, criterion=criterion, cost=cost, locks=locks,
-                 probability=probability, options=options, x0=x0, validate=validate, seed=seed, verify=verify,
-                 time_limit=time_limit, **({} if isinstance(solver, SolverOptions) else {"solver": solver})),
-            spec, solver if isinstance(solver, SolverOptions) else None)
+            dict(
+                R=R,
+                p=p,
+                distribution=distribution,
+                alpha=alpha,
+                k=k,
+                bounds=bounds,
+                pose=pose,
+                poses=poses,
+                Phi=Phi,
+                p_orientation=p_orientation,
+                criterion=criterion,
+                cost=cost,
+                locks=locks,
+                probability=probability,
+                options=options,
+                x0=x0,
+                validate=validate,
+                seed=seed,
+                verify=verify,
+                time_limit=time_limit,
+                **({} if isinstance(solver, SolverOptions) else {"solver": solver}),
+            ),
+            spec,
+            solver if isinstance(solver, SolverOptions) else None,
+        )
         return synthesize(mechanism, **args)
     if probability == "worst_case":  # every error anywhere in its band: no p or distribution needed
-        return _worst_case(mechanism, R, p, distribution, alpha, "ipopt" if solver == "auto" else solver, k, bounds,
-                           pose, poses, Phi, p_orientation,
-                           criterion, cost, locks, x0, options, validate, verify, time_limit)
+        return _worst_case(
+            mechanism,
+            R,
+            p,
+            distribution,
+            alpha,
+            "ipopt" if solver == "auto" else solver,
+            k,
+            bounds,
+            pose,
+            poses,
+            Phi,
+            p_orientation,
+            criterion,
+            cost,
+            locks,
+            x0,
+            options,
+            validate,
+            verify,
+            time_limit,
+        )
     if R is None or p is None:
         missing = "R" if R is None else "p"
         raise InputError(missing, "missing", f"a value for {missing} (a keyword, or spec=DesignSpec({missing}=...))")
@@ -210,9 +247,20 @@ def synthesize(
         pose, chosen = _default_pose(mechanism)  # a model without a 'worst' pose (from_dh, load_urdf)
     if not isinstance(solver, str) or solver not in SOLVERS:
         raise InputError("solver", f"unknown solver {solver!r}", " or ".join(repr(s) for s in SOLVERS))
-    again = dict(k=k, bounds=bounds, pose=pose, poses=poses, Phi=Phi, p_orientation=p_orientation,
-                 criterion=criterion, cost=cost, locks=locks, options=options, probability=probability,
-                 time_limit=time_limit)
+    again = dict(
+        k=k,
+        bounds=bounds,
+        pose=pose,
+        poses=poses,
+        Phi=Phi,
+        p_orientation=p_orientation,
+        criterion=criterion,
+        cost=cost,
+        locks=locks,
+        options=options,
+        probability=probability,
+        time_limit=time_limit,
+    )
 
     if not isinstance(probability, str) or probability not in PROBABILITIES:
         raise InputError("probability", f"got {probability!r}", " or ".join(repr(s) for s in PROBABILITIES))
@@ -248,8 +296,9 @@ def synthesize(
 
     # the solver's fresh result gets its inputs in place of a dataclasses.replace (which runs
     # __init__ over every field again: ~3 % of a warm solve)
-    object.__setattr__(result, "inputs", _run_inputs(mechanism, solver, options, locks, x0, validate, seed,
-                                                     probability, verify))
+    object.__setattr__(
+        result, "inputs", _run_inputs(mechanism, solver, options, locks, x0, validate, seed, probability, verify)
+    )
     if chosen is not None:
         result.inputs["default_pose"] = chosen
     if result.success:
@@ -261,8 +310,14 @@ def synthesize(
         from tolsynth.analysis.validation import validate as mc_validate
 
         report = mc_validate(  # at every pose of the design, the worst one reported first
-            mechanism, result, R=R, p=p, distribution=distribution,
-            pose=[pose] if poses is None else list(poses), n=int(validate), seed=seed,
+            mechanism,
+            result,
+            R=R,
+            p=p,
+            distribution=distribution,
+            pose=[pose] if poses is None else list(poses),
+            n=int(validate),
+            seed=seed,
         )
         result = replace(result, validation=report)
     if verify is not None and verify is not False:
@@ -271,8 +326,16 @@ def synthesize(
         def solve(p_target):
             return synthesize(mechanism, R, p_target, distribution, alpha, solver, x0=result.x, **again)
 
-        result = closed_loop(solve, mechanism, result, p=p, R=R, distribution=distribution,
-                             n=None if verify is True else verify, seed=seed)
+        result = closed_loop(
+            solve,
+            mechanism,
+            result,
+            p=p,
+            R=R,
+            distribution=distribution,
+            n=None if verify is True else verify,
+            seed=seed,
+        )
         result = replace(result, inputs={**(result.inputs or {}), "verify": verify})  # the re-solves' record it not
     return result
 
@@ -292,8 +355,10 @@ def _default_pose(mechanism):
     try:
         w = worst_pose(mechanism, np.sqrt(lo * hi), criterion="sigma", reference=None)
         q = np.asarray(w.q, dtype=float)
-        text = (f"the worst-pose search's pose q = {mechanism.format_joints(q)} "
-                "(largest principal sigma at the middle of the bounds; the model has no 'worst' configuration)")
+        text = (
+            f"the worst-pose search's pose q = {mechanism.format_joints(q)} "
+            "(largest principal sigma at the middle of the bounds; the model has no 'worst' configuration)"
+        )
         out = (q, text)
     except TolsynthError:
         first = next(iter(mechanism.configurations))
@@ -310,13 +375,44 @@ def _timed_out(nlp, solver: str, eps0, exc: TimeLimitError) -> SynthesisResult:
 
     eps = nlp.start_point() if eps0 is None else np.asarray(eps0, dtype=float)
     zero = np.zeros((len(nlp.spec.blocks), 3, 3))
-    return assemble(solver, nlp, eps, zero, np.zeros(nlp.spec.n), Status.TIME_LIMIT,
-                    f"{exc}; the tolerances are the start point, not a design", 0, 0, exc.limit, [],
-                    relaxation_bound=lambda n: n.dual_bound(zero))
+    return assemble(
+        solver,
+        nlp,
+        eps,
+        zero,
+        np.zeros(nlp.spec.n),
+        Status.TIME_LIMIT,
+        f"{exc}; the tolerances are the start point, not a design",
+        0,
+        0,
+        exc.limit,
+        [],
+        relaxation_bound=lambda n: n.dual_bound(zero),
+    )
 
 
-def _worst_case(mechanism, R, p, distribution, alpha, solver, k, bounds, pose, poses, Phi, p_orientation, criterion,
-                cost, locks, x0, options, validate, verify, time_limit=None):
+def _worst_case(
+    mechanism,
+    R,
+    p,
+    distribution,
+    alpha,
+    solver,
+    k,
+    bounds,
+    pose,
+    poses,
+    Phi,
+    p_orientation,
+    criterion,
+    cost,
+    locks,
+    x0,
+    options,
+    validate,
+    verify,
+    time_limit=None,
+):
     """``probability="worst_case"`` (:mod:`tolsynth.synthesis.worst_case`), with the statistical
     design at the same R and p beside it when p is given; ``time_limit`` bounds the worst-case
     solve (its ``options["time_limit"]``) and the statistical one alike."""
@@ -328,24 +424,53 @@ def _worst_case(mechanism, R, p, distribution, alpha, solver, k, bounds, pose, p
         if isinstance(options, dict) and "time_limit" in options:
             raise InputError("time_limit", "given twice: time_limit= and options['time_limit']", "one of the two")
         time_limit = check_time_limit(time_limit)
-        options = {**(options if isinstance(options, dict) else {}), "time_limit": time_limit} \
-            if options is None or isinstance(options, dict) else options
+        options = (
+            {**(options if isinstance(options, dict) else {}), "time_limit": time_limit}
+            if options is None or isinstance(options, dict)
+            else options
+        )
     for name, value in (("validate", validate), ("verify", verify)):
         if value is not None and value is not False:
-            raise InputError(name, "given with probability='worst_case' (it reads no probability)",
-                             "no Monte Carlo check, or a statistical probability ('gaussian' or 'exact')")
+            raise InputError(
+                name,
+                "given with probability='worst_case' (it reads no probability)",
+                "no Monte Carlo check, or a statistical probability ('gaussian' or 'exact')",
+            )
     mechanism = as_mechanism(mechanism)
     given = dict(k=k, bounds=bounds, pose=pose, poses=poses, Phi=Phi, cost=cost, locks=locks)
     cost, locks, bounds = _costs_and_locks(mechanism, cost, locks, bounds)
 
     def statistical():
-        return synthesize(mechanism, R, p, distribution, alpha, solver, p_orientation=p_orientation,
-                          criterion=criterion, time_limit=time_limit, **given)
+        return synthesize(
+            mechanism,
+            R,
+            p,
+            distribution,
+            alpha,
+            solver,
+            p_orientation=p_orientation,
+            criterion=criterion,
+            time_limit=time_limit,
+            **given,
+        )
 
     return synthesize_worst_case(
-        mechanism, R, p=p, alpha=alpha, solver=solver, k=k, bounds=bounds, pose=pose, poses=poses, Phi=Phi,
-        cost=cost, x0=x0, options=options, statistical=statistical,
-        inputs=_run_inputs(mechanism, solver, options, locks, x0, None, 0, "worst_case"))
+        mechanism,
+        R,
+        p=p,
+        alpha=alpha,
+        solver=solver,
+        k=k,
+        bounds=bounds,
+        pose=pose,
+        poses=poses,
+        Phi=Phi,
+        cost=cost,
+        x0=x0,
+        options=options,
+        statistical=statistical,
+        inputs=_run_inputs(mechanism, solver, options, locks, x0, None, 0, "worst_case"),
+    )
 
 
 def _costs_and_locks(mechanism, cost, locks, bounds):
@@ -379,9 +504,12 @@ def _refine_sphere(nlp, spec, result, solver, options):
         if off <= SPHERE_QUADRATURE_TOL:
             break
         if nlp.sphere_nodes >= 4 * SPHERE_NODES:
-            return replace(result, success=False, status=Status.NUMERICAL_ERROR,
-                           message=f"{result.message}; sphere quadrature still off by {off:.1e} "
-                                   f"with {nlp.sphere_nodes} nodes")
+            return replace(
+                result,
+                success=False,
+                status=Status.NUMERICAL_ERROR,
+                message=f"{result.message}; sphere quadrature still off by {off:.1e} with {nlp.sphere_nodes} nodes",
+            )
         nlp = ToleranceNLP(spec, sphere_nodes=2 * nlp.sphere_nodes)
         result = SOLVERS[solver](nlp, result.x, dict(options or {}))
     return result
@@ -390,89 +518,26 @@ def _refine_sphere(nlp, spec, result, solver, options):
 def _run_inputs(mechanism, solver, options, locks, x0, validate, seed, probability="gaussian", verify=None) -> dict:
     """What a result records beyond its specification (see :mod:`tolsynth.io.tables`)."""
     path = getattr(mechanism.spec, "path", None)
-    return {"model": {"name": mechanism.name, "title": mechanism.title, "file": str(path) if path else None},
-            "solver": solver, "options": dict(options or {}), "locks": dict(locks) if locks else None,
-            "probability": probability, "verify": None if verify is None or verify is False else verify,
-            "x0": None if x0 is None else np.asarray(mechanism.tolerances(x0), dtype=float).tolist(),
-            "validate": validate or None, "seed": seed if validate else None,
-            "joint_errors": _joint_error_inputs(mechanism)}
+    return {
+        "model": {"name": mechanism.name, "title": mechanism.title, "file": str(path) if path else None},
+        "solver": solver,
+        "options": dict(options or {}),
+        "locks": dict(locks) if locks else None,
+        "probability": probability,
+        "verify": None if verify is None or verify is False else verify,
+        "x0": None if x0 is None else np.asarray(mechanism.tolerances(x0), dtype=float).tolist(),
+        "validate": validate or None,
+        "seed": seed if validate else None,
+        "joint_errors": _joint_error_inputs(mechanism),
+    }
 
 
 def _joint_error_inputs(mechanism) -> dict | None:
     """Name -> joint, transform ("q": the joint variable), unit and fixed value of each joint
     error (:mod:`tolsynth.model.joint_errors`; a model file does not show those added in memory)."""
-    out = {p.name: {"joint": p.at_joint[0], "transform": p.at_joint[1], "unit": p.unit, "fixed": p.lock}
-           for p in mechanism.parameters if p.at_joint is not None}
-    return out or None
-
-
-@dataclass(frozen=True)
-class Comparison(Tabular):
-    """IPOPT and SUMT on the same specification, side by side."""
-
-    ipopt: SynthesisResult
-    sumt: SynthesisResult
-
-    @property
-    def cost_rel_diff(self) -> float:
-        """``|cost_SUMT - cost_IPOPT| / |cost_IPOPT|``."""
-        return abs(self.sumt.cost - self.ipopt.cost) / abs(self.ipopt.cost)
-
-    @property
-    def tolerance_rel_diff(self) -> dict[str, float]:
-        """Name -> ``|eps_SUMT - eps_IPOPT| / |eps_IPOPT|``."""
-        return {
-            k: abs(self.sumt.tolerances[k] - v) / abs(v) for k, v in self.ipopt.tolerances.items()
-        }
-
-    @property
-    def time_ratio(self) -> float:
-        """SUMT wall time / IPOPT wall time."""
-        return self.sumt.wall_time / self.ipopt.wall_time
-
-    def table(self) -> str:
-        """Short readable table: status, cost and tolerances of both solvers with relative differences."""
-        i, s = self.ipopt, self.sumt
-        rows = [
-            f"{'':>10} {'IPOPT':>14} {'SUMT+Powell':>14} {'rel.diff':>10}",
-            f"{'status':>10} {str(i.status):>14} {str(s.status):>14}",
-            f"{'cost':>10} {i.cost:>14.8g} {s.cost:>14.8g} {self.cost_rel_diff:>10.2e}",
-        ]
-        for name, d in self.tolerance_rel_diff.items():
-            rows.append(f"{name:>10} {i.tolerances[name]:>14.6g} {s.tolerances[name]:>14.6g} {d:>10.2e}")
-        rows += [
-            f"{'iter':>10} {i.iterations:>14d} {s.iterations:>14d}",
-            f"{'evals':>10} {i.function_evaluations:>14d} {s.function_evaluations:>14d}",
-            f"{'time ms':>10} {i.wall_time * 1e3:>14.2f} {s.wall_time * 1e3:>14.2f} {self.time_ratio:>9.1f}x",
-        ]
-        return "\n".join(rows)
-
-    def to_dict(self) -> dict:
-        """Plain dict for JSON: both results and their relative differences."""
-        return {
-            "ipopt": self.ipopt.to_dict(),
-            "sumt": self.sumt.to_dict(),
-            "cost_rel_diff": self.cost_rel_diff,
-            "tolerance_rel_diff": self.tolerance_rel_diff,
-            "time_ratio": self.time_ratio,
-        }
-
-
-def compare(mechanism, R: float, p: float, distribution=None, alpha=0.7, **kwargs) -> Comparison:
-    """Solve the same specification with IPOPT and with SUMT + Powell; see :class:`Comparison`.
-
-    Keyword arguments are those of :func:`synthesize` (``options`` may be a dict with keys
-    ``"ipopt"`` and ``"sumt"``).  Both solvers start from scratch: IPOPT without the cuts and
-    optimum an earlier solve of the same blocks left (``options={"ipopt": {"warm_start": True}}``
-    allows them), so its iterations, evaluations and time compare the algorithms.
-    """
-    options = check_mapping(kwargs.pop("options", None), "options", "a dict with keys 'ipopt' and 'sumt'")
-    check_options(options, {"ipopt": {}, "sumt": {}})
-    kwargs.pop("solver", None)
-    ipopt = check_mapping(options.get("ipopt"), "options['ipopt']", "a dict of IPOPT options")
-    given = {"ipopt": {"warm_start": False, **ipopt}, "sumt": options.get("sumt")}
-    res = {
-        s: synthesize(mechanism, R, p, distribution, alpha, solver=s, options=given[s], **kwargs)
-        for s in ("ipopt", "sumt")
+    out = {
+        p.name: {"joint": p.at_joint[0], "transform": p.at_joint[1], "unit": p.unit, "fixed": p.lock}
+        for p in mechanism.parameters
+        if p.at_joint is not None
     }
-    return Comparison(res["ipopt"], res["sumt"])
+    return out or None
