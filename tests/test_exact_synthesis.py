@@ -60,6 +60,27 @@ def test_certified_exact_design_at_one_pose(xz):
     assert abs(direction_probability(w @ A * g.x, sh, R) - 0.7) > hi - lo
 
 
+def test_workspace_check_of_an_exact_design_is_in_exact_probabilities(xz):
+    """The sampled workspace check of an exact design (p = 0.99, uniform, made at the paper's
+    pose) is in exact probabilities: at the pose it names, 4000 random directions by the reference
+    evaluator find no smaller probability than the check's (to 1e-6) and one within 2 % of its miss
+    probability; a Monte Carlo of the linear model along that direction contains the check's P in
+    its 99.9 % interval and lies below p (the design is over its specification there)."""
+    r = tolsynth.synthesize(xz, R=R, p=0.99, probability="exact")
+    ws = r.workspace
+    assert ws.exact and "exact probabilities" in ws.line() and ws.to_dict()["probabilities"] == "exact"
+    P_check = 1.0 - 0.01 * ws.worst
+    A = xz.sensitivity(ws.q, check_limits=False)[:3]
+    sh = ["uniform"] * xz.n
+    D = _sphere_directions(4000)
+    P = direction_probability(D @ A * r.x, sh, R)
+    assert P.min() >= P_check - 1e-6
+    assert (1.0 - P.min()) >= 0.98 * (1.0 - P_check)
+    lo, hi = _wilson(*_linear_mc(A, r.x, sh, D[int(np.argmin(P))]), 3.2905)
+    assert lo - 2e-4 <= P_check <= hi + 2e-4 and hi < 0.99
+    assert ws.exceeds
+
+
 def test_all_normal_errors_are_the_gaussian_problem_solved_by_cvxpy(xz):
     """All-normal errors: the exact problem is the Gaussian one (routed to its path), and cvxpy +
     Clarabel on the convex form (v = eps^2, an LMI per pose) finds the same cost."""

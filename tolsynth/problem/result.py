@@ -120,6 +120,13 @@ class SynthesisResult(Tabular):
         return np.array(list(self.tolerances.values()))
 
     @property
+    def probability_kind(self) -> str:
+        """The probabilities the design meets: ``"gaussian"`` (the paper's), ``"exact"`` or
+        ``"worst_case"`` (as asked of :func:`tolsynth.synthesize`, else read from the constraints)."""
+        asked = (self.inputs or {}).get("probability")
+        return asked or ("exact" if any(b.kind.endswith("(exact)") for b in self.constraints) else "gaussian")
+
+    @property
     def max_constraint(self) -> float:
         """Largest ``sigma_j z / R`` over all blocks (<= 1 means the specification is met)."""
         return float(max(b.values[0] for b in self.constraints))
@@ -130,7 +137,7 @@ class SynthesisResult(Tabular):
             f"{self.solver}: {self.status} ({self.message})",
             f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})",
             f"iterations {self.iterations}, evaluations {self.function_evaluations}, {self.wall_time * 1e3:.1f} ms",
-            f"probabilities: {(self.inputs or {}).get('probability') or ('exact' if any(b.kind.endswith('(exact)') for b in self.constraints) else 'gaussian')}",
+            f"probabilities: {self.probability_kind}",
         ]
         spec = self.spec
         fixed = {n for n, a, b in zip(getattr(spec, "names", ()), getattr(spec, "lower", ()), getattr(spec, "upper", ()))
