@@ -89,7 +89,7 @@ XU_TABLES = {
 # planar_2r cites itself (tolsynth example model): l1 = 500 mm, l2 = 300 mm.
 PLANAR = {"l1": 500.0, "l2": 300.0}
 
-# the parallel robots' sources are typed in and checked in test_parallel.py
+# the parallel robots' sources are typed in and checked in test_parallel_sources.py
 SOURCE_TESTED = {"ur5", "panda", "puma560", "xu_zhang_1988", "planar_2r", "stewart_gough", "delta", "planar_3rrr"}
 
 

@@ -43,6 +43,7 @@ import numpy as np
 
 from tolsynth.analysis.interval_ops import BINARY, UNARY
 from tolsynth.errors import InputError
+from tolsynth.model.parallel import is_parallel
 
 __all__ = ["Structure", "structure", "position_sensitivity"]
 
@@ -83,6 +84,12 @@ _CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 def position_sensitivity(mech) -> ca.Function:
     """``A(q)``, the rows dx, dy, dz of the mechanism's sensitivity graph at zero error, as an SX
     Function of the joints (constant folding removes what the zero errors switch off)."""
+    if is_parallel(mech.spec):
+        # the interval extension of the unrolled Newton steps and their assembly test is not finite,
+        # even on a box 1e-6 rad wide: the branch and bound would split until its box limit
+        raise InputError("certify", f"{mech.name} is a parallel robot: its sensitivities come from Newton's method "
+                         "unrolled from the home pose, which interval arithmetic cannot bound, so the certified "
+                         "search cannot prove anything", "certify=False (the sampled worst-pose search)")
     S = mech.graphs.sensitivity
     if not isinstance(S, ca.Function):
         raise InputError("mechanism", f"{mech.name}: no sensitivity graph", "a model with CasADi graphs")

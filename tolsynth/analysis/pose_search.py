@@ -413,13 +413,15 @@ def worst_pose(
 
     active = []
     tol_a = 1e-6
+    units = mechanism.joint_units  # a parallel robot's struts are lengths (mm)
     for j in range(nq):
         if j in held:
             continue
+        shown = (lambda v: f"{v:g} mm") if units[j] == "mm" else (lambda v: f"{math.degrees(v):g} deg")
         if abs(q[j] - lo[j]) <= tol_a:
-            active.append(f"{names[j]} lower ({math.degrees(lo[j]):g} deg)")
+            active.append(f"{names[j]} lower ({shown(lo[j])})")
         if abs(q[j] - hi[j]) <= tol_a:
-            active.append(f"{names[j]} upper ({math.degrees(hi[j]):g} deg)")
+            active.append(f"{names[j]} upper ({shown(hi[j])})")
     for c in mechanism.spec.joint_constraints:
         v = sum(coef * q[names.index(jn)] for jn, coef in c.terms.items())
         if abs(v - c.lower) <= tol_a:
