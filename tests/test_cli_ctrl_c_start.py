@@ -112,3 +112,33 @@ def test_guard_is_the_first_statement():
             "print(sorted(set(sys.modules) - before))")
     added = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert added.strip() in ("[]", "['_signal']"), added
+
+
+@pytest.mark.slow
+def test_progress_reaches_a_terminal_through_the_interrupt_filter():
+    """The command's stderr passes through a pipe (the filter of CasADi's interrupt warning); the
+    progress lines of a run longer than a second still appear when stderr is a terminal (a
+    pseudo-terminal here), and not when it is a pipe."""
+    import pty
+
+    argv = [_script(), "solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--everywhere"]
+    master, slave = pty.openpty()
+    try:
+        proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=slave, cwd=ROOT)
+        os.close(slave)
+        chunks = []
+        while True:
+            try:
+                data = os.read(master, 4096)
+            except OSError:  # the child closed the terminal
+                break
+            if not data:
+                break
+            chunks.append(data)
+        assert proc.wait(timeout=120) == 0
+    finally:
+        os.close(master)
+    shown = b"".join(chunks).decode(errors="replace")
+    assert "tolsynth solve: the design for every reachable pose" in shown and "done in" in shown, shown
+    piped = subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=ROOT, timeout=120)
+    assert piped.returncode == 0 and "done in" not in piped.stderr, piped.stderr

@@ -76,7 +76,8 @@ class QuietCasadiInterrupt:
     that drops the one line CasADi's C++ code writes when a Ctrl-C lands inside an IPOPT callback
     (``CasADi - ... WARNING("KeyboardInterruptException") [...]``), so that an interrupt shows the
     command's own line only.  Everything else is forwarded as it comes (progress bars' partial
-    lines too).  Restores stderr on exit."""
+    lines too).  Meanwhile ``sys.stderr`` answers ``isatty()`` for the terminal behind the pipe, so
+    that progress reports still know someone is watching.  Restores stderr on exit."""
 
     NOISE = re.compile(rb'^CasADi - .*WARNING\("KeyboardInterruptException"\)')
     PREFIX = b"CasADi - "
@@ -84,10 +85,12 @@ class QuietCasadiInterrupt:
     def __init__(self):
         self.saved = None
         self.thread = None
+        self.stream = None
 
     def __enter__(self):
         try:
             sys.stderr.flush()
+            terminal = os.isatty(2)
             saved = os.dup(2)
             r, w = os.pipe()
             os.dup2(w, 2)
@@ -95,6 +98,7 @@ class QuietCasadiInterrupt:
         except (OSError, ValueError, AttributeError):  # pragma: no cover - no file descriptors here
             return self
         self.saved = saved
+        self.stream, sys.stderr = sys.stderr, _Stderr(sys.stderr, terminal)
         self.thread = threading.Thread(target=self._pump, args=(r,), name="tolsynth-stderr", daemon=True)
         self.thread.start()
         return self
@@ -133,8 +137,24 @@ class QuietCasadiInterrupt:
             sys.stderr.flush()
         except (OSError, ValueError):  # pragma: no cover
             pass
+        if isinstance(sys.stderr, _Stderr):
+            sys.stderr = self.stream
         os.dup2(self.saved, 2)  # the pipe's last writer (unless a child holds it) goes: the pump ends
         self.thread.join(timeout=2.0)
         os.close(self.saved)
         self.saved = None
         return False
+
+
+class _Stderr:
+    """``sys.stderr`` while file descriptor 2 is the filtering pipe: the same stream, except that
+    ``isatty()`` answers for the terminal the pipe leads to."""
+
+    def __init__(self, stream, terminal: bool):
+        self._stream, self._terminal = stream, terminal
+
+    def isatty(self) -> bool:
+        return self._terminal
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
