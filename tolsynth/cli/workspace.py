@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import sys
 
 import numpy as np
 
@@ -27,6 +26,7 @@ from tolsynth.cli.args import (  # noqa: I001
     split_items,
     write_out,
 )
+from tolsynth.cli.designs import finish
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
 from tolsynth.progress import Working
@@ -137,20 +137,11 @@ def _cmd_worst(args) -> int:
                        probability=args.probability)
     record = dict(tolerances=w.tolerances, distribution=args.dist, R_mm=args.R, criterion=args.criterion,
                   reference=w.reference)
-    if args.out:
-        write_out(w.to_frame(), args, mech, **record)
-    if args.json:
-        out = w.to_dict()
-        out["inputs"] = inputs_record(args, mech, **record)
-        emit_json(out)
-    else:
-        print(f"tolerances   {label}")
-        print(w.report(mech.joint_names, mech.joint_units))
-    if args.certify and not w.certified:
-        print(f"tolsynth worst-pose: the bound is not certified ({w.certificate.reason}); it holds, the gap did not "
-              "close", file=sys.stderr)
-        return 1
-    return 0
+    unproven = args.certify and not w.certified
+    return finish(args, mech, record, frame=w.to_frame, data=w.to_dict,
+                  text=lambda: f"tolerances   {label}\n{w.report(mech.joint_names, mech.joint_units)}", ok=not unproven,
+                  failure=f"the bound is not certified ({w.certificate.reason}); it holds, the gap did not close"
+                  if unproven else "")
 
 
 def register(sub) -> None:
