@@ -90,3 +90,17 @@ def drop_at(path):
     def fn(data):
         del _parent(data, path)[path[-1]]
     return fn
+
+
+def assert_defect_named(tmp_path, model: str, edit, field: str, fragment: str):
+    """The model with ``edit`` applied, loaded, raises ModelFileError naming ``field`` (its
+    message holding ``fragment``); returns the error."""
+    import pytest
+
+    from tolsynth.errors import ModelFileError
+
+    with pytest.raises(ModelFileError) as info:
+        load_dict(tmp_path, edited(model, edit))
+    assert info.value.field == field, str(info.value)
+    assert fragment in str(info.value)
+    return info.value

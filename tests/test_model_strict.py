@@ -14,9 +14,9 @@ import math
 import pytest
 
 import tolsynth
+from model_text import assert_defect_named, model_dict
 from model_text import edited as _edit
 from model_text import load_dict as _load
-from model_text import model_dict
 from model_text import set_at as _set
 from tolsynth.errors import ModelFileError
 from tolsynth.model.fields import FORMAT
@@ -84,11 +84,8 @@ CASES = [
 
 @pytest.mark.parametrize("model, edit, field, fragment", CASES, ids=[c[2] for c in CASES])
 def test_defect_names_field(tmp_path, model, edit, field, fragment):
-    with pytest.raises(ModelFileError) as info:
-        _load(tmp_path, _edit(model, edit))
-    assert info.value.field == field, str(info.value)
-    assert fragment in str(info.value)
-    assert str(tmp_path / "m.toml") in str(info.value)
+    err = assert_defect_named(tmp_path, model, edit, field, fragment)
+    assert str(tmp_path / "m.toml") in str(err)
 
 
 @pytest.mark.parametrize("model", tolsynth.bundled_models())

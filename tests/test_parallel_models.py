@@ -13,11 +13,10 @@ import numpy as np
 import pytest
 
 import tolsynth
+from model_text import assert_defect_named
 from model_text import drop_at as _drop
-from model_text import edited as _edit
-from model_text import load_dict as _load
 from model_text import set_at as _set
-from tolsynth.errors import InputError, ModelFileError
+from tolsynth.errors import InputError
 from tolsynth.probability.stats import z_of_p
 
 
@@ -58,10 +57,7 @@ CASES = [
 
 @pytest.mark.parametrize("model, edit, field, fragment", CASES, ids=[c[2] for c in CASES])
 def test_defect_names_field(tmp_path, model, edit, field, fragment):
-    with pytest.raises(ModelFileError) as info:
-        _load(tmp_path, _edit(model, edit))
-    assert info.value.field == field, str(info.value)
-    assert fragment in str(info.value)
+    assert_defect_named(tmp_path, model, edit, field, fragment)
 
 
 def test_error_selection_and_tolerance_patterns():
