@@ -258,6 +258,22 @@ class _Reader:
         angle_unit = self.unit(self.get(units, "angle", "units"), "units.angle", "angle")
         return LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
 
+    def configuration_tables(self, data: dict, joint_names: list[str], what: str = "joint"):
+        """Each ``[configurations.NAME]`` table as ``(NAME, its field, the table, the joint values
+        in the file's units, the note)``: every joint given a number (``what`` names them in the
+        message), the note a string."""
+        for cname, raw in self.table(data["configurations"], "configurations").items():
+            where = f"configurations.{cname}"
+            self.table(raw, where, "configurations.*", extra=joint_names)
+            missing = [j for j in joint_names if j not in raw]
+            if missing:
+                raise self.fail(where, f"missing {what} value(s) {missing}")
+            values = [self.get(raw, j, where, float) for j in joint_names]
+            note = raw.get("note", "")
+            if not isinstance(note, str):
+                raise self.fail(f"{where}.note", f"expected a string, got {_type_name(note)}")
+            yield cname, where, raw, values, note
+
     def pair(self, value: Any, where: str) -> tuple[float, float]:
         if not isinstance(value, list) or len(value) != 2:
             raise self.fail(where, f"expected [lower, upper], got {value!r:.60}")

@@ -276,19 +276,10 @@ def _parse_parallel_model(data: dict, r: _Reader) -> ParallelSpec:
     joint_names = [j.name for j in joints]
     factor = {leg.joint: (lf if leg.actuation == "prismatic" else af) for leg in legs}
     configurations = {}
-    for cname, raw in r.table(data["configurations"], "configurations").items():
-        where = f"configurations.{cname}"
-        r.table(raw, where, "configurations.*", extra=joint_names)
-        missing = [j for j in joint_names if j not in raw]
-        if missing:
-            raise r.fail(where, f"missing actuator value(s) {missing}")
+    for cname, where, raw, values, note in r.configuration_tables(data, joint_names, "actuator"):
         if raw.get("waive"):
             raise r.fail(f"{where}.waive", "a parallel robot's configurations waive no limit")
-        note = raw.get("note", "")
-        if not isinstance(note, str):
-            raise r.fail(f"{where}.note", f"expected a string, got {_type_name(note)}")
-        q = tuple(r.get(raw, j, where, float) * factor[j] for j in joint_names)
-        configurations[cname] = Configuration(cname, q, note)
+        configurations[cname] = Configuration(cname, tuple(v * factor[j] for j, v in zip(joint_names, values)), note)
     if "home" not in configurations:
         raise r.fail("configurations.home", "missing: the configuration the assembly pose starts from")
     lengths = tuple(leg.joint for leg in legs if leg.actuation == "prismatic")

@@ -261,20 +261,12 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
     # ---- configurations ---------------------------------------------------------------------
     configurations = {}
     limit_names = set(joint_names) | {c.name for c in jcons}
-    for cname, raw in r.table(data["configurations"], "configurations").items():
-        where = f"configurations.{cname}"
-        r.table(raw, where, "configurations.*", extra=joint_names)
-        missing = [j for j in joint_names if j not in raw]
-        if missing:
-            raise r.fail(where, f"missing joint value(s) {missing}")
-        q = tuple(r.get(raw, j, where, float) * af for j in joint_names)
+    for cname, where, raw, values, note in r.configuration_tables(data, joint_names):
+        q = tuple(v * af for v in values)
         waive = r.names(raw.get("waive", []), f"{where}.waive")
         for w in waive:
             if w not in limit_names:
                 raise r.fail(f"{where}.waive", f"{w!r} names no joint or joint constraint{_nearest(w, limit_names)}")
-        note = raw.get("note", "")
-        if not isinstance(note, str):
-            raise r.fail(f"{where}.note", f"expected a string, got {_type_name(note)}")
         if waive and not note.strip():
             raise r.fail(f"{where}.note", "a configuration that waives a limit must say why in 'note'")
         configurations[cname] = Configuration(cname, q, note, tuple(waive))
