@@ -1,7 +1,8 @@
 """What ``tolsynth pareto``, ``budget``, ``processes`` and ``grades`` share: the model, the
 specification's fixed parts (distribution, alpha, poses, orientation, probability) and the
 keyword arguments of the library call they become; their output options, the table files they
-read, and how each of them ends (the table, the JSON object or the report, and the exit status)."""
+read, and how each of them ends (the table, the JSON object or the report, and the exit status;
+``worst-pose`` ends the same way)."""
 
 from __future__ import annotations
 
