@@ -367,3 +367,97 @@ def test_bad_inputs_raise_typed_errors(models):
         tolsynth.worst_pose(m, "coarse", criterion="probability", R=0.1, certify=True)
     with pytest.raises(InputError):
         tolsynth.synthesize_workspace(m, 0.1, 0.99, certify=True, criterion="sphere")
+
+
+# ------------------------------------------------------------------------------------------------
+# the boxes kept, the bound closing, the certified map
+# ------------------------------------------------------------------------------------------------
+def test_maximize_keeps_a_cover_of_the_box_with_sound_bounds():
+    """The boxes set aside tile the box (their volumes add up to it, none overlap a random point
+    twice) and each one's bound is above the function at random points inside it."""
+    from tolsynth.analysis.branch_bound import maximize
+
+    f = lambda x: np.sin(3 * x[:, 0]) * np.cos(2 * x[:, 1]) + 0.1 * x[:, 0]  # noqa: E731
+
+    def bound(lo, hi):  # a Lipschitz bound from the centre: |grad f| <= 3 + 2 + 0.1 in each part
+        return f(0.5 * (lo + hi)) + 0.5 * (3.1 * (hi - lo)[:, 0] + 2.0 * (hi - lo)[:, 1])
+
+    leaves = []
+    r = maximize(bound, f, [-1.0, -2.0], [2.0, 1.0], tol=1e-3, leaves=leaves)
+    assert r.certified
+    lo = np.array([b[0] for b in leaves])
+    hi = np.array([b[1] for b in leaves])
+    ub = np.array([b[2] for b in leaves])
+    assert np.prod(hi - lo, axis=1).sum() == pytest.approx(9.0, rel=1e-12)
+    X = np.random.default_rng(12).uniform([-1.0, -2.0], [2.0, 1.0], (3000, 2))
+    inside = (X[:, None] >= lo[None]).all(axis=2) & (X[:, None] <= hi[None]).all(axis=2)
+    assert np.all(inside.sum(axis=1) == 1)  # interior points: in exactly one box
+    assert np.all(f(X) <= ub[np.argmax(inside, axis=1)] + 1e-15)
+    assert ub.max() == pytest.approx(r.upper_bound)
+
+
+def test_certificate_keeps_its_boxes_and_the_gap_closing(models):
+    """Paper's robot, figure3: random feasible poses lie in a box kept whose bound is above their
+    sigma_1 (numeric sensitivity, NumPy); the history's bound falls and its best value rises to the
+    certificate's own numbers."""
+    from tolsynth.kinematics.joint_space import _feasible
+
+    m = models["xu_zhang_1988"]
+    eps = m.tolerances("figure3")
+    c = certify_worst_pose(m, eps, "uniform", progress=False, keep_boxes=True)
+    lo, hi, ub = c.leaves
+    names = list(m.joint_names)
+    free = [names.index(n) for n in c.searched]
+    lq, hq = _limits(m)
+    rng = np.random.default_rng(13)
+    Q = lq + (hq - lq) * rng.random((400, len(names)))
+    Q[:, [0, 4]] = 0.0
+    Q = Q[_feasible(m, Q.T)][:150]
+    X = Q[:, free]
+    inside = (X[:, None] >= lo[None] - 1e-12).all(axis=2) & (X[:, None] <= hi[None] + 1e-12).all(axis=2)
+    assert inside.any(axis=1).all()
+    bound_at = np.where(inside, ub[None], -np.inf).max(axis=1)
+    assert np.all(_sigma(m, Q, eps) <= bound_at * (1 + 1e-12))
+    H = np.array(c.history)
+    assert np.all(np.diff(H[:, 2]) >= 0) and np.all(np.diff(H[np.isfinite(H[:, 1]), 1]) <= 1e-15)
+    assert H[-1, 1] == pytest.approx(c.upper_bound) and H[-1, 2] == pytest.approx(c.best_value)
+    assert "leaves" not in c.to_dict()
+
+
+def test_certified_map_bounds_random_poses_in_each_cell(models):
+    """Every cell's bound is above sigma_1 (numeric sensitivity, NumPy) at random feasible poses of
+    the cell, theta4 anywhere; the cells the interference band leaves empty are NaN."""
+    from tolsynth.analysis.certify_map import certified_map
+    from tolsynth.kinematics.joint_space import _feasible
+
+    m = models["xu_zhang_1988"]
+    eps = m.tolerances("figure3")
+    cm = certified_map(m, eps, "uniform", joints=("theta2", "thetap2"), n=6, slices=8)
+    names = list(m.joint_names)
+    lq, hq = _limits(m)
+    rng = np.random.default_rng(14)
+    Q = lq + (hq - lq) * rng.random((3000, len(names)))
+    Q[:, [0, 4]] = 0.0
+    Q = Q[_feasible(m, Q.T)][:400]
+    ka = np.clip(np.searchsorted(cm.edges[0], Q[:, names.index("theta2")]) - 1, 0, 5)
+    kb = np.clip(np.searchsorted(cm.edges[1], Q[:, names.index("thetap2")]) - 1, 0, 5)
+    assert np.all(_sigma(m, Q, eps) <= cm.upper[kb, ka] * (1 + 1e-12))
+    assert np.isnan(cm.upper).any() and np.all(np.isnan(cm.sampled)[np.isnan(cm.upper)])
+    assert np.nanmax(cm.upper) >= certify_worst_pose(m, eps, "uniform", progress=False).best_value
+    with pytest.raises(tolsynth.errors.UnknownNameError):
+        certified_map(m, eps, joints=("theta1", "theta2"))  # theta1 is held: it cannot change sigma_1
+
+
+def test_worst_pose_components_certified_with_a_probability_bound(models):
+    """criterion 'components' (the smallest per-component probability, Gaussian reading): the
+    certified lower bound is erf(R / (sqrt 2 sigma_ub)) and lies below the probability at the
+    pose found; the sphere probability says which criterion is certified."""
+    m = models["xu_zhang_1988"]
+    R = 0.5
+    w = tolsynth.worst_pose(m, "figure3", criterion="components", R=R, certify=True, progress=False)
+    assert w.certified and w.boxes > 0
+    assert w.probability_lower_bound == pytest.approx(math.erf(R / (math.sqrt(2) * w.upper_bound)), abs=1e-14)
+    sig = _sigma(m, w.q, m.tolerances("figure3"))[0]
+    assert w.probability_lower_bound <= math.erf(R / (math.sqrt(2) * sig)) == pytest.approx(w.value, rel=1e-9)
+    with pytest.raises(InputError, match="components"):
+        tolsynth.worst_pose(m, "figure3", criterion="probability", R=R, certify=True)

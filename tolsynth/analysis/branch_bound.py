@@ -95,6 +95,7 @@ class _Search:
         self.dropped = -np.inf  # largest bound of a box dropped as unable to beat the best
         self.target = None  # boxes bounded by it are dropped too (a decision)
         self.stuck = -np.inf  # largest bound of a box too small to split
+        self.leaves = None  # when kept: (lo, hi, ub) of every box set aside, a cover of the feasible part
 
     def threshold(self) -> float:
         if self.target is not None and not self.best > self.target:
@@ -156,11 +157,17 @@ class _Search:
         for k in range(len(ub)):
             if ub[k] <= thr:
                 self.dropped = max(self.dropped, float(ub[k]))
+                self.keep_leaf(lo[k], hi[k], ub[k])
             elif widths[k].max() < min_width:
                 self.stuck = max(self.stuck, float(ub[k]))
+                self.keep_leaf(lo[k], hi[k], ub[k])
             else:
                 self.seq += 1
                 heapq.heappush(self.heap, (-float(ub[k]), self.seq, lo[k], hi[k], bool(feasible[k]), int(side[k])))
+
+    def keep_leaf(self, lo, hi, ub) -> None:
+        if self.leaves is not None:
+            self.leaves.append((np.array(lo, dtype=float), np.array(hi, dtype=float), float(ub)))
 
     def upper(self) -> float:
         top = -self.heap[0][0] if self.heap else -np.inf
@@ -219,6 +226,7 @@ def maximize(
     stop=None,
     target: float | None = None,
     stop_above: float | None = None,
+    leaves: list | None = None,
 ) -> MaximizeResult:
     """Certified maximum of an objective over the box ``lo <= x <= hi`` (and ``g(x) <= 0``).
 
@@ -270,6 +278,11 @@ def maximize(
     stop_above : float, optional
         End the search as soon as a feasible point exceeds this value (not certified; the point is
         the answer to the decision).
+    leaves : list, optional
+        When given, ``(lo, hi, upper_bound)`` of every box the search set aside (dropped, too small
+        to split, or left open) is appended: together with the boxes proven infeasible they cover
+        the box, so the largest of their bounds over a region bounds the objective there (a
+        certified map).
 
     Returns
     -------
@@ -290,6 +303,7 @@ def maximize(
         raise InputError("scale", f"{scale}", f"{d} positive numbers")
     s = _Search(point_fn, constraint_fn, lo, hi, float(tol), float(rtol), scale)
     s.target = None if target is None else float(target)
+    s.leaves = None if leaves is None else []
 
     L, H = lo[None, :], hi[None, :]
     feasible = np.array([constraint_fn is None])
@@ -318,7 +332,6 @@ def maximize(
         thr = s.threshold()
         if -s.heap[0][0] <= thr:  # nothing left can beat the best by more than the tolerance
             s.dropped = max(s.dropped, -s.heap[0][0])
-            s.heap.clear()
             break
         take = []
         while s.heap and len(take) < batch and -s.heap[0][0] > thr:
@@ -368,6 +381,13 @@ def maximize(
             callback(processed, s.upper(), s.best)
 
     upper = s.upper()
+    n_open = len(s.heap)
+    if s.heap and -s.heap[0][0] <= s.threshold():
+        n_open = 0  # the boxes left cannot beat the best by more than the tolerance: decided
+    for t in s.heap:
+        s.keep_leaf(t[2], t[3], -t[0])
+    if leaves is not None:
+        leaves.extend(s.leaves)
     slack = s.tol + s.rtol * abs(s.best) if np.isfinite(s.best) else 0.0
     if upper == -np.inf:
         certified, reason = True, ""  # every box proven infeasible
@@ -379,9 +399,9 @@ def maximize(
         if not certified:
             reason = (
                 stopped
-                or (f"box limit reached ({processed} boxes, {len(s.heap)} open)" if s.heap else "")
+                or (f"box limit reached ({processed} boxes, {n_open} open)" if n_open else "")
                 or f"boxes at the resolution limit (min_width={min_width}) still bound above the best"
             )
     return MaximizeResult(
-        float(upper), float(s.best), s.best_x, processed, bool(certified), reason, len(s.heap), time.perf_counter() - t0
+        float(upper), float(s.best), s.best_x, processed, bool(certified), reason, n_open, time.perf_counter() - t0
     )

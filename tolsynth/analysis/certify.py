@@ -80,6 +80,15 @@ class Certificate:
         The joints searched.
     dropped : tuple of str
         Error parameters without effect on the hand position.
+    history : tuple of (int, float, float)
+        After each round of the branch and bound: boxes bounded, the bound proven so far and the
+        best value found (sigma_1 in mm for the Gaussian reading; for the exact per-component
+        probability its proven lower bound and the lowest found): the gap closing.
+    leaves : tuple of ndarray or None
+        With ``keep_boxes=True``: ``(lo, hi, bound)``, the boxes of the searched joints (rad) the
+        search set aside with the bound proven on each (shapes (m, k), (m, k), (m,)); with the
+        boxes proven infeasible they cover the searched joint space, so the largest bound of
+        the boxes meeting a region bounds the criterion there (a certified map).
     """
 
     model: str
@@ -102,6 +111,8 @@ class Certificate:
     searched: tuple = ()
     dropped: tuple = ()
     method: str = ""
+    history: tuple = ()
+    leaves: tuple | None = None
 
     @property
     def gap(self) -> float:
@@ -111,7 +122,8 @@ class Certificate:
         return float(self.best_value - self.probability_lower_bound)
 
     def to_dict(self) -> dict:
-        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
+        """Plain dict for JSON (arrays as lists); the boxes kept are left out (they can be large)."""
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items() if k != "leaves"}
 
     def summary(self) -> str:
         """One line per fact: the proof (or why not), the best pose, what was held and searched."""
@@ -241,7 +253,7 @@ def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str 
                        probability: str = "gaussian", *, rtol: float | None = None, tol: float | None = None,
                        max_boxes: int = DEFAULT_MAX_BOXES, x0=None, base_q=None, progress=None,
                        time_limit: float | None = None, target: float | None = None,
-                       stop_at: float | None = None) -> Certificate:
+                       stop_at: float | None = None, keep_boxes: bool = False) -> Certificate:
     """A proven bound of the worst accuracy over the whole joint space (module docstring).
 
     Parameters
@@ -281,6 +293,8 @@ def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str 
         and the bound returned lies between the best value and the target.
     stop_at : float, optional
         Stop as soon as a pose worse than this is found (sigma above it, probability below it).
+    keep_boxes : bool
+        Keep the boxes set aside and their bounds (``Certificate.leaves``), for a certified map.
 
     Returns
     -------
@@ -340,32 +354,27 @@ def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str 
 
     bar = Progress(progress, max_boxes, f"certified worst pose ({mech.name})", "box")
     done = [0]
+    history = []
+    sign = 1.0 if criterion == "sigma" or probability == "gaussian" else -1.0  # the exact search maximises -P
 
     def callback(n, ub, best):
         bar.update(n, n - done[0])
         done[0] = n
+        history.append((int(n), sign * float(ub), sign * float(best)))
 
     c = np.broadcast_to(np.asarray(variance_divisor(distribution, mech), dtype=float), (mech.n,))
     direction = None
+    leaves = [] if keep_boxes else None
     try:
         if criterion == "sigma" or probability == "gaussian":
-            w = (eps**2 / c)[cols]
-            poly = trig_polynomial(st, dom.free, st.rotation) if st.rotation is None or st.rotation in dom.held else None
-            if poly is not None and all(j in st.joints for j in dom.free):
-                bounds = PolygonSigmaBounds(poly, dom.free, w)
-                method = "arc polygons of the exact trigonometric polynomial"
-            else:
-                held_zero = dict(dom.held)
-                if st.rotation is not None:
-                    held_zero[st.rotation] = 0.0
-                bounds = SigmaBounds(JointGraphs(st, nq, dom.free, held_zero), w, dom.linear)
-                method = "second-order Taylor corners" if bounds.g.use_hessian else "Taylor corners (interval Jacobian)"
+            bounds, method = _sigma_bounds(st, dom, nq, (eps**2 / c)[cols])
             if criterion == "components" and (target is not None or stop_at is not None):
                 raise InputError("target", "given with the Gaussian per-component probability",
                                  "criterion='sigma' with a target in mm")
             r = maximize(lambda L, H: _with_split(bounds.bound(L, H)), bounds.point, dom.lo, dom.hi, tol=0.0,
                          rtol=rtol, max_boxes=max_boxes, constraint_fn=dom.constraint_fn, x0=seeds,
-                         callback=callback, stop=stop, batch=512, target=target, stop_above=stop_at)
+                         callback=callback, stop=stop, batch=512, target=target, stop_above=stop_at,
+                         leaves=leaves)
             if not np.isfinite(r.best_value):
                 raise OutOfRangeError("joint limits", "no pose satisfies every joint limit and constraint",
                                       "a non-empty feasible joint space")
@@ -383,7 +392,8 @@ def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str 
             from tolsynth.analysis.certify_exact import certify_components_exact
 
             out = certify_components_exact(mech, st, dom, eps, distribution, R, tol=tol, max_boxes=max_boxes,
-                                           seeds=seeds, callback=callback, stop=stop, target=target, stop_at=stop_at)
+                                           seeds=seeds, callback=callback, stop=stop, target=target, stop_at=stop_at,
+                                           leaves=leaves)
             q = _full(dom, out["x"], nq)
             direction = out["direction"]
             method = out["method"]
@@ -399,7 +409,32 @@ def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str 
         held={names[j]: f"{math.degrees(v):g} deg, {dom.why[j]}" for j, v in dom.held.items()},
         searched=tuple(names[j] for j in dom.free),
         dropped=tuple(mech.error_parameters[i] for i in range(mech.n) if i not in st.columns),
-        method=method, **cert)
+        method=method, history=tuple(history), leaves=_leaves(leaves, len(dom.free), sign), **cert)
+
+
+def _leaves(leaves, k, sign):
+    """The boxes kept, over the searched joints only, with the bound in the criterion's own sense."""
+    if leaves is None:
+        return None
+    if not leaves:
+        return np.zeros((0, k)), np.zeros((0, k)), np.zeros(0)
+    lo = np.array([b[0][:k] for b in leaves])
+    hi = np.array([b[1][:k] for b in leaves])
+    return lo, hi, sign * np.array([b[2] for b in leaves])
+
+
+def _sigma_bounds(st, dom, nq, w):
+    """The bounds of sigma_1 on boxes of the searched joints (variance weights ``w`` of the kept
+    columns), and the method's name: arc polygons where the sensitivity is a trigonometric
+    polynomial of the searched joints, Taylor corners elsewhere."""
+    poly = trig_polynomial(st, dom.free, st.rotation) if st.rotation is None or st.rotation in dom.held else None
+    if poly is not None and all(j in st.joints for j in dom.free):
+        return PolygonSigmaBounds(poly, dom.free, w), "arc polygons of the exact trigonometric polynomial"
+    held_zero = dict(dom.held)
+    if st.rotation is not None:
+        held_zero[st.rotation] = 0.0
+    bounds = SigmaBounds(JointGraphs(st, nq, dom.free, held_zero), w, dom.linear)
+    return bounds, "second-order Taylor corners" if bounds.g.use_hessian else "Taylor corners (interval Jacobian)"
 
 
 def _with_split(res):

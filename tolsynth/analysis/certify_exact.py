@@ -174,7 +174,7 @@ def _signed_columns(B: ComponentBounds, x: np.ndarray) -> np.ndarray:
 
 
 def certify_components_exact(mech, st, dom, eps, distribution, R, *, tol=None, max_boxes, seeds=None, callback=None,
-                             stop=None, target=None, stop_at=None) -> dict:
+                             stop=None, target=None, stop_at=None, leaves=None) -> dict:
     """The search of the module docstring on the domain of :func:`tolsynth.analysis.certify.certify_worst_pose`."""
     from tolsynth.probability.distributions import shapes_of
 
@@ -207,7 +207,7 @@ def certify_components_exact(mech, st, dom, eps, distribution, R, *, tol=None, m
 
     r = maximize(bound, lambda X: -B.point(X), lo, hi, tol=tol, max_boxes=max_boxes, constraint_fn=cfn, x0=x0,
                  callback=cb, stop=stop, batch=128, target=None if target is None else -float(target),
-                 stop_above=None if stop_at is None else -float(stop_at))
+                 stop_above=None if stop_at is None else -float(stop_at), leaves=leaves)
     if not np.isfinite(r.best_value):
         raise OutOfRangeError("joint limits", "no pose satisfies every joint limit and constraint",
                               "a non-empty feasible joint space")

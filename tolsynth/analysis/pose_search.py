@@ -283,8 +283,12 @@ def worst_pose(
     if probability not in ("gaussian", "exact"):
         raise OutOfRangeError("probability", f"got {probability!r}", "'gaussian' or 'exact'")
     if certify and criterion == "probability":
-        raise InputError("certify", "the sphere probability P(|dr| <= R) has no certified search",
-                         "criterion 'sigma' or 'components' with certify=True")
+        # a proven bound of the sphere probability needs enclosures of all three principal
+        # variances and of a quadrature's error; the per-component probability needs sigma_1 alone
+        raise InputError("certify", "the sphere probability P(|dr| <= R) has no certified search; the smallest "
+                         "per-component probability P(|u.dr| <= R) has one (criterion 'components')",
+                         "criterion 'components' (probability_lower_bound, with R) or 'sigma' (upper_bound, mm) "
+                         "with certify=True")
     from tolsynth.probability.distributions import resolve
 
     distribution = resolve(distribution, mechanism)

@@ -1,0 +1,111 @@
+"""The certified search on the command line, run as a user runs it (a child process): exit
+statuses, the JSON fields of the proof, and the numbers checked against the sensitivity evaluated
+at the reported poses (``Mechanism.sensitivity`` with NumPy's eigensolver) and random poses."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import tolsynth
+from tolsynth.kinematics.joint_space import _feasible, _limits
+from tolsynth.probability.stats import z_of_p
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _run(*argv: str) -> tuple[int, dict | None, str]:
+    proc = subprocess.run([sys.executable, "-m", "tolsynth", *argv], capture_output=True, text=True, cwd=ROOT,
+                          timeout=900)
+    try:
+        out = json.loads(proc.stdout)
+    except json.JSONDecodeError:
+        out = None
+    return proc.returncode, out, proc.stderr
+
+
+def _sigma(mech, Q, eps, c=3.0):
+    out = []
+    for q in np.atleast_2d(Q):
+        A = mech.sensitivity(q, check_limits=False)[:3]
+        out.append(math.sqrt(max(np.linalg.eigvalsh((A * (eps**2 / c)) @ A.T)[-1], 0.0)))
+    return np.array(out)
+
+
+def test_worst_pose_certify_json_holds_its_proof():
+    rc, out, _ = _run("worst-pose", "--model", "planar_2r", "--certify", "--json")
+    assert rc == 0
+    m = tolsynth.load_model("planar_2r")
+    sig = _sigma(m, np.array(out["q"]), np.array(list(out["tolerances"].values())))[0]
+    assert out["certified"] is True and out["boxes"] > 0
+    assert sig == pytest.approx(out["value"], rel=1e-9)
+    assert out["value"] <= out["upper_bound"] <= out["value"] * (1 + 5e-4)
+    assert out["certificate"]["certified"] is True and "leaves" not in out["certificate"]
+
+
+def test_worst_pose_certify_components_gives_a_probability_bound():
+    rc, out, _ = _run("worst-pose", "--model", "planar_2r", "--certify", "--criterion", "components",
+                      "--R", "0.1", "--json")
+    assert rc == 0 and out["certified"] is True
+    m = tolsynth.load_model("planar_2r")
+    sig = _sigma(m, np.array(out["q"]), np.array(list(out["tolerances"].values())))[0]
+    p_there = math.erf(0.1 / (math.sqrt(2.0) * sig))
+    assert out["probability_lower_bound"] <= p_there == pytest.approx(out["value"], rel=1e-9)
+    assert out["probability_lower_bound"] == pytest.approx(math.erf(0.1 / (math.sqrt(2.0) * out["upper_bound"])),
+                                                           abs=1e-14)
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["worst-pose", "--model", "planar_2r", "--certify", "--criterion", "probability", "--R", "0.1"], "components"),
+    (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--certify"], "--everywhere"),
+    (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--max-rounds", "3"], "--everywhere"),
+    (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--everywhere", "--certify",
+      "--criterion", "sphere"], "components"),
+], ids=["sphere-probability", "certify-alone", "max-rounds-alone", "sphere-everywhere"])
+def test_certify_usage_errors_exit_2_naming_the_choice(argv, says):
+    rc, _, err = _run(*argv)
+    assert rc == 2 and says in err and "Traceback" not in err
+
+
+@pytest.mark.slow
+def test_round_limit_is_not_converged_with_the_bound_so_far():
+    """Two rounds on the paper's robot cannot meet the specification: exit status 1, converged and
+    certified false, the reason, and the bound so far above the worst value found (which is
+    sigma z / R at the pose reported, checked here)."""
+    rc, out, err = _run("solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--dist", "uniform",
+                        "--alpha", "0.7", "--probability", "gaussian", "--everywhere", "--certify",
+                        "--max-rounds", "2", "--json")
+    assert rc == 1 and "no convergence" in err
+    assert out["converged"] is False and out["certified"] is False and "round limit (2)" in out["reason"]
+    assert len(out["rounds"]) == 2 and out["rounds"][-1]["boxes"] > 0
+    m = tolsynth.load_model("xu_zhang_1988")
+    eps = np.array([out["tolerances"][n] for n in m.error_parameters])
+    worst = _sigma(m, np.array(out["rounds"][-1]["worst_q"]), eps)[0] * z_of_p(0.99) / 0.5
+    assert worst == pytest.approx(out["worst_value"], rel=1e-9)
+    assert out["worst_value"] <= out["upper_bound"] and out["upper_bound"] > 1.001
+
+
+@pytest.mark.slow
+def test_everywhere_certified_on_the_paper_robot():
+    """The certified exchange proves z sigma_1 / R <= 1 + tol over the continuous joint space; no
+    random feasible pose (3000, NumPy eigenvalues) exceeds the bound."""
+    rc, out, _ = _run("solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--dist", "uniform",
+                      "--alpha", "0.7", "--probability", "gaussian", "--everywhere", "--certify", "--json")
+    assert rc == 0
+    assert out["converged"] is True and out["certified"] is True and out["reason"] == ""
+    assert out["upper_bound"] <= 1.001 and out["rounds"][-1]["boxes"] > 0
+    m = tolsynth.load_model("xu_zhang_1988")
+    eps = np.array([out["tolerances"][n] for n in m.error_parameters])
+    lo, hi = _limits(m)
+    Q = lo + (hi - lo) * np.random.default_rng(15).random((20000, len(lo)))
+    Q = Q[_feasible(m, Q.T)]
+    A = np.stack([m.sensitivity(q, check_limits=False)[:3] for q in Q[:3000]])
+    V = np.einsum("nij,j,nkj->nik", A, eps**2 / 3.0, A)
+    ratio = np.sqrt(np.linalg.eigvalsh(V)[:, -1]) * z_of_p(0.99) / 0.5
+    assert ratio.max() <= out["upper_bound"]
