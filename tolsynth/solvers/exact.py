@@ -73,6 +73,10 @@ START_CUTS = 0.9
 NEW_CUTS = 3
 #: a new cut this close (rad) to one of its pose's is not added
 SAME_CUT = 1e-5
+#: Newton steps on the sphere for a new cut's direction (the cut then tracks its minimum)
+START_STEPS = 8
+#: the barrier parameter (a fraction of the cost, per cut and parameter) a later round starts at
+WARM_TAU = 1e-3
 
 
 @dataclass
@@ -122,7 +126,7 @@ def _lattice(m: int) -> np.ndarray:
 def _local_minima(A: np.ndarray, u: np.ndarray, shapes, R: float, count: int = 3) -> np.ndarray:
     """The lowest few local minima of P over directions at ``eps = e^u`` (a lattice, then Newton's
     method on the sphere from the best points at least 0.3 rad apart), as rows."""
-    D = _lattice(300)
+    D = _LATTICE
     P, _ = probability(np.abs(D @ (A * np.exp(u))), shapes, R, 1e-6)
     starts: list = []
     for j in np.argsort(P):
@@ -130,8 +134,11 @@ def _local_minima(A: np.ndarray, u: np.ndarray, shapes, R: float, count: int = 3
             starts.append(j)
         if len(starts) >= count:
             break
-    W, _ = minimise_directions(np.repeat(A[None], len(starts), axis=0), D[starts], u, shapes, R)
+    W, _ = minimise_directions(np.repeat(A[None], len(starts), axis=0), D[starts], u, shapes, R, steps=START_STEPS)
     return W
+
+
+_LATTICE = _lattice(300)
 
 
 def _deadline(what: str) -> None:
@@ -258,7 +265,7 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
         u_start = _feasible_start(cuts, u, lu, uu, blocks)
         lam0 = None if lam is None else np.concatenate([lam, np.zeros(len(cuts) - lam.size)])
         res = Barrier(cost_fn, cuts, lu, uu).solve(u_start, lam0, max_iter=int(opts["max_iter"]),
-                                                   tau0=None if rnd == 0 else 1e-3 * cost_fn(u_start)[0] / (len(cuts) + spec.n))
+                                                   tau0=None if rnd == 0 else WARM_TAU * cost_fn(u_start)[0] / (len(cuts) + spec.n))
         iters += res.iterations
         u, lam, zb, ok, message = res.u, res.lam, res.z, res.ok, res.message
         eps = np.exp(u)
@@ -273,7 +280,7 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
         if starts:  # the violations' local minima, all in one batch, become tracking cuts
             idx = [i for i, _ in starts]
             W, _ = minimise_directions(np.array([blocks[i].A for i in idx]), np.array([w for _, w in starts]), u,
-                                       shapes, np.array([blocks[i].R for i in idx]))
+                                       shapes, np.array([blocks[i].R for i in idx]), steps=START_STEPS)
             for i, w in zip(idx, W):
                 added += cuts.add(i, blocks[i].A, blocks[i].R, blocks[i].p, w, moving=True)
         history.append({"round": rnd, "cuts": len(cuts), "newton": res.iterations, "added": added,

@@ -127,6 +127,7 @@ class Cuts:
         self._model = None  # (u_ref, E, Hr^-1, gt, B) of the tracking cuts at the last order-2 evaluation
         self._dt = None  # the tracking cuts' tangent steps for a whole Newton step
         self._a = 0.0
+        self._pending = None  # the directions and model of the last order-2 evaluation
 
     def __len__(self) -> int:
         return len(self.w)
@@ -148,7 +149,7 @@ class Cuts:
         self.block.append(blk_index)
         self.w.append(w)
         self.moving.append(bool(moving))
-        self._model = self._dt = None
+        self._model = self._dt = self._pending = None
         return True
 
     def rows(self, W=None) -> np.ndarray:
@@ -194,9 +195,16 @@ class Cuts:
         """The fraction of the planned step that the next evaluations stand at."""
         self._a = float(a)
 
+    def commit(self) -> None:
+        """Make the last order-2 evaluation's directions (and their model) the current ones."""
+        if self._pending is not None:
+            self.w, self._model = self._pending
+            self._pending = None
+            self._dt, self._a = None, 0.0
+
     def __call__(self, u, order):
         """``g = (P - p)/(1 - p)`` per cut, and (order 2) its Jacobian and Hessians in u; an order-2
-        evaluation makes its directions the current ones."""
+        evaluation's directions become the current ones at :meth:`commit`."""
         n = np.size(u)
         if not self.w:
             return np.zeros(0), np.zeros((0, n)), np.zeros((0, n, n))
@@ -208,8 +216,6 @@ class Cuts:
             P, _ = probability(C * np.exp(u)[None, :], self.shapes, R, CUT_EVAL_TOL)
             return (P - p) * s, None, None
         P, G, H, _, _ = derivatives(C, u, self.shapes, R, tol=CUT_EVAL_TOL)
-        self.w = list(W)
-        self._dt, self._a = None, 0.0
         mv = np.flatnonzero(self.moving)
         Hh = H.copy()
         if mv.size:
@@ -219,7 +225,8 @@ class Cuts:
             if pd.any():
                 Hinv[pd] = np.linalg.inv(Hr[pd])
             Hh[mv] = H[mv] - np.einsum("mna,mab,mkb->mnk", B, Hinv, B)
-            self._model = (np.array(u, dtype=float), E, Hinv, gt, B, pd)
+            model = (np.array(u, dtype=float), E, Hinv, gt, B, pd)
         else:
-            self._model = None
+            model = None
+        self._pending = (list(W), model)
         return (P - p) * s, G * s[:, None], Hh * s[:, None, None]

@@ -59,7 +59,9 @@ class Barrier:
         u[~free] = lu[~free]
         width = np.where(free, uu - lu, 1.0)
         u[free] = np.clip(u[free], lu[free] + 1e-9 * width[free], uu[free] - 1e-9 * width[free])
+        commit = getattr(self.cuts, "commit", lambda: None)
         g, J, H = self.cuts(u, 2)
+        commit()
         if g.size and not np.all(g > 0):
             return BarrierResult(u, np.zeros(g.size), np.zeros(u.size), 0, False, "start not strictly feasible")
         f, df, d2f = self.cost(u)
@@ -120,11 +122,17 @@ class Barrier:
                 continue
             # backtracking on the barrier function, keeping every cut strictly feasible
             accepted = False
-            for _ in range(40):
+            full = None
+            for trial in range(40):
                 un = u + a * du
                 if at is not None:
                     at(a)
-                gn = self.cuts(un, 0)[0]
+                if trial == 0:  # the first trial is usually taken: its derivatives come with it
+                    full = self.cuts(un, 2)
+                    gn = full[0]
+                else:
+                    full = None
+                    gn = self.cuts(un, 0)[0]
                 if not gn.size or (np.all(gn > 0) and np.all(gn >= (1.0 - FTB) * g)):  # no cut approached too fast
                     fn, dfn, d2fn = self.cost(un)
                     sln, sun = un - lu, uu - un
@@ -141,7 +149,8 @@ class Barrier:
                 return BarrierResult(u, lam, zu - zl, it, tau <= 1e3 * tau_end,
                                      f"line search failed at tau {tau:.1e} (Newton decrement {-slope / tau:.1e})")
             u, f, df, d2f, sl, su = un, fn, dfn, d2fn, sln, sun
-            g, J, H = self.cuts(u, 2)
+            g, J, H = full if full is not None else self.cuts(u, 2)
+            commit()
             lam = _safeguard(lam + ad * dlam, tau, g) if g.size else lam
             zl = np.where(free, _safeguard(zl + ad * dzl, tau, np.maximum(sl, 1e-300)), 0.0)
             zu = np.where(free, _safeguard(zu + ad * dzu, tau, np.maximum(su, 1e-300)), 0.0)
