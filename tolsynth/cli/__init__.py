@@ -35,8 +35,9 @@ from tolsynth.cli import (
     sweep,
     workspace,
 )
-from tolsynth.cli.args import HelpFormatter, add_pose_arguments, emit_json, parse_pose, parse_tolerances, version
+from tolsynth.cli.args import HelpFormatter, add_pose_arguments, emit_json, parse_pose, version
 from tolsynth.cli.interrupts import Interrupts, QuietCasadiInterrupt
+from tolsynth.cli.params import parse_tolerances
 from tolsynth.errors import TolsynthError
 from tolsynth.interrupts import started_as_command
 

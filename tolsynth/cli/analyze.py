@@ -9,10 +9,10 @@ from tolsynth.cli.args import (
     emit_json,
     inputs_record,
     parse_pose,
-    parse_tolerances,
     pose_label,
 )
 from tolsynth.cli.args import fmt_vec as _fmt_vec
+from tolsynth.cli.params import parse_tolerances
 from tolsynth.kinematics.mechanism import load_model
 
 __all__ = ["register"]

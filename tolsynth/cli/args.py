@@ -10,7 +10,6 @@ input raises a :class:`tolsynth.InputError` naming the option and quoting the sa
 from __future__ import annotations
 
 import argparse
-import fnmatch
 import json
 import math
 import os
@@ -38,9 +37,6 @@ __all__ = [
     "parse_pose",
     "parse_poses",
     "parse_reference",
-    "parse_tolerances",
-    "parse_per_parameter",
-    "parse_bounds",
     "check_figure_path",
     "inputs_record",
     "add_pose_arguments",
@@ -121,7 +117,7 @@ def _arg_type(fn, name: str):
         except InputError as exc:
             msg = str(exc)
             prefix = f"{exc.field}: "
-            raise argparse.ArgumentTypeError(msg[len(prefix):] if msg.startswith(prefix) else msg) from None
+            raise argparse.ArgumentTypeError(msg[len(prefix) :] if msg.startswith(prefix) else msg) from None
 
     parse.__name__ = name
     return parse
@@ -171,9 +167,11 @@ def parse_pose(mech: Mechanism, text: str, field: str = "--pose"):
     """A configuration name, or comma-separated joint values in deg (a suffix ``rad`` allowed)."""
     if text in mech.configurations:
         return text
-    allowed = ("one of " + ", ".join(mech.configurations) + " (configurations), or "
-               f"{len(mech.joint_names)} comma-separated joint values in "
-               f"{'/'.join(sorted(set(mech.joint_units)))} ({', '.join(mech.joint_names)})")
+    allowed = (
+        "one of " + ", ".join(mech.configurations) + " (configurations), or "
+        f"{len(mech.joint_names)} comma-separated joint values in "
+        f"{'/'.join(sorted(set(mech.joint_units)))} ({', '.join(mech.joint_names)})"
+    )
     items = [t.strip() for t in str(text).split(",")]
     if not any(_QTY.match(t) for t in items):
         raise UnknownNameError(field, f"{text!r} is neither a configuration nor joint values", allowed)
@@ -183,7 +181,9 @@ def parse_pose(mech: Mechanism, text: str, field: str = "--pose"):
     for t, unit in zip(items, mech.joint_units):  # a parallel robot's struts in mm, other joints in deg
         if not t:
             raise InputError(field, f"empty item in {text!r}", allowed)
-        values.append(quantity(t, field, "length", "mm") if unit == "mm" else math.radians(quantity(t, field, "angle", "deg")))
+        values.append(
+            quantity(t, field, "length", "mm") if unit == "mm" else math.radians(quantity(t, field, "angle", "deg"))
+        )
     return np.array(values)
 
 
@@ -193,9 +193,12 @@ def default_pose(mech: Mechanism, field: str = "--pose"):
 
     ref = model_reference(mech)
     if ref is None:
-        raise InputError(field, f"not given, and model {mech.name} has no reference pose",
-                         "one of " + ", ".join(mech.configurations) + " (configurations), or "
-                         f"{len(mech.joint_names)} comma-separated joint values in deg")
+        raise InputError(
+            field,
+            f"not given, and model {mech.name} has no reference pose",
+            "one of " + ", ".join(mech.configurations) + " (configurations), or "
+            f"{len(mech.joint_names)} comma-separated joint values in deg",
+        )
     return ref
 
 
@@ -223,169 +226,6 @@ def pose_label(pose) -> str | list:
 
 
 # ---------------------------------------------------------------------------------------------
-# per-parameter values: tolerances, bounds, k, alpha
-# ---------------------------------------------------------------------------------------------
-def _param_kind(mech: Mechanism, i: int) -> str | None:
-    return unit_kind(mech.units[i])
-
-
-def _tolerance_value(mech: Mechanism, field: str):
-    """A tolerance: bare number in the parameter's tolerance unit, or a length / angle suffix."""
-
-    def parse(text: str, where: str):
-        allowed = ("a number in each parameter's tolerance unit, or with a unit suffix "
-                   f"(lengths: {_suffixes('length')}; angles: {_suffixes('angle')})")
-        value, suffix = _split_quantity(text, f"{field}[{where}]" if where else field, allowed)
-        kind = unit_kind(suffix) if suffix else None
-
-        def convert(i: int) -> float:
-            return value if suffix is None else value * to_base(suffix) / to_base(mech.units[i])
-
-        return kind, convert
-
-    return parse
-
-
-def _apply_items(mech: Mechanism, text: str, field: str, base: np.ndarray, parse_value,
-                 set_lookup=None, bare_allowed: bool = True) -> list:
-    """Resolve ``SET``, ``VALUE``, ``pattern=VALUE`` and ``name=VALUE`` items onto ``base``.
-
-    Order of precedence, whatever the order written: the set (tolerances only), then a bare value
-    for every parameter, then patterns (``*``, ``?``, ``[..]``, in the order given), then exact
-    names.  A value with a unit suffix applied by a pattern sets only the parameters of that
-    unit's kind (``*=0.02mm`` every length, ``*=1mrad`` every angle).  Duplicates are errors.
-    """
-    names = list(mech.error_parameters)
-    out = list(base)
-    seen_exact: dict[str, str] = {}
-    seen_pattern: set = set()
-    set_name = None
-    bare = None
-    patterns = []
-    exact = []
-    for item in split_items(text, field):
-        if "=" in item:
-            key, _, val = (s.strip() for s in item.partition("="))
-            if not key or not val:
-                raise InputError(field, f"{item!r}", "name=value with both sides given")
-            kind, conv = parse_value(val, key)
-            if _WILDCARD.search(key):
-                if (key, kind) in seen_pattern:
-                    raise InputError(field, f"pattern {key!r} given twice", "each name or pattern once")
-                seen_pattern.add((key, kind))
-                hits = [i for i, n in enumerate(names) if fnmatch.fnmatchcase(n, key)
-                        and (kind is None or _param_kind(mech, i) == kind)]
-                if not hits:
-                    raise UnknownNameError(field, f"pattern {key!r} matches no{' ' + kind if kind else ''} "
-                                                  "error parameter", "patterns over " + ", ".join(names))
-                patterns.append((hits, conv))
-            else:
-                i = mech.index(key)  # UnknownNameError for a bad name
-                canon = names[i]
-                if canon in seen_exact:
-                    raise InputError(field, f"{canon} given twice ({seen_exact[canon]!r} and {item!r})",
-                                     "each name or pattern once")
-                seen_exact[canon] = item
-                if kind is not None and _param_kind(mech, i) != kind:
-                    raise InputError(field, f"{item!r}: {canon} is a{'n' if _param_kind(mech, i) == 'angle' else ''} "
-                                            f"{_param_kind(mech, i)} (tolerance unit {mech.units[i]})",
-                                     f"a {_param_kind(mech, i)} unit or a bare number in {mech.units[i]}")
-                exact.append((i, conv))
-        elif set_lookup is not None and not _QTY.match(item):
-            if set_name is not None:
-                raise InputError(field, f"two tolerance sets named ({set_name!r}, {item!r})",
-                                 "one SET, then name=value overrides")
-            set_name = item
-            out = list(set_lookup(item))
-        elif bare_allowed:
-            if bare is not None:
-                raise InputError(field, f"two values for every parameter ({bare[0]!r}, {item!r})",
-                                 "one bare value, then name=value overrides")
-            kind, conv = parse_value(item, "")
-            if kind is not None:  # a suffixed bare value: every parameter of that kind
-                hits = [i for i in range(len(names)) if _param_kind(mech, i) == kind]
-            else:
-                hits = list(range(len(names)))
-            bare = (item, hits, conv)
-        else:
-            raise InputError(field, f"{item!r}", "name=value items")
-    if set_name is not None and bare is not None:
-        raise InputError(field, f"both a set ({set_name!r}) and a value for every parameter ({bare[0]!r})",
-                         "a SET or a value, then name=value overrides")
-    if bare is not None:
-        for i in bare[1]:
-            out[i] = bare[2](i)
-    for hits, conv in patterns:
-        for i in hits:
-            out[i] = conv(i)
-    for i, conv in exact:
-        out[i] = conv(i)
-    return out
-
-
-def parse_tolerances(mech: Mechanism, text: str, field: str = "--tolerances") -> np.ndarray:
-    """``SET``, ``VALUE``, ``name=VALUE,...`` or ``SET,name=VALUE,...``; patterns such as ``*=0.02``.
-
-    Bare numbers are in each parameter's tolerance unit; a suffix converts (``h2=5um``,
-    ``alpha1=2mrad``).  Without a set or a value for every parameter, every parameter must be named.
-    """
-    n = mech.n
-    vals = _apply_items(mech, text, field, [math.nan] * n, _tolerance_value(mech, field),
-                        set_lookup=lambda s: mech.tolerances(s))
-    missing = [mech.error_parameters[i] for i in range(n) if not math.isfinite(vals[i])]
-    if missing:
-        raise InputError(field, "no tolerance for " + ", ".join(missing),
-                         "a SET, a value for every parameter (VALUE or *=VALUE), or every name=VALUE")
-    return mech.tolerances(dict(zip(mech.error_parameters, vals)))
-
-
-def _plain_value(field: str, what: str):
-    def parse(text: str, where: str):
-        try:
-            v = float(text)
-        except ValueError:
-            raise InputError(f"{field}[{where}]" if where else field, f"{text!r} is not a number", what) from None
-        if not math.isfinite(v):
-            raise InputError(f"{field}[{where}]" if where else field, f"got {text}", what)
-        return None, (lambda i: v)
-
-    return parse
-
-
-def parse_per_parameter(mech: Mechanism, text: str | None, field: str, default, what: str) -> np.ndarray | None:
-    """``--k`` / ``--alpha``: ``VALUE`` for every parameter, ``name=VALUE`` / ``pattern=VALUE`` overrides."""
-    if text is None:
-        return None
-    base = np.broadcast_to(np.asarray(default, dtype=float), (mech.n,)).tolist()
-    return np.array(_apply_items(mech, text, field, base, _plain_value(field, what)), dtype=float)
-
-
-def parse_bounds(mech: Mechanism, text: str | None, field: str = "--bounds"):
-    """``LOW:HIGH`` for every parameter, ``name=LOW:HIGH`` / ``pattern=LOW:HIGH`` overrides; a side
-    left empty keeps the model's bound; units as for the tolerances.  Returns ``(lower, upper)``."""
-    if text is None:
-        return None
-    lo0, hi0 = (np.asarray(b, dtype=float) for b in mech.bounds)
-    tol = _tolerance_value(mech, field)
-    allowed = "LOW:HIGH in each parameter's tolerance unit (or with a unit suffix); a side may be empty"
-
-    def parse(val: str, where: str):
-        if val.count(":") != 1:
-            raise InputError(f"{field}[{where}]" if where else field, f"{val!r}", allowed)
-        a, b = (s.strip() for s in val.split(":"))
-        ka, ca_ = tol(a, where) if a else (None, None)
-        kb, cb = tol(b, where) if b else (None, None)
-        if ka and kb and ka != kb:
-            raise InputError(f"{field}[{where}]" if where else field, f"{val!r} mixes a length and an angle", allowed)
-        return ka or kb, (lambda i: (ca_(i) if ca_ else None, cb(i) if cb else None))
-
-    pairs = _apply_items(mech, text, field, [(None, None)] * mech.n, parse)
-    lo = np.array([p[0] if p[0] is not None else lo0[i] for i, p in enumerate(pairs)])
-    hi = np.array([p[1] if p[1] is not None else hi0[i] for i, p in enumerate(pairs)])
-    return lo, hi
-
-
-# ---------------------------------------------------------------------------------------------
 # output files
 # ---------------------------------------------------------------------------------------------
 PLOT_INSTALL = 'pip install "tolsynth[plot]"'
@@ -398,13 +238,17 @@ def check_figure_path(path: str | None, field: str = "--out") -> None:
     try:
         from matplotlib.backend_bases import FigureCanvasBase
     except ImportError:
-        raise InputError(field, "writing a figure needs matplotlib, which is not installed",
-                         f"install it with: {PLOT_INSTALL}") from None
+        raise InputError(
+            field, "writing a figure needs matplotlib, which is not installed", f"install it with: {PLOT_INSTALL}"
+        ) from None
     types = FigureCanvasBase.get_supported_filetypes()
     ext = os.path.splitext(path)[1].lstrip(".").lower()
     if ext not in types:
-        raise InputError(field, f"{path!r}: unsupported figure format {('.' + ext) if ext else '(no suffix)'}",
-                         "a file name ending in " + ", ".join("." + t for t in sorted(types)))
+        raise InputError(
+            field,
+            f"{path!r}: unsupported figure format {('.' + ext) if ext else '(no suffix)'}",
+            "a file name ending in " + ", ".join("." + t for t in sorted(types)),
+        )
     check_writable_path(path, field)
 
 
@@ -422,8 +266,7 @@ def inputs_record(args, mech: Mechanism | None = None, **resolved) -> dict:
     given = {k: v for k, v in vars(args).items() if k not in ("func", "task")}
     rec = {"tolsynth_version": version(), "command": getattr(args, "command", None), "arguments": given}
     if mech is not None:
-        rec["model"] = {"name": mech.name, "title": mech.title,
-                        "file": str(getattr(mech.spec, "path", "") or "")}
+        rec["model"] = {"name": mech.name, "title": mech.title, "file": str(getattr(mech.spec, "path", "") or "")}
         rec["error_parameters"] = list(mech.error_parameters)
         rec["tolerance_units"] = dict(zip(mech.error_parameters, mech.units))
     rec.update(resolved)
@@ -432,10 +275,14 @@ def inputs_record(args, mech: Mechanism | None = None, **resolved) -> dict:
 
 def add_table_out_argument(p: argparse.ArgumentParser, what: str, option: str = "--out") -> None:
     """``--out FILE.csv|.json|.parquet``: the result as a table, inputs recorded."""
-    p.add_argument(option, default=None, metavar="FILE",
-                   help=f"write {what} to FILE: .csv (plain, metadata in FILE.json), .json, .parquet or .xlsx, with "
-                        "every input and the package version recorded (needs pandas, Parquet pyarrow: pip install "
-                        "\"tolsynth[tables]\"; Excel openpyxl: pip install \"tolsynth[xlsx]\"); default: none")
+    p.add_argument(
+        option,
+        default=None,
+        metavar="FILE",
+        help=f"write {what} to FILE: .csv (plain, metadata in FILE.json), .json, .parquet or .xlsx, with "
+        "every input and the package version recorded (needs pandas, Parquet pyarrow: pip install "
+        '"tolsynth[tables]"; Excel openpyxl: pip install "tolsynth[xlsx]"); default: none',
+    )
 
 
 def check_table_out(args, option: str = "--out") -> None:
@@ -465,7 +312,11 @@ def fmt_vec(v, fmt="{:.6g}") -> str:
 
 
 def add_model_argument(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--model", required=True, help="bundled model name (see tolsynth.bundled_models()) or path to a .toml model file")
+    p.add_argument(
+        "--model",
+        required=True,
+        help="bundled model name (see tolsynth.bundled_models()) or path to a .toml model file",
+    )
 
 
 def parse_distribution(text: str):
@@ -480,12 +331,16 @@ def parse_distribution(text: str):
     out = {}
     for part in text.split(","):
         if "=" not in part:
-            raise InputError("--dist", f"{part!r} in a per-parameter list", "name=shape pairs, e.g. *=uniform,h2=normal")
+            raise InputError(
+                "--dist", f"{part!r} in a per-parameter list", "name=shape pairs, e.g. *=uniform,h2=normal"
+            )
         k, v = (s.strip() for s in part.split("=", 1))
         try:
             shape(v)
         except InputError as exc:
-            raise InputError("--dist", f"{k}={v}: {exc}", "uniform, normal, triangular, truncnormal, truncnormal(beta)") from None
+            raise InputError(
+                "--dist", f"{k}={v}: {exc}", "uniform, normal, triangular, truncnormal, truncnormal(beta)"
+            ) from None
         out[k] = v
     return out
 
@@ -504,10 +359,14 @@ def dist_label(distribution) -> str:
 
 
 def add_dist_argument(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dist", type=_arg_type(parse_distribution, "distribution"), default=None,
-                   help="distribution of each error in its band: uniform (variance eps^2/3), normal (3 sigma = eps), "
-                        "triangular (eps^2/6), truncnormal or truncnormal(beta) (sigma = eps/beta cut at +-eps); "
-                        "or per parameter, e.g. '*=uniform,h2=normal'; default: the model file's, else uniform")
+    p.add_argument(
+        "--dist",
+        type=_arg_type(parse_distribution, "distribution"),
+        default=None,
+        help="distribution of each error in its band: uniform (variance eps^2/3), normal (3 sigma = eps), "
+        "triangular (eps^2/6), truncnormal or truncnormal(beta) (sigma = eps/beta cut at +-eps); "
+        "or per parameter, e.g. '*=uniform,h2=normal'; default: the model file's, else uniform",
+    )
 
 
 def _verify_arg(text: str):
@@ -523,61 +382,111 @@ def _verify_arg(text: str):
     return n
 
 
-def add_specification_arguments(p: argparse.ArgumentParser, solvers=("auto", "ipopt", "sumt"),
-                                worst_case: bool = False) -> None:
+def add_specification_arguments(
+    p: argparse.ArgumentParser, solvers=("auto", "ipopt", "sumt"), worst_case: bool = False
+) -> None:
     """The arguments of one tolerance specification, shared by ``solve`` and ``report``: model, R, p,
     distribution, cost (alpha, k, bounds), solver, poses, orientation, criterion, probability,
     verification and locked tolerances.  ``solvers``: the ``--solver`` choices; ``worst_case``:
     ``--probability worst_case`` offered (then ``--p`` is optional; the command checks it)."""
     add_model_argument(p)
-    p.add_argument("--R", type=length_mm("--R"), required=True,
-                   help="position accuracy radius, mm (or with a suffix: 500um)")
-    p.add_argument("--p", type=number("--p", "0 < p < 1"), required=not worst_case, default=None,
-                   help="probability per principal component (or of the sphere), 0 < p < 1"
-                        + ("; not needed with --probability worst_case (given: the statistical design's cost "
-                           "is shown beside it)" if worst_case else ""))
+    p.add_argument(
+        "--R", type=length_mm("--R"), required=True, help="position accuracy radius, mm (or with a suffix: 500um)"
+    )
+    p.add_argument(
+        "--p",
+        type=number("--p", "0 < p < 1"),
+        required=not worst_case,
+        default=None,
+        help="probability per principal component (or of the sphere), 0 < p < 1"
+        + (
+            "; not needed with --probability worst_case (given: the statistical design's cost is shown beside it)"
+            if worst_case
+            else ""
+        ),
+    )
     add_dist_argument(p)
-    p.add_argument("--alpha", default=None,
-                   help="cost exponent: VALUE for every parameter, name=VALUE or pattern=VALUE overrides "
-                        "(e.g. 0.7,alpha*=0.5); default: 0.7")
-    p.add_argument("--k", default=None,
-                   help="cost factors k in sum k eps^-alpha: VALUE, name=VALUE, pattern=VALUE; default: the model's")
-    p.add_argument("--bounds", default=None,
-                   help="tolerance bounds LOW:HIGH (either side may be empty: the model's), for every parameter "
-                        "or as name=LOW:HIGH / pattern=LOW:HIGH; in each parameter's tolerance unit or with a "
-                        "suffix (h*=5um:0.2mm); default: the model's")
+    p.add_argument(
+        "--alpha",
+        default=None,
+        help="cost exponent: VALUE for every parameter, name=VALUE or pattern=VALUE overrides "
+        "(e.g. 0.7,alpha*=0.5); default: 0.7",
+    )
+    p.add_argument(
+        "--k",
+        default=None,
+        help="cost factors k in sum k eps^-alpha: VALUE, name=VALUE, pattern=VALUE; default: the model's",
+    )
+    p.add_argument(
+        "--bounds",
+        default=None,
+        help="tolerance bounds LOW:HIGH (either side may be empty: the model's), for every parameter "
+        "or as name=LOW:HIGH / pattern=LOW:HIGH; in each parameter's tolerance unit or with a "
+        "suffix (h*=5um:0.2mm); default: the model's",
+    )
     both = "; both: IPOPT and SUMT + Powell side by side" if "both" in solvers else ""
-    p.add_argument("--solver", choices=list(solvers), default="auto",
-                   help=f"{SOLVER_HELP}{both}")
-    p.add_argument("--pose", action="append", default=None,
-                   help=POSE_HELP + "; repeat the option for several poses (the constraints hold at each); "
-                        "default: the model's reference pose")
-    p.add_argument("--Phi", type=angle_rad("--Phi"), default=None,
-                   help="orientation accuracy half-angle, rad (or with a suffix: 2mrad, 0.1deg); default: none")
-    p.add_argument("--p-orientation", dest="p_orientation",
-                   type=number("--p-orientation", "0 < p < 1"), default=None,
-                   help="probability of the orientation specification, 0 < p < 1; default: --p")
-    p.add_argument("--criterion", choices=["components", "sphere"], default="components",
-                   help="per principal component (the paper's Eq. 20) or the sphere P(|dr| <= R) >= p")
-    p.add_argument("--probability", choices=["gaussian", "exact"] + (["worst_case"] if worst_case else []),
-                   default="gaussian",
-                   help="gaussian (the paper's: each principal component read as normal) or exact (the exact "
-                        "probabilities of the linear error model, along every direction or in the sphere)"
-                        + ("; worst_case: every error anywhere in its band, the hand still within R (no p)"
-                           if worst_case else ""))
-    p.add_argument("--verify", default=None, type=_verify_arg, metavar="N|auto",
-                   help="close the loop: nonlinear Monte Carlo at the optimum with N samples per pose (auto: from p), "
-                        "and a tighter target until its 99%% lower bound reaches p; default: off")
-    p.add_argument("--lock", action="append", default=None, metavar="NAME=VALUE",
-                   help="fix a tolerance at VALUE (its tolerance unit); repeatable; the others are optimised around it")
+    p.add_argument("--solver", choices=list(solvers), default="auto", help=f"{SOLVER_HELP}{both}")
+    p.add_argument(
+        "--pose",
+        action="append",
+        default=None,
+        help=POSE_HELP + "; repeat the option for several poses (the constraints hold at each); "
+        "default: the model's reference pose",
+    )
+    p.add_argument(
+        "--Phi",
+        type=angle_rad("--Phi"),
+        default=None,
+        help="orientation accuracy half-angle, rad (or with a suffix: 2mrad, 0.1deg); default: none",
+    )
+    p.add_argument(
+        "--p-orientation",
+        dest="p_orientation",
+        type=number("--p-orientation", "0 < p < 1"),
+        default=None,
+        help="probability of the orientation specification, 0 < p < 1; default: --p",
+    )
+    p.add_argument(
+        "--criterion",
+        choices=["components", "sphere"],
+        default="components",
+        help="per principal component (the paper's Eq. 20) or the sphere P(|dr| <= R) >= p",
+    )
+    p.add_argument(
+        "--probability",
+        choices=["gaussian", "exact"] + (["worst_case"] if worst_case else []),
+        default="gaussian",
+        help="gaussian (the paper's: each principal component read as normal) or exact (the exact "
+        "probabilities of the linear error model, along every direction or in the sphere)"
+        + ("; worst_case: every error anywhere in its band, the hand still within R (no p)" if worst_case else ""),
+    )
+    p.add_argument(
+        "--verify",
+        default=None,
+        type=_verify_arg,
+        metavar="N|auto",
+        help="close the loop: nonlinear Monte Carlo at the optimum with N samples per pose (auto: from p), "
+        "and a tighter target until its 99%% lower bound reaches p; default: off",
+    )
+    p.add_argument(
+        "--lock",
+        action="append",
+        default=None,
+        metavar="NAME=VALUE",
+        help="fix a tolerance at VALUE (its tolerance unit); repeatable; the others are optimised around it",
+    )
 
 
 #: what each ``--solver`` value runs (solve, report and sweep say the same)
-SOLVER_HELP = ("auto: the compiled interior-point method where it applies (per-component Gaussian criterion, "
-               "power-law costs), IPOPT elsewhere; ipopt: IPOPT with exact derivatives always; sumt: the "
-               "paper's SUMT + Powell; every result certified the same way")
-TOLERANCES_HELP = ("SET | VALUE | name=VALUE,... | SET,name=VALUE,...; patterns such as *=0.02 or h*=0.01; "
-                   "bare numbers in each parameter's tolerance unit, or with a unit suffix (0.1mm, 5um, 2mrad, 0.01deg)")
+SOLVER_HELP = (
+    "auto: the compiled interior-point method where it applies (per-component Gaussian criterion, "
+    "power-law costs), IPOPT elsewhere; ipopt: IPOPT with exact derivatives always; sumt: the "
+    "paper's SUMT + Powell; every result certified the same way"
+)
+TOLERANCES_HELP = (
+    "SET | VALUE | name=VALUE,... | SET,name=VALUE,...; patterns such as *=0.02 or h*=0.01; "
+    "bare numbers in each parameter's tolerance unit, or with a unit suffix (0.1mm, 5um, 2mrad, 0.01deg)"
+)
 POSE_HELP = "configuration name, or joint values in deg, comma-separated (a suffix such as 1.2rad allowed)"
 
 
@@ -587,7 +496,12 @@ def add_pose_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pose", default=None, help=POSE_HELP + "; default: the model's reference pose")
     p.add_argument("--tolerances", required=True, help=TOLERANCES_HELP)
     add_dist_argument(p)
-    p.add_argument("--R", type=length_mm("--R"), required=True,
-                   help="radius of the accuracy sphere, mm (or with a suffix: 500um)")
-    p.add_argument("--Phi", type=angle_rad("--Phi"), default=None,
-                   help="orientation cone half-angle, rad (or with a suffix: 2mrad, 0.1deg); default: none")
+    p.add_argument(
+        "--R", type=length_mm("--R"), required=True, help="radius of the accuracy sphere, mm (or with a suffix: 500um)"
+    )
+    p.add_argument(
+        "--Phi",
+        type=angle_rad("--Phi"),
+        default=None,
+        help="orientation cone half-angle, rad (or with a suffix: 2mrad, 0.1deg); default: none",
+    )

@@ -23,11 +23,11 @@ from tolsynth.cli.args import (
     inputs_record,
     length_mm,
     number,
-    parse_per_parameter,
     parse_poses,
     pose_label,
     write_out,
 )
+from tolsynth.cli.params import parse_per_parameter
 from tolsynth.errors import InputError
 
 __all__ = ["design_command", "add_design_arguments", "add_R_p_arguments", "add_max_nodes_argument", "add_output_arguments",

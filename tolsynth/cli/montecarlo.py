@@ -13,10 +13,10 @@ from tolsynth.cli.args import (  # noqa: I001
     inputs_record,
     number,
     parse_pose,
-    parse_tolerances,
     pose_label,
     write_out,
 )
+from tolsynth.cli.params import parse_tolerances
 from tolsynth.kinematics.mechanism import load_model
 
 __all__ = ["register"]

@@ -16,13 +16,12 @@ from tolsynth.cli.args import (  # noqa: I001
     emit_json,
     inputs_record,
     number,
-    parse_bounds,
-    parse_per_parameter,
     parse_poses,
     parse_reference,
     pose_label,
     write_out,
 )
+from tolsynth.cli.params import parse_bounds, parse_per_parameter
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
 from tolsynth.progress import Working

@@ -16,14 +16,13 @@ from tolsynth.cli.args import (
     emit_json,
     inputs_record,
     number,
-    parse_bounds,
-    parse_per_parameter,
     parse_poses,
     pose_label,
     quantity,
     split_items,
     write_out,
 )
+from tolsynth.cli.params import parse_bounds, parse_per_parameter
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
 

@@ -21,12 +21,12 @@ from tolsynth.cli.args import (  # noqa: I001
     length_mm,
     number,
     parse_reference,
-    parse_tolerances,
     quantity,
     split_items,
     write_out,
 )
 from tolsynth.cli.designs import finish
+from tolsynth.cli.params import parse_tolerances
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
 from tolsynth.progress import Working
