@@ -39,7 +39,8 @@ WILLIAMS_FPK = [((0.0, 0.0, 0.0), (0.0, 0.0, -1065.0)), ((10.0, 20.0, 30.0), (10
 
 # ---------------------------------------------------------------------------------------------
 # LinuxCNC, src/emc/kinematics/genhexkins.h (generalised hexapod, derived from R. Brian Register's
-# work), DEFAULT_BASE_i_{X,Y,Z} and DEFAULT_PLATFORM_i_{X,Y,Z}, struts 0..5 (inch); and
+# work; the "mini tetra" configuration of EMC2's genhexkins.h), DEFAULT_BASE_i_{X,Y,Z} and
+# DEFAULT_PLATFORM_i_{X,Y,Z}, struts 0..5 (inch); and
 # configs/sim/axis/vismach/hexapod-sim/hexapod.ini: HOME = 0 0 20 0 0 0 (inch, deg), strut
 # lengths there 29.7466 in (rounded).
 LINUXCNC_BASE = [(-22.950, 13.250, 0.0), (22.950, 13.250, 0.0), (22.950, 13.250, 0.0),
