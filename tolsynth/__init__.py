@@ -10,6 +10,8 @@ mm and 1e-2 rad); cost in the paper's units (sum of k * eps**-alpha on those num
 """
 
 from tolsynth.interrupts import guard_start as _guard_start; _guard_start()  # noqa: E702,I001  (Ctrl-C while the command starts: one line)
+from tolsynth.analysis.certify import Certificate, certify_worst_pose
+from tolsynth.analysis.certify_map import CertifiedMap, certified_map
 from tolsynth.analysis.contributions import Contributions, contributions
 from tolsynth.analysis.montecarlo import MonteCarloResult, monte_carlo
 from tolsynth.analysis.plot import plot_map
@@ -82,6 +84,10 @@ __all__ = [
     "ValidationResult",
     "worst_pose",
     "WorstPose",
+    "certify_worst_pose",
+    "Certificate",
+    "certified_map",
+    "CertifiedMap",
     "probability_map",
     "ProbabilityMap",
     "plot_map",

@@ -1,0 +1,1 @@
+../../notebooks/12_certified_everywhere.py
