@@ -61,14 +61,13 @@ from __future__ import annotations
 import fnmatch
 import math
 import os
-import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from tolsynth.checks import HUGE, is_real
+from tolsynth.checks import is_real
 from tolsynth.errors import InputError, MissingDependencyError, ModelFileError, UnsupportedJointError
 from tolsynth.model.fields import (
     DEFAULT_BOUNDS,
@@ -82,6 +81,7 @@ from tolsynth.model.fields import (
     _type_name,
 )
 from tolsynth.model.spec import Configuration, ErrorParameter, Joint, Link, MechanismSpec
+from tolsynth.model.urdf_xml import _axis_angles, _chain, _origins, _rpy_matrix
 from tolsynth.units import to_base
 
 __all__ = ["urdf_spec", "URDF_FORMAT", "URDF_INSTALL", "ORIGIN_FIELDS", "AXIS_FIELDS", "GROUPS"]
@@ -223,7 +223,7 @@ def urdf_spec(
     except UnsupportedJointError:
         raise
     except ModelFileError as err:  # name the argument, not the model-file key
-        field = err.field[len("chain."):] if err.field.startswith("chain.") else err.field
+        field = err.field[len("chain.") :] if err.field.startswith("chain.") else err.field
         raise ModelFileError(err.path, field, str(err).split(": ", 2)[-1]) from None
     return spec
 
@@ -231,26 +231,49 @@ def urdf_spec(
 def _check_arguments(path, errors, configurations, tolerance_sets, assumptions, name, title, source) -> None:
     """The shape of load_urdf's arguments (their values are checked by the model-file reader)."""
     if not isinstance(path, (str, os.PathLike)):
-        raise InputError("path", f"got {type(path).__name__}: {path!r:.60}", "the path of a .urdf file (str or os.PathLike)")
-    if not isinstance(errors, str) and (isinstance(errors, (bytes, Mapping)) or not isinstance(errors, Sequence)
-                                        or not all(isinstance(e, str) for e in errors)):
-        raise InputError("errors", f"got {errors!r:.60}", "a pattern or a list of patterns such as ['*.xyz', '*.rpy'] or 'all'")
+        raise InputError(
+            "path", f"got {type(path).__name__}: {path!r:.60}", "the path of a .urdf file (str or os.PathLike)"
+        )
+    if not isinstance(errors, str) and (
+        isinstance(errors, (bytes, Mapping))
+        or not isinstance(errors, Sequence)
+        or not all(isinstance(e, str) for e in errors)
+    ):
+        raise InputError(
+            "errors", f"got {errors!r:.60}", "a pattern or a list of patterns such as ['*.xyz', '*.rpy'] or 'all'"
+        )
     for argname, value in (("configurations", configurations), ("tolerance_sets", tolerance_sets)):
         if value is not None and not isinstance(value, Mapping):
-            raise InputError(argname, f"expected a dict, got {type(value).__name__}: {value!r:.60}",
-                             "a dict name -> " + ("joint values (a list in joint order, or a dict joint -> value)"
-                                                  if argname == "configurations" else "{parameter: tolerance}"))
+            raise InputError(
+                argname,
+                f"expected a dict, got {type(value).__name__}: {value!r:.60}",
+                "a dict name -> "
+                + (
+                    "joint values (a list in joint order, or a dict joint -> value)"
+                    if argname == "configurations"
+                    else "{parameter: tolerance}"
+                ),
+            )
     for cname, value in (configurations or {}).items():
-        ok = isinstance(value, Mapping) or (isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, (str, bytes))
-                                            and all(is_real(v) for v in np.asarray(value, dtype=object).ravel()))
+        ok = isinstance(value, Mapping) or (
+            isinstance(value, (Sequence, np.ndarray))
+            and not isinstance(value, (str, bytes))
+            and all(is_real(v) for v in np.asarray(value, dtype=object).ravel())
+        )
         if not ok:
-            raise InputError(f"configurations[{cname}]", f"got {value!r:.60}",
-                             "a list of joint values in joint order, or a dict joint name -> value")
+            raise InputError(
+                f"configurations[{cname}]",
+                f"got {value!r:.60}",
+                "a list of joint values in joint order, or a dict joint name -> value",
+            )
     for sname, value in (tolerance_sets or {}).items():
         if not isinstance(value, Mapping):
             raise InputError(f"tolerance_sets[{sname}]", f"got {value!r:.60}", "a dict parameter name -> tolerance")
-    if isinstance(assumptions, (str, bytes)) or not isinstance(assumptions, Sequence) or \
-            not all(isinstance(a, str) for a in assumptions):
+    if (
+        isinstance(assumptions, (str, bytes))
+        or not isinstance(assumptions, Sequence)
+        or not all(isinstance(a, str) for a in assumptions)
+    ):
         raise InputError("assumptions", f"got {assumptions!r:.60}", "a list of strings")
     for argname, value in (("name", name), ("title", title), ("source", source)):
         if value is not None and not isinstance(value, str):
@@ -263,116 +286,11 @@ def _angle_unit_guard(configurations: dict, motions: dict, joint_names: list) ->
     for cname, cfg in configurations.items():
         for jn, v in zip(joint_names, cfg.q):
             if motions[jn] == "revolute" and abs(v) > 2 * math.pi * (1 + 1e-9):
-                raise InputError("angle_unit", f"not given, and configurations[{cname}][{jn}] = {v:g} is beyond 2 pi rad "
-                                               "(degrees meant?)",
-                                 "angle_unit='deg' for values in degrees, or angle_unit='rad' to read them as radians")
-
-
-# --------------------------------------------------------------------------------------------
-# reading the URDF
-# --------------------------------------------------------------------------------------------
-def _rpy_matrix(xyz, rpy) -> np.ndarray:
-    """URDF's origin: Trans(xyz) . Rz(yaw) . Ry(pitch) . Rx(roll) (xyz in any length unit)."""
-    r, p, y = rpy
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    T = np.eye(4)
-    T[:3, :3] = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]]) @ np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]]) \
-        @ np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    T[:3, 3] = xyz
-    return T
-
-
-def _numbers(text: str, r: _Reader, where: str, what: str, scale: float = 1.0) -> tuple[float, ...]:
-    """Three finite numbers of an ``xyz`` / ``rpy`` attribute, each at most HUGE (in mm or rad)
-    after ``scale``; a typed error naming the joint otherwise."""
-    try:
-        v = tuple(float(t) for t in text.split())
-    except ValueError:
-        v = ()
-    if len(v) != 3 or not all(math.isfinite(t) and abs(t * scale) <= HUGE for t in v):
-        limit = f"|value| <= {HUGE / scale:g}" + (" m" if scale == 1000.0 else "")
-        raise r.fail(where, f"{what}={text!r}: expected three finite numbers, {limit}")
-    return v
-
-
-def _origins(file: str, r: _Reader) -> dict[str, tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]]:
-    """Each joint's ``<origin xyz rpy>`` as the file writes them (m, rad) and its ``<axis xyz>``.
-    yourdfpy keeps only the composed 4x4 matrix, from which rpy cannot be recovered uniquely at
-    pitch = +-90 deg; the error parameters are the file's own numbers, so they are read here (and
-    checked against yourdfpy's matrices by the caller).  The tree is checked here too: a link or
-    joint declared twice, a link with two parent joints (a closed loop) and a cycle are errors
-    naming them (a URDF describes a tree; tolsynth reads a serial chain of it)."""
-    root = ET.parse(file).getroot()
-    links = [link.get("name") for link in root.findall("link")]
-    joints = root.findall("joint")  # not <transmission><joint>
-    _unique_names(r, links, "link")
-    _unique_names(r, [j.get("name") for j in joints], "joint")
-    parent_of: dict[str, str] = {}
-    for joint in joints:
-        child, parent = joint.find("child"), joint.find("parent")
-        child = child.get("link") if child is not None else None
-        if child in parent_of:
-            raise r.fail(f"joint {joint.get('name')!r}", f"link {child!r} is also the child of joint {parent_of[child]!r}: "
-                                                         "a closed loop (not supported: a URDF chain must be a tree)")
-        parent_of[child] = joint.get("name")
-        parent_link = parent.get("link") if parent is not None else None
-        parent_of.setdefault(f"link:{child}", parent_link)
-    for link in links:  # a cycle: following the parents never reaches a root
-        seen, at = set(), link
-        while at is not None:
-            if at in seen:
-                raise r.fail(f"link {link!r}", "its parent joints form a cycle (not supported: a URDF chain must be a tree)")
-            seen.add(at)
-            at = parent_of.get(f"link:{at}")
-    out = {}
-    for joint in joints:
-        name = joint.get("name")
-        origin = joint.find("origin")
-        xyz = _numbers(origin.get("xyz", "0 0 0") if origin is not None else "0 0 0", r, f"joint {name!r}",
-                       "origin xyz", 1000.0)
-        rpy = _numbers(origin.get("rpy", "0 0 0") if origin is not None else "0 0 0", r, f"joint {name!r}",
-                       "origin rpy")
-        axis_el = joint.find("axis")
-        axis = _numbers(axis_el.get("xyz", "1 0 0") if axis_el is not None else "1 0 0", r, f"joint {name!r}", "axis xyz")
-        out[name] = (xyz, rpy, axis)
-    return out
-
-
-def _unique_names(r: _Reader, names: list, what: str) -> None:
-    seen = set()
-    for n in names:
-        if n is None or not str(n).strip():
-            raise r.fail(f"{what} {n!r}", f"a {what} without a name")
-        if n in seen:
-            raise r.fail(f"{what} {n!r}", f"declared twice (each {what} name once)")
-        seen.add(n)
-
-
-def _chain(robot, base: str, tip: str, r: _Reader, where: str) -> list:
-    """The URDF joints from ``base`` to ``tip``, base first."""
-    links = [link.name for link in robot.links]
-    for key, link in (("base_link", base), ("tip_link", tip)):
-        if not isinstance(link, str):
-            raise r.fail(f"{where}.{key}", f"expected a link name, got {_type_name(link)}: {link!r:.60}")
-        if link not in links:
-            raise r.fail(f"{where}.{key}", f"no link {link!r} in the URDF{_nearest(link, links)}")
-    by_child = {j.child: j for j in robot.joints}
-    path = []
-    link = tip
-    while link != base:
-        joint = by_child.get(link)
-        if joint is None:
-            raise r.fail(f"{where}.tip_link", f"link {tip!r} does not descend from base_link {base!r}")
-        path.append(joint)
-        link = joint.parent
-    if not path:
-        raise r.fail(f"{where}.tip_link", "is the base link itself: the chain is empty")
-    return path[::-1]
-
-
-def _axis_angles(axis: np.ndarray) -> tuple[float, float]:
-    """(phi, theta) with Rz(phi) . Ry(theta) . z = axis (unit)."""
-    return math.atan2(axis[1], axis[0]), math.acos(max(-1.0, min(1.0, axis[2])))
+                raise InputError(
+                    "angle_unit",
+                    f"not given, and configurations[{cname}][{jn}] = {v:g} is beyond 2 pi rad (degrees meant?)",
+                    "angle_unit='deg' for values in degrees, or angle_unit='rad' to read them as radians",
+                )
 
 
 def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> MechanismSpec:
@@ -401,8 +319,13 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
     rr = _Reader(file)  # defects of the URDF itself name the URDF file
     try:
         raw_origins = _origins(file, rr)  # the tree checked before yourdfpy reads it
-        urdf = yourdfpy.URDF.load(file, build_scene_graph=False, build_collision_scene_graph=False,
-                                  load_meshes=False, load_collision_meshes=False)
+        urdf = yourdfpy.URDF.load(
+            file,
+            build_scene_graph=False,
+            build_collision_scene_graph=False,
+            load_meshes=False,
+            load_collision_meshes=False,
+        )
     except ModelFileError:
         raise
     except Exception as exc:  # yourdfpy/lxml raise many kinds on a malformed file
@@ -422,10 +345,15 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
         jn = joint.name
         if joint.type not in _MOVABLE + ("fixed",):
             raise UnsupportedJointError(
-                file, jn, joint.type,
-                f"type {joint.type!r} is not supported on the chain (supported: fixed, {', '.join(_MOVABLE)})")
+                file,
+                jn,
+                joint.type,
+                f"type {joint.type!r} is not supported on the chain (supported: fixed, {', '.join(_MOVABLE)})",
+            )
         if joint.mimic is not None and joint.type != "fixed":
-            raise UnsupportedJointError(file, jn, joint.type, "a mimic joint is not supported (its value follows another joint)")
+            raise UnsupportedJointError(
+                file, jn, joint.type, "a mimic joint is not supported (its value follows another joint)"
+            )
         xyz, rpy, raw_axis = raw_origins[jn]
         composed = _rpy_matrix(xyz, rpy)
         reference = np.asarray(joint.origin if joint.origin is not None else np.eye(4), float)
@@ -462,7 +390,9 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
             selectable[sym] = kind
             labels[sym] = f"{jn} axis {fname}"
         motion = "prismatic" if joint.type == "prismatic" else "revolute"
-        links.append(Link(dims={}, theta=jn, theta_offset=None, origin=tuple(pending), axis=tuple(axis_ops), motion=motion))
+        links.append(
+            Link(dims={}, theta=jn, theta_offset=None, origin=tuple(pending), axis=tuple(axis_ops), motion=motion)
+        )
         pending = []
         motions[jn] = motion
         if joint.type == "continuous":
@@ -478,7 +408,9 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
                 raise rr.fail(f"joint {jn!r}", f"limits lower {lim.lower} must be below upper {lim.upper}")
         joints.append(Joint(jn, lo, hi))
     if not joints:
-        raise r.fail("chain.tip_link", f"the chain {chain['base_link']!r} -> {chain['tip_link']!r} has no movable joint")
+        raise r.fail(
+            "chain.tip_link", f"the chain {chain['base_link']!r} -> {chain['tip_link']!r} has no movable joint"
+        )
     tool = tuple(pending)
     joint_names = [j.name for j in joints]
 
@@ -496,8 +428,11 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
             expanded = [f"{head}.{f}" for f in GROUPS[group]] if head and group in GROUPS else [pat]
             hit = {n for n in selectable for e in expanded if fnmatch.fnmatchcase(n, e)}
         if not hit:
-            raise r.fail(f"chain.errors[{i}]", f"{pat!r} selects no error parameter{_nearest(pat, selectable)} "
-                                               "(names are <joint>.x/y/z/roll/pitch/yaw/tilt1/tilt2; groups .xyz .rpy .axis)")
+            raise r.fail(
+                f"chain.errors[{i}]",
+                f"{pat!r} selects no error parameter{_nearest(pat, selectable)} "
+                "(names are <joint>.x/y/z/roll/pitch/yaw/tilt1/tilt2; groups .xyz .rpy .axis)",
+            )
         chosen |= hit
     order = [n for n in selectable if n in chosen]  # chain order, per joint x y z roll pitch yaw tilt1 tilt2
     sel = {n: selectable[n] for n in order}
@@ -514,9 +449,19 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
         lo, hi = r.pair(list(b) if isinstance(b, (list, tuple)) else b, f"chain.bounds[{n}]")
         if lo <= 0:
             raise r.fail(f"chain.bounds[{n}]", f"the lower bound must be > 0 (cost eps**-alpha), got {lo}")
-        eparams.append(ErrorParameter(
-            name=n, perturbs=(n,), unit=unit, scale=to_base(unit), k=r.positive(ks[n], f"chain.k[{n}]"),
-            lower=lo, upper=hi, label=labels[n], kind=kind))
+        eparams.append(
+            ErrorParameter(
+                name=n,
+                perturbs=(n,),
+                unit=unit,
+                scale=to_base(unit),
+                k=r.positive(ks[n], f"chain.k[{n}]"),
+                lower=lo,
+                upper=hi,
+                label=labels[n],
+                kind=kind,
+            )
+        )
 
     # ---- configurations ---------------------------------------------------------------------
     configurations: dict[str, Configuration] = {}
@@ -534,7 +479,9 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
             raw = dict(zip(joint_names, values))
         for key in raw:
             if key not in joint_names and key != "note":
-                raise r.fail(f"{where}.{key}", f"not a joint of the chain{_nearest(key, joint_names)} (joints: {joint_names})")
+                raise r.fail(
+                    f"{where}.{key}", f"not a joint of the chain{_nearest(key, joint_names)} (joints: {joint_names})"
+                )
         missing = [j for j in joint_names if j not in raw]
         if missing:
             raise r.fail(where, f"missing joint value(s) {missing}")
@@ -545,7 +492,9 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
     _check_configurations(r, configurations, joints)
     if "zero" not in configurations:
         q0 = tuple(0.0 if j.lower <= 0.0 <= j.upper else 0.5 * (j.lower + j.upper) for j in joints)
-        configurations["zero"] = Configuration("zero", q0, "every joint at 0 (at mid-range where 0 is outside its limits)")
+        configurations["zero"] = Configuration(
+            "zero", q0, "every joint at 0 (at mid-range where 0 is outside its limits)"
+        )
 
     # ---- model ------------------------------------------------------------------------------
     meta = r.table(data["model"], "model", "model")
@@ -566,10 +515,24 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
         f"{len(eparams)} error parameters ({', '.join(patterns)})."
     )
     spec = MechanismSpec(
-        name=name, title=title, source=source, assumptions=tuple(assumptions), path=r.path, convention="urdf",
-        base=(), tool=tool, links=tuple(links), symbols=symbols, symbol_kinds=kinds, joints=tuple(joints),
-        loops=(), joint_constraints=(), configurations=configurations, error_parameters=tuple(eparams),
-        tolerance_sets={}, notes=str(meta.get("notes", "")),
+        name=name,
+        title=title,
+        source=source,
+        assumptions=tuple(assumptions),
+        path=r.path,
+        convention="urdf",
+        base=(),
+        tool=tool,
+        links=tuple(links),
+        symbols=symbols,
+        symbol_kinds=kinds,
+        joints=tuple(joints),
+        loops=(),
+        joint_constraints=(),
+        configurations=configurations,
+        error_parameters=tuple(eparams),
+        tolerance_sets={},
+        notes=str(meta.get("notes", "")),
     )
     sets = _tolerance_sets(r, data.get("tolerance_sets", {}), eparams)
     from dataclasses import replace
