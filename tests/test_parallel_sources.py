@@ -152,3 +152,12 @@ def test_worst_pose_reports_strut_limits_in_mm():
     m = tolsynth.load_model("stewart_gough")
     w = tolsynth.worst_pose(m, "coarse", grid=2, starts=1)
     assert w.active and all(a.endswith(" mm)") for a in w.active), w.active
+
+
+def test_cli_certify_on_a_parallel_robot_exits_2_with_the_reason(capsys):
+    """worst-pose --certify: bad input (exit 2) and a one-line reason, not a search without end."""
+    from tolsynth.cli import main
+
+    assert main(["worst-pose", "--model", "planar_3rrr", "--tolerances", "coarse", "--certify"]) == 2
+    err = capsys.readouterr().err
+    assert "certify" in err and "parallel robot" in err and "Traceback" not in err
