@@ -109,3 +109,21 @@ def test_everywhere_certified_on_the_paper_robot():
     V = np.einsum("nij,j,nkj->nik", A, eps**2 / 3.0, A)
     ratio = np.sqrt(np.linalg.eigvalsh(V)[:, -1]) * z_of_p(0.99) / 0.5
     assert ratio.max() <= out["upper_bound"]
+
+
+def test_sampled_exchange_round_limit_says_why_with_progress():
+    """Without certify too: a round limit reached is not converged, the reason says so and by how
+    much the last design misses (its worst value, sigma z / R at the reported pose, checked), exit
+    status 1 naming the reason; a progress callable hears of every round."""
+    m = tolsynth.load_model("xu_zhang_1988")
+    calls = []
+    w = tolsynth.synthesize_workspace(m, 0.5, 0.99, "uniform", 0.7, probability="gaussian", max_rounds=2,
+                                      progress=lambda done, total: calls.append((done, total)))
+    assert not w.converged and w.certified is None and calls == [(1, 2), (2, 2)]
+    worst = _sigma(m, w.rounds[-1]["worst_q"], w.result.x)[0] * z_of_p(0.99) / 0.5
+    assert worst == pytest.approx(w.worst_value, rel=1e-9)
+    assert w.reason == f"round limit (2) reached; the last design misses the specification by {worst - 1:.3g} at a pose found"
+    rc, out, err = _run("solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--dist", "uniform",
+                        "--alpha", "0.7", "--probability", "gaussian", "--everywhere", "--max-rounds", "2", "--json")
+    assert rc == 1 and "round limit (2) reached" in err
+    assert out["converged"] is False and out["reason"] == w.reason

@@ -188,7 +188,8 @@ def cmd_solve(args) -> int:
             print(w.result.summary())
             _print_contributions(reps)
         if not w.success:
-            print("tolsynth solve: no convergence over the workspace; the numbers above are not an optimum", file=sys.stderr)
+            print(f"tolsynth solve: no convergence over the workspace ({w.reason or 'the last solve failed'}); the "
+                  "numbers above are not an optimum", file=sys.stderr)
             return 1
         return 0
     for flag, given in (("--certify", args.certify), ("--max-rounds", args.max_rounds is not None),

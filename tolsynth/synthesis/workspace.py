@@ -170,7 +170,9 @@ def synthesize_workspace(
     probability to ``p - 1e-6``); then ``certified`` is True.  When the round limit is reached, or
     the search cannot close its gap within its box limit, the result says so (``converged`` False,
     ``reason``) with the bound reached.  ``certify_options``: ``rtol``, ``tol``, ``max_boxes`` and
-    ``time_limit`` of each certified search; ``progress`` its progress bar.  The sphere criterion
+    ``time_limit`` of each certified search.  ``progress``: a progress bar on stderr, of the
+    exchange's rounds (with ``certify``: of each certified search's boxes); None shows it on a
+    terminal for runs over a couple of seconds.  The sphere criterion
     is not certified.
     """
     from tolsynth.analysis.pose_search import worst_pose
@@ -217,20 +219,31 @@ def synthesize_workspace(
     if certify:
         return _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max_rounds, certify_options,
                                    progress, sphere, kwargs, lambda eps: search_at(eps, coarse))
-    for _ in range(max_rounds):
-        res = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
-        if not res.success:
-            break
-        w, g = search_at(res.x, coarse)
-        if g <= 1 + tol and coarse is not full:
-            w, g = search_at(res.x, full)
-        rounds.append({"n_poses": len(poses), "cost": res.cost, "worst_value": g, "worst_q": w.q,
-                       "worst_position": w.position})
-        if g <= 1 + tol:
-            converged = True
-            break
-        poses = poses + [w.q]
-    return WorkspaceSynthesis(res, poses, rounds, converged)
+    from tolsynth.progress import Progress
+
+    reason = f"round limit ({max_rounds}) reached"
+    bar = Progress(progress, max_rounds, f"workspace exchange ({mechanism.name})", "round")
+    try:
+        for k in range(max_rounds):
+            res = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
+            if not res.success:
+                reason = f"the solve at {len(poses)} pose(s) did not succeed: {res.message}"
+                break
+            w, g = search_at(res.x, coarse)
+            if g <= 1 + tol and coarse is not full:
+                w, g = search_at(res.x, full)
+            rounds.append({"n_poses": len(poses), "cost": res.cost, "worst_value": g, "worst_q": w.q,
+                           "worst_position": w.position})
+            bar.update(k + 1, 1)
+            if g <= 1 + tol:
+                converged, reason = True, ""
+                break
+            poses = poses + [w.q]
+    finally:
+        bar.close()
+    if not converged and rounds and reason.startswith("round limit"):
+        reason += f"; the last design misses the specification by {rounds[-1]['worst_value'] - 1:.3g} at a pose found"
+    return WorkspaceSynthesis(res, poses, rounds, converged, reason=reason)
 
 
 #: how far below p the exact probability may be proven and still meet the specification
