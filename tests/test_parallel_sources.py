@@ -161,3 +161,53 @@ def test_cli_certify_on_a_parallel_robot_exits_2_with_the_reason(capsys):
     assert main(["worst-pose", "--model", "planar_3rrr", "--tolerances", "coarse", "--certify"]) == 2
     err = capsys.readouterr().err
     assert "certify" in err and "parallel robot" in err and "Traceback" not in err
+
+
+# ---------------------------------------------------------------------------------------------
+# P. Dietmaier, "The Stewart-Gough platform of general geometry can have 40 real postures", in
+# Advances in Robot Kinematics: Analysis and Control, Springer 1998 (doi 10.1007/978-94-015-9064-8_1):
+# a general 6-6 platform (base points X_i, platform points x_i, leg lengths L_i; no units), as typed
+# in E. Martyushev's fkSGP (genSGP, sgpType 100) with one of its real postures (R, t).  Read as metres.
+DIETMAIER_X = [(0, 0, 0), (1.107915, 0, 0), (0.549094, 0.756063, 0), (0.735077, -0.223935, 0.525991),
+               (0.514188, -0.526063, -0.368418), (0.590473, 0.094733, -0.205018)]
+DIETMAIER_x = [(0, 0, 0), (0.542805, 0, 0), (0.956919, -0.528915, 0), (0.665885, -0.353482, 1.402538),
+               (0.478359, 1.158742, 0.107672), (-0.137087, -0.235121, 0.353913)]
+DIETMAIER_L = [1, 0.645275, 1.086284, 1.503439, 1.281933, 0.771071]
+DIETMAIER_R = [[-0.040450357031281, -0.932229494397471, 0.359599691867884],
+               [0.983337493748685, 0.026695523074364, 0.179818582009314],
+               [-0.177231887661606, 0.360881585597300, 0.915616371179918]]
+DIETMAIER_t = [0.955868038233880, -0.046995628998516, -0.290013283037649]
+
+
+def _dietmaier(tmp_path, start):
+    """Dietmaier's platform as a model file (mm), the home configuration its leg lengths, Newton
+    started from ``start`` (x, y, z mm; rx, ry, rz deg)."""
+    from model_text import model_dict, toml_text
+
+    d = model_dict("stewart_gough")
+    for i, leg in enumerate(d["leg"]):
+        leg["base"] = [1000.0 * v for v in DIETMAIER_X[i]]
+        leg["platform"] = [1000.0 * v for v in DIETMAIER_x[i]]
+        leg["limits"] = [1000.0 * DIETMAIER_L[i] - 100.0, 1000.0 * DIETMAIER_L[i] + 100.0]
+    d["configurations"] = {"home": {f"q{i + 1}": 1000.0 * v for i, v in enumerate(DIETMAIER_L)}}
+    del d["tolerance_sets"]
+    d["platform"]["assembly"] = dict(zip(("x", "y", "z", "rx", "ry", "rz"), start))
+    path = tmp_path / "dietmaier.toml"
+    path.write_text(toml_text(d))
+    return tolsynth.load_model(path)
+
+
+def test_general_platform_reaches_dietmaiers_posture_and_another_from_elsewhere(tmp_path):
+    """A general 6-6 platform with non-planar anchors: from a start 83 mm and up to 7.4 deg per angle away, Newton's
+    forward kinematics lands on the source's posture (to 1e-8 mm and 1e-11 in R: the posture's 15
+    printed digits close the legs to 4e-13 m, and df/dx has condition number 160 there); from a
+    start farther away, on another of its 40 postures, whose legs still have the source's lengths."""
+    R, t = np.array(DIETMAIER_R), 1000.0 * np.array(DIETMAIER_t)
+    B, C = 1000.0 * np.array(DIETMAIER_X, float), 1000.0 * np.array(DIETMAIER_x, float)
+    m = _dietmaier(tmp_path, (900.0, 0.0, -250.0, 15.0, 5.0, 85.0))
+    T = m.fk("home")
+    assert np.abs(T[:3, 3] - t).max() <= 1e-8 and np.abs(T[:3, :3] - R).max() <= 1e-11
+    other = _dietmaier(tmp_path, (1000.0, 0.0, -200.0, 0.0, 0.0, 90.0)).fk("home")
+    assert np.abs(other[:3, 3] - t).max() > 100.0  # a different assembly mode
+    legs = np.linalg.norm(other[:3, 3] + C @ other[:3, :3].T - B, axis=1)
+    assert np.abs(legs - 1000.0 * np.array(DIETMAIER_L)).max() <= 1e-9
