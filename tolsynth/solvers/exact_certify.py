@@ -316,13 +316,15 @@ def half_space_bound(costs, lu, uu, u_star, c_rows, R_rows, p_rows, shapes, lam0
     # each cut's half-space is taken where P = p (or just below): every tolerance scaled up by e^s
     P0, G0, _, _, _ = derivatives(c_rows, u_star, shapes, R_rows, tol=1e-12, hessian=False)
     slope = np.maximum(-G0.sum(axis=1), 1e-12)  # -dP/ds
-    s = np.maximum(P0 - p_rows, 0.0) / slope
+    # no farther than the box reaches (a cut that stays above p there gives no half-space)
+    reach_s = float(np.max(uu - u_star)) + 1.0
+    s = np.minimum(np.maximum(P0 - p_rows, 0.0) / slope, reach_s)
     for _ in range(8):
         Ps, es_ = probability(c_rows * np.exp(u_star + s[:, None]), shapes, R_rows, 1e-11)
         over = Ps + es_ - p_rows
         if np.all(over <= 0):
             break
-        s = s + np.maximum(over, 0.0) / slope * 1.5 + 1e-15
+        s = np.minimum(s + np.maximum(over, 0.0) / slope * 1.5 + 1e-15, reach_s)
     else:
         Ps, es_ = probability(c_rows * np.exp(u_star + s[:, None]), shapes, R_rows, 1e-11)
     # the gradient to GRAD_TOL only: its error bound widens the half-spaces by about lam * n * 1e-9,

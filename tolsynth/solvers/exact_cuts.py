@@ -170,24 +170,26 @@ class Cuts:
         W[mv] = _unit(W[mv] + self._a * np.einsum("mxa,ma->mx", E, self._dt))
         return W
 
-    def plan(self, u: np.ndarray, du: np.ndarray, newton: bool = True) -> np.ndarray:
+    def plan(self, u: np.ndarray, du: np.ndarray, damp: float = 1.0, follow: bool = True) -> np.ndarray:
         """Fix the tracking directions' path for the Newton step ``du`` from ``u`` and return each
         cut's derivative of g along it due to the turning (zero for fixed cuts): the joint Newton
-        step, or (``newton=False``) only the turn that follows the minimiser's shift."""
+        step, its part that follows the minimiser's shift (unless ``follow`` is off) plus ``damp``
+        times its Newton step towards the minimum at ``u``.  No turn where P is not at a local
+        minimum in w (the quadratic model is no guide there)."""
         self._a = 0.0
         self._dt = None
         extra = np.zeros(len(self.w))
         if self._model is None or not np.array_equal(self._model[0], u):
             return extra
         _, E, Hinv, gt, B, pd = self._model
-        Bdu = np.einsum("mna,n->ma", B, du)
-        dt = -np.einsum("mab,mb->ma", Hinv, gt + Bdu if newton else Bdu)
-        dt[~pd] = 0.0  # no turn where P is not at a local minimum in w
+        dt = -damp * np.einsum("mab,mb->ma", Hinv, gt)
+        if follow:
+            dt = dt - np.einsum("mab,mnb,n->ma", Hinv, B, du)
+        dt[~pd] = 0.0
         nd = np.linalg.norm(dt, axis=1)
         dt *= np.minimum(1.0, MAX_TURN / np.maximum(nd, 1e-300))[:, None]
         mv = np.flatnonzero(self.moving)
-        scale = 1.0 / (1.0 - np.array(self.p)[mv])
-        extra[mv] = np.einsum("ma,ma->m", gt, dt) * scale
+        extra[mv] = np.einsum("ma,ma->m", gt, dt) / (1.0 - np.array(self.p)[mv])
         self._dt = dt
         return extra
 

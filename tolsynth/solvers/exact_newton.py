@@ -90,13 +90,23 @@ class Barrier:
             slope = float(df @ du - tau * (Jdu / g).sum() - tau * np.sum(np.where(free, du / np.maximum(sl, 1e-300)
                                                                                      - du / np.maximum(su, 1e-300), 0.0)))
             # cuts whose directions follow the worst one turn along the step: g's derivative along
-            # the path gains their term (the joint Newton step, or only the turn that follows the
-            # minimiser where chasing it would take more than half of the step's decrease)
+            # the path gains their term (the joint Newton step; where that would take more than half
+            # of the step's decrease, its part towards the minimum damped, or no turn at all)
             turn = np.zeros(g.size)
             if plan is not None and g.size:
                 turn = plan(u, du)
-                if slope - tau * float((turn / g).sum()) > 0.5 * slope:
-                    turn = plan(u, du, newton=False)
+
+                def cost(t):
+                    return -tau * float((t / g).sum())
+                c1 = cost(turn)
+                if slope + c1 > 0.5 * slope:
+                    c0 = cost(plan(u, du, damp=0.0))
+                    if slope + c0 > 0.5 * slope:
+                        turn = plan(u, du, damp=0.0, follow=False)
+                    else:
+                        turn = plan(u, du, damp=(-0.5 * slope - c0) / (c1 - c0))
+                        if slope + cost(turn) > 0.5 * slope:
+                            turn = plan(u, du, damp=0.0)
             path_slope = slope - tau * float((turn / g).sum()) if g.size else slope
             Jdu = Jdu + turn
             # the multipliers' Newton steps, and the fraction to the boundary on the bounds and on them
