@@ -221,6 +221,10 @@ def _gaussian_start(nlp, solver, eps0):
         from tolsynth.solvers.sumt import solve_sumt
 
         return solve_sumt(nlp).x
+    if solver == "auto":  # the compiled method where it applies: the start costs a millisecond
+        from tolsynth.solvers.fast import solve_auto
+
+        return solve_auto(nlp).x
     from tolsynth.solvers.ipopt import solve_ipopt
 
     return solve_ipopt(nlp).x
@@ -231,6 +235,8 @@ def _gaussian_route(nlp, solver, eps0, t0):
 
     if solver == "sumt":
         from tolsynth.solvers.sumt import solve_sumt as run
+    elif solver == "auto":
+        from tolsynth.solvers.fast import solve_auto as run
     else:
         from tolsynth.solvers.ipopt import solve_ipopt as run
     res = run(nlp, eps0)

@@ -285,7 +285,7 @@ def synthesize(
             if probability == "exact":
                 from tolsynth.solvers.exact import solve_exact
 
-                result = solve_exact(nlp, spec.shapes, "ipopt" if solver == "auto" else solver, eps0, options)
+                result = solve_exact(nlp, spec.shapes, solver, eps0, options)
             else:
                 result = SOLVERS[solver](nlp, eps0, dict(options or {}))
             if probability == "gaussian" and spec.sphere_blocks:
