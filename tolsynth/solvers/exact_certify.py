@@ -84,20 +84,25 @@ def _unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def _lower(rows: np.ndarray, shapes: tuple, R: float, q: float) -> np.ndarray:
-    """``P - error`` per row: to a loose tolerance, then tighter only where the last value is not
-    clear of ``q`` (rows with a few dominant terms need many series terms at the tightest)."""
-    P, e = probability(rows, shapes, R, LOOSE_TOL)
+def _lower(rows: np.ndarray, shapes: tuple, R: float, q: float, first: int = 0) -> tuple[np.ndarray, float]:
+    """``P - error`` per row: to a loose tolerance (or the ``first`` of :data:`MID_TOLS`), then
+    tighter only where the last value is not clear of ``q`` (rows with a few dominant terms need
+    many series terms at the tightest); and the fraction of rows the second tolerance took."""
+    tols = (LOOSE_TOL,) + MID_TOLS
+    P, e = probability(rows, shapes, R, tols[first])
     out = P - e
-    last = LOOSE_TOL
-    for tol in MID_TOLS:
+    last = tols[first]
+    second = 1.0 if first else 0.0
+    for tol in tols[first + 1:]:
         near = np.flatnonzero(np.abs(out - q) < 2 * last)
         if not near.size:
             break
+        if tol == tols[1]:
+            second = near.size / max(rows.shape[0], 1)
         P2, e2 = probability(rows[near], shapes, R, tol)
         out[near] = P2 - e2
         last = tol
-    return out
+    return out, second
 
 
 def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, cut_tol: float = 1e-8,
@@ -109,7 +114,8 @@ def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, c
     value ``P(|v . dr| <= R d)`` is kept with its ``d``, and serves every patch whose own ``d`` is
     at least that (P grows with the radius); a point is evaluated again only where its value is
     short of the level and the patch's ``d`` is larger.  The monotone bound is tried while it
-    still proves patches."""
+    still proves patches.  A pose symmetric under a reflection (:func:`_mirror`) has half of the
+    directions covered, its rows raised by the columns' departure from the symmetry."""
     q = p - tol
     g = np.linspace(-1.0, 1.0, START_GRID + 1)
     S0, T0 = np.meshgrid(g[:-1], g[:-1], indexing="ij")
@@ -117,6 +123,10 @@ def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, c
     s0 = np.tile(S0.ravel(), 3)
     t0 = np.tile(T0.ravel(), 3)
     h = np.full(face.size, 2.0 / START_GRID)
+    axis, slack = _mirror(M)
+    if axis is not None:  # the half with the axis' coordinate >= 0 on each face
+        keep = np.where((face + 2) % 3 == axis, t0 >= 0, s0 >= 0)
+        face, s0, t0, h = face[keep], s0[keep], t0[keep], h[keep]
     proven = math.inf
     violations: list = []
     patches = evaluations = 0
@@ -124,6 +134,7 @@ def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, c
     # d of their evaluation and the lower bound on P(|v . dr| <= R d) found there
     kk, kd_, kv_ = np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0)
     mono_on = True
+    tight = 0.0
     while face.size:
         patches += face.size
         if patches > max_patches:
@@ -137,10 +148,10 @@ def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, c
         V = np.stack(corners, axis=1)  # (N, 4, 3)
         c = _unit(V.sum(axis=1))
         d = np.min(np.einsum("nkx,nx->nk", V, c), axis=1)  # (N,)
-        X = np.abs(V @ M)  # (N, 4, n): |v_k . a_i| eps_i
+        X = np.abs(V @ M) + slack  # (N, 4, n): |v_k . a_i| eps_i (raised by the mirror's slack)
         bound = np.full(face.size, -math.inf)
         if mono_on:
-            bound = _lower(X.max(axis=1) / d[:, None], shapes, R, q)
+            bound = _lower(X.max(axis=1) / d[:, None], shapes, R, q)[0]
             evaluations += face.size
             mono_on = np.count_nonzero(bound >= q) >= 0.2 * face.size
         fail = bound < q
@@ -163,7 +174,8 @@ def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, c
                 dd = np.full(uk.size, math.inf)
                 np.minimum.at(dd, inv, dj[need])
                 r = np.flatnonzero(need.ravel())[first]
-                vals = _lower(X[idx[r // 4], r % 4] / dd[:, None], shapes, R, q)
+                # where most of the last level's values needed the second tolerance, start there
+                vals, tight = _lower(X[idx[r // 4], r % 4] / dd[:, None], shapes, R, q, int(tight > 0.5))
                 evaluations += uk.size
                 val[need] = np.maximum(val[need], np.where(dd[inv] <= dj[need], vals[inv], -math.inf))
                 # keep the value at the larger d (deeper patches have larger d)
@@ -200,6 +212,22 @@ def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, c
         h = np.repeat(hh, 4)
     violations.sort(key=lambda v: v[1])
     return Cover(True, proven, violations, patches, evaluations)
+
+
+def _mirror(M: np.ndarray) -> tuple[int | None, np.ndarray | float]:
+    """A coordinate axis k whose reflection S (w_k -> -w_k) leaves every row ``|w . m_i|`` the same
+    up to rounding: each column lies in the mirror plane or along the axis.  Then
+    ``|S w . m_i| <= |w . m_i| + delta_i`` with ``delta_i = 2 min(|m_ik|, |m_i without k|)``, and as P
+    does not increase when a coefficient grows, a bound on rows raised by delta holds at w and at
+    S w alike.  Returns (k, delta) for the first such axis (delta at most 1e-12 of the largest
+    entry), else (None, 0)."""
+    scale = float(np.abs(M).max(initial=0.0))
+    for k in range(3):
+        rest = np.linalg.norm(np.delete(M, k, axis=0), axis=0)
+        delta = 2.0 * np.minimum(np.abs(M[k]), rest)
+        if scale > 0 and float(delta.max(initial=0.0)) <= 1e-12 * scale:
+            return k, delta
+    return None, 0.0
 
 
 def _sphere_derivatives(M: np.ndarray, shapes: tuple, R: float, w: np.ndarray):
