@@ -445,14 +445,18 @@ class PolygonSigmaBounds:
         return X
 
     def _contract(self, g, V):
-        """``g`` (6, 6^k) contracted per joint with ``V[j]`` (n, p, 6): shape (n, 6, p^k)."""
-        n = V[0].shape[0]
-        X = g.reshape(1, 6, 6**self.k, 1)
-        for j in range(self.k):
-            rest = 6 ** (self.k - j - 1)
-            X = X.reshape(X.shape[0], 6, 6, rest, X.shape[-1])
-            sub = "bairs,npi->narsp" if X.shape[0] == 1 else "nairs,npi->narsp"
-            X = np.einsum(sub, X, V[j], optimize=True).reshape(n, 6, rest, -1)
+        """``g`` (6, 6^k) contracted per joint with ``V[j]`` (n, p_j, 6): shape (n, 6, prod p_j), the
+        tuples of points in the order (p_k, ..., p_1).  The last joint first, so that the index
+        summed (six terms each time, as a plain sum) is always the last axis: one batched matrix
+        product per joint."""
+        n, k = V[0].shape[0], self.k
+        X = np.matmul(g.reshape(1, 6 ** k, 6), np.swapaxes(V[k - 1], 1, 2))  # (n, 6 * 6^(k-1), p_k)
+        done = V[k - 1].shape[1]
+        for j in range(k - 2, -1, -1):
+            rest = X.shape[1] // 6
+            X = np.swapaxes(X.reshape(n, rest, 6, done), 2, 3).reshape(n, rest * done, 6)
+            X = np.matmul(X, np.swapaxes(V[j], 1, 2)).reshape(n, rest, done * V[j].shape[1])
+            done *= V[j].shape[1]
         return X.reshape(n, 6, -1)
 
     @staticmethod
