@@ -1,4 +1,6 @@
-"""Shared fixtures and the ``--runslow`` switch (slow tests are skipped by default, run in CI)."""
+"""Shared fixtures and the switches of the two longer tiers: ``--runslow`` runs the tests marked
+``slow`` (CI does), ``--runlong`` those marked ``long`` (minutes each: certified searches over
+six-joint arms, the fuzz suite's long profile, hundreds of poses; run before a release, not in CI)."""
 
 import os
 
@@ -10,15 +12,17 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 def pytest_addoption(parser):
     parser.addoption("--runslow", action="store_true", default=False, help="run tests marked slow")
+    parser.addoption("--runlong", action="store_true", default=False, help="run tests marked long")
 
 
 def pytest_collection_modifyitems(config, items):
-    if config.getoption("--runslow"):
-        return
-    skip = pytest.mark.skip(reason="slow: run with --runslow (CI does)")
+    slow = pytest.mark.skip(reason="slow: run with --runslow (CI does)")
+    long = pytest.mark.skip(reason="long: run with --runlong (before a release; not in CI)")
     for item in items:
-        if "slow" in item.keywords:
-            item.add_marker(skip)
+        if "long" in item.keywords and not config.getoption("--runlong"):
+            item.add_marker(long)
+        elif "slow" in item.keywords and not config.getoption("--runslow"):
+            item.add_marker(slow)
 
 
 @pytest.fixture(scope="session")

@@ -347,7 +347,8 @@ def case_synthesize(draw):
         res = tolsynth.synthesize(mech, pose=pose, **args)
         accepted(**args)
         if args.get("criterion") == "components" and args.get("Phi") is None:
-            _check_synthesis(mech, res, args["R"], args["p"], args["distribution"], [pose])
+            R = args["R"] if not isinstance(args["R"], str) else float(args["R"].removesuffix("mm"))  # '1' or '1mm'
+            _check_synthesis(mech, res, R, args["p"], args["distribution"], [pose])
         elif res.success:
             finite(res.cost, list(res.tolerances.values()))
     return run

@@ -327,7 +327,7 @@ def test_paper_robot_certified_against_a_dense_search(models):
     assert c.held.keys() == {"theta1", "theta5"}
 
 
-@pytest.mark.slow
+@pytest.mark.long  # minutes per arm (20000 boxes)
 @pytest.mark.parametrize("name", ["puma560", "ur5", "panda"])
 def test_six_joint_arms_bound_a_dense_search(models, name):
     """A box budget: the bound holds whether or not the gap closed, above an independent search."""

@@ -179,6 +179,7 @@ def synthesize_workspace(
     from tolsynth.kinematics.mechanism import as_mechanism
 
     mechanism = as_mechanism(mechanism)
+    R = check_positive(R, "R", "mm")  # a number in mm or a string with its unit, as synthesize reads it
     z = z_of_p(p)
     tol = check_positive(tol, "tol", "relative", upper=1.0)
     max_rounds = check_count(max_rounds, "max_rounds", lower=1, upper=1000)
