@@ -136,7 +136,7 @@ def test_ci_builds_the_docs_with_warnings_as_errors():
     assert "sphinx-build -W --keep-going -b html docs docs/_build/html" in ci
 
 
-@pytest.mark.slow
+@pytest.mark.long  # CI builds the documentation itself, after the tests
 def test_sphinx_build_without_executing_the_notebooks(tmp_path):
     pytest.importorskip("sphinx")
     pytest.importorskip("numpydoc")

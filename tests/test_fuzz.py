@@ -7,8 +7,9 @@ raises a ``TolsynthError`` naming the field.  Never an untyped exception, a hang
 under a 60 s alarm), a numerical warning from inside the package (turned into an error), a
 traceback on the command line, or a silent acceptance of a defect that must be rejected.
 
-Profiles: the default run is derandomized with a few examples per category (seconds); the
-``long`` profile (``@pytest.mark.slow``, run in CI with ``--runslow``) runs 10x as many.
+Profiles: the default run is derandomized with a few examples per category (seconds); the ``ci``
+profile (``@pytest.mark.slow``, run in CI with ``--runslow``) runs 3x as many, the ``long`` one
+(``@pytest.mark.long``, ``--runlong``, before a release) 10x as many.
 ``HYPOTHESIS_PROFILE=long`` selects the long numbers for the default-marked tests too.
 ``tests/fuzz_counts.py`` counts the outcomes of the same cases per category.
 """
@@ -27,10 +28,10 @@ import fuzz_cases as fc
 
 pytestmark = pytest.mark.filterwarnings("error:::tolsynth")
 
-EXAMPLES = {"default": 40, "long": 400}
+EXAMPLES = {"default": 40, "ci": 120, "long": 400}
 if os.environ.get("HYPOTHESIS_PROFILE") == "long":
     EXAMPLES["default"] = EXAMPLES["long"]
-PROFILES = [pytest.param("default"), pytest.param("long", marks=pytest.mark.slow)]
+PROFILES = [pytest.param("default"), pytest.param("ci", marks=pytest.mark.slow), pytest.param("long", marks=pytest.mark.long)]
 
 
 def _settings(profile: str, scale: float = 1.0):
