@@ -257,7 +257,7 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
             for j in range(3):        # the exact worst directions at the Gaussian design, which track
                 cuts.add(i, blk.A, blk.R, blk.p, dirs[i][:, j], moving=True)  # the worst directions from then on
             for w in _local_minima(blk.A, np.log(eps_g), shapes, blk.R):
-                cuts.add(i, blk.A, blk.R, blk.p, w, moving=True)
+                cuts.add(i, blk.A, blk.R, blk.p, w, moving=True, slides=True)
     if not len(cuts):  # nothing near its limit: the worst block still starts the cut set
         i = int(np.argmax(vals[:, 0]))
         cuts.add(i, blocks[i].A, blocks[i].R, blocks[i].p, dirs[i][:, 0])
@@ -288,7 +288,7 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
             W, _ = minimise_directions(np.array([blocks[i].A for i in idx]), np.array([w for _, w in starts]), u,
                                        shapes, np.array([blocks[i].R for i in idx]), steps=START_STEPS)
             for i, w in zip(idx, W):
-                added += cuts.add(i, blocks[i].A, blocks[i].R, blocks[i].p, w, moving=True)
+                added += cuts.add(i, blocks[i].A, blocks[i].R, blocks[i].p, w, moving=True, slides=True)
         history.append({"round": rnd, "cuts": len(cuts), "newton": res.iterations, "added": added,
                         "cost": nlp.cost(eps), "inner": message,
                         "proven": min((c.proven for c in covers), default=1.0)})

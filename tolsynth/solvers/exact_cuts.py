@@ -27,6 +27,8 @@ __all__ = ["Cuts", "sphere_model", "minimise_directions"]
 CUT_EVAL_TOL = 1e-11
 #: largest direction step (rad) of one Newton step on the sphere
 MAX_TURN = 0.2
+#: largest turn (rad) of a slide where P is not convex in w (the quadratic model is no guide there)
+SADDLE_TURN = 0.05
 
 
 def _unit(v):
@@ -127,14 +129,19 @@ class Cuts:
         self._model = None  # (u_ref, E, Hr^-1, gt, B) of the tracking cuts at the last order-2 evaluation
         self._dt = None  # the tracking cuts' tangent steps for a whole Newton step
         self._a = 0.0
-        self._pending = None  # the directions and model of the last order-2 evaluation
+        self._pending = None  # the directions, model and g of the last order-2 evaluation
+        self._g = None
+        self._slide = np.zeros(0)  # per cut: the fraction of a full slide step it takes next
 
     def __len__(self) -> int:
         return len(self.w)
 
-    def add(self, blk_index: int, A: np.ndarray, R: float, p: float, w: np.ndarray, moving: bool = False) -> bool:
+    def add(self, blk_index: int, A: np.ndarray, R: float, p: float, w: np.ndarray, moving: bool = False,
+            slides: bool = False) -> bool:
         """Add the cut unless its pose has one within ``same_cut`` rad (up to sign) or one with the
-        same row ``|w . a_i|`` (a mirror direction of a symmetric pose); True if added."""
+        same row ``|w . a_i|`` (a mirror direction of a symmetric pose); True if added.  A moving
+        cut tracks a local minimum of P where P is convex in w; one that ``slides`` also descends
+        (:meth:`slide`) where it is not."""
         w = np.asarray(w, dtype=float) / np.linalg.norm(w)
         c = np.abs(w @ A)
         cmax = max(float(c.max()), 1e-300)
@@ -149,7 +156,8 @@ class Cuts:
         self.block.append(blk_index)
         self.w.append(w)
         self.moving.append(bool(moving))
-        self._model = self._dt = self._pending = None
+        self._slide = np.append(self._slide, 1.0 if slides else 0.0)
+        self._model = self._dt = self._pending = self._g = None
         return True
 
     def rows(self, W=None) -> np.ndarray:
@@ -181,7 +189,7 @@ class Cuts:
         extra = np.zeros(len(self.w))
         if self._model is None or not np.array_equal(self._model[0], u):
             return extra
-        _, E, Hinv, gt, B, pd = self._model
+        _, E, Hinv, gt, B, pd, _ = self._model
         dt = -damp * np.einsum("mab,mb->ma", Hinv, gt)
         if follow:
             dt = dt - np.einsum("mab,mnb,n->ma", Hinv, B, du)
@@ -200,7 +208,7 @@ class Cuts:
     def commit(self) -> None:
         """Make the last order-2 evaluation's directions (and their model) the current ones."""
         if self._pending is not None:
-            self.w, self._model = self._pending
+            self.w, self._model, self._g = self._pending
             self._pending = None
             self._dt, self._a = None, 0.0
 
@@ -211,15 +219,22 @@ class Cuts:
         if not self.w:
             return np.zeros(0), np.zeros((0, n)), np.zeros((0, n, n))
         W = self._directions()
+        if order == 0:
+            R, p = np.array(self.R), np.array(self.p)
+            P, _ = probability(self.rows(W) * np.exp(u)[None, :], self.shapes, R, CUT_EVAL_TOL)
+            return (P - p) / (1.0 - p), None, None
+        g, J, Hh, model = self._full(u, W)
+        self._pending = (list(W), model, g)
+        return g, J, Hh
+
+    def _full(self, u, W):
         C = self.rows(W)
         R, p = np.array(self.R), np.array(self.p)
         s = 1.0 / (1.0 - p)
-        if order == 0:
-            P, _ = probability(C * np.exp(u)[None, :], self.shapes, R, CUT_EVAL_TOL)
-            return (P - p) * s, None, None
         P, G, H, _, _ = derivatives(C, u, self.shapes, R, tol=CUT_EVAL_TOL)
         mv = np.flatnonzero(self.moving)
         Hh = H.copy()
+        model = None
         if mv.size:
             E, gt, Hr, B = sphere_model(np.array(self.A)[mv], W[mv], G[mv], H[mv])
             pd = _positive(Hr)
@@ -227,8 +242,32 @@ class Cuts:
             if pd.any():
                 Hinv[pd] = np.linalg.inv(Hr[pd])
             Hh[mv] = H[mv] - np.einsum("mna,mab,mkb->mnk", B, Hinv, B)
-            model = (np.array(u, dtype=float), E, Hinv, gt, B, pd)
-        else:
-            model = None
-        self._pending = (list(W), model)
-        return (P - p) * s, G * s[:, None], Hh * s[:, None, None]
+            model = (np.array(u, dtype=float), E, Hinv, gt, B, pd, Hr)
+        return (P - p) * s, G * s[:, None], Hh * s[:, None, None], model
+
+    def slide(self, u):
+        """Between Newton steps, the tracking directions where P is not convex in w (a flat
+        valley, a saddle) take a short descent step on the sphere, kept where P falls and the
+        margin keeps at least half of itself; returns the cuts' new ``(g, J, H)`` or None."""
+        if self._model is None or self._g is None or not np.array_equal(self._model[0], u):
+            return None
+        _, E, _, gt, _, pd, Hr = self._model
+        mv = np.flatnonzero(self.moving)
+        go = ~pd & (np.linalg.norm(gt, axis=1) > 1e-9) & (self._slide[mv] > 1e-3)
+        if not go.any():
+            return None
+        ev, V = np.linalg.eigh(Hr[go])
+        ev = np.maximum(np.abs(ev), 1e-3 * np.maximum(np.abs(ev).max(axis=1, keepdims=True), 1e-300))
+        dt = -np.einsum("mab,mb,mcb,mc->ma", V, 1.0 / ev, V, gt[go])
+        nd = np.linalg.norm(dt, axis=1)
+        k = mv[go]
+        dt *= (np.minimum(1.0, SADDLE_TURN / np.maximum(nd, 1e-300)) * self._slide[k])[:, None]
+        W = np.array(self.w)
+        W[k] = _unit(W[k] + np.einsum("mxa,ma->mx", E[go], dt))
+        g, J, Hh, model = self._full(u, W)
+        ok = (g[k] < self._g[k]) & (g[k] >= 0.5 * self._g[k])
+        self._slide[k] = np.where(ok, np.minimum(1.0, 2.0 * self._slide[k]), 0.5 * self._slide[k])
+        if not ok.all():
+            return None
+        self.w, self._model, self._g = list(W), model, g
+        return g, J, Hh

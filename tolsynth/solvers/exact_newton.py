@@ -31,7 +31,7 @@ FTB = 0.995
 KAPPA = 100.0
 DEBUG = False
 #: the barrier parameter falls once the Newton decrement squared of phi / tau is below this
-DECREMENT = 1e-3
+DECREMENT = 1e-2
 
 
 @dataclass
@@ -75,6 +75,7 @@ class Barrier:
         zl = np.where(free, tau / np.maximum(sl, 1e-300), 0.0)
         zu = np.where(free, tau / np.maximum(su, 1e-300), 0.0)
         plan, at = getattr(self.cuts, "plan", None), getattr(self.cuts, "at", None)
+        slide = getattr(self.cuts, "slide", None)
         it = 0
         for it in range(1, max_iter + 1):
             # Newton step on the reduced system (multipliers eliminated)
@@ -148,6 +149,12 @@ class Barrier:
                     sln, sun = un - lu, uu - un
                     phin = self._phi(fn, gn, sln, sun, tau)
                     if phin <= phi0 + 1e-4 * a * min(path_slope, 0.0) + 1e-15 * abs(phi0):
+                        if full is None:  # the derivatives' own evaluation must agree that every cut holds
+                            full = self.cuts(un, 2)
+                            if not np.all(full[0] > 0):
+                                full = None
+                                a *= 0.5
+                                continue
                         accepted = True
                         break
                 a *= 0.5
@@ -159,8 +166,11 @@ class Barrier:
                 return BarrierResult(u, lam, zu - zl, it, tau <= 1e3 * tau_end,
                                      f"line search failed at tau {tau:.1e} (Newton decrement {-slope / tau:.1e})")
             u, f, df, d2f, sl, su = un, fn, dfn, d2fn, sln, sun
-            g, J, H = full if full is not None else self.cuts(u, 2)
+            g, J, H = full
             commit()
+            moved = slide(u) if slide is not None else None
+            if moved is not None:
+                g, J, H = moved
             lam = _safeguard(lam + ad * dlam, tau, g) if g.size else lam
             zl = np.where(free, _safeguard(zl + ad * dzl, tau, np.maximum(sl, 1e-300)), 0.0)
             zu = np.where(free, _safeguard(zu + ad * dzu, tau, np.maximum(su, 1e-300)), 0.0)
