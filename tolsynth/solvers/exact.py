@@ -123,7 +123,7 @@ def _lattice(m: int) -> np.ndarray:
     return np.column_stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z])
 
 
-def _local_minima(A: np.ndarray, u: np.ndarray, shapes, R: float, count: int = 3) -> np.ndarray:
+def _local_minima(A: np.ndarray, u: np.ndarray, shapes, R: float, count: int = 4) -> np.ndarray:
     """The lowest few local minima of P over directions at ``eps = e^u`` (a lattice, then Newton's
     method on the sphere from the best points at least 0.3 rad apart), as rows."""
     D = _LATTICE
