@@ -317,6 +317,7 @@ def _dense_then_local(m, eps, n, seed, fixed=None):
     return best
 
 
+@pytest.mark.slow  # 10-17 s
 def test_paper_robot_certified_against_a_dense_search(models):
     m = models["xu_zhang_1988"]
     eps = m.tolerances("figure3")
@@ -339,6 +340,7 @@ def test_six_joint_arms_bound_a_dense_search(models, name):
     assert c.best_value <= ref * (1 + 1e-9) or c.best_value >= ref * (1 - 1e-3)
 
 
+@pytest.mark.slow  # 10-17 s
 def test_interference_corner_found_where_the_sampled_exchange_missed_it(models):
     """The sampled exchange's design on the paper's robot: the certified search proves its largest
     sigma z / R, above what the sampled search saw, at a pose on the interference limit."""

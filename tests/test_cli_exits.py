@@ -120,7 +120,10 @@ def _command_interrupted(argv: list[str], after: float) -> tuple[int | None, str
         if proc.poll() is not None:
             return None, proc.communicate()[1]
         proc.send_signal(signal.SIGINT)
+        sent = time.perf_counter()
         _, err = proc.communicate(timeout=60)
+        if proc.returncode == 0 and time.perf_counter() - sent < 0.5:
+            return None, err  # it was already exiting (the signal met its interpreter shutting down)
         return proc.returncode, err
     finally:
         if proc.poll() is None:  # pragma: no cover
