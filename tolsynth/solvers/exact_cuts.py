@@ -29,6 +29,8 @@ CUT_EVAL_TOL = 1e-11
 MAX_TURN = 0.2
 #: largest turn (rad) of a slide where P is not convex in w (the quadratic model is no guide there)
 SADDLE_TURN = 0.05
+#: each accepted slide uses this much of a cut's budget of 1 (the step shrinks with it)
+SLIDE_BUDGET = 0.1
 
 
 def _unit(v):
@@ -266,7 +268,8 @@ class Cuts:
         W[k] = _unit(W[k] + np.einsum("mxa,ma->mx", E[go], dt))
         g, J, Hh, model = self._full(u, W)
         ok = (g[k] < self._g[k]) & (g[k] >= 0.5 * self._g[k])
-        self._slide[k] = np.where(ok, np.minimum(1.0, 2.0 * self._slide[k]), 0.5 * self._slide[k])
+        # a slide that keeps P falling may go on (a few times per solve); one that does not, shorter
+        self._slide[k] = np.where(ok, np.maximum(self._slide[k] - SLIDE_BUDGET, 0.0), 0.5 * self._slide[k])
         if not ok.all():
             return None
         self.w, self._model, self._g = list(W), model, g

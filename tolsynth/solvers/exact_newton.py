@@ -127,6 +127,12 @@ class Barrier:
             phi0 = self._phi(f, g, sl, su, tau)
             # the Newton decrement of phi / tau (self-concordant): small means on the central path
             if -slope <= DECREMENT * tau:
+                # centred: the cuts whose directions are not at a minimum of P may slide first
+                moved = slide(u) if slide is not None else None
+                if moved is not None:
+                    g, J, H = moved
+                    lam = _safeguard(lam, tau, g)
+                    continue
                 if tau <= tau_end:
                     break
                 tau = max(tau_end, min(0.1 * tau, tau**1.5 / math.sqrt(scale)))
@@ -168,9 +174,6 @@ class Barrier:
             u, f, df, d2f, sl, su = un, fn, dfn, d2fn, sln, sun
             g, J, H = full
             commit()
-            moved = slide(u) if slide is not None else None
-            if moved is not None:
-                g, J, H = moved
             lam = _safeguard(lam + ad * dlam, tau, g) if g.size else lam
             zl = np.where(free, _safeguard(zl + ad * dzl, tau, np.maximum(sl, 1e-300)), 0.0)
             zu = np.where(free, _safeguard(zu + ad * dzu, tau, np.maximum(su, 1e-300)), 0.0)
