@@ -64,13 +64,13 @@ class _Piecewise:
         u = (x - self.a) / self.h
         j = np.clip(np.floor(u).astype(np.intp), 0, self.pieces - 1)
         t = 2.0 * (u - j) - 1.0
-        coef = self.coef
-        b1 = np.zeros((coef.shape[1],) + np.shape(x))
+        c = self.coef[:, :, j]  # every point's piece's coefficients, gathered once
+        b1 = np.zeros(c.shape[1:])
         b2 = np.zeros_like(b1)
         t2 = 2.0 * t
-        for k in range(self.degree, 0, -1):  # Clenshaw, gathering one coefficient per piece a step
-            b1, b2 = coef[k][:, j] + t2 * b1 - b2, b1
-        return coef[0][:, j] + t * b1 - b2
+        for k in range(self.degree, 0, -1):  # Clenshaw
+            b1, b2 = c[k] + t2 * b1 - b2, b1
+        return c[0] + t * b1 - b2
 
 
 def _small_I(y: np.ndarray, x: float) -> np.ndarray:
@@ -111,10 +111,10 @@ def _fit(funcs, a, b, pieces, degree, scale):
 @lru_cache(maxsize=None)
 def _tables(beta: float):
     x = beta / math.sqrt(2.0)
-    small = _fit(lambda y: _small_I(y, x)[None, :], 0.0, _SPLIT, 20, 24, np.ones(1))
+    small = _fit(lambda y: _small_I(y, x)[None, :], 0.0, _SPLIT, 80, 10, np.ones(1))
     scale = np.maximum(np.max(np.abs(_large_CS(np.linspace(0.0, 1.0 / _SPLIT, 64), x)), axis=1), 1e-300)
     # C, S; their first and their second derivatives apart: a value needs only the first pair
-    large = tuple(_fit(lambda v, k=k: _large_CS(v, x)[k : k + 2], 0.0, 1.0 / _SPLIT, 4, 20, scale[k : k + 2])
+    large = tuple(_fit(lambda v, k=k: _large_CS(v, x)[k : k + 2], 0.0, 1.0 / _SPLIT, 16, 10, scale[k : k + 2])
                   for k in (0, 2, 4))
     c = 2.0 * math.exp(-x * x) / (math.sqrt(math.pi) * math.erf(x))
     return x, c, small, large
