@@ -48,15 +48,20 @@ def _cold_cvxpy(m, R, p, distribution):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3, help="runs per row (default 3; medians)")
-    ap.add_argument("--only", choices=("uniform", "mixed", "paper"),
-                    help="only the paper's robot rows of these shapes (paper: both), nothing after them")
+    ap.add_argument(
+        "--only",
+        choices=("uniform", "mixed", "paper"),
+        help="only the paper's robot rows of these shapes (paper: both), nothing after them",
+    )
     args = ap.parse_args()
     rng = np.random.default_rng(0)
     m = tolsynth.load_model("xu_zhang_1988")
     tolsynth.synthesize(m, R=0.5, p=0.9, probability="gaussian")  # graphs built once, outside the timings
     print(f"xu_zhang_1988 at its worst pose; medians of {args.repeat} runs, a new R each time\n")
-    print(f"{'shapes':>8} {'p':>5} | {'exact s':>8} {'cpu s':>7} {'cvxpy s':>8} {'cpu s':>7} {'ratio':>6} "
-          f"{'cpu ratio':>9} | {'cost':>10} {'gap/cost':>9} {'rounds':>6} {'status':>18}")
+    print(
+        f"{'shapes':>8} {'p':>5} | {'exact s':>8} {'cpu s':>7} {'cvxpy s':>8} {'cpu s':>7} {'ratio':>6} "
+        f"{'cpu ratio':>9} | {'cost':>10} {'gap/cost':>9} {'rounds':>6} {'status':>18}"
+    )
     for name, dist in (("uniform", "uniform"), ("mixed", MIXED)):
         if args.only in ("uniform", "mixed") and name != args.only:
             continue
@@ -72,9 +77,11 @@ def main() -> None:
                 te.append(time.perf_counter() - t0)
                 ce.append(time.process_time() - c0)
             e, c, ec, cvc = (statistics.median(x) for x in (te, tc, ce, cc))
-            print(f"{name:>8} {p:5.2f} | {e:8.3f} {ec:7.3f} {c:8.3f} {cvc:7.3f} {e / c:6.1f} {ec / cvc:9.1f} | "
-                  f"{last.cost:10.4f} {last.gap / last.cost:9.1e} {len(last.history):6d} {str(last.status):>18}",
-                  flush=True)
+            print(
+                f"{name:>8} {p:5.2f} | {e:8.3f} {ec:7.3f} {c:8.3f} {cvc:7.3f} {e / c:6.1f} {ec / cvc:9.1f} | "
+                f"{last.cost:10.4f} {last.gap / last.cost:9.1e} {len(last.history):6d} {str(last.status):>18}",
+                flush=True,
+            )
     if args.only:
         return
     # verify=True at p = 0.99: the time it adds
@@ -94,8 +101,10 @@ def main() -> None:
     qs = random_poses(pm, 30, rng)
     t0 = time.perf_counter()
     r = tolsynth.synthesize(pm, R=1.0, p=0.95, poses=qs, probability="exact")
-    print(f"puma560, 30 random poses, p = 0.95: {time.perf_counter() - t0:.2f} s, {r.status}, "
-          f"gap/cost {r.gap / r.cost:.1e}")
+    print(
+        f"puma560, 30 random poses, p = 0.95: {time.perf_counter() - t0:.2f} s, {r.status}, "
+        f"gap/cost {r.gap / r.cost:.1e}"
+    )
     # sphere against components
     ts, tcmp = [], []
     for _ in range(args.repeat):
@@ -106,9 +115,11 @@ def main() -> None:
         s = tolsynth.synthesize(m, R=R, p=0.9, criterion="sphere", probability="exact")
         ts.append(time.perf_counter() - t1)
         tcmp.append(t1 - t0)
-    print(f"sphere p = 0.9: {statistics.median(ts):.2f} s against components {statistics.median(tcmp):.2f} s "
-          f"({statistics.median(ts) / statistics.median(tcmp):.1f}x); {s.status}, cost {s.cost:.4f}, "
-          f"bound {s.lower_bound:.4f}")
+    print(
+        f"sphere p = 0.9: {statistics.median(ts):.2f} s against components {statistics.median(tcmp):.2f} s "
+        f"({statistics.median(ts) / statistics.median(tcmp):.1f}x); {s.status}, cost {s.cost:.4f}, "
+        f"bound {s.lower_bound:.4f}"
+    )
     # all-normal: the Gaussian path
     tn, tg = [], []
     for _ in range(args.repeat):
@@ -119,8 +130,10 @@ def main() -> None:
         tolsynth.synthesize(m, R=R * 1.001, p=0.99, distribution="normal", probability="gaussian")
         tn.append(t1 - t0)
         tg.append(time.perf_counter() - t1)
-    print(f"all-normal p = 0.99: exact path {1e3 * statistics.median(tn):.2f} ms, Gaussian path "
-          f"{1e3 * statistics.median(tg):.2f} ms")
+    print(
+        f"all-normal p = 0.99: exact path {1e3 * statistics.median(tn):.2f} ms, Gaussian path "
+        f"{1e3 * statistics.median(tg):.2f} ms"
+    )
 
 
 if __name__ == "__main__":

@@ -20,8 +20,14 @@ from __future__ import annotations
 
 import os
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS",
-             "VECLIB_MAXIMUM_THREADS", "BLIS_NUM_THREADS"):
+for _var in (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "BLIS_NUM_THREADS",
+):
     os.environ[_var] = "1"
 try:
     os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
@@ -65,10 +71,14 @@ def main() -> None:
     q = m.joints("worst")
     eps = m.tolerances("figure3")
     f = m.graphs.position
-    print(f"tolsynth {tolsynth.__version__}, casadi {ca.__version__}, numpy {np.__version__}; "
-          f"one core ({'pinned' if PINNED else 'not pinned'}, thread counts 1); median of {repeats}")
-    print(f"model xu_zhang_1988, tolerances figure3, uniform, pose 'worst'; position graph: "
-          f"{f.n_instructions()} instructions; batch {B}")
+    print(
+        f"tolsynth {tolsynth.__version__}, casadi {ca.__version__}, numpy {np.__version__}; "
+        f"one core ({'pinned' if PINNED else 'not pinned'}, thread counts 1); median of {repeats}"
+    )
+    print(
+        f"model xu_zhang_1988, tolerances figure3, uniform, pose 'worst'; position graph: "
+        f"{f.n_instructions()} instructions; batch {B}"
+    )
     print()
 
     rng = np.random.default_rng(0)
@@ -98,8 +108,12 @@ def main() -> None:
     if shutil.which("gcc") or shutil.which("cc"):
         try:
             t0 = time.perf_counter()
-            fj = ca.Function("position_jit", f.sx_in(), f.call(f.sx_in()),
-                             {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O3"]}})
+            fj = ca.Function(
+                "position_jit",
+                f.sx_in(),
+                f.call(f.sx_in()),
+                {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O3"]}},
+            )
             fjm = fj.map(B, "serial")
             fjm(Qd, Dd)
             compile_s = time.perf_counter() - t0
@@ -136,8 +150,10 @@ def main() -> None:
     probability_map(m, "figure3", R=0.2, n=20, progress=False)  # warm up
     t = median_time(lambda: probability_map(m, "figure3", R=0.2, n=100, progress=False), max(1, repeats // 2))
     pm = probability_map(m, "figure3", R=0.2, n=100, progress=False)
-    print(f"{'100 x 100 map (figure3, R = 0.2 mm, uniform)':50}{t:10.2f} s  "
-          f"({int(np.isfinite(pm.P).sum())} reachable points, IK + statistics)")
+    print(
+        f"{'100 x 100 map (figure3, R = 0.2 mm, uniform)':50}{t:10.2f} s  "
+        f"({int(np.isfinite(pm.P).sum())} reachable points, IK + statistics)"
+    )
     t = median_time(lambda: worst_pose(m, "figure3", criterion="sigma"), repeats)
     print(f"{'worst-pose search, criterion sigma':50}{t:10.2f} s")
     t = median_time(lambda: worst_pose(m, "figure3", criterion="probability", R=0.2), max(1, repeats // 2))

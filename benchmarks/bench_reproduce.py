@@ -68,9 +68,11 @@ def main():
     with tempfile.TemporaryDirectory() as empty:
         cold = run_subprocess({**os.environ, "TOLSYNTH_CACHE_DIR": empty})
     warm = [run_subprocess() for _ in range(a.repeat)]
-    print(f"\n`tolsynth reproduce` as a subprocess: median {statistics.median(warm):.2f} s "
-          f"(min {min(warm):.2f}, max {max(warm):.2f}, {a.repeat} runs, compiled library cached); "
-          f"first run, empty cache: {cold:.2f} s")
+    print(
+        f"\n`tolsynth reproduce` as a subprocess: median {statistics.median(warm):.2f} s "
+        f"(min {min(warm):.2f}, max {max(warm):.2f}, {a.repeat} runs, compiled library cached); "
+        f"first run, empty cache: {cold:.2f} s"
+    )
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-c", "import tolsynth.cli, tolsynth.synthesis.reproduce"], check=True)
     print(f"  of which starting Python and importing tolsynth: {time.perf_counter() - t0:.2f} s")
@@ -85,15 +87,21 @@ def main():
         ip_t.append(sum(r.ipopt.wall_time for rep in reps for r in rep.readings.values()))
         su_t.append(sum(rep.printed_unit.sumt.wall_time for rep in reps))
     worst = max(rep.agreement()["cost_rel_diff"] for rep in reps)
-    print(f"\nreproduce() in-process: median {statistics.median(walls):.3f} s over {a.repeat} runs; inside "
-          f"the solvers (their own wall_time): IPOPT 36 solves {statistics.median(ip_t):.3f} s, "
-          f"SUMT 18 solves {statistics.median(su_t):.3f} s; largest IPOPT-SUMT cost difference {worst:.1e}")
+    print(
+        f"\nreproduce() in-process: median {statistics.median(walls):.3f} s over {a.repeat} runs; inside "
+        f"the solvers (their own wall_time): IPOPT 36 solves {statistics.median(ip_t):.3f} s, "
+        f"SUMT 18 solves {statistics.median(su_t):.3f} s; largest IPOPT-SUMT cost difference {worst:.1e}"
+    )
 
     # -- SUMT per column: compiled vs Python Powell vs before --------------------------------
-    print("\nSUMT + Powell per column (synthesize end to end): compiled; Python Powell, same options; "
-          "before (Python, line_rtol 1e-9, no extrapolation)")
-    print(f"  {'column':<52} {'compiled ms':>11} {'evals':>6} {'python ms':>9} {'before ms':>9} {'evals':>7} "
-          f"{'py/comp':>7} {'before/comp':>11} {'|SUMT-IPOPT|/IPOPT':>18}")
+    print(
+        "\nSUMT + Powell per column (synthesize end to end): compiled; Python Powell, same options; "
+        "before (Python, line_rtol 1e-9, no extrapolation)"
+    )
+    print(
+        f"  {'column':<52} {'compiled ms':>11} {'evals':>6} {'python ms':>9} {'before ms':>9} {'evals':>7} "
+        f"{'py/comp':>7} {'before/comp':>11} {'|SUMT-IPOPT|/IPOPT':>18}"
+    )
     r_py, r_before = [], []
     for i, ref in enumerate(refs):
         label = f"{ref.table}: R={ref.R:g} mm, p={ref.p:g}, alpha={ref.alpha:g}, {ref.distribution}"
@@ -106,8 +114,15 @@ def main():
             try:
                 tp, _ = sumt_column(mech, ref)
                 t0 = time.perf_counter()
-                sb = synthesize(mech, ref.R, ref.p, ref.distribution, ref.alpha, solver="sumt",
-                                options={"line_rtol": 1e-9, "extrapolate": False})
+                sb = synthesize(
+                    mech,
+                    ref.R,
+                    ref.p,
+                    ref.distribution,
+                    ref.alpha,
+                    solver="sumt",
+                    options={"line_rtol": 1e-9, "extrapolate": False},
+                )
                 tb = time.perf_counter() - t0
             finally:
                 del os.environ["TOLSYNTH_NO_COMPILE"]
@@ -118,8 +133,10 @@ def main():
             row += f" {'':>9} {'':>9} {'':>7} {'':>7} {'':>11}"
         print(row + f" {abs(su.cost - ip.cost) / ip.cost:>18.1e}")
     if r_py:
-        print(f"  speed-up over {len(r_py)} columns (median): {statistics.median(r_py):.0f}x over the Python Powell, "
-              f"{statistics.median(r_before):.0f}x over before")
+        print(
+            f"  speed-up over {len(r_py)} columns (median): {statistics.median(r_py):.0f}x over the Python Powell, "
+            f"{statistics.median(r_before):.0f}x over before"
+        )
 
 
 if __name__ == "__main__":

@@ -109,10 +109,15 @@ class Row:
         return ok
 
     def line(self) -> str:
-        same = (f"{max(self.rel):.1e}" + (f" ({self.above} lean above certified)" if self.above else "")
-                + (f" ({len(self.failures)} FAILED)" if self.failures else ""))
-        return (f"| {self.label} | {fmt_t(self.t_ts)} | {fmt_t(self.t_lean)} | {self.ratio:.2f}x | {same} | "
-                f"{self.target}: {'yes' if self.met() else 'no'} |")
+        same = (
+            f"{max(self.rel):.1e}"
+            + (f" ({self.above} lean above certified)" if self.above else "")
+            + (f" ({len(self.failures)} FAILED)" if self.failures else "")
+        )
+        return (
+            f"| {self.label} | {fmt_t(self.t_ts)} | {fmt_t(self.t_lean)} | {self.ratio:.2f}x | {same} | "
+            f"{self.target}: {'yes' if self.met() else 'no'} |"
+        )
 
     def engine(self) -> str:
         """Which engine ran the tolsynth side: one name, or each with its count where they differ."""
@@ -121,14 +126,16 @@ class Row:
         return ", ".join(f"{ENGINES.get(k, k)} {n}x" for k, n in sorted(self.engines.items()))
 
     def detail(self) -> str:
-        return (f"  {self.label}: tolsynth {fmt_t(self.t_ts)} ({self.engine()}; iterations median "
-                f"{statistics.median(self.its):g}), "
-                f"lean {fmt_t(self.t_lean)} (Clarabel iterations median {statistics.median(self.lean_its):g}), "
-                f"{self.ratio:.2f}x over {len(self.ts)} pairs; cost (lean - tolsynth) / tolsynth from "
-                f"{min(self.signed):.1e} to {max(self.signed):.1e}"
-                + (f"; lean retried {self.retried}x" if self.retried else "")
-                + (f"; lean 'optimal_inaccurate' {self.inaccurate}x" if self.inaccurate else "")
-                + (f"; FAILURES: {self.failures[:3]}" if self.failures else ""))
+        return (
+            f"  {self.label}: tolsynth {fmt_t(self.t_ts)} ({self.engine()}; iterations median "
+            f"{statistics.median(self.its):g}), "
+            f"lean {fmt_t(self.t_lean)} (Clarabel iterations median {statistics.median(self.lean_its):g}), "
+            f"{self.ratio:.2f}x over {len(self.ts)} pairs; cost (lean - tolsynth) / tolsynth from "
+            f"{min(self.signed):.1e} to {max(self.signed):.1e}"
+            + (f"; lean retried {self.retried}x" if self.retried else "")
+            + (f"; lean 'optimal_inaccurate' {self.inaccurate}x" if self.inaccurate else "")
+            + (f"; FAILURES: {self.failures[:3]}" if self.failures else "")
+        )
 
 
 def paired(row: Row, reps: int, setup, ts_fn, lean_fn) -> Row:
@@ -137,7 +144,7 @@ def paired(row: Row, reps: int, setup, ts_fn, lean_fn) -> Row:
     for i in range(reps):
         args = setup(i)
         out = {}
-        for side in (("ts", "lean") if i % 2 == 0 else ("lean", "ts")):
+        for side in ("ts", "lean") if i % 2 == 0 else ("lean", "ts"):
             fn = ts_fn if side == "ts" else lean_fn
             t0 = time.perf_counter()
             res = fn(*args)
@@ -176,12 +183,21 @@ def sweeps(reps: int) -> list[Row]:
     rows = []
 
     def run(label, ts_kw, lean_kw):
-        ts = lambda kw: tolsynth.synthesize(m, kw.get("R", R), kw.get("p", P), DIST, kw.get("alpha", ALPHA),
-                                            **{k: v for k, v in kw.items() if k not in ("R", "p", "alpha")})
-        lean = lambda kw: lm.solve(kw.get("R", R), kw.get("p", P), **{k: v for k, v in kw.items() if k not in ("R", "p")})
+        ts = lambda kw: tolsynth.synthesize(
+            m,
+            kw.get("R", R),
+            kw.get("p", P),
+            DIST,
+            kw.get("alpha", ALPHA),
+            **{k: v for k, v in kw.items() if k not in ("R", "p", "alpha")},
+        )
+        lean = lambda kw: lm.solve(
+            kw.get("R", R), kw.get("p", P), **{k: v for k, v in kw.items() if k not in ("R", "p")}
+        )
         ts(ts_kw(0)), lean(lean_kw(0))  # the sweep's first point, untimed
-        row = paired(Row(label), reps, lambda i: (ts_kw(i + 1), lean_kw(i + 1)),
-                     lambda a, b: ts(a), lambda a, b: lean(b))
+        row = paired(
+            Row(label), reps, lambda i: (ts_kw(i + 1), lean_kw(i + 1)), lambda a, b: ts(a), lambda a, b: lean(b)
+        )
         rows.append(row)
 
     def k_step(i):
@@ -191,12 +207,18 @@ def sweeps(reps: int) -> list[Row]:
 
     run(f"sweep step: k of {names[0]} (+1 %)", k_step, k_step)
     lm.solve(R, P)
-    run("sweep step: alpha (+0.002; lean rebuilds)", lambda i: {"alpha": ALPHA + 0.002 * i},
-        lambda i: {"alpha": ALPHA + 0.002 * i})
+    run(
+        "sweep step: alpha (+0.002; lean rebuilds)",
+        lambda i: {"alpha": ALPHA + 0.002 * i},
+        lambda i: {"alpha": ALPHA + 0.002 * i},
+    )
     lm.solve(R, P, alpha=ALPHA)
     up = lambda i: 0.8 * eps[j] * (1 + 0.002 * i)
-    run(f"sweep step: upper bound of {names[j]} (active, +0.2 %)",
-        lambda i: {"bounds": {names[j]: (lo[j], up(i))}}, lambda i: {"upper": {names[j]: up(i)}})
+    run(
+        f"sweep step: upper bound of {names[j]} (active, +0.2 %)",
+        lambda i: {"bounds": {names[j]: (lo[j], up(i))}},
+        lambda i: {"upper": {names[j]: up(i)}},
+    )
     lk = lambda i: {"locks": {names[0]: 0.9 * eps[0] * (1 + 0.002 * i)}}
     run(f"sweep step: lock of {names[0]} (+0.2 %)", lk, lk)
     rs = lambda i: {"R": R * (1 + 0.002 * i)}
@@ -210,6 +232,7 @@ def many_poses(name: str, sizes, reps: dict, rng) -> list[Row]:
     m_ts, m_lean = tolsynth.load_model(name), tolsynth.load_model(name)
     rows = []
     for N in sizes:
+
         def setup(i, N=N):
             return (random_poses(m_ts, N, rng),)
 
@@ -228,18 +251,31 @@ def warm_1000(name: str, reps: int, rng, k_step: bool) -> list[Row]:
     tolsynth.synthesize(m, R, P, DIST, ALPHA, poses=poses), lm.solve(R, P)  # built, canonicalised: untimed
     rows = []
     rs = lambda i: R * (1 + 0.002 * (i + 1))
-    rows.append(paired(Row(f"{name}, 1000 random poses, warm: R step (+0.2 %)", "< 0.1 s and >= 3x"), reps,
-                       lambda i: (rs(i),), lambda r: tolsynth.synthesize(m, r, P, DIST, ALPHA, poses=poses),
-                       lambda r: lm.solve(r, P)))
+    rows.append(
+        paired(
+            Row(f"{name}, 1000 random poses, warm: R step (+0.2 %)", "< 0.1 s and >= 3x"),
+            reps,
+            lambda i: (rs(i),),
+            lambda r: tolsynth.synthesize(m, r, P, DIST, ALPHA, poses=poses),
+            lambda r: lm.solve(r, P),
+        )
+    )
     if k_step:
+
         def ks(i):
             k = m.k
             k[0] *= 1 + 0.01 * (i + 1)
             return (k,)
 
-        rows.append(paired(Row(f"{name}, 1000 random poses, warm: k step (+1 %)", "< 0.1 s and >= 3x"), reps, ks,
-                           lambda k: tolsynth.synthesize(m, R, P, DIST, ALPHA, poses=poses, k=k),
-                           lambda k: lm.solve(R, P, k=k)))
+        rows.append(
+            paired(
+                Row(f"{name}, 1000 random poses, warm: k step (+1 %)", "< 0.1 s and >= 3x"),
+                reps,
+                ks,
+                lambda k: tolsynth.synthesize(m, R, P, DIST, ALPHA, poses=poses, k=k),
+                lambda k: lm.solve(R, P, k=k),
+            )
+        )
     return rows
 
 
@@ -251,8 +287,11 @@ def main() -> None:
     import casadi
     import cvxpy
 
-    print(f"cores: {os.cpu_count()}, python {sys.version.split()[0]}, numpy {np.__version__}, casadi "
-          f"{casadi.__version__}, cvxpy {cvxpy.__version__}{', --quick' if quick else ''}", flush=True)
+    print(
+        f"cores: {os.cpu_count()}, python {sys.version.split()[0]}, numpy {np.__version__}, casadi "
+        f"{casadi.__version__}, cvxpy {cvxpy.__version__}{', --quick' if quick else ''}",
+        flush=True,
+    )
     t_start = time.perf_counter()
     rng = np.random.default_rng(22)
     rows = [cold_single(6 if quick else 30, rng)]
@@ -260,12 +299,16 @@ def main() -> None:
     reps = {10: 3, 30: 3, 100: 2} if quick else {10: 9, 30: 7, 100: 5}
     for name in ("puma560", "panda"):
         rows += many_poses(name, (10, 30, 100), reps, rng)
-    for name in (("puma560",) if quick else ("puma560", "panda")):
+    for name in ("puma560",) if quick else ("puma560", "panda"):
         rows += warm_1000(name, 3 if quick else 7, rng, k_step=not quick)
 
-    print(f"\nSummary ({os.cpu_count()} cores, paired medians in one run of {time.perf_counter() - t_start:.0f} s; "
-          f"ratio = lean cvxpy time / tolsynth time, above 1: tolsynth faster):\n")
-    print("| workload | tolsynth median | lean cvxpy median | ratio (cvxpy/tolsynth) | same optimum (rel diff) | target (>= 3x) |")
+    print(
+        f"\nSummary ({os.cpu_count()} cores, paired medians in one run of {time.perf_counter() - t_start:.0f} s; "
+        f"ratio = lean cvxpy time / tolsynth time, above 1: tolsynth faster):\n"
+    )
+    print(
+        "| workload | tolsynth median | lean cvxpy median | ratio (cvxpy/tolsynth) | same optimum (rel diff) | target (>= 3x) |"
+    )
     print("|---|---|---|---|---|---|")
     for row in rows:
         print(row.line())

@@ -25,8 +25,12 @@ import tolsynth
 
 def grid_of(size: int) -> dict:
     """The sweep's axes: ``size`` values each of R and p, two alphas, two distributions."""
-    return dict(R=list(np.linspace(0.2, 1.0, size)), p=list(np.linspace(0.9, 0.995, size)), alpha=[0.5, 0.7],
-                distribution=["uniform", "normal"])
+    return dict(
+        R=list(np.linspace(0.2, 1.0, size)),
+        p=list(np.linspace(0.9, 0.995, size)),
+        alpha=[0.5, 0.7],
+        distribution=["uniform", "normal"],
+    )
 
 
 def throughput(m, grid: dict, client, repeat: int, **kw) -> tuple[float, float, int]:
@@ -53,22 +57,31 @@ def main():
     m = tolsynth.load_model("xu_zhang_1988")
     grid = grid_of(a.size)
     n = a.size * a.size * 4
-    print(f"sweep of {n} solves (xu_zhang_1988, default solver), median of {a.repeat} runs, {os.cpu_count()} CPUs, "
-          f"load average {os.getloadavg()[0]:.1f} at the start")
+    print(
+        f"sweep of {n} solves (xu_zhang_1988, default solver), median of {a.repeat} runs, {os.cpu_count()} CPUs, "
+        f"load average {os.getloadavg()[0]:.1f} at the start"
+    )
     print(f"{'engine':<42} {'rows/s':>8} {'s':>7} {'vs serial':>10} {'failed':>7}")
 
     def run(label, client, **kw):
         return (label, *throughput(m, grid, client, a.repeat, **kw))
 
-    rows = [run("serial (this process)", "serial"),
-            run(f"processes ({a.workers}, ProcessPoolExecutor)", "processes", workers=a.workers),
-            run("auto (client=None, the default)", None, workers=a.workers)]
+    rows = [
+        run("serial (this process)", "serial"),
+        run(f"processes ({a.workers}, ProcessPoolExecutor)", "processes", workers=a.workers),
+        run("auto (client=None, the default)", None, workers=a.workers),
+    ]
     from distributed import Client, LocalCluster
 
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cl, Client(cl) as c:
+    with (
+        LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cl,
+        Client(cl) as c,
+    ):
         rows.append(run("dask LocalCluster (1 thread, in-process)", c))
-    with LocalCluster(n_workers=a.workers, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
-            Client(cl) as c:
+    with (
+        LocalCluster(n_workers=a.workers, threads_per_worker=1, processes=True, dashboard_address=None) as cl,
+        Client(cl) as c,
+    ):
         c.submit(lambda: None).result()
         rows.append(run(f"dask LocalCluster ({a.workers} worker processes)", c))
     base = rows[0][1]

@@ -158,9 +158,15 @@ class SLSQPExact:
             return (-2.0 * w * proj**2).reshape(-1, len(u))
 
         u0 = np.log(nlp.start_point())
-        return minimize(fun, u0, jac=True, method="SLSQP", bounds=list(zip(nlp.lu, nlp.uu)),
-                        constraints=[{"type": "ineq", "fun": cons, "jac": cons_jac}],
-                        options={"ftol": ftol, "maxiter": 1000})
+        return minimize(
+            fun,
+            u0,
+            jac=True,
+            method="SLSQP",
+            bounds=list(zip(nlp.lu, nlp.uu)),
+            constraints=[{"type": "ineq", "fun": cons, "jac": cons_jac}],
+            options={"ftol": ftol, "maxiter": 1000},
+        )
 
 
 def fmt_t(t):
@@ -178,8 +184,10 @@ def main():
     rep_pose = 2 if quick else 3
     rep_big = 1 if quick else 3
     table = []  # (figure, target, measured, alternatives, met)
-    print(f"cores: {os.cpu_count()}, python {sys.version.split()[0]}, casadi {ca.__version__}, numpy {np.__version__}"
-          f"{', --quick' if quick else ''}")
+    print(
+        f"cores: {os.cpu_count()}, python {sys.version.split()[0]}, casadi {ca.__version__}, numpy {np.__version__}"
+        f"{', --quick' if quick else ''}"
+    )
     m = tolsynth.load_model("xu_zhang_1988")
 
     # == 1. one warm solve =====================================================================
@@ -231,24 +239,36 @@ def main():
     lam = np.linalg.eigvalsh(np.einsum("bin,n,bjn->bij", sl.As, np.exp(2 * r_sl.x) / sl.c, sl.As))
     sl_viol = float(np.sqrt(lam.max()) - 1)
     t_su, r_su = median_time(lambda: tolsynth.synthesize(m, R, P, DIST, ALPHA, solver="sumt"), max(5, rep_alt // 4))
-    print(f"\n1. one warm solve, paper's column (R {R} mm, p {P}, {DIST}, alpha {ALPHA}); optimum {ref:.10g}, "
-          f"gap {first.gap:.1e}")
+    print(
+        f"\n1. one warm solve, paper's column (R {R} mm, p {P}, {DIST}, alpha {ALPHA}); optimum {ref:.10g}, "
+        f"gap {first.gap:.1e}"
+    )
     print(f"  {'solver':<66} {'median':>10} {'cost rel.err':>12}  ratio to tolsynth")
-    print(f"  {'tolsynth.synthesize (default: interior point), end to end, first batch':<66} {fmt_t(t_e2e):>10} "
-          f"{abs(res.cost - ref) / ref:>12.1e}  1 ({res.message})")
+    print(
+        f"  {'tolsynth.synthesize (default: interior point), end to end, first batch':<66} {fmt_t(t_e2e):>10} "
+        f"{abs(res.cost - ref) / ref:>12.1e}  1 ({res.message})"
+    )
     print(f"  {'  of which the solver (result.wall_time: kernel + checks)':<66} {fmt_t(inside):>10}")
     print(f"  {'  of which the compiled kernel itself (one ctypes call)':<66} {fmt_t(t_call):>10}")
     print(f"  {'  of which make_specification (checks, sensitivities)':<66} {fmt_t(t_spec):>10}")
-    print(f"  {'lean cvxpy + Clarabel, the Problem re-solved, end to end':<66} {fmt_t(t_cl):>10} {cl_err:>12.1e}"
-          f"  {t_cl / t_e2e:.2f}x")
+    print(
+        f"  {'lean cvxpy + Clarabel, the Problem re-solved, end to end':<66} {fmt_t(t_cl):>10} {cl_err:>12.1e}"
+        f"  {t_cl / t_e2e:.2f}x"
+    )
     print(f"  {'  of which inside Clarabel (solver_stats.solve_time)':<66} {fmt_t(cl_inside):>10}")
     label_ip = "solver='ipopt' (the exchange method, warm re-solve), end to end"
-    print(f"  {label_ip:<66} {fmt_t(t_ip):>10} "
-          f"{abs(r_ip.cost - ref) / ref:>12.1e}  {t_ip / t_e2e:.2f}x ({r_ip.iterations} IPOPT iterations)")
-    print(f"  {f'scipy SLSQP, exact gradients, ftol {ftol:g}, from a built spec':<66} {fmt_t(t_sl):>10} {sl_err:>12.1e}"
-          f"  {t_sl / t_e2e:.2f}x (largest sigma z/R - 1 = {sl_viol:.1e}, {r_sl.nit} iterations)")
-    print(f"  {'SUMT + Powell (compiled), end to end':<66} {fmt_t(t_su):>10} {abs(r_su.cost - ref) / ref:>12.1e}"
-          f"  {t_su / t_e2e:.2f}x")
+    print(
+        f"  {label_ip:<66} {fmt_t(t_ip):>10} "
+        f"{abs(r_ip.cost - ref) / ref:>12.1e}  {t_ip / t_e2e:.2f}x ({r_ip.iterations} IPOPT iterations)"
+    )
+    print(
+        f"  {f'scipy SLSQP, exact gradients, ftol {ftol:g}, from a built spec':<66} {fmt_t(t_sl):>10} {sl_err:>12.1e}"
+        f"  {t_sl / t_e2e:.2f}x (largest sigma z/R - 1 = {sl_viol:.1e}, {r_sl.nit} iterations)"
+    )
+    print(
+        f"  {'SUMT + Powell (compiled), end to end':<66} {fmt_t(t_su):>10} {abs(r_su.cost - ref) / ref:>12.1e}"
+        f"  {t_su / t_e2e:.2f}x"
+    )
     # a sweep's step: each solve at another R (0.2 % apart): a new specification every call
     Rs = [R * (1 + 0.002 * k) for k in range(10)]
     step = {"k": 0}
@@ -267,32 +287,48 @@ def main():
     its = [neighbour_ts().iterations for _ in range(20)]
     t_nbcl, _ = median_time(neighbour_cl, rep_alt)
     ok_nb = r_nb.success and r_nb.gap <= 1e-6 * r_nb.cost
-    print(f"  {'tolsynth.synthesize, R changed 0.2 % per call (a sweep step)':<66} {fmt_t(t_nb):>10} {'':>12}"
-          f"  {t_nb / t_e2e:.2f}x the same-spec re-solve; iterations median {statistics.median(its):g}; "
-          f"certified {ok_nb}")
-    print(f"  {'lean cvxpy + Clarabel, the same R steps':<66} {fmt_t(t_nbcl):>10} {'':>12}"
-          f"  {t_nbcl / t_nb:.2f}x tolsynth's step")
+    print(
+        f"  {'tolsynth.synthesize, R changed 0.2 % per call (a sweep step)':<66} {fmt_t(t_nb):>10} {'':>12}"
+        f"  {t_nb / t_e2e:.2f}x the same-spec re-solve; iterations median {statistics.median(its):g}; "
+        f"certified {ok_nb}"
+    )
+    print(
+        f"  {'lean cvxpy + Clarabel, the same R steps':<66} {fmt_t(t_nbcl):>10} {'':>12}"
+        f"  {t_nbcl / t_nb:.2f}x tolsynth's step"
+    )
 
     def warm_row():  # filled in at the end, from every batch
         t_w, t_c = wb.t_warm, wb.t_cl
         met = t_w <= 1e-3 and t_c / t_w >= 3 and t_sl > t_w
-        return ("one warm solve, end to end", "<= 1 ms, >= 3x faster than the lean cvxpy model, ahead of SLSQP",
-                f"{fmt_t(t_w)}: median of {len(wb.warm)} solves in {len(wb.batches)} batches over the run (the "
-                f"compiled kernel itself {fmt_t(t_call)}, {res.iterations} iterations)",
-                f"lean cvxpy + Clarabel {fmt_t(t_c)} ({t_c / t_w:.2f}x); IPOPT warm {fmt_t(t_ip)} ({t_ip / t_w:.2f}x); "
-                f"SLSQP exact grad. {fmt_t(t_sl)} ({t_sl / t_w:.2f}x); SUMT + Powell {fmt_t(t_su)} "
-                f"({t_su / t_w:.2f}x)", met)
+        return (
+            "one warm solve, end to end",
+            "<= 1 ms, >= 3x faster than the lean cvxpy model, ahead of SLSQP",
+            f"{fmt_t(t_w)}: median of {len(wb.warm)} solves in {len(wb.batches)} batches over the run (the "
+            f"compiled kernel itself {fmt_t(t_call)}, {res.iterations} iterations)",
+            f"lean cvxpy + Clarabel {fmt_t(t_c)} ({t_c / t_w:.2f}x); IPOPT warm {fmt_t(t_ip)} ({t_ip / t_w:.2f}x); "
+            f"SLSQP exact grad. {fmt_t(t_sl)} ({t_sl / t_w:.2f}x); SUMT + Powell {fmt_t(t_su)} "
+            f"({t_su / t_w:.2f}x)",
+            met,
+        )
 
     table.append(None)  # the warm-solve row, filled in at the end
-    table.append(("a sweep step: a solve at another R (0.2 % apart)", ">= 3x faster than the lean cvxpy model",
-                  f"{fmt_t(t_nb)} (iterations median {statistics.median(its):g})",
-                  f"lean cvxpy + Clarabel, same steps {fmt_t(t_nbcl)} ({t_nbcl / t_nb:.2f}x)", t_nbcl / t_nb >= 3))
+    table.append(
+        (
+            "a sweep step: a solve at another R (0.2 % apart)",
+            ">= 3x faster than the lean cvxpy model",
+            f"{fmt_t(t_nb)} (iterations median {statistics.median(its):g})",
+            f"lean cvxpy + Clarabel, same steps {fmt_t(t_nbcl)} ({t_nbcl / t_nb:.2f}x)",
+            t_nbcl / t_nb >= 3,
+        )
+    )
 
     # == 2. many poses =========================================================================
     sizes = [1, 10, 30, 100, 300, 1000]
     cl_max = 100 if quick else 300
-    print("\n2. random feasible pose sets on xu_zhang_1988, a new set per repeat; end to end, against the "
-          "lean cvxpy model built and solved (cost difference '-': Clarabel did not report optimal)")
+    print(
+        "\n2. random feasible pose sets on xu_zhang_1988, a new set per repeat; end to end, against the "
+        "lean cvxpy model built and solved (cost difference '-': Clarabel did not report optimal)"
+    )
     print(f"  {'poses':>6} {'tolsynth':>10} {'lean cvxpy':>10} {'ratio':>7} {'|cost diff|/cost':>16}  tolsynth message")
     rng = np.random.default_rng(2024)
     # untimed: the first solves of a size (the kernel's first use, cvxpy's imports)
@@ -329,10 +365,20 @@ def main():
     fit = [N for N in sizes if N >= 30]
     slope = float(np.polyfit(np.log(fit), np.log([t_of[N] for N in fit]), 1)[0])
     print(f"  growth exponent of tolsynth's time over {fit[0]}..{fit[-1]} poses: {slope:.2f}")
-    alt = (f"lean cvxpy + Clarabel {fmt_t(t_cl1000)} ({t_cl1000 / t_of[1000]:.1f}x)" if t_cl1000
-           else f"lean cvxpy at {cl_max} poses: {t_cl_top / t_of[cl_max]:.1f}x (1000 poses: run without --quick)")
-    table.append(("1000 poses, cold", "< 2 s, linear growth", f"{fmt_t(t_of[1000])}, growth exponent {slope:.2f} "
-                  "(30..1000)", alt, t_of[1000] < 2 and slope <= 1.15))
+    alt = (
+        f"lean cvxpy + Clarabel {fmt_t(t_cl1000)} ({t_cl1000 / t_of[1000]:.1f}x)"
+        if t_cl1000
+        else f"lean cvxpy at {cl_max} poses: {t_cl_top / t_of[cl_max]:.1f}x (1000 poses: run without --quick)"
+    )
+    table.append(
+        (
+            "1000 poses, cold",
+            "< 2 s, linear growth",
+            f"{fmt_t(t_of[1000])}, growth exponent {slope:.2f} (30..1000)",
+            alt,
+            t_of[1000] < 2 and slope <= 1.15,
+        )
+    )
 
     wb.batch("after the pose sets")
 
@@ -351,11 +397,19 @@ def main():
             raise SystemExit(f"tolsynth reproduce failed:\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}")
 
     t_cmd, _ = median_time(run_cmd, rep_big)
-    print(f"\n3. tolsynth reproduce (18 columns, IPOPT and SUMT + Powell): in-process {fmt_t(t_rep)}, "
-          f"as the command {fmt_t(t_cmd)}; largest IPOPT-SUMT cost difference {worst:.1e}")
-    table.append(("`tolsynth reproduce`, 18 columns, both solvers", "< 3 s on 2 cores",
-                  f"{fmt_t(t_cmd)} as the command ({fmt_t(t_rep)} in-process)",
-                  f"IPOPT-SUMT cost agreement {worst:.1e}", t_cmd < 3))
+    print(
+        f"\n3. tolsynth reproduce (18 columns, IPOPT and SUMT + Powell): in-process {fmt_t(t_rep)}, "
+        f"as the command {fmt_t(t_cmd)}; largest IPOPT-SUMT cost difference {worst:.1e}"
+    )
+    table.append(
+        (
+            "`tolsynth reproduce`, 18 columns, both solvers",
+            "< 3 s on 2 cores",
+            f"{fmt_t(t_cmd)} as the command ({fmt_t(t_rep)} in-process)",
+            f"IPOPT-SUMT cost agreement {worst:.1e}",
+            t_cmd < 3,
+        )
+    )
 
     wb.batch("after reproduce")
 
@@ -384,26 +438,42 @@ def main():
             t_np, pmn = median_time(one_map, 1)
         finally:
             del os.environ["TOLSYNTH_NO_COMPILE"]
-        same = (np.array_equal(pm.reachable, pm1.reachable) and np.array_equal(pm.reachable, pmn.reachable)
-                and float(np.nanmax(np.abs(pm.P - pmn.P))) <= 1e-9)
+        same = (
+            np.array_equal(pm.reachable, pm1.reachable)
+            and np.array_equal(pm.reachable, pmn.reachable)
+            and float(np.nanmax(np.abs(pm.P - pmn.P))) <= 1e-9
+        )
         alts = [f"one thread {fmt_t(t_one)}", f"NumPy iteration (no C compiler) {fmt_t(t_np)} ({t_np / t_map:.1f}x)"]
-        print(f"\n4. the 100 x 100 probability map (figure3, R 0.2 mm): {fmt_t(t_map)} "
-              f"({int(np.sum(pm.reachable))} reachable points; compiled IK on {threads} threads); on one thread "
-              f"{fmt_t(t_one)}; by the NumPy iteration {fmt_t(t_np)}; the same map from all three: {same}")
+        print(
+            f"\n4. the 100 x 100 probability map (figure3, R 0.2 mm): {fmt_t(t_map)} "
+            f"({int(np.sum(pm.reachable))} reachable points; compiled IK on {threads} threads); on one thread "
+            f"{fmt_t(t_one)}; by the NumPy iteration {fmt_t(t_np)}; the same map from all three: {same}"
+        )
     else:
-        print(f"\n4. the 100 x 100 probability map (figure3, R 0.2 mm): {fmt_t(t_map)} "
-              f"({int(np.sum(pm.reachable))} reachable points; NumPy IK: {backend['reason']})")
-    table.append(("100 x 100 map", "< 1 s", f"{fmt_t(t_map)} (IK {backend['backend']}, {threads} thread(s))",
-                  "; ".join(alts), t_map < 1))
+        print(
+            f"\n4. the 100 x 100 probability map (figure3, R 0.2 mm): {fmt_t(t_map)} "
+            f"({int(np.sum(pm.reachable))} reachable points; NumPy IK: {backend['reason']})"
+        )
+    table.append(
+        (
+            "100 x 100 map",
+            "< 1 s",
+            f"{fmt_t(t_map)} (IK {backend['backend']}, {threads} thread(s))",
+            "; ".join(alts),
+            t_map < 1,
+        )
+    )
     worst_pose(m, "figure3", criterion="probability", R=0.2)
     t_wp, wp = median_time(lambda: worst_pose(m, "figure3", criterion="probability", R=0.2), rep_big + 1)
     print(f"5. worst_pose(criterion='probability') (figure3, R 0.2 mm): {fmt_t(t_wp)}, P = {wp.value:.5f}")
-    table.append(("`worst_pose(criterion=\"probability\")`", "< 0.5 s", fmt_t(t_wp), "", t_wp < 0.5))
+    table.append(('`worst_pose(criterion="probability")`', "< 0.5 s", fmt_t(t_wp), "", t_wp < 0.5))
 
     wb.batch("at the end")
     table[table.index(None)] = warm_row()
-    print(f"\n1'. the warm solve over the whole run: {fmt_t(wb.t_warm)} (lean cvxpy {fmt_t(wb.t_cl)}, "
-          f"{wb.t_cl / wb.t_warm:.2f}x); batch medians: {wb.spread()}")
+    print(
+        f"\n1'. the warm solve over the whole run: {fmt_t(wb.t_warm)} (lean cvxpy {fmt_t(wb.t_cl)}, "
+        f"{wb.t_cl / wb.t_warm:.2f}x); batch medians: {wb.spread()}"
+    )
 
     print(f"\nSummary ({os.cpu_count()} cores; medians in this run):\n")
     print("| figure | target | measured | alternatives, same run (their time / tolsynth's) | target met |")

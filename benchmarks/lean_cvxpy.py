@@ -62,7 +62,7 @@ def _divisor(name: str) -> float:
     if key in _DIVISORS:
         return _DIVISORS[key]
     if key.startswith("truncnormal"):
-        beta = 2.0 if key == "truncnormal" else float(key[len("truncnormal("):-1])
+        beta = 2.0 if key == "truncnormal" else float(key[len("truncnormal(") : -1])
         phi = math.exp(-0.5 * beta * beta) / math.sqrt(2 * math.pi)
         return beta * beta / (1.0 - 2.0 * beta * phi / math.erf(beta / math.sqrt(2.0)))
     raise ValueError(f"distribution: unknown shape {name!r}")
@@ -209,16 +209,24 @@ class LeanModel:
         eps = np.sqrt(np.maximum(w, 0.0) * t) if w is not None else np.full(mech.n, math.nan)
         stats = self.problem.solver_stats
         value = self.problem.value
-        return LeanResult(self.problem.status, float(value) if value is not None else math.nan, eps,
-                          float(stats.solve_time or math.nan), int(stats.num_iters or 0), retried)
+        return LeanResult(
+            self.problem.status,
+            float(value) if value is not None else math.nan,
+            eps,
+            float(stats.solve_time or math.nan),
+            int(stats.num_iters or 0),
+            retried,
+        )
 
 
 # -- the check against tolsynth ----------------------------------------------------------------
 def _compare(label, lean_res, ts_res, rtol=1e-6):
     rel = abs(lean_res.cost - ts_res.cost) / abs(ts_res.cost)
     ok = lean_res.success and ts_res.success and rel <= rtol
-    print(f"  {label:<52} tolsynth {ts_res.cost:.10g}  lean {lean_res.cost:.10g}  rel.diff {rel:.1e}  "
-          f"{'ok' if ok else 'MISMATCH'} ({lean_res.status}, {lean_res.iterations} Clarabel iterations)")
+    print(
+        f"  {label:<52} tolsynth {ts_res.cost:.10g}  lean {lean_res.cost:.10g}  rel.diff {rel:.1e}  "
+        f"{'ok' if ok else 'MISMATCH'} ({lean_res.status}, {lean_res.iterations} Clarabel iterations)"
+    )
     return ok
 
 
@@ -235,24 +243,37 @@ def main() -> int:
     k2 = m.k * np.linspace(0.8, 1.3, m.n)
     ok &= _compare("k varied per parameter", lm.solve(R, P, k=k2), tolsynth.synthesize(m, R, P, "uniform", ALPHA, k=k2))
     a2 = np.linspace(0.5, 0.9, m.n)
-    ok &= _compare("alpha per parameter (rebuilt)", lm.solve(R, P, alpha=a2),
-                   tolsynth.synthesize(m, R, P, "uniform", a2))
+    ok &= _compare(
+        "alpha per parameter (rebuilt)", lm.solve(R, P, alpha=a2), tolsynth.synthesize(m, R, P, "uniform", a2)
+    )
     lm.solve(R, P, alpha=ALPHA)
     names = m.error_parameters
     i = int(np.argmax(eps))
     hi = {names[i]: 0.8 * eps[i]}
-    ok &= _compare(f"upper bound of {names[i]} at 0.8 x its optimum", lm.solve(R, P, upper=hi),
-                   tolsynth.synthesize(m, R, P, "uniform", ALPHA, bounds={names[i]: (m.bounds[0][i], hi[names[i]])}))
+    ok &= _compare(
+        f"upper bound of {names[i]} at 0.8 x its optimum",
+        lm.solve(R, P, upper=hi),
+        tolsynth.synthesize(m, R, P, "uniform", ALPHA, bounds={names[i]: (m.bounds[0][i], hi[names[i]])}),
+    )
     lock = {names[0]: 0.9 * eps[0]}
-    ok &= _compare(f"{names[0]} locked at 0.9 x its optimum", lm.solve(R, P, locks=lock),
-                   tolsynth.synthesize(m, R, P, "uniform", ALPHA, locks=lock))
+    ok &= _compare(
+        f"{names[0]} locked at 0.9 x its optimum",
+        lm.solve(R, P, locks=lock),
+        tolsynth.synthesize(m, R, P, "uniform", ALPHA, locks=lock),
+    )
     ok &= _compare("R 0.3 mm", lm.solve(0.3, P), tolsynth.synthesize(m, 0.3, P, "uniform", ALPHA))
     ok &= _compare("p 0.95", lm.solve(R, 0.95), tolsynth.synthesize(m, R, 0.95, "uniform", ALPHA))
-    ok &= _compare("normal (3 sigma = eps)", LeanModel(m, ["worst"], "normal").solve(R, P),
-                   tolsynth.synthesize(m, R, P, "normal", ALPHA))
+    ok &= _compare(
+        "normal (3 sigma = eps)",
+        LeanModel(m, ["worst"], "normal").solve(R, P),
+        tolsynth.synthesize(m, R, P, "normal", ALPHA),
+    )
     mixed = {"*": "uniform", names[0]: "normal", names[-1]: "triangular", names[3]: "truncnormal(2.5)"}
-    ok &= _compare("mixed shapes (uniform, normal, triangular, truncnormal)",
-                   LeanModel(m, ["worst"], mixed).solve(R, P), tolsynth.synthesize(m, R, P, mixed, ALPHA))
+    ok &= _compare(
+        "mixed shapes (uniform, normal, triangular, truncnormal)",
+        LeanModel(m, ["worst"], mixed).solve(R, P),
+        tolsynth.synthesize(m, R, P, mixed, ALPHA),
+    )
 
     for name in ("puma560", "panda"):
         mech = tolsynth.load_model(name)
@@ -261,8 +282,11 @@ def main() -> int:
         ts = tolsynth.synthesize(mech, R, P, "uniform", ALPHA, poses=poses)
         lm = LeanModel(mech, poses, "uniform", ALPHA)
         ok &= _compare("10 poses", lm.solve(R, P), ts)
-        ok &= _compare("R 0.2 mm, p 0.999", lm.solve(0.2, 0.999),
-                       tolsynth.synthesize(mech, 0.2, 0.999, "uniform", ALPHA, poses=poses))
+        ok &= _compare(
+            "R 0.2 mm, p 0.999",
+            lm.solve(0.2, 0.999),
+            tolsynth.synthesize(mech, 0.2, 0.999, "uniform", ALPHA, poses=poses),
+        )
     print(f"all agree to 1e-6: {bool(ok)} ({time.perf_counter() - t0:.1f} s)")
     return 0 if ok else 1
 

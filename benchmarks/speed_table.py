@@ -55,12 +55,16 @@ import tolsynth  # noqa: E402
 from tolsynth.problem.specification import make_specification  # noqa: E402
 
 ROOT = HERE.parent
-MARKERS = {ROOT / "README.md": ("<!-- speed table start -->", "<!-- speed table end -->"),
-           ROOT / "docs" / "speed.md": ("<!-- speed detail start -->", "<!-- speed detail end -->")}
+MARKERS = {
+    ROOT / "README.md": ("<!-- speed table start -->", "<!-- speed table end -->"),
+    ROOT / "docs" / "speed.md": ("<!-- speed detail start -->", "<!-- speed detail end -->"),
+}
 
 #: repeats per workload: the full run (a few minutes on 2 cores) and --quick (about one)
-REPEATS = {"full": dict(cold=40, sweep=40, poses={10: 9, 30: 7, 100: 5}, big=7, warm=300, alt=60, exact=3, grid=5),
-           "quick": dict(cold=6, sweep=8, poses={10: 3, 30: 3, 100: 2}, big=3, warm=50, alt=10, exact=1, grid=1)}
+REPEATS = {
+    "full": dict(cold=40, sweep=40, poses={10: 9, 30: 7, 100: 5}, big=7, warm=300, alt=60, exact=3, grid=5),
+    "quick": dict(cold=6, sweep=8, poses={10: 3, 30: 3, 100: 2}, big=3, warm=50, alt=10, exact=1, grid=1),
+}
 
 
 def warm_resolve(reps: int, alt_reps: int) -> tuple[bs.Row, str]:
@@ -71,8 +75,13 @@ def warm_resolve(reps: int, alt_reps: int) -> tuple[bs.Row, str]:
     solve = lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA)
     ref = solve().cost
     lm.solve(bs.R, bs.P)  # canonicalised once: untimed
-    row = bs.paired(bs.Row("one warm re-solve, same specification, paper's robot"), reps, lambda i: (),
-                    solve, lambda: lm.solve(bs.R, bs.P))
+    row = bs.paired(
+        bs.Row("one warm re-solve, same specification, paper's robot"),
+        reps,
+        lambda i: (),
+        solve,
+        lambda: lm.solve(bs.R, bs.P),
+    )
     tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt")
     t_ip, _ = median_time(lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt"), alt_reps)
     sl = SLSQPExact(make_specification(m, bs.R, bs.P, bs.DIST, bs.ALPHA))
@@ -80,13 +89,16 @@ def warm_resolve(reps: int, alt_reps: int) -> tuple[bs.Row, str]:
         if abs(sl.solve(ftol).fun - ref) <= bs.RTOL * ref:
             break
     t_sl, r_sl = median_time(lambda: sl.solve(ftol), alt_reps)
-    t_su, r_su = median_time(lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="sumt"),
-                             max(5, alt_reps // 4))
+    t_su, r_su = median_time(
+        lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="sumt"), max(5, alt_reps // 4)
+    )
     t = row.t_ts
-    line = (f"The warm re-solve ({bs.fmt_t(t)}) against other methods in the same run (their time / tolsynth's): "
-            f"IPOPT's warm re-solve (`solver=\"ipopt\"`) {bs.fmt_t(t_ip)} ({t_ip / t:.1f}x); scipy SLSQP with "
-            f"exact gradients (ftol {ftol:g}, cost within {abs(r_sl.fun - ref) / ref:.0e}) {bs.fmt_t(t_sl)} "
-            f"({t_sl / t:.1f}x); SUMT + Powell {bs.fmt_t(t_su)} ({t_su / t:.1f}x).")
+    line = (
+        f"The warm re-solve ({bs.fmt_t(t)}) against other methods in the same run (their time / tolsynth's): "
+        f'IPOPT\'s warm re-solve (`solver="ipopt"`) {bs.fmt_t(t_ip)} ({t_ip / t:.1f}x); scipy SLSQP with '
+        f"exact gradients (ftol {ftol:g}, cost within {abs(r_sl.fun - ref) / ref:.0e}) {bs.fmt_t(t_sl)} "
+        f"({t_sl / t:.1f}x); SUMT + Powell {bs.fmt_t(t_su)} ({t_su / t:.1f}x)."
+    )
     print(" ", line, flush=True)
     return row, line
 
@@ -98,15 +110,21 @@ class PlainRow:
         self.label, self.ts, self.lean, self.failures, self.rel, self.target = label, ts, lean, failures, rel, target
         self.t_ts, self.t_lean = statistics.median(ts), statistics.median(lean)
         self.ratio = self.t_lean / self.t_ts
-        print(f"  {label}: tolsynth {bs.fmt_t(self.t_ts)}, lean {bs.fmt_t(self.t_lean)}, {self.ratio:.2f}x over "
-              f"{len(ts)} run(s)" + (f", largest relative cost difference {rel:.1e}" if rel is not None else "")
-              + (f"; FAILURES: {failures[:2]}" if failures else ""), flush=True)
+        print(
+            f"  {label}: tolsynth {bs.fmt_t(self.t_ts)}, lean {bs.fmt_t(self.t_lean)}, {self.ratio:.2f}x over "
+            f"{len(ts)} run(s)"
+            + (f", largest relative cost difference {rel:.1e}" if rel is not None else "")
+            + (f"; FAILURES: {failures[:2]}" if failures else ""),
+            flush=True,
+        )
 
     def line(self) -> str:
         same = "-" if self.rel is None else f"{self.rel:.1e}"
         met = "" if self.rel is None else f": {'yes' if self.ratio >= bs.TARGET and not self.failures else 'no'}"
-        return (f"| {self.label} | {bs.fmt_t(self.t_ts)} | {bs.fmt_t(self.t_lean)} | {self.ratio:.2f}x | "
-                f"{same}{' (FAILED)' if self.failures else ''} | {self.target}{met} |")
+        return (
+            f"| {self.label} | {bs.fmt_t(self.t_ts)} | {bs.fmt_t(self.t_lean)} | {self.ratio:.2f}x | "
+            f"{same}{' (FAILED)' if self.failures else ''} | {self.target}{met} |"
+        )
 
 
 def grid_sweep(repeat: int, size: int = 6) -> PlainRow:
@@ -131,7 +149,7 @@ def grid_sweep(repeat: int, size: int = 6) -> PlainRow:
 
     ts, lean, failures = [], [], []
     for i in range(repeat):
-        for side in (("ts", "lean") if i % 2 == 0 else ("lean", "ts")):
+        for side in ("ts", "lean") if i % 2 == 0 else ("lean", "ts"):
             if side == "ts":
                 rate, t, failed = throughput(m, grid, "serial", 1)
                 ts.append(t)
@@ -141,8 +159,14 @@ def grid_sweep(repeat: int, size: int = 6) -> PlainRow:
                 lean_grid()
                 lean.append(time.perf_counter() - t0)
     rel = max(abs(lean_cost[(r.R, r.p, r.alpha, r.distribution)] - r.cost) / r.cost for r in df.itertuples())
-    return PlainRow(f"a grid of {n} solves, `tolsynth.sweep` in this process (R x p x alpha x distribution)",
-                    ts, lean, failures, rel, ">= 3x")
+    return PlainRow(
+        f"a grid of {n} solves, `tolsynth.sweep` in this process (R x p x alpha x distribution)",
+        ts,
+        lean,
+        failures,
+        rel,
+        ">= 3x",
+    )
 
 
 def exact_path(reps: int, rng, exact_cvxpy) -> PlainRow:
@@ -153,7 +177,7 @@ def exact_path(reps: int, rng, exact_cvxpy) -> PlainRow:
     ts, lean, failures = [], [], []
     for i in range(reps):
         R = 0.5 * (1 + 0.02 * rng.random())  # a new R: no solve repeats another
-        for side in (("ts", "lean") if i % 2 == 0 else ("lean", "ts")):
+        for side in ("ts", "lean") if i % 2 == 0 else ("lean", "ts"):
             if side == "lean":
                 lean.append(exact_cvxpy(m, R, 0.9, "uniform")[0])
                 continue
@@ -161,8 +185,14 @@ def exact_path(reps: int, rng, exact_cvxpy) -> PlainRow:
             res = tolsynth.synthesize(m, R=R, p=0.9, distribution="uniform", probability="exact")
             ts.append(time.perf_counter() - t0)
             failures += [] if res.success else [res.message]
-    return PlainRow("exact probabilities, paper's robot, uniform, p 0.9 (lean: the Gaussian problem, cold)",
-                    ts, lean, failures, None, "none (a different problem)")
+    return PlainRow(
+        "exact probabilities, paper's robot, uniform, p 0.9 (lean: the Gaussian problem, cold)",
+        ts,
+        lean,
+        failures,
+        None,
+        "none (a different problem)",
+    )
 
 
 def exact_row(reps: int, rng):
@@ -179,9 +209,12 @@ def table(rows, quick: bool, seconds: float, loads: tuple, warm_line: str) -> st
     """The README block: what ran, the table, the other methods' line."""
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     failed = [r.label for r in rows if r.failures]
-    same = ("Every tolsynth result certified and at the lean model's optimum to 1e-6 (or below it where "
-            "Clarabel stopped short of a certified optimum)" if not failed else
-            "NOT every row reached the same certified optimum: " + "; ".join(failed))
+    same = (
+        "Every tolsynth result certified and at the lean model's optimum to 1e-6 (or below it where "
+        "Clarabel stopped short of a certified optimum)"
+        if not failed
+        else "NOT every row reached the same certified optimum: " + "; ".join(failed)
+    )
     prose = [
         f"From one run of `python benchmarks/speed_table.py{' --quick' if quick else ''}` ({stamp}, "
         f"{os.cpu_count()} cores, load average {loads[0]:.1f} at the start and {loads[1]:.1f} at the end, "
@@ -215,17 +248,20 @@ def replace_between(path: Path, text: str) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer repeats: about a minute")
-    ap.add_argument("--write", action="store_true",
-                    help="replace the table in README.md and the run's detail in docs/speed.md")
+    ap.add_argument(
+        "--write", action="store_true", help="replace the table in README.md and the run's detail in docs/speed.md"
+    )
     args = ap.parse_args()
     n = REPEATS["quick" if args.quick else "full"]
     import casadi
     import cvxpy
 
     loads0 = os.getloadavg()[0]
-    head = (f"cores: {os.cpu_count()}, python {sys.version.split()[0]}, numpy {np.__version__}, casadi "
-            f"{casadi.__version__}, cvxpy {cvxpy.__version__}, tolsynth {tolsynth.__version__}, "
-            f"load average {loads0:.2f}{', --quick' if args.quick else ''}")
+    head = (
+        f"cores: {os.cpu_count()}, python {sys.version.split()[0]}, numpy {np.__version__}, casadi "
+        f"{casadi.__version__}, cvxpy {cvxpy.__version__}, tolsynth {tolsynth.__version__}, "
+        f"load average {loads0:.2f}{', --quick' if args.quick else ''}"
+    )
     print(head, flush=True)
     t_start = time.perf_counter()
     rng = np.random.default_rng(22)
@@ -258,12 +294,24 @@ def main() -> None:
     if args.write:
         replace_between(ROOT / "README.md", md)
         same = [r.line() for r in rows + ([ex] if ex is not None else [])]
-        replace_between(ROOT / "docs" / "speed.md", "\n".join([
-            "```text", head, detail.getvalue().rstrip(), "```", "",
-            "Each workload against its target (at least 3x the lean model; 1000 poses also under 0.1 s) and "
-            "the largest relative cost difference of its pairs:", "",
-            "| workload | tolsynth median | lean cvxpy median | ratio | same optimum (rel diff) | target |",
-            "|---|---|---|---|---|---|", *same]))
+        replace_between(
+            ROOT / "docs" / "speed.md",
+            "\n".join(
+                [
+                    "```text",
+                    head,
+                    detail.getvalue().rstrip(),
+                    "```",
+                    "",
+                    "Each workload against its target (at least 3x the lean model; 1000 poses also under 0.1 s) and "
+                    "the largest relative cost difference of its pairs:",
+                    "",
+                    "| workload | tolsynth median | lean cvxpy median | ratio | same optimum (rel diff) | target |",
+                    "|---|---|---|---|---|---|",
+                    *same,
+                ]
+            ),
+        )
         print("written: README.md, docs/speed.md")
 
 

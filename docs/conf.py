@@ -69,7 +69,10 @@ numpydoc_xref_param_type = False
 
 html_theme = "pydata_sphinx_theme"
 html_title = f"tolsynth {release}"
-html_theme_options = {"navigation_with_keys": False, "show_toc_level": 2,
-                      "secondary_sidebar_items": {"notebooks/*": []}}
+html_theme_options = {
+    "navigation_with_keys": False,
+    "show_toc_level": 2,
+    "secondary_sidebar_items": {"notebooks/*": []},
+}
 html_static_path = ["_static"]
 html_css_files = ["wide.css"]

@@ -89,8 +89,12 @@ for row, label in zip(S[:3], ("dx", "dy", "dz")):
     print(f"{label:>4}" + "".join(f"{v:9.3f}" for v in row))
 print("(mm per tolerance unit)")
 i = m.index
-print("\ncolumn h'2 + column h'4 =", (S[:3, i("hp2")] + S[:3, i("hp4")]).round(12),
-      "   column s1 - column a =", (S[:3, i("s1")] - S[:3, i("a")]).round(12))
+print(
+    "\ncolumn h'2 + column h'4 =",
+    (S[:3, i("hp2")] + S[:3, i("hp4")]).round(12),
+    "   column s1 - column a =",
+    (S[:3, i("s1")] - S[:3, i("a")]).round(12),
+)
 
 # %% [markdown]
 # ## 2. Tables 1-3 side by side
@@ -119,8 +123,11 @@ def column_label(rep):
 
 def side_by_side(table):
     cols = [r for r in reports if r.table == table]
-    fixed = {"Table 1": "p = 0.99, alpha = 0.7", "Table 2": "R = 0.5 mm, alpha = 0.7",
-             "Table 3": "R = 0.5 mm, p = 0.99"}[table]
+    fixed = {
+        "Table 1": "p = 0.99, alpha = 0.7",
+        "Table 2": "R = 0.5 mm, alpha = 0.7",
+        "Table 3": "R = 0.5 mm, p = 0.99",
+    }[table]
     print(f"{table} ({fixed}; U = uniform, N = normal); each column: printed | tolsynth optimum")
     print(f"{'':>7} {'':>8}" + "".join(f" |{column_label(c):^17}" for c in cols))
     print(f"{'param':>7} {'unit':>8}" + " |  printed  optimum" * len(cols))
@@ -130,11 +137,17 @@ def side_by_side(table):
             r = c.readings["printed"]
             cells.append(f" | {r.printed[name]:8.4g} {r.ipopt.tolerances[name]:8.4g}")
         print(f"{name:>7} {unit:>8}" + "".join(cells))
-    print(f"{'cost':>16}" + "".join(
-        f" | {c.readings['printed'].printed_cost:8.4g} {c.readings['printed'].ipopt.cost:8.4g}" for c in cols))
-    print(f"{'max sz/R':>16}" + "".join(
-        f" | {c.readings['printed'].printed_max_constraint:8.4f} {c.readings['printed'].ipopt.max_constraint:8.4f}"
-        for c in cols))
+    print(
+        f"{'cost':>16}"
+        + "".join(f" | {c.readings['printed'].printed_cost:8.4g} {c.readings['printed'].ipopt.cost:8.4g}" for c in cols)
+    )
+    print(
+        f"{'max sz/R':>16}"
+        + "".join(
+            f" | {c.readings['printed'].printed_max_constraint:8.4f} {c.readings['printed'].ipopt.max_constraint:8.4f}"
+            for c in cols
+        )
+    )
     print()
 
 
@@ -191,7 +204,9 @@ v = np.array([[r.readings["printed"].ratio[n] for n in lengths] for r in reports
 print(f"\nall lengths (mm): geometric mean {np.exp(np.log(v).mean()):.3f}, range {v.min():.2f} to {v.max():.2f}")
 for n in ("h2", "s1"):
     v = np.array([r.readings["printed"].ratio[n] for r in reports])
-    print(f"  {n}: geometric mean {np.exp(np.log(v).mean()):.3f}  (the two lengths the reconstruction leaves unexplained)")
+    print(
+        f"  {n}: geometric mean {np.exp(np.log(v).mean()):.3f}  (the two lengths the reconstruction leaves unexplained)"
+    )
 
 # %%
 x = np.arange(len(reports))
@@ -200,8 +215,14 @@ for j, n in enumerate(angles):
     for key, marker in (("printed", "o"), ("deg", "s")):
         v = [r.readings[key].ratio[n] for r in reports]
         unit = reports[0].readings[key].ipopt.units[n]
-        ax.plot(x + 0.12 * (j - 1), v, marker, color=f"C{j}", mfc="none" if key == "deg" else f"C{j}",
-                label=f"{n}, read as {unit}")
+        ax.plot(
+            x + 0.12 * (j - 1),
+            v,
+            marker,
+            color=f"C{j}",
+            mfc="none" if key == "deg" else f"C{j}",
+            label=f"{n}, read as {unit}",
+        )
 ax.axhline(1.0, color="k", lw=0.8)
 ax.set_yscale("log")
 ax.yaxis.set_minor_formatter(NullFormatter())
@@ -248,8 +269,10 @@ def group_eval(mech, ref, eps, group):
 
 m_deg = m.with_units({n: "deg" for n in angles})
 print(f"{'':<44}{'lengths (x z)':^30}|{'angles, 1e-2 rad (y)':^30}|{'angles, deg (y)':^21}")
-print(f"{'column':<44}{'pr sz/R':>9}{'pr cost':>10}{'opt cost':>10} |{'pr sz/R':>9}{'pr cost':>10}"
-      f"{'opt cost':>10} |{'pr sz/R':>9}{'opt cost':>10}")
+print(
+    f"{'column':<44}{'pr sz/R':>9}{'pr cost':>10}{'opt cost':>10} |{'pr sz/R':>9}{'pr cost':>10}"
+    f"{'opt cost':>10} |{'pr sz/R':>9}{'opt cost':>10}"
+)
 block_rows = []
 for ref, r in zip(m.spec.reference_results, reports):
     pr_eps, opt = np.array(ref.tolerances), r.readings["printed"].ipopt.x
@@ -264,16 +287,21 @@ for ref, r in zip(m.spec.reference_results, reports):
     print(f"{r.label:<44}{gl:9.4f}{cl:10.4g}{col:10.4g} |{ga:9.4f}{ca_:10.4g}{coa:10.4g} |{gd:9.4f}{cod:10.4g}")
 block_rows = np.array(block_rows)
 over = [r.readings["printed"].printed_max_constraint for r in reports]
-print(f"\nprinted tolerances exceed the spec (max sigma z/R > 1) in {sum(v > 1 for v in over)} of {len(over)} "
-      f"columns; largest {max(over):.4f}, smallest {min(over):.4f}")
-print(f"angles alone, printed unit: sigma z/R from {block_rows[:, 1].min():.3f} to {block_rows[:, 1].max():.3f}; "
-      f"read as degrees: from {block_rows[:, 2].min():.3f} to {block_rows[:, 2].max():.3f}")
+print(
+    f"\nprinted tolerances exceed the spec (max sigma z/R > 1) in {sum(v > 1 for v in over)} of {len(over)} "
+    f"columns; largest {max(over):.4f}, smallest {min(over):.4f}"
+)
+print(
+    f"angles alone, printed unit: sigma z/R from {block_rows[:, 1].min():.3f} to {block_rows[:, 1].max():.3f}; "
+    f"read as degrees: from {block_rows[:, 2].min():.3f} to {block_rows[:, 2].max():.3f}"
+)
 
 # %%
 fig, ax = plt.subplots(figsize=(10, 4))
 w = 0.27
-for k, name in enumerate(("lengths alone (x z error)", "angles alone, 1e-2 rad as printed (y error)",
-                          "angles alone, read as deg (y error)")):
+for k, name in enumerate(
+    ("lengths alone (x z error)", "angles alone, 1e-2 rad as printed (y error)", "angles alone, read as deg (y error)")
+):
     ax.bar(x + (k - 1) * w, block_rows[:, k], w, label=name)
 ax.axhline(1.0, color="k", lw=1, ls="--", label="specification: sigma_1 z(p) / R = 1")
 ax.set_ylim(0.4, 1.6)
@@ -306,7 +334,7 @@ ours = {(r.R, r.p, r.alpha, r.distribution): r.readings["printed"].ipopt.x for r
 z = tolsynth.z_of_p
 
 laws = []  # (name, exact ratio, numerator key, denominator key)
-for (R, p, al, d) in printed:
+for R, p, al, d in printed:
     if d == "uniform":
         laws.append(("normal / uniform", math.sqrt(3), (R, p, al, "normal"), (R, p, al, "uniform")))
 for d in ("uniform", "normal"):
@@ -397,9 +425,11 @@ print("What does not:")
 for n in ("h2", "s1", *angles):
     v = np.array([r.readings["printed"].ratio[n] for r in reports])
     print(f"  {n:>6} (printed unit): median {np.median(v):.2f}")
-print(f"  printed pairs that this model makes interchangeable: h'2/h'4 median printed ratio "
-      f"{np.median([r.tolerances[i('hp2')] / r.tolerances[i('hp4')] for r in m.spec.reference_results]):.2f}, "
-      f"s1/a {np.median([r.tolerances[i('s1')] / r.tolerances[i('a')] for r in m.spec.reference_results]):.2f} "
-      "(optimum: exactly 1)")
+print(
+    f"  printed pairs that this model makes interchangeable: h'2/h'4 median printed ratio "
+    f"{np.median([r.tolerances[i('hp2')] / r.tolerances[i('hp4')] for r in m.spec.reference_results]):.2f}, "
+    f"s1/a {np.median([r.tolerances[i('s1')] / r.tolerances[i('a')] for r in m.spec.reference_results]):.2f} "
+    "(optimum: exactly 1)"
+)
 print(f"  printed tolerances exceed the spec in {sum(v > 1 for v in over)} of 18 columns")
 print("  the printed columns follow the exact scaling laws only roughly (section 4)")

@@ -83,9 +83,11 @@ print("solves:", sum(len(v) for v, _ in sweeps.values()) * len(DISTS))
 # %%
 def label_log_ticks(axis):
     """Plain numbers on a log axis spanning about a decade: 0.02, 0.03, 0.05, 0.1, ..."""
+
     def fmt(v, _):
         mant = v / 10 ** math.floor(math.log10(v))
         return f"{v:g}" if any(abs(mant - k) < 1e-6 for k in (1, 2, 3, 5)) else ""
+
     axis.set_major_formatter(FuncFormatter(fmt))
     axis.set_minor_formatter(FuncFormatter(fmt))
 
@@ -122,8 +124,12 @@ def plot_sweep(param, xlabel, logx=False, logy_cost=False):
     axes[0].set_title(f"length tolerances vs {param}")
     axes[1].set_title(f"angular tolerances vs {param}")
     axes[2].set_title(f"optimal cost vs {param}")
-    fig.suptitle(f"Optimal tolerances against {param} (others: " +
-                 ", ".join(f"{k} = {v:g}" for k, v in BASE.items() if k != param) + ")", y=1.02)
+    fig.suptitle(
+        f"Optimal tolerances against {param} (others: "
+        + ", ".join(f"{k} = {v:g}" for k, v in BASE.items() if k != param)
+        + ")",
+        y=1.02,
+    )
     fig.tight_layout()
     plt.show()
 
@@ -147,7 +153,9 @@ for dist in DISTS:
     free = np.array([not a for a in active])
     slope = np.polyfit(np.log(values[free]), np.log(cost[free]), 1)[0]
     first = next((v, a) for v, a in zip(values, active) if a) if not free.all() else None
-    print(f"{dist:>7}: log-log slope of cost vs R with no bound active = {slope:.6f} (exact: -alpha = {-BASE['alpha']})")
+    print(
+        f"{dist:>7}: log-log slope of cost vs R with no bound active = {slope:.6f} (exact: -alpha = {-BASE['alpha']})"
+    )
     if first:
         print(f"         bounds active below R = {values[~free].max():.4g} mm: {first[1]} at R = {first[0]:.4g} mm")
     ratio = X[free] / values[free, None]
@@ -156,10 +164,12 @@ try:
     tolsynth.synthesize(m, 0.005, BASE["p"], "uniform", BASE["alpha"])
 except tolsynth.InfeasibleSpecificationError as exc:
     print("R = 0.005 mm:", exc)
-print("pairs equal: max |h'2 - h'4| / h'2 =",
-      f"{max(np.max(np.abs(d[0][:, m.index('hp2')] / d[0][:, m.index('hp4')] - 1)) for _, dd in sweeps.values() for d in dd.values()):.1e},",
-      "max |s1 - a| / a =",
-      f"{max(np.max(np.abs(d[0][:, m.index('s1')] / d[0][:, m.index('a')] - 1)) for _, dd in sweeps.values() for d in dd.values()):.1e}")
+print(
+    "pairs equal: max |h'2 - h'4| / h'2 =",
+    f"{max(np.max(np.abs(d[0][:, m.index('hp2')] / d[0][:, m.index('hp4')] - 1)) for _, dd in sweeps.values() for d in dd.values()):.1e},",
+    "max |s1 - a| / a =",
+    f"{max(np.max(np.abs(d[0][:, m.index('s1')] / d[0][:, m.index('a')] - 1)) for _, dd in sweeps.values() for d in dd.values()):.1e}",
+)
 
 # %%
 plot_sweep("p", "probability per principal component p (dimensionless)", logy_cost=True)
@@ -175,8 +185,10 @@ zs = np.array([tolsynth.z_of_p(p) for p in values])
 for dist in DISTS:
     X = data[dist][0]
     prod = X * zs[:, None]
-    print(f"{dist:>7}: eps * z(p) constant to {np.max(np.ptp(prod, axis=0) / prod.mean(axis=0)):.1e} (relative); "
-          f"widening from p = 0.99 to 0.7: z(0.99)/z(0.7) = {tolsynth.z_of_p(0.99) / tolsynth.z_of_p(0.7):.4f}")
+    print(
+        f"{dist:>7}: eps * z(p) constant to {np.max(np.ptp(prod, axis=0) / prod.mean(axis=0)):.1e} (relative); "
+        f"widening from p = 0.99 to 0.7: z(0.99)/z(0.7) = {tolsynth.z_of_p(0.99) / tolsynth.z_of_p(0.7):.4f}"
+    )
 
 # %%
 plot_sweep("alpha", "cost exponent alpha (dimensionless)")
@@ -209,8 +221,10 @@ for param, (values, data) in sweeps.items():
     r = XN[free] / XU[free]
     alphas = values[free] if param == "alpha" else np.full(free.sum(), BASE["alpha"])
     cr = CN[free] / CU[free] / 3.0 ** (-alphas / 2)
-    print(f"sweep {param:>5}: normal/uniform tolerance ratio in [{r.min():.6f}, {r.max():.6f}] (sqrt(3) = "
-          f"{math.sqrt(3):.6f}); cost ratio / 3^(-alpha/2) in [{cr.min():.6f}, {cr.max():.6f}]")
+    print(
+        f"sweep {param:>5}: normal/uniform tolerance ratio in [{r.min():.6f}, {r.max():.6f}] (sqrt(3) = "
+        f"{math.sqrt(3):.6f}); cost ratio / 3^(-alpha/2) in [{cr.min():.6f}, {cr.max():.6f}]"
+    )
 
 # %% [markdown]
 # ## 2. Who fills the error budget?  Shares of the principal variances
@@ -247,8 +261,12 @@ if (lam[0] - lam[1]) / lam[0] < 1e-6:  # degenerate: rotate inside the plane of 
     lam = np.einsum("ij,ik,kj->j", D, V, D)
 share = (eps[None, :] ** 2 * (D.T @ S) ** 2 / c) / lam[:, None]  # (3 directions, n parameters)
 block = res.constraints[0]
-print("sigma_j z / R from these directions:", (np.sqrt(lam) * tolsynth.z_of_p(BASE["p"]) / BASE["R"]).round(6),
-      " from the result:", block.values.round(6))
+print(
+    "sigma_j z / R from these directions:",
+    (np.sqrt(lam) * tolsynth.z_of_p(BASE["p"]) / BASE["R"]).round(6),
+    " from the result:",
+    block.values.round(6),
+)
 print("shares sum to 1 per direction:", share.sum(axis=1).round(12))
 print(f"\n{'param':>7}" + "".join(f"   d{j + 1} = ({', '.join(f'{v:+.3f}' for v in D[:, j])})" for j in range(3)))
 for i, n in enumerate(names):
@@ -258,8 +276,9 @@ for i, n in enumerate(names):
 fig, ax = plt.subplots(figsize=(10, 3.8))
 left = np.zeros(3)
 sig_ratio = np.sqrt(lam) * tolsynth.z_of_p(BASE["p"]) / BASE["R"]
-ylabels = [f"w{j + 1}: d = ({', '.join(f'{v:+.2f}' for v in D[:, j])}), sigma z/R = {sig_ratio[j]:.3f}"
-           for j in range(3)]
+ylabels = [
+    f"w{j + 1}: d = ({', '.join(f'{v:+.2f}' for v in D[:, j])}), sigma z/R = {sig_ratio[j]:.3f}" for j in range(3)
+]
 for i, n in enumerate(names):
     ax.barh(range(3), 100 * share[:, i], left=left, color=plt.cm.tab20(i), label=n)
     for j in range(3):
@@ -271,7 +290,9 @@ ax.invert_yaxis()
 ax.set_xlim(0, 100)
 ax.set_xlabel("share of the principal variance lambda_j (%)")
 ax.set_ylabel("principal direction (base frame)")
-ax.set_title(f"Error budget at the optimum, worst pose (R = {BASE['R']} mm, p = {BASE['p']}, uniform, alpha = {BASE['alpha']})")
+ax.set_title(
+    f"Error budget at the optimum, worst pose (R = {BASE['R']} mm, p = {BASE['p']}, uniform, alpha = {BASE['alpha']})"
+)
 ax.legend(ncol=6, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.22))
 fig.tight_layout()
 plt.show()
@@ -303,8 +324,10 @@ for label, val in cases.items():
     tol, dist = (val, "uniform") if isinstance(val, np.ndarray) else val
     w = worst_pose(m, tol, criterion="sigma", distribution=dist)
     worst_found[label] = w
-    print(f"{label:<28} {str(np.degrees(w.q).round(2).tolist()):>42} {str(w.position[[0, 2]].round(1).tolist()):>22} "
-          f"{w.value / w.reference_value:18.4f}")
+    print(
+        f"{label:<28} {str(np.degrees(w.q).round(2).tolist()):>42} {str(w.position[[0, 2]].round(1).tolist()):>22} "
+        f"{w.value / w.reference_value:18.4f}"
+    )
 print("\njoint order:", m.joint_names, "(theta1 and theta5 do not change the statistics and are held)")
 print("hand: (X0, Z0); the paper's pose has its hand at", m.fk("worst")[[0, 2], 3].round(1).tolist())
 
@@ -333,8 +356,10 @@ print(f"{'iter':>4} {'poses':>5} {'cost':>9} {'worst sigma1 z/R over the workspa
 for k, (npose, cost, g, q, pos, _) in enumerate(history):
     print(f"{k:>4} {npose:>5} {cost:9.4f} {g:36.5f}   {np.degrees(q).round(2).tolist()}")
 final = history[-1][5]
-print(f"\ncost of meeting the spec everywhere: {final.cost:.4f} against {history[0][1]:.4f} at the paper's pose "
-      f"(+{100 * (final.cost / history[0][1] - 1):.1f}%)")
+print(
+    f"\ncost of meeting the spec everywhere: {final.cost:.4f} against {history[0][1]:.4f} at the paper's pose "
+    f"(+{100 * (final.cost / history[0][1] - 1):.1f}%)"
+)
 print(f"{'param':>7} {'paper pose':>11} {'everywhere':>11} {'ratio':>7}")
 for n, a, b in zip(names, history[0][5].x, final.x):
     print(f"{n:>7} {a:11.5g} {b:11.5g} {b / a:7.3f}")
@@ -353,13 +378,23 @@ pmap = probability_map(m, final.tolerances, R=R, distribution="uniform", n=60, p
 fig = plot_map(pmap)
 ax = fig.axes[0]
 pts = np.array([h[4] for h in history])
-ax.plot(pts[:, 0], pts[:, 2], "o", color="darkorange", mec="k", ms=7,
-        label="hand points of the worst poses found (any hand orientation)")
+ax.plot(
+    pts[:, 0],
+    pts[:, 2],
+    "o",
+    color="darkorange",
+    mec="k",
+    ms=7,
+    label="hand points of the worst poses found (any hand orientation)",
+)
 for k, pt in enumerate(pts):
     ax.annotate(str(k), (pt[0], pt[2]), textcoords="offset points", xytext=(6, 4), fontsize=8)
 ax.legend(loc="upper left", fontsize=8, framealpha=0.9)
-ax.set_title(f"P(|dr| <= {R:g} mm) for the tolerances that meet the spec at every pose (uniform errors)\n"
-             "numbers: exchange iteration in which the pose was found", fontsize=10)
+ax.set_title(
+    f"P(|dr| <= {R:g} mm) for the tolerances that meet the spec at every pose (uniform errors)\n"
+    "numbers: exchange iteration in which the pose was found",
+    fontsize=10,
+)
 plt.show()
 
 # %% [markdown]
@@ -383,7 +418,9 @@ for pp in p_grid:
     assert comp.success and sph.success
     sig, _ = principal(covariance(S_worst, comp.x, "uniform")[0])
     rows.append((pp, p_ball(sig**2, BASE["R"]), comp.cost, sph.cost))
-print(f"{'p':>6} {'P(sphere) at the per-component optimum':>40} {'cost components':>16} {'cost sphere':>12} {'extra':>7}")
+print(
+    f"{'p':>6} {'P(sphere) at the per-component optimum':>40} {'cost components':>16} {'cost sphere':>12} {'extra':>7}"
+)
 for pp, ps, cc, cs in rows:
     print(f"{pp:>6} {ps:>40.4f} {cc:>16.3f} {cs:>12.3f} {100 * (cs / cc - 1):>6.1f}%")
 

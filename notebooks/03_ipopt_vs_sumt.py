@@ -66,21 +66,27 @@ print("SUMT: ", c.sumt.message)
 # summed over the outer loop), function evaluations and wall time.
 
 # %%
-head = (f"{'column':<28} {'IPOPT cost':>11} {'SUMT cost':>11} {'cost diff':>9} {'tol diff':>9} "
-        f"{'gap I':>8} {'gap S':>8} {'it I':>5} {'it S':>5} {'ev I':>5} {'ev S':>7} {'ms I':>6} {'ms S':>7} {'S/I':>5}")
+head = (
+    f"{'column':<28} {'IPOPT cost':>11} {'SUMT cost':>11} {'cost diff':>9} {'tol diff':>9} "
+    f"{'gap I':>8} {'gap S':>8} {'it I':>5} {'it S':>5} {'ev I':>5} {'ev S':>7} {'ms I':>6} {'ms S':>7} {'S/I':>5}"
+)
 print(head)
 for lab, c in zip(labels, comparisons):
     i, s = c.ipopt, c.sumt
-    print(f"{lab:<28} {i.cost:11.6f} {s.cost:11.6f} {c.cost_rel_diff:9.1e} {max(c.tolerance_rel_diff.values()):9.1e} "
-          f"{i.gap:8.1e} {s.gap:8.1e} {i.iterations:5d} {s.iterations:5d} {i.function_evaluations:5d} "
-          f"{s.function_evaluations:7d} {i.wall_time * 1e3:6.1f} {s.wall_time * 1e3:7.0f} {c.time_ratio:5.2f}")
+    print(
+        f"{lab:<28} {i.cost:11.6f} {s.cost:11.6f} {c.cost_rel_diff:9.1e} {max(c.tolerance_rel_diff.values()):9.1e} "
+        f"{i.gap:8.1e} {s.gap:8.1e} {i.iterations:5d} {s.iterations:5d} {i.function_evaluations:5d} "
+        f"{s.function_evaluations:7d} {i.wall_time * 1e3:6.1f} {s.wall_time * 1e3:7.0f} {c.time_ratio:5.2f}"
+    )
 cd = np.array([c.cost_rel_diff for c in comparisons])
 td = np.array([max(c.tolerance_rel_diff.values()) for c in comparisons])
 tr = np.array([c.time_ratio for c in comparisons])
 ev = np.array([c.sumt.function_evaluations / c.ipopt.function_evaluations for c in comparisons])
 print(f"\ncost agreement: max relative difference {cd.max():.1e}; tolerances: max {td.max():.1e}")
-print(f"SUMT / IPOPT: wall time x{np.median(tr):.2f} (median; range {tr.min():.2f}-{tr.max():.2f}), "
-      f"evaluations x{np.median(ev):.0f} (median)")
+print(
+    f"SUMT / IPOPT: wall time x{np.median(tr):.2f} (median; range {tr.min():.2f}-{tr.max():.2f}), "
+    f"evaluations x{np.median(ev):.0f} (median)"
+)
 fallback = [lab for lab, c in zip(labels, comparisons) if ";" in c.ipopt.message]
 print("IPOPT columns solved on the fallback strategy:", fallback or "none")
 
@@ -163,8 +169,11 @@ for k, c in enumerate(comparisons):
     color = plt.cm.viridis(k / (len(comparisons) - 1))
     axes[0].loglog(r, np.maximum(excess, 1e-13), "o-", ms=3, lw=0.8, color=color)
     axes[1].loglog(r, np.maximum(slack, 1e-16), "o-", ms=3, lw=0.8, color=color)
-rr = np.geomspace(min(e["r"] for c in comparisons for e in c.sumt.history),
-                  max(e["r"] for c in comparisons for e in c.sumt.history), 10)
+rr = np.geomspace(
+    min(e["r"] for c in comparisons for e in c.sumt.history),
+    max(e["r"] for c in comparisons for e in c.sumt.history),
+    10,
+)
 axes[0].loglog(rr, rr * nu, "k--", lw=1.2, label="barrier bound r * nu")
 axes[0].set_xlabel("penalty weight r (cost units)")
 axes[0].set_ylabel("cost - optimal cost (cost units)")
@@ -197,8 +206,14 @@ start = 0
 for k, e in enumerate(c.sumt.history):
     hist = np.array(e["inner_history"])
     its = np.arange(start, start + hist.size)
-    ax.semilogy(its, np.maximum(hist - hist[-1], 1e-14), ".-", ms=3, lw=0.8,
-                label=f"r = {e['r']:.1e}: {e['inner_iterations']} sweeps, {e['inner_evaluations']} evaluations")
+    ax.semilogy(
+        its,
+        np.maximum(hist - hist[-1], 1e-14),
+        ".-",
+        ms=3,
+        lw=0.8,
+        label=f"r = {e['r']:.1e}: {e['inner_iterations']} sweeps, {e['inner_evaluations']} evaluations",
+    )
     start += hist.size
 ax.set_xlabel("Powell sweep, counted over all outer iterations (count)")
 ax.set_ylabel("penalty - its final value in that outer iteration (cost units)")
@@ -229,8 +244,11 @@ for k, c in enumerate(comparisons):
     axes[2].semilogy(it, [max(e["inf_du"], 1e-17) for e in h], lw=0.9, color=color)
 for ax, ylabel, title in zip(
     axes,
-    ("|objective - optimal cost| (cost units)", "primal infeasibility inf_pr (dimensionless)",
-     "dual infeasibility inf_du (cost units)"),
+    (
+        "|objective - optimal cost| (cost units)",
+        "primal infeasibility inf_pr (dimensionless)",
+        "dual infeasibility inf_du (cost units)",
+    ),
     ("IPOPT objective", "IPOPT primal infeasibility", "IPOPT dual infeasibility"),
 ):
     ax.set_xlabel("IPOPT iteration, over all exchange rounds (count)")
@@ -242,11 +260,15 @@ plt.show()
 first = []
 for c in comparisons:
     h = c.ipopt.history
-    ok = [k for k, e in enumerate(h) if abs(e["objective"] - c.ipopt.cost) <= 1e-9 * c.ipopt.cost and e["inf_pr"] <= 1e-8]
+    ok = [
+        k for k, e in enumerate(h) if abs(e["objective"] - c.ipopt.cost) <= 1e-9 * c.ipopt.cost and e["inf_pr"] <= 1e-8
+    ]
     first.append((ok[0] if ok else len(h), len(h) - 1))
 first = np.array(first)
-print(f"iterations until cost within 1e-9 and inf_pr <= 1e-8: median {np.median(first[:, 0]):.0f}; "
-      f"until IPOPT stops: median {np.median(first[:, 1]):.0f} (max {first[:, 1].max()})")
+print(
+    f"iterations until cost within 1e-9 and inf_pr <= 1e-8: median {np.median(first[:, 0]):.0f}; "
+    f"until IPOPT stops: median {np.median(first[:, 1]):.0f} (max {first[:, 1].max()})"
+)
 
 # %% [markdown]
 # ## Summary
@@ -254,10 +276,16 @@ print(f"iterations until cost within 1e-9 and inf_pr <= 1e-8: median {np.median(
 # %%
 print(f"18 columns, both solvers converged: {all(c.ipopt.success and c.sumt.success for c in comparisons)}")
 print(f"costs agree to {cd.max():.1e} (relative), tolerances to {td.max():.1e}")
-print(f"IPOPT: {np.median([c.ipopt.iterations for c in comparisons]):.0f} iterations and "
-      f"{np.median([c.ipopt.wall_time for c in comparisons]) * 1e3:.1f} ms per column (median)")
-print(f"SUMT + Powell: {np.median([len(c.sumt.history) for c in comparisons]):.0f} outer iterations, "
-      f"{np.median([c.sumt.function_evaluations for c in comparisons]):.0f} evaluations and "
-      f"{np.median([c.sumt.wall_time for c in comparisons]):.2f} s per column (median)")
-print(f"total solver time: IPOPT {sum(c.ipopt.wall_time for c in comparisons):.2f} s, "
-      f"SUMT {sum(c.sumt.wall_time for c in comparisons):.1f} s")
+print(
+    f"IPOPT: {np.median([c.ipopt.iterations for c in comparisons]):.0f} iterations and "
+    f"{np.median([c.ipopt.wall_time for c in comparisons]) * 1e3:.1f} ms per column (median)"
+)
+print(
+    f"SUMT + Powell: {np.median([len(c.sumt.history) for c in comparisons]):.0f} outer iterations, "
+    f"{np.median([c.sumt.function_evaluations for c in comparisons]):.0f} evaluations and "
+    f"{np.median([c.sumt.wall_time for c in comparisons]):.2f} s per column (median)"
+)
+print(
+    f"total solver time: IPOPT {sum(c.ipopt.wall_time for c in comparisons):.2f} s, "
+    f"SUMT {sum(c.sumt.wall_time for c in comparisons):.1f} s"
+)

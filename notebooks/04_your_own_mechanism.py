@@ -60,7 +60,7 @@ from tolsynth.kinematics.batch_stats import principal_std_batch
 # anywhere you like.
 
 # %%
-MODEL = '''
+MODEL = """
 # A planar three-link (3R) arm whose out-of-plane errors are modelled as well.
 # Units: lengths in mm, angles in degrees in THIS FILE; tolerances in mm and mrad.
 
@@ -121,13 +121,19 @@ note = "elbow and wrist at right angles"
 q1 = 0.0
 q2 = 90.0
 q3 = 90.0
-'''
+"""
 # the ten error parameters: (name, unit, k, bounds)
 for name, unit, k, bounds in [
-    ("l1", "mm", 1.0, (0.0001, 5.0)), ("l2", "mm", 1.0, (0.0001, 5.0)), ("l3", "mm", 1.0, (0.0001, 5.0)),
+    ("l1", "mm", 1.0, (0.0001, 5.0)),
+    ("l2", "mm", 1.0, (0.0001, 5.0)),
+    ("l3", "mm", 1.0, (0.0001, 5.0)),
     ("d2", "mm", 1.0, (0.0001, 5.0)),
-    ("o1", "mrad", 1.5, (0.0001, 50.0)), ("o2", "mrad", 1.5, (0.0001, 50.0)), ("o3", "mrad", 1.5, (0.0001, 50.0)),
-    ("t1", "mrad", 1.5, (0.0001, 50.0)), ("t2", "mrad", 1.5, (0.0001, 50.0)), ("t3", "mrad", 1.5, (0.0001, 50.0)),
+    ("o1", "mrad", 1.5, (0.0001, 50.0)),
+    ("o2", "mrad", 1.5, (0.0001, 50.0)),
+    ("o3", "mrad", 1.5, (0.0001, 50.0)),
+    ("t1", "mrad", 1.5, (0.0001, 50.0)),
+    ("t2", "mrad", 1.5, (0.0001, 50.0)),
+    ("t3", "mrad", 1.5, (0.0001, 50.0)),
 ]:
     MODEL += f'''
 [[error_parameters]]
@@ -203,8 +209,10 @@ def constraint_map(x):
 
 
 g1 = constraint_map(res1.x)
-print(f"largest sigma z / R over the joint space: {g1.max():.3f} (1 at the stretched pose) -> the spec is "
-      f"{'met' if g1.max() <= 1 else 'not met'} everywhere")
+print(
+    f"largest sigma z / R over the joint space: {g1.max():.3f} (1 at the stretched pose) -> the spec is "
+    f"{'met' if g1.max() <= 1 else 'not met'} everywhere"
+)
 
 # %% [markdown]
 # ## 4. The specification at every pose
@@ -215,8 +223,9 @@ print(f"largest sigma z / R over the joint space: {g1.max():.3f} (1 at the stret
 # `tolsynth.synthesize_workspace`.
 
 # %%
-ws = tolsynth.synthesize_workspace(m, R, p, "uniform", alpha, pose="stretched", Phi=Phi,
-                                   search={"reference": "stretched"})
+ws = tolsynth.synthesize_workspace(
+    m, R, p, "uniform", alpha, pose="stretched", Phi=Phi, search={"reference": "stretched"}
+)
 assert ws.success, ws.result.message
 res, poses = ws.result, ws.poses
 history = [(r["n_poses"], r["cost"], r["worst_value"], r["worst_q"]) for r in ws.rounds]

@@ -53,8 +53,10 @@ grinding = Process("grinding", Chase(2.0, 0.01, 1.0), half[5], half[7])
 lapping = Process("lapping", Chase(4.0, 0.004, 1.0), half[3], half[5])
 standard = Process("standard", Chase(1.0, 0.05, 1.0), 0.05, 1.0)
 precision = Process("precision", Chase(3.0, 0.02, 1.0), 0.005, 0.05)
-processes = {name: ([turning, grinding, lapping] if unit == "mm" else [standard, precision])
-             for name, unit in zip(m.error_parameters, m.units)}
+processes = {
+    name: ([turning, grinding, lapping] if unit == "mm" else [standard, precision])
+    for name, unit in zip(m.error_parameters, m.units)
+}
 
 # %% [markdown]
 # ## The proven cheapest process per parameter
@@ -76,8 +78,10 @@ assert best.proven
 # line of the summary. When it is feasible at all, it costs more than the proven optimum:
 
 # %%
-print(f"proven optimum {best.cost:.4f}; rounded {best.rounded['cost']:.4f} "
-      f"(+{100 * (best.rounded['cost'] / best.cost - 1):.1f} %)")
+print(
+    f"proven optimum {best.cost:.4f}; rounded {best.rounded['cost']:.4f} "
+    f"(+{100 * (best.rounded['cost'] / best.cost - 1):.1f} %)"
+)
 
 # %% [markdown]
 # ## Who contributes to the error at that optimum
@@ -118,8 +122,10 @@ except tolsynth.InfeasibleSpecificationError as err:
 
 # %%
 buy = tolsynth.best_accuracy(m, free.cost, p=0.99)
-print(f"budget {free.cost:.3f} buys R in [{buy.bracket[0]:.5f}, {buy.bracket[1]:.5f}] mm "
-      f"({buy.solves} solves, certified: {buy.certified})")
+print(
+    f"budget {free.cost:.3f} buys R in [{buy.bracket[0]:.5f}, {buy.bracket[1]:.5f}] mm "
+    f"({buy.solves} solves, certified: {buy.certified})"
+)
 front = tolsynth.pareto_front(m, R=[0.25, 0.35, 0.5, 0.7, 1.0, 1.4, 2.0], p=0.99)
 print(front.table())
 front.plot()

@@ -161,8 +161,9 @@ fig.tight_layout()
 
 # %%
 m = mechs["xu_zhang_1988"]
-r = tolsynth.synthesize(m.with_joint_errors(servo_errors(m, 0.8 * q_max["xu_zhang_1988"])),
-                        validate=100_000, seed=9, **SPEC)
+r = tolsynth.synthesize(
+    m.with_joint_errors(servo_errors(m, 0.8 * q_max["xu_zhang_1988"])), validate=100_000, seed=9, **SPEC
+)
 v = r.validation
 for j in range(3):
     lo, hi = v.p_components_ci[j]
@@ -182,9 +183,11 @@ for q in (0.0, 0.2, 0.4):
     mj = m.with_joint_errors(servo_errors(m, q)) if q else m
     ws = tolsynth.synthesize_workspace(mj, **SPEC)
     one = tolsynth.synthesize(mj, **SPEC)
-    print(f"q = {q:.1f} mrad: at the worst pose {one.cost:.3f}; everywhere {ws.result.cost:.3f} "
-          f"(+{100 * (ws.result.cost / one.cost - 1):.1f} %, {len(ws.rounds)} rounds, converged {ws.converged}); "
-          f"the one-pose optimum breaks the specification elsewhere by x{ws.rounds[0]['worst_value']:.3f}")
+    print(
+        f"q = {q:.1f} mrad: at the worst pose {one.cost:.3f}; everywhere {ws.result.cost:.3f} "
+        f"(+{100 * (ws.result.cost / one.cost - 1):.1f} %, {len(ws.rounds)} rounds, converged {ws.converged}); "
+        f"the one-pose optimum breaks the specification elsewhere by x{ws.rounds[0]['worst_value']:.3f}"
+    )
 
 # %% [markdown]
 # Measured when this was written: everywhere costs +5.1 % over the worst pose with exact joints,
@@ -241,5 +244,8 @@ for k in (0.1, 1.0, 10.0):
         r = tolsynth.synthesize(m.with_joint_errors(errs), pose=ROBOTS[name]["pose"], **SPEC)
         servo = [r.tolerances[f"{j}.servo"] for j in m.joint_names]
         links = sum(r.spec.costs.costs([r.tolerances[n] for n in r.spec.names])[: m.n])  # the links' part
-        print(f"k = {k:5.1f} {name:>14}: encoder steps q = 2 eps = "
-              + ", ".join(f"{2 * s:.3f}" for s in servo) + f" mrad; link cost {links:.2f}, total {r.cost:.2f}")
+        print(
+            f"k = {k:5.1f} {name:>14}: encoder steps q = 2 eps = "
+            + ", ".join(f"{2 * s:.3f}" for s in servo)
+            + f" mrad; link cost {links:.2f}, total {r.cost:.2f}"
+        )

@@ -88,8 +88,10 @@ print(f"largest hand-position difference URDF vs D-H over 200 random poses: {wor
 R, p, alpha = 0.5, 0.99, 0.7
 ws = tolsynth.synthesize_workspace(m, R, p, "uniform", alpha, pose="zero", tol=0.01, max_rounds=8)
 print(ws.summary().splitlines()[0])
-print(f"cost {ws.result.cost:.3f}, certified gap {ws.gap:.1e}, poses imposed {len(ws.poses)}, "
-      f"largest sigma z / R found afterwards {ws.worst_value:.4f}")
+print(
+    f"cost {ws.result.cost:.3f}, certified gap {ws.gap:.1e}, poses imposed {len(ws.poses)}, "
+    f"largest sigma z / R found afterwards {ws.worst_value:.4f}"
+)
 worst_q = np.asarray(ws.poses[-1])
 print("last pose added (deg):", np.degrees(worst_q).round(1))
 

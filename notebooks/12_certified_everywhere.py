@@ -42,8 +42,10 @@ z = z_of_p(p)
 
 t0 = time.perf_counter()
 ws = tolsynth.synthesize_workspace(m, R, p, "uniform", alpha, probability="gaussian")
-print(f"sampled exchange: converged {ws.converged}, {len(ws.rounds)} rounds, cost {ws.result.cost:.6f}, "
-      f"worst z sigma_1 / R found {ws.worst_value:.6f} ({time.perf_counter() - t0:.1f} s)")
+print(
+    f"sampled exchange: converged {ws.converged}, {len(ws.rounds)} rounds, cost {ws.result.cost:.6f}, "
+    f"worst z sigma_1 / R found {ws.worst_value:.6f} ({time.perf_counter() - t0:.1f} s)"
+)
 
 # %% [markdown]
 # ## The certified exchange
@@ -59,16 +61,20 @@ print(f"sampled exchange: converged {ws.converged}, {len(ws.rounds)} rounds, cos
 t0 = time.perf_counter()
 wc = tolsynth.synthesize_workspace(m, R, p, "uniform", alpha, probability="gaussian", certify=True, progress=False)
 print(wc.certificate_line())
-print(f"{len(wc.rounds)} rounds, {len(wc.poses)} poses imposed, cost {wc.result.cost:.6f} "
-      f"({time.perf_counter() - t0:.1f} s)")
+print(
+    f"{len(wc.rounds)} rounds, {len(wc.poses)} poses imposed, cost {wc.result.cost:.6f} "
+    f"({time.perf_counter() - t0:.1f} s)"
+)
 print(wc.to_frame()[["n_poses", "cost", "worst_value", "upper_bound", "certified", "boxes"]])
 c = wc.certificate
 print()
 print(c.summary())
 names = list(m.joint_names)
 g = np.degrees(c.q[names.index("thetap2")] - c.q[names.index("theta2")])
-print(f"\nz sigma_1 / R: the sampled search saw {ws.worst_value:.6f}, the certified search found "
-      f"{c.best_value * z / R:.6f} at thetap2 - theta2 = {g:.4f} deg (the interference limit: 50 or 130 deg)")
+print(
+    f"\nz sigma_1 / R: the sampled search saw {ws.worst_value:.6f}, the certified search found "
+    f"{c.best_value * z / R:.6f} at thetap2 - theta2 = {g:.4f} deg (the interference limit: 50 or 130 deg)"
+)
 
 # %% [markdown]
 # The same tolerances as the sampled exchange: its design misses the specification by less than
@@ -115,24 +121,37 @@ plt.show()
 # %%
 t0 = time.perf_counter()
 cm = tolsynth.certified_map(m, wc.result.x, "uniform", joints=("theta2", "thetap2"), n=40, slices=30)
-print(f"{cm.boxes} boxes bounded in {time.perf_counter() - t0:.1f} s; largest z sigma_1 / R: sampled "
-      f"{np.nanmax(cm.sampled) * z / R:.4f}, bound {np.nanmax(cm.upper) * z / R:.4f}; bound over value: median "
-      f"{np.nanmedian(cm.upper / cm.sampled) - 1:.2%}, largest {np.nanmax(cm.upper / cm.sampled) - 1:.2%}")
+print(
+    f"{cm.boxes} boxes bounded in {time.perf_counter() - t0:.1f} s; largest z sigma_1 / R: sampled "
+    f"{np.nanmax(cm.sampled) * z / R:.4f}, bound {np.nanmax(cm.upper) * z / R:.4f}; bound over value: median "
+    f"{np.nanmedian(cm.upper / cm.sampled) - 1:.2%}, largest {np.nanmax(cm.upper / cm.sampled) - 1:.2%}"
+)
 
 fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
 ext = np.degrees([cm.edges[0][0], cm.edges[0][-1], cm.edges[1][0], cm.edges[1][-1]])
 vmin, vmax = np.nanmin(cm.sampled) * z / R, np.nanmax(cm.upper) * z / R
-for ax, M, title in ((axes[0], cm.sampled, "sampled: largest value at the boxes' centres"),
-                     (axes[1], cm.upper, "certified: bound at every pose of the cell")):
+for ax, M, title in (
+    (axes[0], cm.sampled, "sampled: largest value at the boxes' centres"),
+    (axes[1], cm.upper, "certified: bound at every pose of the cell"),
+):
     im = ax.imshow(M * z / R, origin="lower", extent=ext, aspect="auto", vmin=vmin, vmax=vmax, cmap="viridis")
     ax.set_title(title, fontsize=10)
     ax.set_xlabel("theta2 (deg)")
 for ax in axes:
-    ax.plot(*np.degrees([c.q[names.index("theta2")], c.q[names.index("thetap2")]]), "r*", ms=12,
-            label="certified worst pose")
+    ax.plot(
+        *np.degrees([c.q[names.index("theta2")], c.q[names.index("thetap2")]]),
+        "r*",
+        ms=12,
+        label="certified worst pose",
+    )
     qs = ws.rounds[-1]["worst_q"]
-    ax.plot(*np.degrees([qs[names.index("theta2")], qs[names.index("thetap2")]]), "wx", ms=9, mew=2,
-            label="sampled exchange's last worst pose")
+    ax.plot(
+        *np.degrees([qs[names.index("theta2")], qs[names.index("thetap2")]]),
+        "wx",
+        ms=9,
+        mew=2,
+        label="sampled exchange's last worst pose",
+    )
 axes[0].set_ylabel("thetap2 (deg)")
 axes[0].legend(loc="lower right", fontsize=8)
 fig.colorbar(im, ax=axes, label="z sigma_1 / R")

@@ -77,8 +77,10 @@ groups = {
 }
 for g, names in groups.items():
     mean_eps = np.mean([eps[n] for n in names])
-    print(f"{g:17}: {len(names):2d} parameters, share of tr V {sum(share[n] for n in names):.3f}, "
-          f"mean tolerance {mean_eps:.4f} mm")
+    print(
+        f"{g:17}: {len(names):2d} parameters, share of tr V {sum(share[n] for n in names):.3f}, "
+        f"mean tolerance {mean_eps:.4f} mm"
+    )
 
 fig, ax = plt.subplots(figsize=(8, 3.2))
 x = np.arange(len(legs))
@@ -106,14 +108,18 @@ plt.show()
 # %%
 ws = tolsynth.synthesize_workspace(m, pose="home", search={"grid": 4}, **SPEC)
 print(ws.summary().splitlines()[0])
-print(f"cost at home only {home.cost:.2f}, over the workspace {ws.result.cost:.2f} "
-      f"(+{100 * (ws.result.cost / home.cost - 1):.1f} %)")
+print(
+    f"cost at home only {home.cost:.2f}, over the workspace {ws.result.cost:.2f} "
+    f"(+{100 * (ws.result.cost / home.cost - 1):.1f} %)"
+)
 worst_q = ws.rounds[-1]["worst_q"]
 print("worst pose found: struts", m.format_joints(worst_q), "hand", np.round(ws.rounds[-1]["worst_position"], 2), "mm")
 a_home = m.analyze("home", home.x, R=SPEC["R"])
 a_worst = m.analyze(worst_q, home.x, R=SPEC["R"])
-print(f"the home design at the worst pose: largest sigma {a_worst.principal_std[0]:.4f} mm "
-      f"(at home {a_home.principal_std[0]:.4f} mm)")
+print(
+    f"the home design at the worst pose: largest sigma {a_worst.principal_std[0]:.4f} mm "
+    f"(at home {a_home.principal_std[0]:.4f} mm)"
+)
 
 # %% [markdown]
 # ## The workspace map
@@ -125,8 +131,10 @@ print(f"the home design at the worst pose: largest sigma {a_worst.principal_std[
 
 # %%
 pm = tolsynth.probability_map(m, ws.result.x, R=SPEC["R"], n=41, plane="xz", progress=False)
-print(f"reachable points {int(np.isfinite(pm.P).sum())} of {pm.P.size}; lowest P {pm.worst[2]:.4f} at "
-      f"x = {pm.worst[0]:.1f}, z = {pm.worst[1]:.1f} mm")
+print(
+    f"reachable points {int(np.isfinite(pm.P).sum())} of {pm.P.size}; lowest P {pm.worst[2]:.4f} at "
+    f"x = {pm.worst[0]:.1f}, z = {pm.worst[1]:.1f} mm"
+)
 pm.plot()
 plt.show()
 
@@ -139,5 +147,7 @@ plt.show()
 
 # %%
 mc = tolsynth.monte_carlo(m, worst_q, ws.result.x, R=SPEC["R"], n=50_000, seed=1, progress=False)
-print(f"P(|dr| <= R): Monte Carlo {mc.p_sphere:.4f} [{mc.p_sphere_ci[0]:.4f}, {mc.p_sphere_ci[1]:.4f}], "
-      f"linear Gaussian {mc.p_sphere_analytic:.4f}; samples not assembled: {mc.n_loop_failures}")
+print(
+    f"P(|dr| <= R): Monte Carlo {mc.p_sphere:.4f} [{mc.p_sphere_ci[0]:.4f}, {mc.p_sphere_ci[1]:.4f}], "
+    f"linear Gaussian {mc.p_sphere_analytic:.4f}; samples not assembled: {mc.n_loop_failures}"
+)

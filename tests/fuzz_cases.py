@@ -30,7 +30,9 @@ from model_text import model_dict, toml_text
 from tolsynth.errors import TolsynthError
 
 MODELS = ("planar_2r", "puma560", "xu_zhang_1988")
-CASE_SECONDS = 60  # a case that takes longer is a hang (the slowest valid cases take ~12 s alone, 20+ s on a loaded machine)
+CASE_SECONDS = (
+    60  # a case that takes longer is a hang (the slowest valid cases take ~12 s alone, 20+ s on a loaded machine)
+)
 
 
 class Hang(BaseException):
@@ -114,7 +116,9 @@ def _where() -> str:
     import sys
     import traceback
 
-    frames = [f for f in traceback.extract_tb(sys.exc_info()[2]) if "tolsynth" in f.filename and "tests" not in f.filename]
+    frames = [
+        f for f in traceback.extract_tb(sys.exc_info()[2]) if "tolsynth" in f.filename and "tests" not in f.filename
+    ]
     return f"at {Path(frames[-1].filename).name}:{frames[-1].lineno}" if frames else ""
 
 
@@ -139,8 +143,19 @@ def probability(*values) -> None:
 # ---------------------------------------------------------------------------------------------
 # model files
 # ---------------------------------------------------------------------------------------------
-MUTATIONS = ("delete", "type", "nan", "inf", "huge", "negative", "unknown_key", "duplicate", "empty",
-             "truncated", "binary")
+MUTATIONS = (
+    "delete",
+    "type",
+    "nan",
+    "inf",
+    "huge",
+    "negative",
+    "unknown_key",
+    "duplicate",
+    "empty",
+    "truncated",
+    "binary",
+)
 #: mutations that must always be rejected (a NaN, an infinity, an unknown key are never valid)
 MUST_REJECT = ("nan", "inf", "unknown_key")
 #: lists whose items must be distinct (a duplicate there doubles a sensitivity, a loop, a joint)
@@ -204,7 +219,7 @@ def mutate(draw, model: str, kind: str):
         table[bad] = draw(st.sampled_from([1.0, "x", [1.0], {"a": 1.0}]))
         # a symbol, a tolerance-set value or a configuration's joint value may have any name: a new
         # key there is a new symbol (rejected when unused), a new set, a new configuration
-        free = path in ((), ) or (path and path[-1] in ("symbols", "tolerance_sets", "configurations"))
+        free = path in ((),) or (path and path[-1] in ("symbols", "tolerance_sets", "configurations"))
         return toml_text(data).encode(), not free or path[-1:] == ("symbols",)
     numeric = [p for p in paths if not isinstance(_parent(data, p)[p[-1]], (dict, list))]
     path = draw(st.sampled_from(numeric))
@@ -266,8 +281,32 @@ def load_mutated(tmp: Path, blob: bytes, must_reject: bool):
 # ---------------------------------------------------------------------------------------------
 # API arguments
 # ---------------------------------------------------------------------------------------------
-BAD = (0, -1, -0.0, 1e-300, -1e-300, 1e300, -1e300, 1e155, math.nan, math.inf, -math.inf, 1 - 1.1e-16,
-       2**70, True, None, "1", "", [], [1.0], {}, np.float64("nan"), 1e-12, 0.5, 3)
+BAD = (
+    0,
+    -1,
+    -0.0,
+    1e-300,
+    -1e-300,
+    1e300,
+    -1e300,
+    1e155,
+    math.nan,
+    math.inf,
+    -math.inf,
+    1 - 1.1e-16,
+    2**70,
+    True,
+    None,
+    "1",
+    "",
+    [],
+    [1.0],
+    {},
+    np.float64("nan"),
+    1e-12,
+    0.5,
+    3,
+)
 
 
 def _mech(name):
@@ -331,17 +370,48 @@ def _args(draw, defaults: dict, pool: dict | None = None, k: int = 2) -> dict:
 def case_synthesize(draw):
     mech = _mech(draw(st.sampled_from(["planar_2r", "xu_zhang_1988"])))
     pose = "worst"
-    args = _args(draw, {"R": 0.5, "p": 0.99, "distribution": "uniform", "alpha": 0.7, "k": None, "bounds": None,
-                        "x0": None, "options": None, "criterion": "components", "Phi": None},
-                 {"distribution": ["normal", "Uniform"], "criterion": ["sphere", "sphre"],
-                  "options": [{"tol": -1}, {"tol": 1e-8}, {"max_iter": 0}, {"max_iter": 2.5}, {"nope": 1},
-                              {"tol": math.nan}, "tol"],
-                  "x0": [np.zeros(mech.n), np.full(mech.n, 1e155), np.full(mech.n, 0.01), [1.0],
-                         np.full(mech.n, 1e8), np.full(mech.n, 1e-12)],
-                  "bounds": [(1e-3, 1e300), (0.0, 1.0), (2.0, 1.0), {"zz": (1, 2)}, ("a", "b")],
-                  "alpha": [{"x": 1}, np.full(mech.n, 0.7), 1e9, 50.0],
-                  "k": [1e155, np.full(mech.n, -1.0), {"zz": 1}],
-                  "R": [1e-9, 1e6], "p": [0.999999, 1e-9], "Phi": [0.01, -0.01]})
+    args = _args(
+        draw,
+        {
+            "R": 0.5,
+            "p": 0.99,
+            "distribution": "uniform",
+            "alpha": 0.7,
+            "k": None,
+            "bounds": None,
+            "x0": None,
+            "options": None,
+            "criterion": "components",
+            "Phi": None,
+        },
+        {
+            "distribution": ["normal", "Uniform"],
+            "criterion": ["sphere", "sphre"],
+            "options": [
+                {"tol": -1},
+                {"tol": 1e-8},
+                {"max_iter": 0},
+                {"max_iter": 2.5},
+                {"nope": 1},
+                {"tol": math.nan},
+                "tol",
+            ],
+            "x0": [
+                np.zeros(mech.n),
+                np.full(mech.n, 1e155),
+                np.full(mech.n, 0.01),
+                [1.0],
+                np.full(mech.n, 1e8),
+                np.full(mech.n, 1e-12),
+            ],
+            "bounds": [(1e-3, 1e300), (0.0, 1.0), (2.0, 1.0), {"zz": (1, 2)}, ("a", "b")],
+            "alpha": [{"x": 1}, np.full(mech.n, 0.7), 1e9, 50.0],
+            "k": [1e155, np.full(mech.n, -1.0), {"zz": 1}],
+            "R": [1e-9, 1e6],
+            "p": [0.999999, 1e-9],
+            "Phi": [0.01, -0.01],
+        },
+    )
 
     def run():
         res = tolsynth.synthesize(mech, pose=pose, **args)
@@ -351,6 +421,7 @@ def case_synthesize(draw):
             _check_synthesis(mech, res, R, args["p"], args["distribution"], [pose])
         elif res.success:
             finite(res.cost, list(res.tolerances.values()))
+
     return run
 
 
@@ -367,94 +438,189 @@ def case_synthesize_valid(draw):
     def run():
         res = tolsynth.synthesize(mech, R, p, dist, alpha, pose=pose)
         _check_synthesis(mech, res, R, p, dist, [pose])
+
     return run
 
 
 def case_analyze(draw):
     mech = _mech(draw(st.sampled_from(MODELS)))
-    args = _args(draw, {"q": "worst", "tolerances": next(iter(mech.tolerance_sets)), "distribution": "uniform",
-                        "R": 0.5, "Phi": None},
-                 {"q": [np.zeros(len(mech.joint_names)), [np.nan] * len(mech.joint_names), "nowhere"],
-                  "tolerances": [np.full(mech.n, 1e155), np.zeros(mech.n), np.full(mech.n, -1.0),
-                                 {"x": 1}, np.full(mech.n, 1e-300)],
-                  "R": [1e-12, 1e-9, 1e9], "Phi": [1e-12, 0.01]})
+    args = _args(
+        draw,
+        {"q": "worst", "tolerances": next(iter(mech.tolerance_sets)), "distribution": "uniform", "R": 0.5, "Phi": None},
+        {
+            "q": [np.zeros(len(mech.joint_names)), [np.nan] * len(mech.joint_names), "nowhere"],
+            "tolerances": [
+                np.full(mech.n, 1e155),
+                np.zeros(mech.n),
+                np.full(mech.n, -1.0),
+                {"x": 1},
+                np.full(mech.n, 1e-300),
+            ],
+            "R": [1e-12, 1e-9, 1e9],
+            "Phi": [1e-12, 0.01],
+        },
+    )
 
     def run():
         a = mech.analyze(**args)
         accepted(**args)
-        finite(a.position, a.sensitivity, a.covariance, a.principal_std, a.p_components, a.p_sphere,
-               a.p_cone, a.p_orientation_components)
+        finite(
+            a.position,
+            a.sensitivity,
+            a.covariance,
+            a.principal_std,
+            a.p_components,
+            a.p_sphere,
+            a.p_cone,
+            a.p_orientation_components,
+        )
         probability(a.p_components, a.p_sphere, a.p_cone, a.p_orientation_components)
+
     return run
 
 
 def case_monte_carlo(draw):
     mech = _mech(draw(st.sampled_from(["planar_2r", "xu_zhang_1988"])))
-    args = _args(draw, {"q": "worst", "tolerances": next(iter(mech.tolerance_sets)), "distribution": "uniform",
-                        "R": 0.5, "n": 2000, "seed": 0, "batch": 1000, "Phi": None, "confidence": 0.95},
-                 {"n": [1, 10**13, 2.5, 1e4], "seed": [-1, 1.5, 2**70], "batch": [1, 10**13],
-                  "tolerances": [np.full(mech.n, 1e155), np.zeros(mech.n)]})
+    args = _args(
+        draw,
+        {
+            "q": "worst",
+            "tolerances": next(iter(mech.tolerance_sets)),
+            "distribution": "uniform",
+            "R": 0.5,
+            "n": 2000,
+            "seed": 0,
+            "batch": 1000,
+            "Phi": None,
+            "confidence": 0.95,
+        },
+        {
+            "n": [1, 10**13, 2.5, 1e4],
+            "seed": [-1, 1.5, 2**70],
+            "batch": [1, 10**13],
+            "tolerances": [np.full(mech.n, 1e155), np.zeros(mech.n)],
+        },
+    )
 
     def run():
         r = tolsynth.monte_carlo(mech, **args)
         accepted(**args)
         finite(r.p_components, r.p_sphere)
         probability(r.p_components, r.p_sphere)
+
     return run
 
 
 def case_validate(draw):
     mech = _mech("planar_2r")
-    args = _args(draw, {"tolerances_or_result": "coarse", "R": 0.5, "p": 0.9, "distribution": "uniform",
-                        "pose": "worst", "n": 2000, "seed": 0},
-                 {"tolerances_or_result": [np.full(mech.n, 1e155), object()], "n": [10**13, 2.5]})
+    args = _args(
+        draw,
+        {
+            "tolerances_or_result": "coarse",
+            "R": 0.5,
+            "p": 0.9,
+            "distribution": "uniform",
+            "pose": "worst",
+            "n": 2000,
+            "seed": 0,
+        },
+        {"tolerances_or_result": [np.full(mech.n, 1e155), object()], "n": [10**13, 2.5]},
+    )
 
     def run():
         v = tolsynth.validate(mech, **args)
         accepted(**args)
         probability(v.p_components, v.p_sphere)
+
     return run
 
 
 def case_worst_pose(draw):
     mech = _mech(draw(st.sampled_from(["planar_2r", "xu_zhang_1988"])))
-    args = _args(draw, {"tolerances": next(iter(mech.tolerance_sets)), "criterion": "sigma", "R": 0.5,
-                        "distribution": "uniform", "grid": 4, "starts": 2, "step_tol": 1e-4,
-                        "max_grid_points": 100, "seed": 0, "reference": "worst", "fixed": None},
-                 {"criterion": ["probability", "sigmaa"], "grid": [1, 2, 10**6], "starts": [10**6, 2.5],
-                  "max_grid_points": [1, 10**12], "step_tol": [1e-7, 1.0, 2.0],
-                  "fixed": [{"nope": 0.0}, {mech.joint_names[0]: math.nan}, {mech.joint_names[0]: "a"}],
-                  "reference": ["nowhere", [0.0], [math.nan] * len(mech.joint_names)]})
+    args = _args(
+        draw,
+        {
+            "tolerances": next(iter(mech.tolerance_sets)),
+            "criterion": "sigma",
+            "R": 0.5,
+            "distribution": "uniform",
+            "grid": 4,
+            "starts": 2,
+            "step_tol": 1e-4,
+            "max_grid_points": 100,
+            "seed": 0,
+            "reference": "worst",
+            "fixed": None,
+        },
+        {
+            "criterion": ["probability", "sigmaa"],
+            "grid": [1, 2, 10**6],
+            "starts": [10**6, 2.5],
+            "max_grid_points": [1, 10**12],
+            "step_tol": [1e-7, 1.0, 2.0],
+            "fixed": [{"nope": 0.0}, {mech.joint_names[0]: math.nan}, {mech.joint_names[0]: "a"}],
+            "reference": ["nowhere", [0.0], [math.nan] * len(mech.joint_names)],
+        },
+    )
 
     def run():
         w = tolsynth.worst_pose(mech, **args)
         accepted(**args)
         finite(w.q, w.value, w.position)
+
     return run
 
 
 def case_probability_map(draw):
     mech = _mech("planar_2r")
-    args = _args(draw, {"tolerances": "coarse", "R": 0.5, "distribution": "uniform", "n": 6, "plane": "xy",
-                        "offset": 0.0, "hand_axis": None, "extent": None, "reference": "worst", "seeds": 1,
-                        "check_points": 3},
-                 {"n": [5, 10**6, 4.0], "plane": ["xz", "ab"], "extent": [(0, 1, 0, 1), (1, 0, 0, 1),
-                  (math.nan, 1, 0, 1), (0, 1e300, 0, 1)], "hand_axis": [(0, 0, 0), (0, 0, 1)],
-                  "seeds": [10**9, -1], "check_points": [10**9, -1]})
+    args = _args(
+        draw,
+        {
+            "tolerances": "coarse",
+            "R": 0.5,
+            "distribution": "uniform",
+            "n": 6,
+            "plane": "xy",
+            "offset": 0.0,
+            "hand_axis": None,
+            "extent": None,
+            "reference": "worst",
+            "seeds": 1,
+            "check_points": 3,
+        },
+        {
+            "n": [5, 10**6, 4.0],
+            "plane": ["xz", "ab"],
+            "extent": [(0, 1, 0, 1), (1, 0, 0, 1), (math.nan, 1, 0, 1), (0, 1e300, 0, 1)],
+            "hand_axis": [(0, 0, 0), (0, 0, 1)],
+            "seeds": [10**9, -1],
+            "check_points": [10**9, -1],
+        },
+    )
 
     def run():
         pm = tolsynth.probability_map(mech, progress=False, **args)
         accepted(**args)
         P = np.asarray(pm.P, dtype=float)
         probability(P[np.isfinite(P)])
+
     return run
 
 
 def case_synthesize_workspace(draw):
     mech = _mech("planar_2r")
-    args = _args(draw, {"R": 0.5, "p": 0.99, "distribution": "uniform", "tol": 1e-3, "max_rounds": 2,
-                        "search": {"grid": 4, "max_grid_points": 100}},
-                 {"max_rounds": [0, -1, 10**9, 1.5], "tol": [-1.0, 0.0], "search": [{"grid": 10**6}, {"x": 1}, "a"]})
+    args = _args(
+        draw,
+        {
+            "R": 0.5,
+            "p": 0.99,
+            "distribution": "uniform",
+            "tol": 1e-3,
+            "max_rounds": 2,
+            "search": {"grid": 4, "max_grid_points": 100},
+        },
+        {"max_rounds": [0, -1, 10**9, 1.5], "tol": [-1.0, 0.0], "search": [{"grid": 10**6}, {"x": 1}, "a"]},
+    )
 
     def run():
         ws = tolsynth.synthesize_workspace(mech, pose="elbow90", **args)
@@ -463,18 +629,23 @@ def case_synthesize_workspace(draw):
             raise BadNumbers("result is None")
         if ws.success:
             finite(ws.result.cost)
+
     return run
 
 
 def case_compare(draw):
     mech = _mech("planar_2r")
-    args = _args(draw, {"R": 0.5, "p": 0.99, "distribution": "uniform", "alpha": 0.7, "options": None},
-                 {"options": [{"ipopt": {"tol": -1}}, {"sumt": {"x": 1}}, {"ipopt": "a"}, [1]]})
+    args = _args(
+        draw,
+        {"R": 0.5, "p": 0.99, "distribution": "uniform", "alpha": 0.7, "options": None},
+        {"options": [{"ipopt": {"tol": -1}}, {"sumt": {"x": 1}}, {"ipopt": "a"}, [1]]},
+    )
 
     def run():
         c = tolsynth.compare(mech, pose="elbow90", **args)
         accepted(**args)
         finite(c.ipopt.cost, c.sumt.cost)
+
     return run
 
 
@@ -486,19 +657,40 @@ def case_mechanism(draw):
         "fk": [np.zeros(nq), [math.nan] * nq, [1e300] * nq, "nowhere", [0.0], None, 5],
         "sensitivity": [np.zeros(nq), [math.inf] * nq, "worst", {}, [[0.0] * nq]],
         "joints": [np.zeros(nq), [1e300] * nq, ["a"] * nq, None, 3.0],
-        "deltas": [{"zz": 1.0}, {mech.error_parameters[0]: "a"}, np.full(mech.n, 1e300), [1.0], "x",
-                   {mech.error_parameters[0]: math.nan}],
-        "tolerances": [{mech.error_parameters[0]: "a"}, np.full(mech.n, 1e155), "nope", 5, None,
-                       {mech.error_parameters[0]: None}],
+        "deltas": [
+            {"zz": 1.0},
+            {mech.error_parameters[0]: "a"},
+            np.full(mech.n, 1e300),
+            [1.0],
+            "x",
+            {mech.error_parameters[0]: math.nan},
+        ],
+        "tolerances": [
+            {mech.error_parameters[0]: "a"},
+            np.full(mech.n, 1e155),
+            "nope",
+            5,
+            None,
+            {mech.error_parameters[0]: None},
+        ],
         "index": ["nope", ["a"], None, 3],
-        "with_units": [{mech.error_parameters[0]: "furlong"}, {mech.error_parameters[0]: 3}, "mm", {"nope": "mm"},
-                       [("a", "mm")]],
+        "with_units": [
+            {mech.error_parameters[0]: "furlong"},
+            {mech.error_parameters[0]: 3},
+            "mm",
+            {"nope": "mm"},
+            [("a", "mm")],
+        ],
     }
     value = draw(st.sampled_from(pool[method] + list(BAD)))
 
     def run():
         if method in ("fk", "sensitivity"):
-            out = getattr(mech, method)("worst", deltas=value) if isinstance(value, dict) else getattr(mech, method)(value)
+            out = (
+                getattr(mech, method)("worst", deltas=value)
+                if isinstance(value, dict)
+                else getattr(mech, method)(value)
+            )
             finite(out)
         elif method == "with_units":
             m2 = mech.with_units(value)
@@ -508,13 +700,17 @@ def case_mechanism(draw):
             if not isinstance(out, int):
                 finite(out)
         accepted(value=value)
+
     return run
 
 
 def case_stats(draw):
     fn = draw(st.sampled_from(["z_of_p", "p_ball", "p_components", "p_cone"]))
-    a = draw(st.sampled_from(list(BAD) + [[1.0, 2.0, 3.0], [1e300, 1.0, 1e-300], [0.0, 0.0, 0.0], [[1.0]],
-                                          np.eye(3), [1.0, -1.0]]))
+    a = draw(
+        st.sampled_from(
+            list(BAD) + [[1.0, 2.0, 3.0], [1e300, 1.0, 1e-300], [0.0, 0.0, 0.0], [[1.0]], np.eye(3), [1.0, -1.0]]
+        )
+    )
     b = draw(st.sampled_from(list(BAD) + [0.5, 1e-12, 1e9]))
 
     def run():
@@ -530,6 +726,7 @@ def case_stats(draw):
         if fn != "z_of_p":
             probability(out)
         accepted(**({"a": a} if fn == "z_of_p" else {"b": b} if fn == "p_cone" else {"a": a, "b": b}))
+
     return run
 
 
@@ -566,8 +763,17 @@ def case_valid_extremes(draw):
             # slow (about 12 s for puma560: many panels for variance ratios near 1e-15), not wrong;
             # the search gets 9 decades here so that each case stays within its time bound
             e = np.clip(eps, 1e-6, 1e3)
-            w = tolsynth.worst_pose(mech, e, criterion="probability", R=R, grid=3, starts=1, step_tol=1e-3,
-                                    max_grid_points=50, reference=None)
+            w = tolsynth.worst_pose(
+                mech,
+                e,
+                criterion="probability",
+                R=R,
+                grid=3,
+                starts=1,
+                step_tol=1e-3,
+                max_grid_points=50,
+                reference=None,
+            )
             finite(w.q, w.value)
         elif fn == "p_ball":
             probability(tolsynth.p_ball(eps[:3] ** 2, R))
@@ -584,28 +790,43 @@ def case_valid_extremes(draw):
                 lam = np.linalg.eigvalsh(S @ np.diag(e**2 / 3.0) @ S.T)
                 if p_ball(np.clip(lam, 0, None), R) < p - 1e-6:
                     raise BadNumbers("sphere optimum below p")
+
     return run
 
 
 def case_sweep(draw):
     """tolsynth.sweep with bad grids (typed errors before any solve), in this process."""
     mech = _mech("planar_2r")
-    args = _args(draw, {"R": [0.5, 0.3], "p": 0.99, "alpha": 0.7, "distribution": "uniform",
-                        "criterion": "components", "solver": "ipopt"},
-                 {"R": [[], [0.5, -1.0], [0.3, math.nan], ["0.5"], [[0.5]], np.array([0.2, 0.4]), {"a": 1}],
-                  "p": [[0.9, 1.0], [0.5, 0.99], [math.inf], (0.9,)],
-                  "alpha": [[0.7, 0.0], [{"x": 1}], [0.5, 11.0], {"h1": 0.5}],
-                  "distribution": [["uniform", "normal"], ["cauchy"], [], "Normal"],
-                  "criterion": [["components", "sphere"], "box", [None]],
-                  "solver": [["ipopt", "snopt"], "powell", [1]]})
+    args = _args(
+        draw,
+        {
+            "R": [0.5, 0.3],
+            "p": 0.99,
+            "alpha": 0.7,
+            "distribution": "uniform",
+            "criterion": "components",
+            "solver": "ipopt",
+        },
+        {
+            "R": [[], [0.5, -1.0], [0.3, math.nan], ["0.5"], [[0.5]], np.array([0.2, 0.4]), {"a": 1}],
+            "p": [[0.9, 1.0], [0.5, 0.99], [math.inf], (0.9,)],
+            "alpha": [[0.7, 0.0], [{"x": 1}], [0.5, 11.0], {"h1": 0.5}],
+            "distribution": [["uniform", "normal"], ["cauchy"], [], "Normal"],
+            "criterion": [["components", "sphere"], "box", [None]],
+            "solver": [["ipopt", "snopt"], "powell", [1]],
+        },
+    )
     client = draw(st.sampled_from(["serial", "serial", "threads", 3, "", "tcp", b"serial"]))
     workers = draw(st.sampled_from([None, None, 0, -1, 2.5, "2", 1e300]))
 
     def run():
         df = tolsynth.sweep(mech, client=client, workers=workers, pose="elbow90", progress=False, **args)
         accepted(**args)
-        typed = {c.__name__ for c in vars(tolsynth.errors).values() if isinstance(c, type)
-                 and issubclass(c, tolsynth.TolsynthError)}
+        typed = {
+            c.__name__
+            for c in vars(tolsynth.errors).values()
+            if isinstance(c, type) and issubclass(c, tolsynth.TolsynthError)
+        }
         for err in df.loc[df["status"] == "error", "error"]:  # a row's exception must be typed too
             if err.split(":")[0] not in typed:
                 raise Silent(f"untyped error inside a sweep row: {err}")
@@ -613,9 +834,17 @@ def case_sweep(draw):
         finite(ok["cost"].to_numpy(), ok[[c for c in df.columns if c.startswith("eps_")]].to_numpy())
         for _, row in ok.iterrows():
             if row["criterion"] == "components":
-                res = type("R", (), {"success": True, "cost": row["cost"],
-                                     "tolerances": {n: row["eps_" + n] for n in mech.error_parameters}})
+                res = type(
+                    "R",
+                    (),
+                    {
+                        "success": True,
+                        "cost": row["cost"],
+                        "tolerances": {n: row["eps_" + n] for n in mech.error_parameters},
+                    },
+                )
                 _check_synthesis(mech, res, row["R"], row["p"], row["distribution"], ["elbow90"])
+
     return run
 
 
@@ -639,26 +868,95 @@ API_CASES = {
 # ---------------------------------------------------------------------------------------------
 # command line
 # ---------------------------------------------------------------------------------------------
-CLI_VALUES = ("0", "-1", "nan", "inf", "1e300", "1e-300", "", "abc", "0.99", "0.5", "1,2", ",,,", "worst",
-              "figure3", "figure3,h2=0.1,h2=0.2", "figure3,,,", "free", "0,0,1", "-0", "0.1mm", "5um", "1e9m",
-              "2mrad", "h*=0.01", "1:", ":0", "x.xyz", "/nonexistent/dir/x.png", "none", "0,0,0,0,0", "l1=50um",
-              "l1=1e-5", "o1=2mrad", "l1=", "/proc/x.csv")
+CLI_VALUES = (
+    "0",
+    "-1",
+    "nan",
+    "inf",
+    "1e300",
+    "1e-300",
+    "",
+    "abc",
+    "0.99",
+    "0.5",
+    "1,2",
+    ",,,",
+    "worst",
+    "figure3",
+    "figure3,h2=0.1,h2=0.2",
+    "figure3,,,",
+    "free",
+    "0,0,1",
+    "-0",
+    "0.1mm",
+    "5um",
+    "1e9m",
+    "2mrad",
+    "h*=0.01",
+    "1:",
+    ":0",
+    "x.xyz",
+    "/nonexistent/dir/x.png",
+    "none",
+    "0,0,0,0,0",
+    "l1=50um",
+    "l1=1e-5",
+    "o1=2mrad",
+    "l1=",
+    "/proc/x.csv",
+)
 #: command -> (fixed arguments that make a valid, quick run, options fuzzed)
 CLI_COMMANDS = {
-    "analyze": (["--model", "xu_zhang_1988", "--pose", "worst", "--tolerances", "figure3", "--R", "0.5"],
-                ["--model", "--pose", "--tolerances", "--R", "--Phi", "--dist"]),
-    "solve": (["--model", "planar_2r", "--pose", "elbow90", "--R", "0.5", "--p", "0.99"],
-              ["--model", "--R", "--p", "--alpha", "--k", "--bounds", "--pose", "--Phi", "--p-orientation",
-               "--criterion", "--solver", "--lock", "--out"]),
-    "montecarlo": (["--model", "planar_2r", "--pose", "worst", "--tolerances", "coarse", "--R", "0.5", "--n", "2000",
-                    "--quiet"], ["--pose", "--tolerances", "--R", "--n", "--seed", "--batch", "--confidence"]),
-    "worst-pose": (["--model", "planar_2r", "--tolerances", "coarse", "--grid", "5"],
-                   ["--tolerances", "--R", "--grid", "--reference", "--criterion"]),
-    "map": (["--model", "planar_2r", "--tolerances", "coarse", "--plane", "xy", "--n", "6", "--quiet"],
-            ["--R", "--n", "--plane", "--offset", "--hand-axis", "--extent", "--reference", "--out", "--data"]),
-    "sweep": (["--model", "planar_2r", "--pose", "elbow90", "--R", "0.5,0.3", "--p", "0.99", "--workers", "1", "--quiet"],
-              ["--R", "--p", "--alpha", "--dist", "--criterion", "--solver", "--workers", "--out", "--grid", "--k",
-               "--bounds"]),
+    "analyze": (
+        ["--model", "xu_zhang_1988", "--pose", "worst", "--tolerances", "figure3", "--R", "0.5"],
+        ["--model", "--pose", "--tolerances", "--R", "--Phi", "--dist"],
+    ),
+    "solve": (
+        ["--model", "planar_2r", "--pose", "elbow90", "--R", "0.5", "--p", "0.99"],
+        [
+            "--model",
+            "--R",
+            "--p",
+            "--alpha",
+            "--k",
+            "--bounds",
+            "--pose",
+            "--Phi",
+            "--p-orientation",
+            "--criterion",
+            "--solver",
+            "--lock",
+            "--out",
+        ],
+    ),
+    "montecarlo": (
+        ["--model", "planar_2r", "--pose", "worst", "--tolerances", "coarse", "--R", "0.5", "--n", "2000", "--quiet"],
+        ["--pose", "--tolerances", "--R", "--n", "--seed", "--batch", "--confidence"],
+    ),
+    "worst-pose": (
+        ["--model", "planar_2r", "--tolerances", "coarse", "--grid", "5"],
+        ["--tolerances", "--R", "--grid", "--reference", "--criterion"],
+    ),
+    "map": (
+        ["--model", "planar_2r", "--tolerances", "coarse", "--plane", "xy", "--n", "6", "--quiet"],
+        ["--R", "--n", "--plane", "--offset", "--hand-axis", "--extent", "--reference", "--out", "--data"],
+    ),
+    "sweep": (
+        ["--model", "planar_2r", "--pose", "elbow90", "--R", "0.5,0.3", "--p", "0.99", "--workers", "1", "--quiet"],
+        [
+            "--R",
+            "--p",
+            "--alpha",
+            "--dist",
+            "--criterion",
+            "--solver",
+            "--workers",
+            "--out",
+            "--grid",
+            "--k",
+            "--bounds",
+        ],
+    ),
 }
 
 

@@ -20,8 +20,7 @@ from hypothesis import strategies as st
 
 import fuzz_cases as fc  # beside this file: run as a script, its folder is on sys.path
 
-SETTINGS = dict(derandomize=True, database=None, deadline=None,
-                suppress_health_check=list(HealthCheck))
+SETTINGS = dict(derandomize=True, database=None, deadline=None, suppress_health_check=list(HealthCheck))
 
 
 def run(name, strategy, make, n):
@@ -48,11 +47,17 @@ def main(n: int = 100) -> None:
     rows = []
     t0 = time.perf_counter()
     for kind in fc.MUTATIONS:
-        rows.append(run(f"model file: {kind}", fc.model_mutations(kinds=(kind,)),
-                        lambda x: (lambda: fc.load_mutated(tmp, x[2], x[3])), n))
+        rows.append(
+            run(
+                f"model file: {kind}",
+                fc.model_mutations(kinds=(kind,)),
+                lambda x: lambda: fc.load_mutated(tmp, x[2], x[3]),
+                n,
+            )
+        )
     for name, case in fc.API_CASES.items():
         rows.append(run(f"API: {name}", st.data(), lambda data, case=case: case(data.draw), n))
-    rows.append(run("CLI", fc.cli_argv(), lambda argv: (lambda: fc.run_cli(argv)), n))
+    rows.append(run("CLI", fc.cli_argv(), lambda argv: lambda: fc.run_cli(argv), n))
     keys = list(rows[0][1])
     print(f"{'category':<34}" + "".join(f"{k:>12}" for k in ["cases"] + keys))
     total = {k: 0 for k in keys}

@@ -56,7 +56,9 @@ def _urdf_file(text: str, extra_links: str = "") -> Path:
     if not _FOLDER:
         _FOLDER.append(Path(tempfile.mkdtemp(prefix="tolsynth_fuzz_")))
     path = _FOLDER[0] / "robot.urdf"
-    path.write_text('<robot name="r">' + "".join(f'<link name="{n}"/>' for n in links) + extra_links + text + "</robot>")
+    path.write_text(
+        '<robot name="r">' + "".join(f'<link name="{n}"/>' for n in links) + extra_links + text + "</robot>"
+    )
     return path
 
 
@@ -72,18 +74,48 @@ def case_urdf_files(draw):
         finite(m.fk("zero"), m.sensitivity("zero"))
         res = tolsynth.synthesize(m, 0.5, 0.99, pose="zero")
         _check_synthesis(m, res, 0.5, 0.99, "uniform", ["zero"])
+
     return run
 
 
 def case_load_urdf_arguments(draw):
-    name = draw(st.sampled_from(["errors", "configurations", "tolerance_sets", "assumptions", "name", "k", "bounds",
-                                 "angle_unit", "length_unit", "base_link"]))
-    pool = {"errors": [5, [5], "*.zz", ["*.xyz"], "all", None], "configurations": ["abc", {"a": "x"}, {"a": [0.1, 0.2]},
-            {"a": [90.0, 0.0]}, {"a": [5.0, 0.0]}, {"a": {"j1": 0.1, "j2": 0.2}}, {"a": [math.nan, 0.0]}, [1, 2]],
-            "tolerance_sets": ["x", {"s": 3}, {"s": {"j1.x": 0.1}}, {"s": {"zz": 0.1}}],
-            "assumptions": [5, "text", ["a"], [5]], "name": [5, "r2", ""], "k": ["a", -1.0, {"length": 2.0}],
-            "bounds": [5, (1.0, 0.5), (0.001, 1.0)], "angle_unit": ["deg", "furlong", 5, "rad"],
-            "length_unit": ["m", "inch", None], "base_link": [5, "nope", "l1"]}
+    name = draw(
+        st.sampled_from(
+            [
+                "errors",
+                "configurations",
+                "tolerance_sets",
+                "assumptions",
+                "name",
+                "k",
+                "bounds",
+                "angle_unit",
+                "length_unit",
+                "base_link",
+            ]
+        )
+    )
+    pool = {
+        "errors": [5, [5], "*.zz", ["*.xyz"], "all", None],
+        "configurations": [
+            "abc",
+            {"a": "x"},
+            {"a": [0.1, 0.2]},
+            {"a": [90.0, 0.0]},
+            {"a": [5.0, 0.0]},
+            {"a": {"j1": 0.1, "j2": 0.2}},
+            {"a": [math.nan, 0.0]},
+            [1, 2],
+        ],
+        "tolerance_sets": ["x", {"s": 3}, {"s": {"j1.x": 0.1}}, {"s": {"zz": 0.1}}],
+        "assumptions": [5, "text", ["a"], [5]],
+        "name": [5, "r2", ""],
+        "k": ["a", -1.0, {"length": 2.0}],
+        "bounds": [5, (1.0, 0.5), (0.001, 1.0)],
+        "angle_unit": ["deg", "furlong", 5, "rad"],
+        "length_unit": ["m", "inch", None],
+        "base_link": [5, "nope", "l1"],
+    }
     value = draw(st.sampled_from(pool[name] + list(BAD[:6])))
 
     def run():
@@ -95,12 +127,15 @@ def case_load_urdf_arguments(draw):
         for cname in m.configurations:
             finite(m.fk(cname))
             m.joints(cname)  # every named pose inside its limits (checked at load)
+
     return run
 
 
 def case_search_limits(draw):
     """Limits of the budget and process searches, progress, exact options, time limits."""
-    which = draw(st.sampled_from(["rtol", "max_solves", "max_nodes", "rel_gap", "progress", "exact_options", "time_limit"]))
+    which = draw(
+        st.sampled_from(["rtol", "max_solves", "max_nodes", "rel_gap", "progress", "exact_options", "time_limit"])
+    )
     value = draw(st.sampled_from(list(BAD) + [{"bogus": 1}, "a", {"max_rounds": 2}, "x", True, 2, 1e-3]))
     m = tolsynth.load_model("planar_2r")
 
@@ -114,7 +149,12 @@ def case_search_limits(draw):
             from tolsynth.model.cost import PowerLaw
             from tolsynth.synthesis.processes import Process
 
-            procs = {"l1": [Process("turning", PowerLaw(1.0, 0.7), 0.05, 0.5), Process("grinding", PowerLaw(3.0, 0.7), 0.005, 0.05)]}
+            procs = {
+                "l1": [
+                    Process("turning", PowerLaw(1.0, 0.7), 0.05, 0.5),
+                    Process("grinding", PowerLaw(3.0, 0.7), 0.005, 0.05),
+                ]
+            }
             best = tolsynth.synthesize_processes(m, 0.5, 0.99, processes=procs, pose="elbow90", **{which: value})
             finite(best.cost, best.lower_bound)
             if best.proven and which == "max_nodes" and isinstance(value, (int, float)) and value < 2:
@@ -135,13 +175,32 @@ def case_search_limits(draw):
                 _check_synthesis(m, res, 0.5, 0.99, "uniform", ["elbow90"])
             elif str(res.status) not in ("time_limit",):
                 raise BadNumbers(f"status {res.status} at time_limit={value!r}")
+
     return run
 
 
 def case_unit_strings(draw):
     """R and Phi written with units: the same numbers as the plain ones, or a typed error."""
-    text = draw(st.sampled_from(["500um", "0.5mm", "0.05cm", "0.0005m", " 0.5 mm", "5deg", "0.5 furlong", "", "mm",
-                                 "1e400um", "nan mm", "-0.5mm", "0.5µm", "2mrad"]))
+    text = draw(
+        st.sampled_from(
+            [
+                "500um",
+                "0.5mm",
+                "0.05cm",
+                "0.0005m",
+                " 0.5 mm",
+                "5deg",
+                "0.5 furlong",
+                "",
+                "mm",
+                "1e400um",
+                "nan mm",
+                "-0.5mm",
+                "0.5µm",
+                "2mrad",
+            ]
+        )
+    )
     m = tolsynth.load_model("planar_2r")
 
     def run():
@@ -152,6 +211,7 @@ def case_unit_strings(draw):
         b = m.analyze("elbow90", "coarse", R=ref[text])
         if not np.isclose(a.p_sphere, b.p_sphere, rtol=1e-12, atol=0):
             raise BadNumbers(f"R={text!r}: P {a.p_sphere} != {b.p_sphere}")
+
     return run
 
 

@@ -80,15 +80,19 @@ def _parent(data: dict, path):
 
 def set_at(path, value):
     """An edit that sets ``data[path[0]][path[1]]...`` to ``value``."""
+
     def fn(data):
         _parent(data, path)[path[-1]] = value
+
     return fn
 
 
 def drop_at(path):
     """An edit that deletes ``data[path[0]][path[1]]...``."""
+
     def fn(data):
         del _parent(data, path)[path[-1]]
+
     return fn
 
 

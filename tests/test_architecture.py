@@ -14,17 +14,17 @@ ROOT = Path(__file__).resolve().parents[1] / "tolsynth"
 
 #: bottom to top; a module may import modules of its own layer or of lower layers only
 LAYERS = [
-    "base",          # tolsynth/*.py other than __init__/__main__: errors, units, checks, progress, ...
-    "probability",   # error shapes, Gaussian and exact probabilities: pure maths
-    "model",         # what a robot model is and how a file, D-H table or URDF becomes one
-    "kinematics",    # CasADi graphs, the Mechanism, inverse kinematics, batch evaluation
-    "problem",       # the tolerance NLP and its result
-    "solvers",       # IPOPT, SUMT + Powell, the exact-probability solver
-    "analysis",      # Monte Carlo, worst pose, maps, contributions, certification
-    "synthesis",     # synthesize, workspace, processes, Pareto, budget, sweeps, reproduce
-    "io",            # tables, reports
-    "api",           # tolsynth/__init__.py
-    "cli",           # the command line
+    "base",  # tolsynth/*.py other than __init__/__main__: errors, units, checks, progress, ...
+    "probability",  # error shapes, Gaussian and exact probabilities: pure maths
+    "model",  # what a robot model is and how a file, D-H table or URDF becomes one
+    "kinematics",  # CasADi graphs, the Mechanism, inverse kinematics, batch evaluation
+    "problem",  # the tolerance NLP and its result
+    "solvers",  # IPOPT, SUMT + Powell, the exact-probability solver
+    "analysis",  # Monte Carlo, worst pose, maps, contributions, certification
+    "synthesis",  # synthesize, workspace, processes, Pareto, budget, sweeps, reproduce
+    "io",  # tables, reports
+    "api",  # tolsynth/__init__.py
+    "cli",  # the command line
 ]
 
 
@@ -78,8 +78,7 @@ def test_every_module_sits_in_a_known_layer():
 
 def test_no_upward_import():
     rank = {layer: i for i, layer in enumerate(LAYERS)}
-    upward = sorted(f"{a} -> {b}" for a, deps in GRAPH.items() for b in deps
-                    if rank[_layer(b)] > rank[_layer(a)])
+    upward = sorted(f"{a} -> {b}" for a, deps in GRAPH.items() for b in deps if rank[_layer(b)] > rank[_layer(a)])
     assert upward == []
 
 
@@ -94,7 +93,7 @@ def test_no_import_cycle():
         stack.append(node)
         for nxt in sorted(graph[node]):
             if state.get(nxt) == 1:
-                cycles.append(" -> ".join(stack[stack.index(nxt):] + [nxt]))
+                cycles.append(" -> ".join(stack[stack.index(nxt) :] + [nxt]))
             elif nxt not in state:
                 visit(nxt, stack)
         stack.pop()

@@ -49,8 +49,9 @@ def models():
 # ------------------------------------------------------------------------------------------------
 # facts proven on the graph, checked numerically
 # ------------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("name, rotation", [("planar_2r", 0), ("xu_zhang_1988", 0), ("puma560", 0), ("ur5", 0),
-                                            ("panda", None)])
+@pytest.mark.parametrize(
+    "name, rotation", [("planar_2r", 0), ("xu_zhang_1988", 0), ("puma560", 0), ("ur5", 0), ("panda", None)]
+)
 def test_base_rotation_proof_matches_the_numbers(models, name, rotation):
     """Where the proof holds, turning the joint turns every column of A by Rz at random poses; panda
     has link-1 errors before its first joint (h1, alpha1), so its waist changes sigma and is not held."""
@@ -119,7 +120,7 @@ def test_exact_reading_against_floating_point():
         v = rng.normal(size=2)
         num = sum(float(c) * np.prod([v[q[i]] ** e for i, e in mono]) for mono, c in pw.outputs[0].items())
         assert abs(num - ((v[0] + 0.5 * v[1]) ** 2 - v[0] * v[1] / 4.0)) < 1e-12
-    (mono, c), = pw.outputs[1].items()  # one term left, exact and not zero
+    ((mono, c),) = pw.outputs[1].items()  # one term left, exact and not zero
     assert c == Fraction(0.1 * 3) - Fraction(0.3) and c != 0
 
 
@@ -154,8 +155,10 @@ def test_rigorous_eigenvalue_bounds():
     sym = np.stack([G[:, 0, 0], G[:, 1, 1], G[:, 2, 2], G[:, 0, 1], G[:, 0, 2], G[:, 1, 2]], axis=1)
     err = 1e-3 * np.abs(sym)
     lam = lambda_max_bound(G, err)
-    assert np.all(lam >= np.linalg.eigvalsh(G)[:, -1] + np.sqrt((err[:, :3] ** 2).sum(1) + 2 * (err[:, 3:] ** 2).sum(1))
-                  * (1 - 1e-12))
+    assert np.all(
+        lam
+        >= np.linalg.eigvalsh(G)[:, -1] + np.sqrt((err[:, :3] ** 2).sum(1) + 2 * (err[:, 3:] ** 2).sum(1)) * (1 - 1e-12)
+    )
 
 
 def test_arc_polygons_hold_their_arcs():
@@ -191,8 +194,9 @@ def test_polytope_vertices_cover_the_feasible_part():
             assert np.max(((C[k] + D[k]) @ w)[use[k]]) >= np.max(X[k][feas[k]] @ w) - 1e-12
 
 
-@pytest.mark.parametrize("name, polygon", [("xu_zhang_1988", False), ("puma560", True), ("puma560", False),
-                                           ("panda", True)])
+@pytest.mark.parametrize(
+    "name, polygon", [("xu_zhang_1988", False), ("puma560", True), ("puma560", False), ("panda", True)]
+)
 def test_sigma_bounds_are_sound_on_random_boxes(models, name, polygon):
     m = models[name]
     st = structure(m)
@@ -276,8 +280,12 @@ def test_planar_2r_against_the_closed_form(models):
     grid = np.linspace(lo[1], hi[1], 2001)
     vals = sigma(grid)
     k = int(np.argmax(vals))
-    res = minimize_scalar(lambda v: -sigma(v)[0], bounds=(grid[max(k - 1, 0)], grid[min(k + 1, 2000)]),
-                          method="bounded", options={"xatol": 1e-12})
+    res = minimize_scalar(
+        lambda v: -sigma(v)[0],
+        bounds=(grid[max(k - 1, 0)], grid[min(k + 1, 2000)]),
+        method="bounded",
+        options={"xatol": 1e-12},
+    )
     ref = max(vals.max(), -res.fun)
     assert c.certified and ref <= c.upper_bound and c.upper_bound - ref <= 1e-6 * ref
     assert abs(c.best_value - ref) <= 1e-6 * ref
@@ -304,12 +312,20 @@ def _dense_then_local(m, eps, n, seed, fixed=None):
         a = np.zeros(len(lo))
         for jn, coef in c.terms.items():
             a[names.index(jn)] = coef
-        cons += [{"type": "ineq", "fun": lambda q, a=a, u=c.upper: u - a @ q},
-                 {"type": "ineq", "fun": lambda q, a=a, l_=c.lower: a @ q - l_}]
+        cons += [
+            {"type": "ineq", "fun": lambda q, a=a, u=c.upper: u - a @ q},
+            {"type": "ineq", "fun": lambda q, a=a, l_=c.lower: a @ q - l_},
+        ]
     best = vals.max()
     for q0 in Q[np.argsort(vals)[-5:]]:
-        r = minimize(lambda q: -_sigma(m, q, eps)[0], q0, bounds=list(zip(lo, hi)), constraints=cons, method="SLSQP",
-                     options={"ftol": 1e-14, "maxiter": 300})
+        r = minimize(
+            lambda q: -_sigma(m, q, eps)[0],
+            q0,
+            bounds=list(zip(lo, hi)),
+            constraints=cons,
+            method="SLSQP",
+            options={"ftol": 1e-14, "maxiter": 300},
+        )
         if r.success or r.status in (8, 9):
             q = np.clip(r.x, lo, hi)
             if _feasible(m, q[:, None])[0]:

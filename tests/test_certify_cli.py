@@ -21,8 +21,9 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def _run(*argv: str) -> tuple[int, dict | None, str]:
-    proc = subprocess.run([sys.executable, "-m", "tolsynth", *argv], capture_output=True, text=True, cwd=ROOT,
-                          timeout=900)
+    proc = subprocess.run(
+        [sys.executable, "-m", "tolsynth", *argv], capture_output=True, text=True, cwd=ROOT, timeout=900
+    )
     try:
         out = json.loads(proc.stdout)
     except json.JSONDecodeError:
@@ -50,24 +51,44 @@ def test_worst_pose_certify_json_holds_its_proof():
 
 
 def test_worst_pose_certify_components_gives_a_probability_bound():
-    rc, out, _ = _run("worst-pose", "--model", "planar_2r", "--certify", "--criterion", "components",
-                      "--R", "0.1", "--json")
+    rc, out, _ = _run(
+        "worst-pose", "--model", "planar_2r", "--certify", "--criterion", "components", "--R", "0.1", "--json"
+    )
     assert rc == 0 and out["certified"] is True
     m = tolsynth.load_model("planar_2r")
     sig = _sigma(m, np.array(out["q"]), np.array(list(out["tolerances"].values())))[0]
     p_there = math.erf(0.1 / (math.sqrt(2.0) * sig))
     assert out["probability_lower_bound"] <= p_there == pytest.approx(out["value"], rel=1e-9)
-    assert out["probability_lower_bound"] == pytest.approx(math.erf(0.1 / (math.sqrt(2.0) * out["upper_bound"])),
-                                                           abs=1e-14)
+    assert out["probability_lower_bound"] == pytest.approx(
+        math.erf(0.1 / (math.sqrt(2.0) * out["upper_bound"])), abs=1e-14
+    )
 
 
-@pytest.mark.parametrize("argv, says", [
-    (["worst-pose", "--model", "planar_2r", "--certify", "--criterion", "probability", "--R", "0.1"], "components"),
-    (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--certify"], "--everywhere"),
-    (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--max-rounds", "3"], "--everywhere"),
-    (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--everywhere", "--certify",
-      "--criterion", "sphere"], "components"),
-], ids=["sphere-probability", "certify-alone", "max-rounds-alone", "sphere-everywhere"])
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["worst-pose", "--model", "planar_2r", "--certify", "--criterion", "probability", "--R", "0.1"], "components"),
+        (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--certify"], "--everywhere"),
+        (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--max-rounds", "3"], "--everywhere"),
+        (
+            [
+                "solve",
+                "--model",
+                "planar_2r",
+                "--R",
+                "0.1",
+                "--p",
+                "0.99",
+                "--everywhere",
+                "--certify",
+                "--criterion",
+                "sphere",
+            ],
+            "components",
+        ),
+    ],
+    ids=["sphere-probability", "certify-alone", "max-rounds-alone", "sphere-everywhere"],
+)
 def test_certify_usage_errors_exit_2_naming_the_choice(argv, says):
     rc, _, err = _run(*argv)
     assert rc == 2 and says in err and "Traceback" not in err
@@ -78,9 +99,26 @@ def test_round_limit_is_not_converged_with_the_bound_so_far():
     """Two rounds on the paper's robot cannot meet the specification: exit status 1, converged and
     certified false, the reason, and the bound so far above the worst value found (which is
     sigma z / R at the pose reported, checked here)."""
-    rc, out, err = _run("solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--dist", "uniform",
-                        "--alpha", "0.7", "--probability", "gaussian", "--everywhere", "--certify",
-                        "--max-rounds", "2", "--json")
+    rc, out, err = _run(
+        "solve",
+        "--model",
+        "xu_zhang_1988",
+        "--R",
+        "0.5",
+        "--p",
+        "0.99",
+        "--dist",
+        "uniform",
+        "--alpha",
+        "0.7",
+        "--probability",
+        "gaussian",
+        "--everywhere",
+        "--certify",
+        "--max-rounds",
+        "2",
+        "--json",
+    )
     assert rc == 1 and "no convergence" in err
     assert out["converged"] is False and out["certified"] is False and "round limit (2)" in out["reason"]
     assert len(out["rounds"]) == 2 and out["rounds"][-1]["boxes"] > 0
@@ -95,8 +133,24 @@ def test_round_limit_is_not_converged_with_the_bound_so_far():
 def test_everywhere_certified_on_the_paper_robot():
     """The certified exchange proves z sigma_1 / R <= 1 + tol over the continuous joint space; no
     random feasible pose (3000, NumPy eigenvalues) exceeds the bound."""
-    rc, out, _ = _run("solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--dist", "uniform",
-                      "--alpha", "0.7", "--probability", "gaussian", "--everywhere", "--certify", "--json")
+    rc, out, _ = _run(
+        "solve",
+        "--model",
+        "xu_zhang_1988",
+        "--R",
+        "0.5",
+        "--p",
+        "0.99",
+        "--dist",
+        "uniform",
+        "--alpha",
+        "0.7",
+        "--probability",
+        "gaussian",
+        "--everywhere",
+        "--certify",
+        "--json",
+    )
     assert rc == 0
     assert out["converged"] is True and out["certified"] is True and out["reason"] == ""
     assert out["upper_bound"] <= 1.001 and out["rounds"][-1]["boxes"] > 0
@@ -117,13 +171,41 @@ def test_sampled_exchange_round_limit_says_why_with_progress():
     status 1 naming the reason; a progress callable hears of every round."""
     m = tolsynth.load_model("xu_zhang_1988")
     calls = []
-    w = tolsynth.synthesize_workspace(m, 0.5, 0.99, "uniform", 0.7, probability="gaussian", max_rounds=2,
-                                      progress=lambda done, total: calls.append((done, total)))
+    w = tolsynth.synthesize_workspace(
+        m,
+        0.5,
+        0.99,
+        "uniform",
+        0.7,
+        probability="gaussian",
+        max_rounds=2,
+        progress=lambda done, total: calls.append((done, total)),
+    )
     assert not w.converged and w.certified is None and calls == [(1, 2), (2, 2)]
     worst = _sigma(m, w.rounds[-1]["worst_q"], w.result.x)[0] * z_of_p(0.99) / 0.5
     assert worst == pytest.approx(w.worst_value, rel=1e-9)
-    assert w.reason == f"round limit (2) reached; the last design misses the specification by {worst - 1:.3g} at a pose found"
-    rc, out, err = _run("solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--dist", "uniform",
-                        "--alpha", "0.7", "--probability", "gaussian", "--everywhere", "--max-rounds", "2", "--json")
+    assert (
+        w.reason
+        == f"round limit (2) reached; the last design misses the specification by {worst - 1:.3g} at a pose found"
+    )
+    rc, out, err = _run(
+        "solve",
+        "--model",
+        "xu_zhang_1988",
+        "--R",
+        "0.5",
+        "--p",
+        "0.99",
+        "--dist",
+        "uniform",
+        "--alpha",
+        "0.7",
+        "--probability",
+        "gaussian",
+        "--everywhere",
+        "--max-rounds",
+        "2",
+        "--json",
+    )
     assert rc == 1 and "round limit (2) reached" in err
     assert out["converged"] is False and out["reason"] == w.reason

@@ -22,13 +22,36 @@ from test_kinematics import XU_ORDER, fd_sensitivity, xu_fk
 from test_stats import ball_probability_scipy
 from tolsynth.cli import main
 
-ARGS = ["analyze", "--model", "xu_zhang_1988", "--pose", "worst", "--tolerances", "figure3",
-        "--dist", "uniform", "--R", "0.2", "--json"]
+ARGS = [
+    "analyze",
+    "--model",
+    "xu_zhang_1988",
+    "--pose",
+    "worst",
+    "--tolerances",
+    "figure3",
+    "--dist",
+    "uniform",
+    "--R",
+    "0.2",
+    "--json",
+]
 KEYS = {"position", "sensitivity", "covariance", "principal_std", "p_components", "p_sphere"}
 
 # Figure 3 (the paper's section 5, docs/reconstruction.md), in mm and rad, and the worst pose of the model file (deg)
-FIGURE3 = {"h2": 0.06, "hp2": 0.028, "hp3": 0.06, "hp4": 0.028, "h3": 0.08, "h4": 0.01, "s1": 0.01,
-           "a": 0.015, "alpha1": 0.0005, "alpha3": 0.0005, "alpha4": 0.0005}
+FIGURE3 = {
+    "h2": 0.06,
+    "hp2": 0.028,
+    "hp3": 0.06,
+    "hp4": 0.028,
+    "h3": 0.08,
+    "h4": 0.01,
+    "s1": 0.01,
+    "a": 0.015,
+    "alpha1": 0.0005,
+    "alpha3": 0.0005,
+    "alpha4": 0.0005,
+}
 WORST_DEG = [0.0, 157.6451903, 107.97116143, 22.3548097, 0.0]
 
 
@@ -83,8 +106,9 @@ def test_analyze_json_normal_is_a_third_of_uniform_variance(capsys, reference):
     """--dist normal: eps^2/9 instead of eps^2/3, so the covariance is exactly a third."""
     assert main(_with({"--dist": "normal"})) == 0
     out = json.loads(capsys.readouterr().out)
-    assert np.allclose(out["covariance"], reference["covariance"] / 3.0, rtol=1e-6,
-                       atol=1e-9 * np.abs(reference["covariance"]).max())
+    assert np.allclose(
+        out["covariance"], reference["covariance"] / 3.0, rtol=1e-6, atol=1e-9 * np.abs(reference["covariance"]).max()
+    )
     sig = reference["principal_std"] / math.sqrt(3.0)
     assert abs(out["p_sphere"] - ball_probability_scipy(sig**2, 0.2)) <= 1e-7
 
@@ -152,11 +176,14 @@ def test_bad_input_exits_2_naming_the_field(capsys, changes, fragments):
         assert fragment in captured.err, (fragment, captured.err)
 
 
-@pytest.mark.parametrize("args, fragment", [
-    (_with({"--dist": "lognormal"}), "--dist"),
-    ([a for a in ARGS if a not in ("--R", "0.2")], "--R"),
-    (_with({"--R": "small"}), "--R"),
-])
+@pytest.mark.parametrize(
+    "args, fragment",
+    [
+        (_with({"--dist": "lognormal"}), "--dist"),
+        ([a for a in ARGS if a not in ("--R", "0.2")], "--R"),
+        (_with({"--R": "small"}), "--R"),
+    ],
+)
 def test_argparse_errors_exit_2(capsys, args, fragment):
     with pytest.raises(SystemExit) as info:
         main(args)

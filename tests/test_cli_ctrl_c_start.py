@@ -40,8 +40,7 @@ def _script() -> str:
 
 
 def _interrupt(command: list[str], after: float) -> tuple[int, str]:
-    proc = subprocess.Popen(command + ARGV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            cwd=ROOT)
+    proc = subprocess.Popen(command + ARGV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     try:
         time.sleep(after)
         proc.send_signal(signal.SIGINT)
@@ -64,8 +63,11 @@ def _before_the_guard(rc: int, err: str) -> bool:
     frames = re.findall(r'File "([^"]+)", line (\d+)', err)
     ours = [(f, int(n)) for f, n in frames if "/tolsynth/" in f.replace(os.sep, "/")]
     first_line = _guard_line()
-    return (rc == -signal.SIGINT and err.rstrip().endswith("KeyboardInterrupt")
-            and all(f.endswith("__init__.py") and n == first_line for f, n in ours))
+    return (
+        rc == -signal.SIGINT
+        and err.rstrip().endswith("KeyboardInterrupt")
+        and all(f.endswith("__init__.py") and n == first_line for f, n in ours)
+    )
 
 
 def _guard_line() -> int:
@@ -78,8 +80,13 @@ def _guard_line() -> int:
 
 def _handled(rc: int, err: str) -> bool:
     lines = [line for line in err.splitlines() if line.strip()]
-    return (rc == 130 and len(lines) == 1 and "interrupted (Ctrl-C)" in lines[0]
-            and "Traceback" not in err and "Error" not in err)
+    return (
+        rc == 130
+        and len(lines) == 1
+        and "interrupted (Ctrl-C)" in lines[0]
+        and "Traceback" not in err
+        and "Error" not in err
+    )
 
 
 @pytest.mark.parametrize("how", ["script", "python -m"])
@@ -103,13 +110,16 @@ def test_guard_is_the_first_statement():
     body = [node for node in tree.body if not (isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant))]
     assert isinstance(body[0], ast.ImportFrom) and body[0].module == "tolsynth.interrupts"
     guard = ast.parse(open(os.path.join(ROOT, "tolsynth", "interrupts.py")).read())
-    imported = {alias.name for node in ast.walk(guard) if isinstance(node, (ast.Import, ast.ImportFrom))
-                for alias in node.names}
+    imported = {
+        alias.name for node in ast.walk(guard) if isinstance(node, (ast.Import, ast.ImportFrom)) for alias in node.names
+    }
     assert imported <= {"_signal", "os", "sys"}, imported
     path = os.path.join(ROOT, "tolsynth", "interrupts.py")
-    code = ("import sys; before = set(sys.modules)\n"
-            f"exec(compile(open({path!r}).read(), {path!r}, 'exec'), {{'__name__': 'guard'}})\n"
-            "print(sorted(set(sys.modules) - before))")
+    code = (
+        "import sys; before = set(sys.modules)\n"
+        f"exec(compile(open({path!r}).read(), {path!r}, 'exec'), {{'__name__': 'guard'}})\n"
+        "print(sorted(set(sys.modules) - before))"
+    )
     added = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert added.strip() in ("[]", "['_signal']"), added
 

@@ -47,27 +47,61 @@ def test_models_lists_every_bundled_model_with_its_source(capsys, tmp_path):
 
 
 def test_pareto_matches_the_api(capsys, tmp_path):
-    out = _json(capsys, ["pareto", "--model", "planar_2r", "--p", "0.99", "--R", "0.3:0.9:3",
-                         "--probability", "gaussian", "--dist", "uniform"])
-    front = tolsynth.pareto_front("planar_2r", R=[0.3, 0.6, 0.9], p=0.99, probability="gaussian",
-                                  distribution="uniform")
+    out = _json(
+        capsys,
+        [
+            "pareto",
+            "--model",
+            "planar_2r",
+            "--p",
+            "0.99",
+            "--R",
+            "0.3:0.9:3",
+            "--probability",
+            "gaussian",
+            "--dist",
+            "uniform",
+        ],
+    )
+    front = tolsynth.pareto_front(
+        "planar_2r", R=[0.3, 0.6, 0.9], p=0.99, probability="gaussian", distribution="uniform"
+    )
     assert [r["R"] for r in out["rows"]] == pytest.approx([0.3, 0.6, 0.9])
     assert [r["cost"] for r in out["rows"]] == pytest.approx([r["cost"] for r in front.rows], rel=1e-9)
     assert out["inputs"]["command"] == "pareto"
     path = tmp_path / "front.csv"
-    assert main(["pareto", "--model", "planar_2r", "--R", "0.5", "--p", "0.9,0.99", "--probability", "gaussian",
-                 "--out", str(path)]) == 0
+    assert (
+        main(
+            [
+                "pareto",
+                "--model",
+                "planar_2r",
+                "--R",
+                "0.5",
+                "--p",
+                "0.9,0.99",
+                "--probability",
+                "gaussian",
+                "--out",
+                str(path),
+            ]
+        )
+        == 0
+    )
     frame = pd.read_csv(path)  # plain pandas
     assert list(frame["p"]) == [0.9, 0.99] and frame["cost"].is_monotonic_increasing
     assert tolsynth.read_table(path).attrs["summary"]["axis"] == "p"
 
 
-@pytest.mark.parametrize("argv,needle", [
-    (["--R", "0.5", "--p", "0.9"], "--R/--p"),
-    (["--R", "0.9:0.3:3", "--p", "0.9"], "START < STOP"),
-    (["--R", "0.3:0.9:1", "--p", "0.9"], "N"),
-    (["--R", "0.3:0.9:x", "--p", "0.9"], "whole number"),
-])
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["--R", "0.5", "--p", "0.9"], "--R/--p"),
+        (["--R", "0.9:0.3:3", "--p", "0.9"], "START < STOP"),
+        (["--R", "0.3:0.9:1", "--p", "0.9"], "N"),
+        (["--R", "0.3:0.9:x", "--p", "0.9"], "whole number"),
+    ],
+)
 def test_pareto_bad_ranges(capsys, argv, needle):
     assert main(["pareto", "--model", "planar_2r"] + argv) == 2
     err = capsys.readouterr().err
@@ -81,8 +115,24 @@ def test_budget_matches_the_api(capsys, tmp_path):
     assert out["budget"]["certified"] and out["cost"] <= 12.0
     path = tmp_path / "b.xlsx"
     pytest.importorskip("openpyxl")
-    assert main(["budget", "--model", "planar_2r", "--R", "0.5", "--cost", "12", "--probability", "gaussian",
-                 "--out", str(path)]) == 0
+    assert (
+        main(
+            [
+                "budget",
+                "--model",
+                "planar_2r",
+                "--R",
+                "0.5",
+                "--cost",
+                "12",
+                "--probability",
+                "gaussian",
+                "--out",
+                str(path),
+            ]
+        )
+        == 0
+    )
     frame = pd.read_excel(path)
     assert frame["cost"].sum() <= 12.0 + 1e-9
     assert tolsynth.read_table(path).attrs["summary"]["budget"]["quantity"] == "p"
@@ -93,18 +143,54 @@ def test_budget_matches_the_api(capsys, tmp_path):
 def test_processes_from_a_table_file(capsys, tmp_path):
     table = tmp_path / "procs.toml"
     table.write_text(PROCS)
-    out = _json(capsys, ["processes", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--table", str(table),
-                         "--probability", "gaussian"])
+    out = _json(
+        capsys,
+        [
+            "processes",
+            "--model",
+            "xu_zhang_1988",
+            "--R",
+            "0.5",
+            "--p",
+            "0.99",
+            "--table",
+            str(table),
+            "--probability",
+            "gaussian",
+        ],
+    )
     from tolsynth.model.cost import PowerLaw
 
-    procs = {"h3": [tolsynth.Process("turning", PowerLaw(1.0, 0.7), 0.05, 0.5),
-                    tolsynth.Process("grinding", PowerLaw(3.0, 0.7), 0.005, 0.05)]}
+    procs = {
+        "h3": [
+            tolsynth.Process("turning", PowerLaw(1.0, 0.7), 0.05, 0.5),
+            tolsynth.Process("grinding", PowerLaw(3.0, 0.7), 0.005, 0.05),
+        ]
+    }
     api = tolsynth.synthesize_processes("xu_zhang_1988", 0.5, 0.99, procs, probability="gaussian")
     assert out["processes"] == api.processes and out["proven"]
     assert out["cost"] == pytest.approx(api.cost, rel=1e-9)
     path = tmp_path / "pc.csv"
-    assert main(["processes", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--table", str(table),
-                 "--probability", "gaussian", "--out", str(path)]) == 0
+    assert (
+        main(
+            [
+                "processes",
+                "--model",
+                "xu_zhang_1988",
+                "--R",
+                "0.5",
+                "--p",
+                "0.99",
+                "--table",
+                str(table),
+                "--probability",
+                "gaussian",
+                "--out",
+                str(path),
+            ]
+        )
+        == 0
+    )
     frame = pd.read_csv(path).set_index("parameter")
     assert frame.loc["h3", "process"] == api.processes["h3"]
     # no table and no processes in the model file; a table that is not TOML
@@ -117,8 +203,9 @@ def test_processes_from_a_table_file(capsys, tmp_path):
     assert "cannot be read" in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=[] if n == "planar_2r" else pytest.mark.slow)
-                                  for n in tolsynth.bundled_models()])
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=[] if n == "planar_2r" else pytest.mark.slow) for n in tolsynth.bundled_models()]
+)
 def test_every_bundled_model_with_the_default_probability(capsys, name):
     from tolsynth.kinematics.joint_space import model_reference
 
@@ -127,8 +214,7 @@ def test_every_bundled_model_with_the_default_probability(capsys, name):
     out = _json(capsys, ["pareto", "--model", name, "--R", "0.5,1", "--p", "0.99", *pose])
     assert all(r["success"] for r in out["rows"]) and out["inputs"]["model"]["name"] == name
     budget = out["rows"][1]["cost"] * 1.01  # a little above the R = 1 design's cost: it buys R <= 1
-    out = _json(capsys, ["budget", "--model", name, "--p", "0.99", "--cost", f"{budget:.12g}", "--rtol", "1e-3",
-                         *pose])
+    out = _json(capsys, ["budget", "--model", name, "--p", "0.99", "--cost", f"{budget:.12g}", "--rtol", "1e-3", *pose])
     assert out["budget"]["certified"] and out["budget"]["value"] <= 1.0 + 1e-9
 
 
@@ -147,8 +233,9 @@ def test_solve_worst_case_without_p(capsys):
     eps = np.array([out["tolerances"][n] for n in m.error_parameters])
     worst = max(np.linalg.norm(A @ (np.array(s) * eps)) for s in itertools.product((-1.0, 1.0), repeat=len(eps)))
     assert worst == pytest.approx(0.8, rel=1e-6)
-    both = _json(capsys, ["solve", "--model", "xu_zhang_1988", "--R", "0.8", "--p", "0.99", "--probability",
-                          "worst_case"])
+    both = _json(
+        capsys, ["solve", "--model", "xu_zhang_1988", "--R", "0.8", "--p", "0.99", "--probability", "worst_case"]
+    )
     assert both["cost"] == pytest.approx(out["cost"], rel=1e-9)
     assert 1.6 < both["cost"] / both["statistical"]["cost"] < 1.8
     for bad in (["--solver", "both"], ["--everywhere"], ["--criterion", "sphere"]):
@@ -164,16 +251,48 @@ def test_grades_command(capsys, tmp_path):
     iso_half = {"IT10": 0.105, "IT11": 0.16, "IT12": 0.26, "IT13": 0.405}
     grades = tmp_path / "g.toml"
     grades.write_text('["o*"]\nA = 0.1\nB = 0.2\nC = 0.5\nD = 1.0\n', encoding="utf-8")
-    out = _json(capsys, ["grades", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--sizes", "l1=300,l2=0.3m",
-                         "--grades", str(grades)])
+    out = _json(
+        capsys,
+        [
+            "grades",
+            "--model",
+            "planar_2r",
+            "--R",
+            "0.5",
+            "--p",
+            "0.99",
+            "--sizes",
+            "l1=300,l2=0.3m",
+            "--grades",
+            str(grades),
+        ],
+    )
     assert out["proven"] and out["cost"] >= out["continuous_cost"]
     for n in ("l1", "l2"):
         assert out["tolerances"][n] == pytest.approx(iso_half[out["grades"][n]], rel=1e-12)
     for n in ("o1", "o2"):
         assert out["tolerances"][n] == {"A": 0.1, "B": 0.2, "C": 0.5, "D": 1.0}[out["grades"][n]]
     csv = tmp_path / "g.csv"
-    assert main(["grades", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--sizes", "300",
-                 "--grades", str(grades), "--out", str(csv)]) == 0
+    assert (
+        main(
+            [
+                "grades",
+                "--model",
+                "planar_2r",
+                "--R",
+                "0.5",
+                "--p",
+                "0.99",
+                "--sizes",
+                "300",
+                "--grades",
+                str(grades),
+                "--out",
+                str(csv),
+            ]
+        )
+        == 0
+    )
     frame = pd.read_csv(csv).set_index("parameter")
     assert frame.loc["l1", "grade"] == out["grades"]["l1"] and frame.loc["o2", "tolerance"] == out["tolerances"]["o2"]
     capsys.readouterr()

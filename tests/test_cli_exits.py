@@ -21,11 +21,14 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 def _start(argv: list[str]) -> subprocess.Popen:
     """``tolsynth ARGV`` in a child that says 'ready' on stderr once the package is imported, so
     that the signal lands in the command's work, not in the interpreter's start-up."""
-    code = ("import sys, tolsynth.cli\n"
-            "print('ready', file=sys.stderr, flush=True)\n"
-            f"sys.exit(tolsynth.cli.main({argv!r}))\n")
-    return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=ROOT)
+    code = (
+        "import sys, tolsynth.cli\n"
+        "print('ready', file=sys.stderr, flush=True)\n"
+        f"sys.exit(tolsynth.cli.main({argv!r}))\n"
+    )
+    return subprocess.Popen(
+        [sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT
+    )
 
 
 def _interrupt(argv: list[str], after: float = 1.0) -> tuple[int, str, float]:
@@ -44,10 +47,25 @@ def _interrupt(argv: list[str], after: float = 1.0) -> tuple[int, str, float]:
             proc.communicate()
 
 
-@pytest.mark.parametrize("argv", [
-    ["map", "--model", "xu_zhang_1988", "--n", "400", "--quiet"],
-    ["montecarlo", "--model", "xu_zhang_1988", "--tolerances", "figure3", "--R", "0.2", "--n", "1000000000", "--quiet"],
-], ids=["map", "montecarlo"])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["map", "--model", "xu_zhang_1988", "--n", "400", "--quiet"],
+        [
+            "montecarlo",
+            "--model",
+            "xu_zhang_1988",
+            "--tolerances",
+            "figure3",
+            "--R",
+            "0.2",
+            "--n",
+            "1000000000",
+            "--quiet",
+        ],
+    ],
+    ids=["map", "montecarlo"],
+)
 def test_ctrl_c_exits_130_without_traceback(argv):
     rc, err, dt = _interrupt(argv)
     assert rc == 130, err
@@ -73,11 +91,14 @@ def test_reproduce_with_nothing_to_reproduce_says_so(capsys):
     assert "planar_2r has no published results" in cap.err
 
 
-@pytest.mark.parametrize("out, fragment", [
-    ("x.xyz", "unsupported figure format .xyz"),
-    ("/nonexistent/dir/x.png", "does not exist"),
-    ("noext", "unsupported figure format (no suffix)"),
-])
+@pytest.mark.parametrize(
+    "out, fragment",
+    [
+        ("x.xyz", "unsupported figure format .xyz"),
+        ("/nonexistent/dir/x.png", "does not exist"),
+        ("noext", "unsupported figure format (no suffix)"),
+    ],
+)
 def test_map_output_path_checked_before_any_work(capsys, monkeypatch, out, fragment):
     import tolsynth.cli.workspace as w
 
@@ -113,8 +134,9 @@ def test_hand_axis_message_quotes_the_cli_value(capsys):
 def _command_interrupted(argv: list[str], after: float) -> tuple[int | None, str]:
     """``python -m tolsynth ARGV`` as a user starts it, SIGINT after ``after`` s (maybe while the
     package is still being imported); (exit status, stderr), or (None, ...) if it ended first."""
-    proc = subprocess.Popen([sys.executable, "-m", "tolsynth", *argv], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tolsynth", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT
+    )
     try:
         time.sleep(after)
         if proc.poll() is not None:
@@ -162,19 +184,35 @@ def test_ctrl_c_many_times_in_reproduce():
 LONG_NAME = "x" * 300
 
 
-@pytest.mark.parametrize("argv", [
-    ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", ""],
-    ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", "/proc/r.html"],
-    ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", LONG_NAME + ".html"],
-    ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", "r.pdf"],
-    ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", "/dev/full"],
-    ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--workers", "1", "--out", ""],
-    ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--workers", "1", "--out", "/proc/s.csv"],
-    ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--workers", "1", "--out", LONG_NAME + ".csv"],
-    ["map", "--model", "planar_2r", "--tolerances", "coarse", "--out", "/proc/f.png"],
-    ["map", "--model", "planar_2r", "--tolerances", "coarse", "--out", ""],
-    ["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--out", "/proc/t.json"],
-], ids=lambda a: f"{a[0]} --out {a[-1][:20]!r}")
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", ""],
+        ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", "/proc/r.html"],
+        [
+            "report",
+            "--model",
+            "planar_2r",
+            "--R",
+            "0.5",
+            "--p",
+            "0.99",
+            "--pose",
+            "elbow90",
+            "--out",
+            LONG_NAME + ".html",
+        ],
+        ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", "r.pdf"],
+        ["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--pose", "elbow90", "--out", "/dev/full"],
+        ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--workers", "1", "--out", ""],
+        ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--workers", "1", "--out", "/proc/s.csv"],
+        ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--workers", "1", "--out", LONG_NAME + ".csv"],
+        ["map", "--model", "planar_2r", "--tolerances", "coarse", "--out", "/proc/f.png"],
+        ["map", "--model", "planar_2r", "--tolerances", "coarse", "--out", ""],
+        ["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--out", "/proc/t.json"],
+    ],
+    ids=lambda a: f"{a[0]} --out {a[-1][:20]!r}",
+)
 def test_bad_output_paths_are_one_line_before_any_work(argv, capsys, monkeypatch):
     """An output file that cannot be written is found before the work starts: status 2 and one
     line naming --out, never a traceback, and no solve runs."""
@@ -196,8 +234,29 @@ def test_a_full_device_at_write_time_is_one_line(tmp_path):
     """/dev/full accepts the open and fails the write (no space): one line, status 2."""
     link = tmp_path / "full.csv"
     link.symlink_to("/dev/full")
-    out = subprocess.run([sys.executable, "-m", "tolsynth", "sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.99",
-                          "--workers", "1", "--quiet", "--out", str(link)], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "tolsynth",
+            "sweep",
+            "--model",
+            "planar_2r",
+            "--R",
+            "0.5",
+            "--p",
+            "0.99",
+            "--workers",
+            "1",
+            "--quiet",
+            "--out",
+            str(link),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+    )
     assert out.returncode == 2, out.stderr
     lines = [line for line in out.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "No space left on device" in lines[0] and "Traceback" not in out.stderr
@@ -225,7 +284,25 @@ def test_report_refuses_a_format_it_cannot_write(tmp_path):
     """``report --out x.pdf`` (or .docx, or no suffix) wrote HTML under that name: now refused
     before any work, naming the formats it writes; the API's DesignReport.write likewise."""
     for name in ("x.pdf", "x.docx", "noext"):
-        out = subprocess.run([sys.executable, "-m", "tolsynth", "report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99",
-                              "--out", str(tmp_path / name)], capture_output=True, text=True, timeout=120, cwd=ROOT)
+        out = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "tolsynth",
+                "report",
+                "--model",
+                "planar_2r",
+                "--R",
+                "0.5",
+                "--p",
+                "0.99",
+                "--out",
+                str(tmp_path / name),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            cwd=ROOT,
+        )
         assert out.returncode == 2 and ".html" in out.stderr and ".md" in out.stderr, out.stderr
         assert not (tmp_path / name).exists()

@@ -42,15 +42,18 @@ def test_tolerance_units_wildcards_and_overrides(capsys, xz):
     assert [t[n] for n in ("hp2", "hp3", "hp4")] == [0.04] * 3 and t["h2"] == fig3["h2"]
 
 
-@pytest.mark.parametrize("text, fragment", [
-    ("figure3,h2=0.1,h2=0.2", "h2 given twice"),
-    ("figure3,,,", "empty item 2"),
-    ("figure3,h2=2mrad", "h2 is a length"),
-    ("figure3,x*=1", "matches no error parameter"),
-    ("*=0.02mm", "no tolerance for alpha1"),
-    ("figure3,h2=1parsec", "unknown unit 'parsec'"),
-    ("figure3,figure3", "two tolerance sets"),
-])
+@pytest.mark.parametrize(
+    "text, fragment",
+    [
+        ("figure3,h2=0.1,h2=0.2", "h2 given twice"),
+        ("figure3,,,", "empty item 2"),
+        ("figure3,h2=2mrad", "h2 is a length"),
+        ("figure3,x*=1", "matches no error parameter"),
+        ("*=0.02mm", "no tolerance for alpha1"),
+        ("figure3,h2=1parsec", "unknown unit 'parsec'"),
+        ("figure3,figure3", "two tolerance sets"),
+    ],
+)
 def test_bad_tolerances_are_typed_errors(capsys, text, fragment):
     assert main(["analyze", "--model", "xu_zhang_1988", "--tolerances", text, "--R", "0.2"]) == 2
     err = capsys.readouterr().err
@@ -78,24 +81,66 @@ def test_solve_reaches_alpha_k_bounds_poses_and_p_orientation(capsys):
     k[0] = 3.0
     lo, hi = (np.array(b, dtype=float) for b in m.bounds)
     hi[0] = 0.2  # l1 <= 0.2 mm: below its optimum (0.223 mm), so the bound is active
-    api = tolsynth.synthesize(m, 0.5, 0.99, "uniform", alpha, k=k, bounds=(lo, hi),
-                              poses=["stretched", "elbow90"], Phi=0.005, p_orientation=0.95)
+    api = tolsynth.synthesize(
+        m,
+        0.5,
+        0.99,
+        "uniform",
+        alpha,
+        k=k,
+        bounds=(lo, hi),
+        poses=["stretched", "elbow90"],
+        Phi=0.005,
+        p_orientation=0.95,
+    )
     assert api.success and api.bounds_active == {"l1": "upper"}
-    argv = ["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--alpha", "0.7,l2=0.5,o2=0.9",
-            "--k", "l1=3", "--bounds", "l1=:200um", "--pose", "stretched", "--pose", "elbow90",
-            "--Phi", "5mrad", "--p-orientation", "0.95"]
+    argv = [
+        "solve",
+        "--model",
+        "planar_2r",
+        "--R",
+        "0.5",
+        "--p",
+        "0.99",
+        "--alpha",
+        "0.7,l2=0.5,o2=0.9",
+        "--k",
+        "l1=3",
+        "--bounds",
+        "l1=:200um",
+        "--pose",
+        "stretched",
+        "--pose",
+        "elbow90",
+        "--Phi",
+        "5mrad",
+        "--p-orientation",
+        "0.95",
+    ]
     out = _json(capsys, argv + ["--json"])
     assert out["cost"] == pytest.approx(api.cost, rel=1e-9)
     assert out["bounds_active"] == {"l1": "upper"}
     inp = out["inputs"]
     assert inp["tolsynth_version"] == tolsynth.__version__ and inp["model"]["name"] == "planar_2r"
     assert inp["alpha"] == alpha.tolist() and inp["k"] == k.tolist() and inp["poses"] == ["stretched", "elbow90"]
-    assert inp["bounds"][1] == pytest.approx(hi.tolist(), rel=1e-15) and inp["p_orientation"] == 0.95 and inp["Phi_rad"] == 0.005
+    assert (
+        inp["bounds"][1] == pytest.approx(hi.tolist(), rel=1e-15)
+        and inp["p_orientation"] == 0.95
+        and inp["Phi_rad"] == 0.005
+    )
     # --solver both: everything a single solve shows, side by side
     assert main(argv + ["--solver", "both"]) == 0
     text = capsys.readouterr().out
-    for fragment in ("dual lower bound", "gap (cost - bound)", "mm [upper]", "mrad", f"{api.cost:.8g}",
-                     "position at pose 'elbow90' [1]", "orientation at pose 'stretched' [1]", "SUMT + Powell"):
+    for fragment in (
+        "dual lower bound",
+        "gap (cost - bound)",
+        "mm [upper]",
+        "mrad",
+        f"{api.cost:.8g}",
+        "position at pose 'elbow90' [1]",
+        "orientation at pose 'stretched' [1]",
+        "SUMT + Powell",
+    ):
         assert fragment in text, fragment
     assert text.count("mm [upper]") == 2  # the marker in both columns
 
@@ -128,10 +173,13 @@ def test_solve_rejects_p_orientation_without_phi(capsys):
     assert "--p-orientation" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("extra, fragment", [
-    (["--everywhere"], "given with --everywhere"),
-    (["--solver", "both"], "given with --solver both"),
-])
+@pytest.mark.parametrize(
+    "extra, fragment",
+    [
+        (["--everywhere"], "given with --everywhere"),
+        (["--solver", "both"], "given with --solver both"),
+    ],
+)
 def test_solve_rejects_verify_where_it_would_be_ignored(capsys, extra, fragment):
     """--verify closes the loop of one solve; with --everywhere or both solvers it would silently do
     nothing, so it is a typed error naming the option."""
@@ -148,8 +196,23 @@ def test_solve_and_report_share_the_specification_options():
 
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     opts = {name: {o for a in sub.choices[name]._actions for o in a.option_strings} for name in ("solve", "report")}
-    shared = {"--model", "--R", "--p", "--dist", "--alpha", "--k", "--bounds", "--solver", "--pose", "--Phi",
-              "--p-orientation", "--criterion", "--probability", "--verify", "--lock"}
+    shared = {
+        "--model",
+        "--R",
+        "--p",
+        "--dist",
+        "--alpha",
+        "--k",
+        "--bounds",
+        "--solver",
+        "--pose",
+        "--Phi",
+        "--p-orientation",
+        "--criterion",
+        "--probability",
+        "--verify",
+        "--lock",
+    }
     assert shared <= opts["solve"] and shared <= opts["report"]
 
 

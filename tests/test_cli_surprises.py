@@ -34,13 +34,16 @@ def test_lock_takes_a_unit_suffix(capsys):
     assert out["cost"] == pytest.approx(api.cost, rel=1e-8) and api.tolerances["l1"] == pytest.approx(0.05, rel=1e-12)
 
 
-@pytest.mark.parametrize("locks, fragment", [
-    (["l1=0.05", "l1=0.06"], "--lock l1: given twice"),
-    (["l1=1e-5"], "locks[l1]: 1e-05 mm is outside the parameter's bounds"),
-    (["o1=50um"], "--lock o1: '50um' is not a tolerance"),
-    (["x9=0.1"], "x9"),
-    (["l1"], "NAME=VALUE"),
-])
+@pytest.mark.parametrize(
+    "locks, fragment",
+    [
+        (["l1=0.05", "l1=0.06"], "--lock l1: given twice"),
+        (["l1=1e-5"], "locks[l1]: 1e-05 mm is outside the parameter's bounds"),
+        (["o1=50um"], "--lock o1: '50um' is not a tolerance"),
+        (["x9=0.1"], "x9"),
+        (["l1"], "NAME=VALUE"),
+    ],
+)
 def test_bad_locks_are_one_line_errors(capsys, locks, fragment):
     argv = list(BASE)
     for item in locks:
@@ -61,8 +64,23 @@ def test_lock_and_contributions_with_both_solvers(capsys):
 
 
 def test_lock_and_contributions_with_everywhere(capsys):
-    out = _json(capsys, ["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--everywhere",
-                         "--lock", "l1=0.05", "--contributions", "--json"])
+    out = _json(
+        capsys,
+        [
+            "solve",
+            "--model",
+            "planar_2r",
+            "--R",
+            "0.5",
+            "--p",
+            "0.99",
+            "--everywhere",
+            "--lock",
+            "l1=0.05",
+            "--contributions",
+            "--json",
+        ],
+    )
     assert out["tolerances"]["l1"] == pytest.approx(0.05, rel=1e-9)
     assert "contributions" in out
 
@@ -72,8 +90,12 @@ def test_lock_and_contributions_with_everywhere(capsys):
 # ---------------------------------------------------------------------------------------------
 def _no_worst():
     """A from_dh robot without a 'worst' configuration (planar 2R, the bundled model's table)."""
-    return tolsynth.Mechanism.from_dh([{"a": 500.0, "limits": (-170, 170)}, {"a": 300.0, "limits": (-150, 150)}],
-                                      angle_unit="deg", name="two_link", configurations={"bent": [30.0, 90.0]})
+    return tolsynth.Mechanism.from_dh(
+        [{"a": 500.0, "limits": (-170, 170)}, {"a": 300.0, "limits": (-150, 150)}],
+        angle_unit="deg",
+        name="two_link",
+        configurations={"bent": [30.0, 90.0]},
+    )
 
 
 def test_default_pose_for_a_model_without_worst():
@@ -183,7 +205,9 @@ def test_working_reports_long_runs_only():
     with Working("tolsynth solve: a long run", delay=0.05, every=0.1, file=buf, show=True):
         time.sleep(0.35)
     lines = buf.getvalue().splitlines()
-    assert lines[0].startswith("tolsynth solve: a long run, 0 s") and lines[-1].startswith("tolsynth solve: a long run: done in")
+    assert lines[0].startswith("tolsynth solve: a long run, 0 s") and lines[-1].startswith(
+        "tolsynth solve: a long run: done in"
+    )
     buf = io.StringIO()
     with Working("short", delay=0.5, file=buf, show=True):
         pass

@@ -19,7 +19,9 @@ pytest.importorskip("pyarrow")
 
 def test_solve_out_matches_api(tmp_path, capsys):
     path = tmp_path / "t.json"
-    assert main(["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.9", "--dist", "normal", "--out", str(path)]) == 0
+    assert (
+        main(["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.9", "--dist", "normal", "--out", str(path)]) == 0
+    )
     frame = pd.read_json(path, orient="table", precise_float=True)
     ref = tolsynth.synthesize("planar_2r", 0.5, 0.9, "normal")
     np.testing.assert_allclose(frame["tolerance"].to_numpy(), ref.x, rtol=1e-9)
@@ -43,12 +45,15 @@ def test_solve_out_read_by_plain_pandas(tmp_path, capsys, suffix):
     assert back.attrs["summary"]["cost"] == pytest.approx(frame["cost"].sum(), rel=1e-12)
 
 
-@pytest.mark.parametrize("argv", [
-    ["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.9"],
-    ["montecarlo", "--model", "planar_2r", "--tolerances", "coarse", "--R", "0.5", "--n", "1000"],
-    ["worst-pose", "--model", "planar_2r", "--tolerances", "coarse", "--grid", "5"],
-    ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.9"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.9"],
+        ["montecarlo", "--model", "planar_2r", "--tolerances", "coarse", "--R", "0.5", "--n", "1000"],
+        ["worst-pose", "--model", "planar_2r", "--tolerances", "coarse", "--grid", "5"],
+        ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.9"],
+    ],
+)
 def test_unknown_suffix_refused_before_work(argv, capsys, tmp_path, monkeypatch):
     import importlib
 
@@ -64,16 +69,54 @@ def test_unknown_suffix_refused_before_work(argv, capsys, tmp_path, monkeypatch)
 
 def test_map_data_and_montecarlo_out(tmp_path, capsys):
     data = tmp_path / "map.csv"
-    assert main(["map", "--model", "planar_2r", "--tolerances", "coarse", "--plane", "xy", "--n", "6",
-                 "--quiet", "--data", str(data)]) == 0
+    assert (
+        main(
+            [
+                "map",
+                "--model",
+                "planar_2r",
+                "--tolerances",
+                "coarse",
+                "--plane",
+                "xy",
+                "--n",
+                "6",
+                "--quiet",
+                "--data",
+                str(data),
+            ]
+        )
+        == 0
+    )
     frame = pd.read_csv(data)  # a plain CSV: its metadata in map.csv.json beside it
     pm = tolsynth.probability_map(tolsynth.load_model("planar_2r"), "coarse", plane="xy", n=6, R=0.2, progress=False)
     np.testing.assert_allclose(frame["P"].to_numpy(), pm.P.ravel(), rtol=1e-12, equal_nan=True)
     out = tmp_path / "mc.parquet"
-    assert main(["montecarlo", "--model", "planar_2r", "--tolerances", "coarse", "--R", "0.5", "--n", "2000",
-                 "--seed", "4", "--quiet", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "montecarlo",
+                "--model",
+                "planar_2r",
+                "--tolerances",
+                "coarse",
+                "--R",
+                "0.5",
+                "--n",
+                "2000",
+                "--seed",
+                "4",
+                "--quiet",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     frame = pd.read_parquet(out)
-    mc = tolsynth.monte_carlo(tolsynth.load_model("planar_2r"), "worst", "coarse", R=0.5, n=2000, seed=4, progress=False)
+    mc = tolsynth.monte_carlo(
+        tolsynth.load_model("planar_2r"), "worst", "coarse", R=0.5, n=2000, seed=4, progress=False
+    )
     assert frame.set_index("quantity").loc["p_sphere", "monte_carlo"] == mc.p_sphere
     assert frame.attrs["inputs"]["command_line"]["arguments"]["seed"] == 4
 
@@ -92,8 +135,10 @@ def test_sweep_cli_from_toml_and_arguments(tmp_path, capsys):
     assert frame.attrs["inputs"]["command_line"]["grid"]["p"] == [0.95]
     capsys.readouterr()
     # --json: every row and the inputs; a failing row gives exit 1 and keeps the others
-    assert main(["sweep", "--model", "planar_2r", "--R", "0.5,1e-9", "--p", "0.9", "--workers", "1", "--quiet",
-                 "--json"]) == 1
+    assert (
+        main(["sweep", "--model", "planar_2r", "--R", "0.5,1e-9", "--p", "0.9", "--workers", "1", "--quiet", "--json"])
+        == 1
+    )
     captured = capsys.readouterr()
     out = json.loads(captured.out)
     assert [r["status"] for r in out["rows"]] == ["optimal", "error"]
@@ -101,14 +146,17 @@ def test_sweep_cli_from_toml_and_arguments(tmp_path, capsys):
     assert "1 of 2 solves did not succeed" in captured.err
 
 
-@pytest.mark.parametrize("text, fragment", [
-    ('R = [0.5]\np = [0.9]\nbeta = 1\n', "unknown key"),
-    ('R = [0.5]\np = [0.9]\nalph = 1\n', "did you mean 'alpha'"),
-    ('R = [true]\np = [0.9]\n', "R"),
-    ('R = [0.5]\np = ["x"]\n', "p"),
-    ('R = 0.5\np = 0.9\n[x]\n', "unknown key"),
-    ('R = [0.5\n', "cannot be read as TOML"),
-])
+@pytest.mark.parametrize(
+    "text, fragment",
+    [
+        ("R = [0.5]\np = [0.9]\nbeta = 1\n", "unknown key"),
+        ("R = [0.5]\np = [0.9]\nalph = 1\n", "did you mean 'alpha'"),
+        ("R = [true]\np = [0.9]\n", "R"),
+        ('R = [0.5]\np = ["x"]\n', "p"),
+        ("R = 0.5\np = 0.9\n[x]\n", "unknown key"),
+        ("R = [0.5\n", "cannot be read as TOML"),
+    ],
+)
 def test_sweep_grid_file_errors(tmp_path, capsys, text, fragment):
     grid = tmp_path / "grid.toml"
     grid.write_text(text)
@@ -118,9 +166,11 @@ def test_sweep_grid_file_errors(tmp_path, capsys, text, fragment):
 
 
 def test_every_json_records_inputs(capsys):
-    for argv in (["reproduce", "--no-sumt"],
-                 ["map", "--model", "planar_2r", "--tolerances", "coarse", "--plane", "xy", "--n", "6", "--quiet"],
-                 ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.9", "--workers", "1", "--quiet"]):
+    for argv in (
+        ["reproduce", "--no-sumt"],
+        ["map", "--model", "planar_2r", "--tolerances", "coarse", "--plane", "xy", "--n", "6", "--quiet"],
+        ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.9", "--workers", "1", "--quiet"],
+    ):
         assert main(argv + ["--json"]) == 0
         inp = json.loads(capsys.readouterr().out)["inputs"]
         assert inp["tolsynth_version"] == tolsynth.__version__ and inp["command"] == argv[0]

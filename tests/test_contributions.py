@@ -69,8 +69,12 @@ def test_sphere_loss_shares_against_finite_differences_of_p_ball(mech, optimum):
         return 1.0 - p_ball(np.clip(lam, 0, None), 0.5)
 
     h = 1e-5
-    el = np.array([(loss(eps * np.exp(h * np.eye(mech.n)[i])) - loss(eps * np.exp(-h * np.eye(mech.n)[i]))) / (2 * h)
-                   for i in range(mech.n)])
+    el = np.array(
+        [
+            (loss(eps * np.exp(h * np.eye(mech.n)[i])) - loss(eps * np.exp(-h * np.eye(mech.n)[i]))) / (2 * h)
+            for i in range(mech.n)
+        ]
+    )
     np.testing.assert_allclose(rep.sphere_share[0], el / el.sum(), atol=1e-6)
     assert rep.P_sphere[0] == pytest.approx(1.0 - loss(eps), abs=1e-9)
 
@@ -100,8 +104,24 @@ def test_cli_contributions_and_lock(capsys):
 
     from tolsynth.cli import main
 
-    assert main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--lock", "h3=0.2",
-                 "--contributions", "--json"]) == 0
+    assert (
+        main(
+            [
+                "solve",
+                "--model",
+                "xu_zhang_1988",
+                "--R",
+                "0.5",
+                "--p",
+                "0.99",
+                "--lock",
+                "h3=0.2",
+                "--contributions",
+                "--json",
+            ]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert out["tolerances"]["h3"] == 0.2 and out["inputs"]["locks"] == {"h3": 0.2}
     rows = out["contributions"]["rows"]

@@ -81,8 +81,12 @@ def test_dual_min_is_the_global_minimum(model, w):
     val, ustar = model.dual_min(np.array([w]), lu, uu)
     grid = np.linspace(lu, uu, 200001)
     brute = np.min(model.value(grid) + w * np.exp(2 * grid))
-    ref = minimize_scalar(lambda x: float(model.value(x)) + w * math.exp(2 * x), bounds=(lu, uu), method="bounded",
-                          options={"xatol": 1e-12})
+    ref = minimize_scalar(
+        lambda x: float(model.value(x)) + w * math.exp(2 * x),
+        bounds=(lu, uu),
+        method="bounded",
+        options={"xatol": 1e-12},
+    )
     best = min(brute, ref.fun)
     assert val[0] <= best + 1e-9 * max(1.0, abs(best))  # a valid lower bound, always
     assert lu - 1e-12 <= ustar[0] <= uu + 1e-12
@@ -143,10 +147,14 @@ def test_one_direction_against_scipy_slsqp():
     lo, hi = 0.005, 0.2
     eps, _ = _one_direction(models, a, T, lo, hi)
     cs = CostSet(tuple(models))
-    ref = minimize(lambda u: cs.cost(np.exp(u)), np.full(4, math.log(0.01)), method="SLSQP",
-                   bounds=[(math.log(lo), math.log(hi))] * 4,
-                   constraints=[{"type": "ineq", "fun": lambda u: 1.0 - np.sum(a**2 * np.exp(2 * u)) / T}],
-                   options={"ftol": 1e-12, "maxiter": 500})
+    ref = minimize(
+        lambda u: cs.cost(np.exp(u)),
+        np.full(4, math.log(0.01)),
+        method="SLSQP",
+        bounds=[(math.log(lo), math.log(hi))] * 4,
+        constraints=[{"type": "ineq", "fun": lambda u: 1.0 - np.sum(a**2 * np.exp(2 * u)) / T}],
+        options={"ftol": 1e-12, "maxiter": 500},
+    )
     assert ref.success, ref.message
     assert cs.cost(eps) == pytest.approx(ref.fun, rel=1e-6)
     np.testing.assert_allclose(eps, np.exp(ref.x), rtol=1e-3)
@@ -161,7 +169,8 @@ def test_cost_set_from_user_input():
     cs = cost_set({"model": "exponential", "A": 3, "B": 4}, names)
     assert all(m == Exponential(3, 4) for m in cs.models)
     assert cost_model({"model": "tabulated", "eps": [0.1, 0.2], "costs": [2, 1]}).cost(0.15) == pytest.approx(
-        math.exp(np.interp(math.log(0.15), np.log([0.1, 0.2]), np.log([2, 1]))))
+        math.exp(np.interp(math.log(0.15), np.log([0.1, 0.2]), np.log([2, 1])))
+    )
     with pytest.raises(InputError, match="cost.model"):
         cost_model({"model": "cubic"})
     with pytest.raises(InputError, match="unknown fields"):

@@ -20,16 +20,24 @@ def _with(tmp_path, l1_extra: str, name="m.toml") -> Path:
 
 
 def test_model_file_cost_processes_and_lock(tmp_path):
-    path = _with(tmp_path, 'cost = {model = "chase", A = 1.0, B = 0.4, k = 1.0}\n'
-                           'processes = [{name = "turning", cost = {model = "chase", A = 1.0, B = 0.4, k = 1.0}, lower = 0.1, upper = 1.0},\n'
-                           '             {name = "lapping", cost = {model = "exponential", A = 12.0, B = 20.0}, lower = 0.002, upper = 0.015}]\n')
+    path = _with(
+        tmp_path,
+        'cost = {model = "chase", A = 1.0, B = 0.4, k = 1.0}\n'
+        'processes = [{name = "turning", cost = {model = "chase", A = 1.0, B = 0.4, k = 1.0}, lower = 0.1, upper = 1.0},\n'
+        '             {name = "lapping", cost = {model = "exponential", A = 12.0, B = 20.0}, lower = 0.002, upper = 0.015}]\n',
+    )
     m = tolsynth.load_model(path)
     assert m.cost_models == {"l1": Chase(1.0, 0.4, 1.0)}
     assert [p.name for p in m.processes["l1"]] == ["turning", "lapping"]
     api = tolsynth.synthesize("planar_2r", 0.5, 0.99, cost={"l1": Chase(1.0, 0.4, 1.0)})
     fromfile = tolsynth.synthesize(m, 0.5, 0.99)
     assert fromfile.cost == pytest.approx(api.cost, rel=1e-9)
-    procs = {"l1": [Process("turning", Chase(1.0, 0.4, 1.0), 0.1, 1.0), Process("lapping", Exponential(12.0, 20.0), 0.002, 0.015)]}
+    procs = {
+        "l1": [
+            Process("turning", Chase(1.0, 0.4, 1.0), 0.1, 1.0),
+            Process("lapping", Exponential(12.0, 20.0), 0.002, 0.015),
+        ]
+    }
     a = tolsynth.synthesize_processes("planar_2r", 0.2, 0.99, procs)
     b = tolsynth.synthesize_processes(m, 0.2, 0.99)
     assert a.processes == b.processes and a.cost == pytest.approx(b.cost, rel=1e-9)
@@ -38,13 +46,16 @@ def test_model_file_cost_processes_and_lock(tmp_path):
     assert tolsynth.synthesize(locked, 0.5, 0.99).tolerances["l1"] == 0.05
 
 
-@pytest.mark.parametrize("extra, match", [
-    ('cost = {model = "cubic"}\n', "cost.model"),
-    ('cost = {model = "power", k = 1.0}\n', "missing"),
-    ("lock = -1.0\n", "lock"),
-    ('processes = [{name = "t", lower = 0.1, upper = 1.0}]\n', "cost"),
-    ("costs = 1\n", "costs"),
-])
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        ('cost = {model = "cubic"}\n', "cost.model"),
+        ('cost = {model = "power", k = 1.0}\n', "missing"),
+        ("lock = -1.0\n", "lock"),
+        ('processes = [{name = "t", lower = 0.1, upper = 1.0}]\n', "cost"),
+        ("costs = 1\n", "costs"),
+    ],
+)
 def test_model_file_bad_designer_fields(tmp_path, extra, match):
     with pytest.raises(tolsynth.ModelFileError, match=match):
         tolsynth.load_model(_with(tmp_path, extra))

@@ -24,10 +24,19 @@ def _one_direction(models, lower=1e-4, upper=10.0):
     A = np.zeros((3, n))
     A[0] = A_ROW
     return Specification(
-        names=tuple(f"e{i}" for i in range(n)), units=("mm",) * n, R=1.0, p=0.99, z=SCALE,
-        distribution="uniform", c=3.0, alpha=np.full(n, 0.7), k=np.ones(n),
-        lower=np.full(n, lower), upper=np.full(n, upper),
-        blocks=(Block("x", "position", SCALE, A),), cost=CostSet(tuple(models)),
+        names=tuple(f"e{i}" for i in range(n)),
+        units=("mm",) * n,
+        R=1.0,
+        p=0.99,
+        z=SCALE,
+        distribution="uniform",
+        c=3.0,
+        alpha=np.full(n, 0.7),
+        k=np.ones(n),
+        lower=np.full(n, lower),
+        upper=np.full(n, upper),
+        blocks=(Block("x", "position", SCALE, A),),
+        cost=CostSet(tuple(models)),
     )
 
 

@@ -26,8 +26,12 @@ PUMA_LINKS = [
     {"d": 0.0, "a": 0.0, "alpha": -90.0, "limits": (-100, 100)},
     {"d": 0.0, "a": 0.0, "alpha": 0.0, "limits": (-266, 266)},
 ]
-PUMA_CONFIGS = {"qz": [0, 0, 0, 0, 0, 0], "qr": [0, 90, -90, 0, 0, 0], "qs": [0, 0, -90, 0, 0, 0],
-                "qn": [0, 45, -180, 0, 45, 0]}
+PUMA_CONFIGS = {
+    "qz": [0, 0, 0, 0, 0, 0],
+    "qr": [0, 90, -90, 0, 0, 0],
+    "qs": [0, 0, -90, 0, 0, 0],
+    "qn": [0, 45, -180, 0, 45, 0],
+}
 # Universal Robots' UR5 table (m, rad), given in SI units to check the unit conversion
 UR5_A = [0.0, -0.425, -0.39225, 0.0, 0.0, 0.0]
 UR5_D = [0.089159, 0.0, 0.0, 0.10915, 0.09465, 0.0823]
@@ -35,14 +39,19 @@ UR5_ALPHA = [PI2, 0.0, 0.0, PI2, -PI2, 0.0]
 
 
 def puma():
-    return tolsynth.Mechanism.from_dh(PUMA_LINKS, "standard", name="puma560", configurations=PUMA_CONFIGS, angle_unit="deg")
+    return tolsynth.Mechanism.from_dh(
+        PUMA_LINKS, "standard", name="puma560", configurations=PUMA_CONFIGS, angle_unit="deg"
+    )
 
 
 def ur5_in_si():
-    links = [{"a": a, "d": d, "alpha": al, "limits": (-2 * math.pi, 2 * math.pi)}
-             for a, d, al in zip(UR5_A, UR5_D, UR5_ALPHA)]
-    return tolsynth.Mechanism.from_dh(links, name="ur5", length_unit="m", angle_unit="rad",
-                                      configurations={"worst": [0, 0, 0, -PI2, 0, 0]})
+    links = [
+        {"a": a, "d": d, "alpha": al, "limits": (-2 * math.pi, 2 * math.pi)}
+        for a, d, al in zip(UR5_A, UR5_D, UR5_ALPHA)
+    ]
+    return tolsynth.Mechanism.from_dh(
+        links, name="ur5", length_unit="m", angle_unit="rad", configurations={"worst": [0, 0, 0, -PI2, 0, 0]}
+    )
 
 
 def ur5_in_mm():
@@ -51,7 +60,9 @@ def ur5_in_mm():
     d = [89.159, 0.0, 0.0, 109.15, 94.65, 82.3]
     alpha = [90.0, 0.0, 0.0, 90.0, -90.0, 0.0]
     links = [{"a": a[i], "d": d[i], "alpha": alpha[i], "limits": (-360, 360)} for i in range(6)]
-    return tolsynth.Mechanism.from_dh(links, name="ur5", configurations={"worst": [0, 0, 0, -90, 0, 0]}, angle_unit="deg")
+    return tolsynth.Mechanism.from_dh(
+        links, name="ur5", configurations={"worst": [0, 0, 0, -90, 0, 0]}, angle_unit="deg"
+    )
 
 
 def panda():
@@ -64,9 +75,14 @@ def panda():
     links = [{"a": a[i], "d": d[i], "alpha": alpha[i], "limits": (lo[i], hi[i])} for i in range(7)]
     m = tolsynth.load_model("panda")
     return tolsynth.Mechanism.from_dh(
-        links, "modified", name="panda", angle_unit="rad", tool=[("Tz", 107.0, "flange")],
+        links,
+        "modified",
+        name="panda",
+        angle_unit="rad",
+        tool=[("Tz", 107.0, "flange")],
         errors=["h*", "s[1-6]", "alpha*", "o*", "flange"],
-        configurations={c: list(q) for c, q in m.configurations.items()})
+        configurations={c: list(q) for c, q in m.configurations.items()},
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -125,10 +141,14 @@ def _dh_standard(q, a, d, alpha):
     T = np.eye(4)
     for qi, ai, di, al in zip(q, a, d, alpha):
         ct, st, ca, sa = math.cos(qi), math.sin(qi), math.cos(al), math.sin(al)
-        T = T @ np.array([[ct, -st * ca, st * sa, ai * ct],
-                          [st, ct * ca, -ct * sa, ai * st],
-                          [0.0, sa, ca, di],
-                          [0.0, 0.0, 0.0, 1.0]])
+        T = T @ np.array(
+            [
+                [ct, -st * ca, st * sa, ai * ct],
+                [st, ct * ca, -ct * sa, ai * st],
+                [0.0, sa, ca, di],
+                [0.0, 0.0, 0.0, 1.0],
+            ]
+        )
     return T
 
 
@@ -151,11 +171,17 @@ def test_puma_and_ur5_fk_against_numpy_chains():
 def test_sensitivity_of_from_dh_against_central_differences():
     """A base, a tool and an offset, with tolerances in um and deg: columns per tolerance unit."""
     m = tolsynth.Mechanism.from_dh(
-        [{"d": 100.0, "a": 50.0, "alpha": 90.0, "offset": 10.0, "limits": (-180, 180)},
-         {"a": 300.0, "limits": (-180, 180)}, {"a": 200.0, "alpha": -90.0, "limits": (-180, 180)}],
-        base=[("Tz", 400.0), ("Rx", 5.0)], tool=[("Tx", 30.0)],
-        tolerance_units={"length": "um", "angle": "deg"}, bounds={"length": (1, 5000), "angle": (0.001, 3)},
-        angle_unit="deg")
+        [
+            {"d": 100.0, "a": 50.0, "alpha": 90.0, "offset": 10.0, "limits": (-180, 180)},
+            {"a": 300.0, "limits": (-180, 180)},
+            {"a": 200.0, "alpha": -90.0, "limits": (-180, 180)},
+        ],
+        base=[("Tz", 400.0), ("Rx", 5.0)],
+        tool=[("Tx", 30.0)],
+        tolerance_units={"length": "um", "angle": "deg"},
+        bounds={"length": (1, 5000), "angle": (0.001, 3)},
+        angle_unit="deg",
+    )
     assert m.error_parameters[:2] == ("base1", "base2") and m.error_parameters[-1] == "tool1"
     q = np.radians([20.0, -35.0, 50.0])
     S = m.sensitivity(q)
@@ -180,29 +206,32 @@ def _links(i, **change):
     return links
 
 
-@pytest.mark.parametrize("kwargs, error, field", [
-    ({"links": _links(1, a="long")}, ModelFileError, "links[1].a"),
-    ({"links": _links(0, a=math.nan)}, ModelFileError, "links[0].a"),
-    ({"links": _links(0, limits=(90, -90))}, ModelFileError, "links[0].limits"),
-    ({"links": _links(1, limits=(1, 2, 3))}, ModelFileError, "links[1].limits"),
-    ({"links": _links(1, lenght=3.0)}, UnknownNameError, "links[1].lenght"),
-    ({"links": _links(0, h=3.0)}, UnknownNameError, "links[0].h"),  # h is the modified convention's
-    ({"links": [GOOD[0], {"a": 1.0}]}, InputError, "links[1].limits"),
-    ({"links": [GOOD[0], 5.0]}, InputError, "links[1]"),
-    ({"links": []}, InputError, "links"),
-    ({"links": GOOD, "convention": "craig"}, InputError, "convention"),
-    ({"links": GOOD, "length_unit": "inch"}, ModelFileError, "units.length"),
-    ({"links": GOOD, "k": {"a2": -1.0}}, ModelFileError, "k[a2]"),
-    ({"links": GOOD, "k": {"a9": 1.0}}, UnknownNameError, "k[a9]"),
-    ({"links": GOOD, "bounds": {"angle": (0.0, 1.0)}}, ModelFileError, "bounds[alpha1]"),
-    ({"links": GOOD, "tolerance_units": {"length": "mrad"}}, ModelFileError, "tolerance_units[a1]"),
-    ({"links": GOOD, "errors": ["b*"]}, UnknownNameError, "errors[0]"),
-    ({"links": GOOD, "configurations": {"home": [0.0]}}, InputError, "configurations[home]"),
-    ({"links": GOOD, "configurations": {"home": {"q1": 0.0, "q3": 1.0}}}, ModelFileError, "configurations[home]"),
-    ({"links": GOOD, "base": [("Tw", 1.0)]}, InputError, "base[0]"),
-    ({"links": GOOD, "tool": [("Tz", "x")]}, ModelFileError, "tool[0]"),
-    ({"links": [dict(GOOD[0], name="j"), dict(GOOD[1], name="j")]}, ModelFileError, "joints"),
-])
+@pytest.mark.parametrize(
+    "kwargs, error, field",
+    [
+        ({"links": _links(1, a="long")}, ModelFileError, "links[1].a"),
+        ({"links": _links(0, a=math.nan)}, ModelFileError, "links[0].a"),
+        ({"links": _links(0, limits=(90, -90))}, ModelFileError, "links[0].limits"),
+        ({"links": _links(1, limits=(1, 2, 3))}, ModelFileError, "links[1].limits"),
+        ({"links": _links(1, lenght=3.0)}, UnknownNameError, "links[1].lenght"),
+        ({"links": _links(0, h=3.0)}, UnknownNameError, "links[0].h"),  # h is the modified convention's
+        ({"links": [GOOD[0], {"a": 1.0}]}, InputError, "links[1].limits"),
+        ({"links": [GOOD[0], 5.0]}, InputError, "links[1]"),
+        ({"links": []}, InputError, "links"),
+        ({"links": GOOD, "convention": "craig"}, InputError, "convention"),
+        ({"links": GOOD, "length_unit": "inch"}, ModelFileError, "units.length"),
+        ({"links": GOOD, "k": {"a2": -1.0}}, ModelFileError, "k[a2]"),
+        ({"links": GOOD, "k": {"a9": 1.0}}, UnknownNameError, "k[a9]"),
+        ({"links": GOOD, "bounds": {"angle": (0.0, 1.0)}}, ModelFileError, "bounds[alpha1]"),
+        ({"links": GOOD, "tolerance_units": {"length": "mrad"}}, ModelFileError, "tolerance_units[a1]"),
+        ({"links": GOOD, "errors": ["b*"]}, UnknownNameError, "errors[0]"),
+        ({"links": GOOD, "configurations": {"home": [0.0]}}, InputError, "configurations[home]"),
+        ({"links": GOOD, "configurations": {"home": {"q1": 0.0, "q3": 1.0}}}, ModelFileError, "configurations[home]"),
+        ({"links": GOOD, "base": [("Tw", 1.0)]}, InputError, "base[0]"),
+        ({"links": GOOD, "tool": [("Tz", "x")]}, ModelFileError, "tool[0]"),
+        ({"links": [dict(GOOD[0], name="j"), dict(GOOD[1], name="j")]}, ModelFileError, "joints"),
+    ],
+)
 def test_bad_input_is_a_typed_error_naming_the_field(kwargs, error, field):
     with pytest.raises(error) as info:
         tolsynth.Mechanism.from_dh(**{"angle_unit": "deg", **kwargs})

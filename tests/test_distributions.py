@@ -56,8 +56,7 @@ def test_model_file_declares_shapes_and_the_default_uses_them(tmp_path):
     m = tolsynth.load_model(str(f))
     assert m.distribution["h3"] == "normal" and m.distribution["h2"] == "uniform"
     r_file = tolsynth.synthesize(m, R=0.5, p=0.99)  # distribution=None: the file's shapes
-    r_api = tolsynth.synthesize(tolsynth.load_model("xu_zhang_1988"), R=0.5, p=0.99,
-                                distribution={"h3": "normal"})
+    r_api = tolsynth.synthesize(tolsynth.load_model("xu_zhang_1988"), R=0.5, p=0.99, distribution={"h3": "normal"})
     assert r_file.cost == pytest.approx(r_api.cost, rel=1e-7)  # the solver tolerance
     # distribution= as a string still sets every parameter at once
     r_all = tolsynth.synthesize(m, R=0.5, p=0.99, distribution="uniform")
@@ -78,14 +77,46 @@ def test_bad_per_parameter_input_is_typed(xz):
 
 
 def test_command_line_takes_per_parameter_shapes():
-    out = subprocess.run([sys.executable, "-m", "tolsynth", "analyze", "--model", "xu_zhang_1988", "--tolerances",
-                          "figure3", "--R", "0.3", "--dist", "*=uniform,h2=normal", "--json"],
-                         capture_output=True, text=True, timeout=120)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "tolsynth",
+            "analyze",
+            "--model",
+            "xu_zhang_1988",
+            "--tolerances",
+            "figure3",
+            "--R",
+            "0.3",
+            "--dist",
+            "*=uniform,h2=normal",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert out.returncode == 0, out.stderr
     d = json.loads(out.stdout)
     xz = tolsynth.load_model("xu_zhang_1988")
     a = xz.analyze("worst", "figure3", {"*": "uniform", "h2": "normal"}, R=0.3)
     np.testing.assert_allclose(d["principal_std"], a.principal_std, rtol=1e-12)
-    bad = subprocess.run([sys.executable, "-m", "tolsynth", "analyze", "--model", "xu_zhang_1988", "--tolerances",
-                          "figure3", "--dist", "h2=gamma"], capture_output=True, text=True, timeout=120)
+    bad = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "tolsynth",
+            "analyze",
+            "--model",
+            "xu_zhang_1988",
+            "--tolerances",
+            "figure3",
+            "--dist",
+            "h2=gamma",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert bad.returncode != 0 and "Traceback" not in bad.stderr and "--dist" in bad.stderr

@@ -88,8 +88,9 @@ def test_robots_dh_block_says_true_things():
     T = np.eye(4)
     for q, ai, di, al in zip(np.radians([0, 0, 0, -90, 0, 0]), a, d, alpha):
         ct, st, ca, sa = math.cos(q), math.sin(q), math.cos(al), math.sin(al)
-        T = T @ np.array([[ct, -st * ca, st * sa, ai * ct], [st, ct * ca, -ct * sa, ai * st],
-                          [0, sa, ca, di], [0, 0, 0, 1]])
+        T = T @ np.array(
+            [[ct, -st * ca, st * sa, ai * ct], [st, ct * ca, -ct * sa, ai * st], [0, sa, ca, di], [0, 0, 0, 1]]
+        )
     np.testing.assert_allclose(T[:3, 3], [-911.9, -191.45, 89.159], atol=1e-9)  # the comment
     np.testing.assert_allclose(ur5.fk("stretched"), T, atol=1e-9)
     from tolsynth.probability.stats import covariance, principal
@@ -107,9 +108,15 @@ def test_every_page_is_in_the_toctree_and_no_page_cites_notes_outside_the_reposi
     listed = {line.strip() for t in toctrees for line in t.splitlines() if line.strip() and not line.startswith(":")}
     pages = {p.stem for p in DOCS.glob("*.md")} | {p.stem for p in DOCS.glob("*.rst")}
     assert pages - {"index"} <= listed, sorted(pages - {"index"} - listed)
-    texts = {p: p.read_text(encoding="utf-8") for p in [*DOCS.glob("*.md"), ROOT / "README.md",
-                                                         *(ROOT / "notebooks").glob("*.py"),
-                                                         ROOT / "models" / "xu_zhang_1988.toml"]}
+    texts = {
+        p: p.read_text(encoding="utf-8")
+        for p in [
+            *DOCS.glob("*.md"),
+            ROOT / "README.md",
+            *(ROOT / "notebooks").glob("*.py"),
+            ROOT / "models" / "xu_zhang_1988.toml",
+        ]
+    }
     for path, text in texts.items():
         assert not re.search(r"RECONSTRUCTION\.md|DIGEST\.md|shared/paper", text), path
         assert not re.search(r"\b[Ii]ssues? \d+|\bissue notes\b", text), path
@@ -143,9 +150,27 @@ def test_sphinx_build_without_executing_the_notebooks(tmp_path):
     pytest.importorskip("myst_nb")
     pytest.importorskip("pydata_sphinx_theme")
     out = tmp_path / "html"
-    run = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-b", "html",
-                          "-D", "nb_execution_mode=off", "-d", str(tmp_path / "doctrees"), str(DOCS), str(out)],
-                         capture_output=True, text=True, timeout=600, cwd=ROOT)
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sphinx",
+            "-W",
+            "--keep-going",
+            "-b",
+            "html",
+            "-D",
+            "nb_execution_mode=off",
+            "-d",
+            str(tmp_path / "doctrees"),
+            str(DOCS),
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ROOT,
+    )
     assert run.returncode == 0, run.stderr[-4000:]
     api = (out / "generated" / "tolsynth.SynthesisResult.html").read_text(encoding="utf-8")
     assert "summary" in api and "to_frame" in api  # own and inherited (Tabular) methods

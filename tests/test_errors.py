@@ -205,7 +205,7 @@ MALFORMED = [
     ("planar_2r", [(r'^length = "mm"', 'length = "furlong"')], "units.length", ["unknown unit", "furlong"]),
     ("planar_2r", [(r'^unit = "mrad"', 'unit = "milliradian"')], "error_parameters[2].unit", ["unknown unit"]),
     ("planar_2r", [(r'^unit = "mm"', 'unit = "mrad"')], "error_parameters[0].unit", ["not a unit of length"]),
-    ("planar_2r", [(r'^k = 1.0\n', "")], "error_parameters[0].k", ["missing"]),
+    ("planar_2r", [(r"^k = 1.0\n", "")], "error_parameters[0].k", ["missing"]),
     ("planar_2r", [(r'alpha = "alpha1" \}', 'alpha = "l1" }')], "chain.links[0].alpha", ["'l1'", "length", "angle"]),
     ("planar_2r", [(r'a = "l1", alpha', 'a = "l1", h = "l1", alpha')], "chain.links[0].h", ["'h'", "standard"]),
     ("xu_zhang_1988", [(r'alpha = "alpha0"', 'alpha = "alpha0", d = "s1"')], "chain.links[0].d", ["'d'", "modified"]),

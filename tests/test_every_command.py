@@ -38,10 +38,12 @@ def _args(name):
 @pytest.mark.parametrize("name", MODELS)
 def test_every_command_runs(name):
     m, tol, pose = _args(name)
-    for argv in (["analyze", "--model", name, "--tolerances", tol, "--R", "0.5", *pose],
-                 ["solve", "--model", name, "--R", "0.5", "--p", "0.99", *pose],
-                 ["montecarlo", "--model", name, "--tolerances", tol, "--R", "0.5", "--n", "2000", *pose],
-                 ["worst-pose", "--model", name, "--tolerances", tol, "--grid", "3"]):
+    for argv in (
+        ["analyze", "--model", name, "--tolerances", tol, "--R", "0.5", *pose],
+        ["solve", "--model", name, "--R", "0.5", "--p", "0.99", *pose],
+        ["montecarlo", "--model", name, "--tolerances", tol, "--R", "0.5", "--n", "2000", *pose],
+        ["worst-pose", "--model", name, "--tolerances", tol, "--grid", "3"],
+    ):
         out = _run(argv)
         assert out["inputs"]["model"]["name"] == name, argv
 

@@ -100,6 +100,7 @@ def test_one_uniform_and_a_trapezoid():
 @pytest.mark.parametrize("n,R", [(3, 0.4), (6, 1.3), (12, 2.0)])
 def test_irwin_hall(n, R):
     """n equal uniforms on [-1, 1]: S = 2 IH_n - n, P(|S| <= R) from the Irwin-Hall CDF."""
+
     def F(x):
         return sum((-1) ** k * comb(n, k) * (x - k) ** n for k in range(int(math.floor(x)) + 1)) / factorial(n)
 
@@ -162,8 +163,16 @@ def test_planar_arm_exact_design_has_a_certain_normal_direction():
     assert r.success and r.inputs["probability"] == "exact"
     g = tolsynth.synthesize("planar_2r", 0.5, 0.9)
     assert abs(r.cost / g.cost - 1) < 0.1  # the same design problem, another reading of p
-    mc = tolsynth.monte_carlo("planar_2r", list(r.spec.poses.values())[0], r.x, R=0.5, n=200_000, seed=3,
-                              directions=r.constraints[0].directions[:, :1], check_limits=False)
+    mc = tolsynth.monte_carlo(
+        "planar_2r",
+        list(r.spec.poses.values())[0],
+        r.x,
+        R=0.5,
+        n=200_000,
+        seed=3,
+        directions=r.constraints[0].directions[:, :1],
+        check_limits=False,
+    )
     lo, hi = mc.p_directions_ci[0]
     assert lo <= 0.9 + 1e-3 and hi >= 0.9 - 1e-3, (lo, hi)
 

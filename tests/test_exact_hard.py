@@ -37,9 +37,12 @@ def _model_rows(model, dist, p=0.9):
 
 
 # ------------------------------------------------------------------------- the parts themselves
-@pytest.mark.parametrize("part", [part_of(s) for s in ("uniform", "triangular", "normal", "truncnormal",
-                                                       "truncnormal(0.5)", "truncnormal(5)")]
-                         + [cap_of(0.5), cap_of(2.0), cap_of(5.0)], ids=lambda p: f"{p.kind}{p.beta:g}")
+@pytest.mark.parametrize(
+    "part",
+    [part_of(s) for s in ("uniform", "triangular", "normal", "truncnormal", "truncnormal(0.5)", "truncnormal(5)")]
+    + [cap_of(0.5), cap_of(2.0), cap_of(5.0)],
+    ids=lambda p: f"{p.kind}{p.beta:g}",
+)
 def test_envelopes_bound_the_characteristic_function_and_never_rise(part):
     """The envelopes the truncation bounds rest on: above |cf| on a fine grid up to s = 1e5 (cf in
     closed form: sinc, its square, the Gaussian, and the truncated normal through SciPy's Faddeeva
@@ -87,8 +90,15 @@ def test_truncated_normal_table_against_the_faddeeva_function(beta):
 
 
 # ------------------------------------------------------------------- a dominant term, tiny ones
-CASES = [("uniform", "uniform"), ("truncnormal", "uniform"), ("uniform", "truncnormal"), ("triangular", "normal"),
-         ("truncnormal", "truncnormal"), ("normal", "uniform"), ("truncnormal(0.5)", "triangular")]
+CASES = [
+    ("uniform", "uniform"),
+    ("truncnormal", "uniform"),
+    ("uniform", "truncnormal"),
+    ("triangular", "normal"),
+    ("truncnormal", "truncnormal"),
+    ("normal", "uniform"),
+    ("truncnormal(0.5)", "triangular"),
+]
 
 
 @pytest.mark.parametrize("n1,n2", CASES)
@@ -103,8 +113,15 @@ def test_two_terms_against_quadrature(n1, n2, ratio):
         assert abs(P - ref) <= err + 2e-12, (R, P, ref, err)
 
 
-@pytest.mark.parametrize("n1,n2,ratio", [("uniform", "uniform", 0.5), ("truncnormal", "uniform", 1e-3),
-                                         ("triangular", "normal", 0.2), ("uniform", "truncnormal", 0.7)])
+@pytest.mark.parametrize(
+    "n1,n2,ratio",
+    [
+        ("uniform", "uniform", 0.5),
+        ("truncnormal", "uniform", 1e-3),
+        ("triangular", "normal", 0.2),
+        ("uniform", "truncnormal", 0.7),
+    ],
+)
 def test_sphere_kernel_against_quadrature(n1, n2, ratio):
     """The sphere's kernel ``P - 2 R f(R)`` of a direction against quadrature of P and of the density."""
     from tolsynth.probability.exact_rows import evaluate
@@ -123,8 +140,11 @@ def test_a_dominant_term_among_many_near_zero(small):
     b = np.array([1.0, 0.5, 0.3] + [small * (1 + k) for k in range(5)])
     for R in (0.4, 1.2, 1.8, 2.2):
         P, err = direction_probability(b, names, R, tol=1e-10, return_error=True)
-        ref = fft_probability(list(b[:3]), names[:3], R, 2e-3) if small < 1e-6 else \
-            fft_probability(list(b), names, R, min(2e-3, small))
+        ref = (
+            fft_probability(list(b[:3]), names[:3], R, 2e-3)
+            if small < 1e-6
+            else fft_probability(list(b), names, R, min(2e-3, small))
+        )
         assert err <= 1e-10
         assert abs(P - ref) <= 1e-8 if small >= 1e-6 else abs(P - ref) <= 1e-9 + 20 * small
 
@@ -136,9 +156,19 @@ def test_the_input_that_made_the_old_evaluator_raise():
     while the next float of R passed: such knife edges made a solve fail or not depending on the
     design the warm-started runs before it left.  Now: a value within 1e-10, equal to Olds' formula
     in rational arithmetic."""
-    b = [9.350782719455504e-18, 4.986023021342734e-17, 2.6947488179485835e-17, 2.5358484119842838e-18,
-         2.8387329663433656e-18, 2.5358484119842838e-18, 0.0, 2.519605716512743e-33, 0.4010276964244558,
-         0.2387763762606198, 0.24366218611324772]
+    b = [
+        9.350782719455504e-18,
+        4.986023021342734e-17,
+        2.6947488179485835e-17,
+        2.5358484119842838e-18,
+        2.8387329663433656e-18,
+        2.5358484119842838e-18,
+        0.0,
+        2.519605716512743e-33,
+        0.4010276964244558,
+        0.2387763762606198,
+        0.24366218611324772,
+    ]
     for R in (0.7980079978169268, 0.7980079978169269):
         P, err = direction_probability(b, ["uniform"] * 11, R, tol=1e-10, return_error=True)
         assert err <= 1e-10
@@ -173,8 +203,12 @@ def _grouped_fft(groups, R, h):
 def _fft_groups(groups, R, h):
     W = sum(b * c for b, _, c in groups) + 2 * h
     # the sum of many terms concentrates: the grid needs only 40 standard deviations
-    sd = math.sqrt(sum(c * b * b * (1 / 3 if nm == "uniform" else 1 / 6 if nm == "triangular"
-                                    else shape(nm).variance) for b, nm, c in groups))
+    sd = math.sqrt(
+        sum(
+            c * b * b * (1 / 3 if nm == "uniform" else 1 / 6 if nm == "triangular" else shape(nm).variance)
+            for b, nm, c in groups
+        )
+    )
     W = min(W, 40 * sd)
     N = 1 << int(math.ceil(math.log2(2 * W / h + 8)))
     j = np.arange(N)
@@ -201,8 +235,9 @@ def test_the_papers_robot_with_mixed_shapes_for_every_p(p):
     for w in E.T:
         b = np.abs(w @ A * eps)
         P, err = direction_probability(b, sh, 0.5, tol=1e-10, return_error=True)
-        ref = fft_probability(list(b[b > 1e-12]), [nm for nm, x in zip(names, b) if x > 1e-12], 0.5,
-                              float(b.max()) / 32000)
+        ref = fft_probability(
+            list(b[b > 1e-12]), [nm for nm, x in zip(names, b) if x > 1e-12], 0.5, float(b.max()) / 32000
+        )
         assert err <= 1e-10 and abs(P - ref) <= 3e-10
 
 
@@ -325,8 +360,9 @@ def test_values_do_not_depend_on_exact_solves_before(rng):
 
 
 # ------------------------------------------------------------------------------------- speed
-@pytest.mark.parametrize("model,dist,p", [("xu_zhang_1988", MIXED, 0.9), ("xu_zhang_1988", MIXED, 0.5),
-                                          ("planar_2r", PLANAR_MIXED, 0.5)])
+@pytest.mark.parametrize(
+    "model,dist,p", [("xu_zhang_1988", MIXED, 0.9), ("xu_zhang_1988", MIXED, 0.5), ("planar_2r", PLANAR_MIXED, 0.5)]
+)
 def test_the_evaluations_of_the_slow_solves_are_fast(model, dist, p):
     """What an exact solve of these specifications evaluates (they ran for minutes): the principal
     directions, the worst direction, 400 directions and the sphere, each within seconds (the sum
@@ -334,10 +370,12 @@ def test_the_evaluations_of_the_slow_solves_are_fast(model, dist, p):
     A, eps, sh = _model_rows(model, dist, p)
     D = np.random.default_rng(1).normal(size=(400, 3))
     D /= np.linalg.norm(D, axis=1, keepdims=True)
-    for f in (lambda: direction_probability_batch(D @ A * eps, sh, 0.5, tol=1e-10),
-              lambda: components_probability(A, eps, sh, 0.5, tol=1e-10),
-              lambda: worst_direction(A, eps, sh, 0.5, tol=1e-10),
-              lambda: ball_probability(A, eps, sh, 0.5, tol=1e-6, return_error=True)):
+    for f in (
+        lambda: direction_probability_batch(D @ A * eps, sh, 0.5, tol=1e-10),
+        lambda: components_probability(A, eps, sh, 0.5, tol=1e-10),
+        lambda: worst_direction(A, eps, sh, 0.5, tol=1e-10),
+        lambda: ball_probability(A, eps, sh, 0.5, tol=1e-6, return_error=True),
+    ):
         t0 = time.perf_counter()
         out = f()
         assert time.perf_counter() - t0 < 8.0

@@ -23,7 +23,7 @@ def unit_distribution(name: str):
         return stats.norm(0.0, 1.0 / 3.0)
     if key == "triangular":
         return stats.triang(0.5, -1.0, 2.0)
-    beta = 2.0 if key == "truncnormal" else float(key[len("truncnormal("):-1])
+    beta = 2.0 if key == "truncnormal" else float(key[len("truncnormal(") : -1])
     return stats.truncnorm(-beta, beta, scale=1.0 / beta)
 
 
@@ -113,7 +113,9 @@ def test_references_reproduce_closed_forms():
     n, R = 4, 1.3
 
     def ih(x):
-        return sum((-1) ** k * math.comb(n, k) * (x - k) ** n for k in range(int(math.floor(x)) + 1)) / math.factorial(n)
+        return sum((-1) ** k * math.comb(n, k) * (x - k) ** n for k in range(int(math.floor(x)) + 1)) / math.factorial(
+            n
+        )
 
     assert abs(float(olds([1.0] * n, R)) - (ih((n + R) / 2) - ih((n - R) / 2))) < 1e-15
     P, D = two_term(1.0, "uniform", 1.0, "uniform", 0.6)

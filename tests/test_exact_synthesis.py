@@ -95,14 +95,18 @@ def test_all_normal_errors_are_the_gaussian_problem_solved_by_cvxpy(xz):
     v = cp.Variable(xz.n)
     S = A * (z_of_p(0.99) / (3.0 * R))  # sigma_i = eps_i / 3; z sigma_j <= R
     lmi = S @ cp.diag(v) @ S.T
-    prob = cp.Problem(cp.Minimize(cp.sum(cp.multiply(k, cp.power(v, -alpha / 2, approx=False)))),
-                      [0.5 * (lmi + lmi.T) << np.eye(3), v >= lo**2, v <= hi**2])
+    prob = cp.Problem(
+        cp.Minimize(cp.sum(cp.multiply(k, cp.power(v, -alpha / 2, approx=False)))),
+        [0.5 * (lmi + lmi.T) << np.eye(3), v >= lo**2, v <= hi**2],
+    )
     prob.solve(solver="CLARABEL")
     assert e.cost == pytest.approx(prob.value, rel=1e-5)
     np.testing.assert_allclose(e.x, np.sqrt(v.value), rtol=1e-3)
 
 
-@pytest.mark.parametrize("p", [0.7, pytest.param(0.5, marks=pytest.mark.slow), pytest.param(0.99, marks=pytest.mark.slow)])
+@pytest.mark.parametrize(
+    "p", [0.7, pytest.param(0.5, marks=pytest.mark.slow), pytest.param(0.99, marks=pytest.mark.slow)]
+)
 def test_midpoints_of_feasible_designs_stay_feasible(p):
     """The convexity the certificate rests on (Lagoa, Li & Sznaier 2005): along a fixed direction,
     designs on the boundary P = p have their arithmetic and geometric midpoints inside (the
@@ -194,8 +198,11 @@ def test_bad_input():
 def test_certified_across_p_and_shapes(xz, p, dist):
     """The paper's robot at p = 0.7 and 0.99, uniform and mixed shapes: certified, and 2000 random
     directions meet p - 1e-7 by the reference evaluator."""
-    d = "uniform" if dist == "uniform" else {"*": "uniform", "h2": "normal", "s1": "triangular",
-                                             "alpha3": "truncnormal"}
+    d = (
+        "uniform"
+        if dist == "uniform"
+        else {"*": "uniform", "h2": "normal", "s1": "triangular", "alpha3": "truncnormal"}
+    )
     r = tolsynth.synthesize(xz, R=R, p=p, distribution=d, probability="exact")
     assert r.success and r.gap <= 1e-6 * r.cost, r.message
     A = xz.sensitivity(xz.joints("worst"))[:3]
@@ -290,8 +297,26 @@ def test_command_line_exact(xz):
     import subprocess
     import sys
 
-    out = subprocess.run([sys.executable, "-m", "tolsynth", "solve", "--model", "xu_zhang_1988", "--R", "0.5",
-                          "--p", "0.8", "--probability", "exact", "--json"], capture_output=True, text=True, timeout=600)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "tolsynth",
+            "solve",
+            "--model",
+            "xu_zhang_1988",
+            "--R",
+            "0.5",
+            "--p",
+            "0.8",
+            "--probability",
+            "exact",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert out.returncode == 0, out.stderr
     d = json.loads(out.stdout)
     assert d["inputs"]["probability"] == "exact"

@@ -57,10 +57,18 @@ def check(mech, res, ref_ipopt=None, rtol=1e-6):
         assert res.cost <= ref_ipopt.cost * (1 + 1e-9) and res.cost >= ref_ipopt.lower_bound * (1 - 1e-9)
 
 
-@pytest.mark.parametrize("model,N", [("xu_zhang_1988", 1), ("xu_zhang_1988", 10), ("puma560", 3), ("puma560", 10),
-                                     pytest.param("panda", 10, marks=pytest.mark.slow),
-                                     pytest.param("puma560", 30, marks=pytest.mark.slow),
-                                     pytest.param("ur5", 10, marks=pytest.mark.slow)])
+@pytest.mark.parametrize(
+    "model,N",
+    [
+        ("xu_zhang_1988", 1),
+        ("xu_zhang_1988", 10),
+        ("puma560", 3),
+        ("puma560", 10),
+        pytest.param("panda", 10, marks=pytest.mark.slow),
+        pytest.param("puma560", 30, marks=pytest.mark.slow),
+        pytest.param("ur5", 10, marks=pytest.mark.slow),
+    ],
+)
 @pytest.mark.parametrize("distribution", ["uniform", "normal"])
 def test_random_pose_sets_agree_with_clarabel_and_ipopt(model, N, distribution):
     mech = tolsynth.load_model(model)
@@ -134,8 +142,9 @@ def test_extreme_scales_and_upper_bounds_active():
     np.testing.assert_array_equal(top.x, mech.bounds[1])
     assert set(top.bounds_active.values()) == {"upper"}
     # every tolerance locked: nothing to choose; the cost is k eps^-alpha at the locks
-    locked = tolsynth.synthesize(mech, R=5.0, p=0.9, alpha=0.7, pose="worst",
-                                 locks={n: 0.01 for n in mech.error_parameters})
+    locked = tolsynth.synthesize(
+        mech, R=5.0, p=0.9, alpha=0.7, pose="worst", locks={n: 0.01 for n in mech.error_parameters}
+    )
     assert locked.solver == "ipm" and locked.success and locked.gap == pytest.approx(0.0, abs=1e-12)
     assert locked.cost == pytest.approx(float(np.sum(mech.k * 0.01**-0.7)), rel=1e-12)
 
@@ -253,10 +262,14 @@ def test_sweep_steps_start_warm_and_reach_the_cold_optimum():
     names, eps = m.error_parameters, base.x
     lo, _ = m.bounds
     j = int(np.argmax(eps))
-    steps = [({}, dict(k={names[0]: 1.01 * m.k[0]})), ({}, dict(alpha=ALPHA + 0.002)),
-             (dict(bounds={names[j]: (lo[j], 0.8 * eps[j])}), dict(bounds={names[j]: (lo[j], 0.802 * eps[j])})),
-             (dict(locks={names[0]: 0.9 * eps[0]}), dict(locks={names[0]: 0.902 * eps[0]})),
-             ({}, dict(R=R * 1.002)), ({}, dict(p=P - 0.0002))]
+    steps = [
+        ({}, dict(k={names[0]: 1.01 * m.k[0]})),
+        ({}, dict(alpha=ALPHA + 0.002)),
+        (dict(bounds={names[j]: (lo[j], 0.8 * eps[j])}), dict(bounds={names[j]: (lo[j], 0.802 * eps[j])})),
+        (dict(locks={names[0]: 0.9 * eps[0]}), dict(locks={names[0]: 0.902 * eps[0]})),
+        ({}, dict(R=R * 1.002)),
+        ({}, dict(p=P - 0.0002)),
+    ]
     for before, kw in steps:
         args = dict(R=R, p=P, distribution="uniform", alpha=ALPHA)
         tolsynth.synthesize(m, **args, **before)  # the sweep's previous step

@@ -31,12 +31,22 @@ pytestmark = pytest.mark.filterwarnings("error:::tolsynth")
 EXAMPLES = {"default": 40, "ci": 120, "long": 400}
 if os.environ.get("HYPOTHESIS_PROFILE") == "long":
     EXAMPLES["default"] = EXAMPLES["long"]
-PROFILES = [pytest.param("default"), pytest.param("ci", marks=pytest.mark.slow), pytest.param("long", marks=pytest.mark.long)]
+PROFILES = [
+    pytest.param("default"),
+    pytest.param("ci", marks=pytest.mark.slow),
+    pytest.param("long", marks=pytest.mark.long),
+]
 
 
 def _settings(profile: str, scale: float = 1.0):
-    return settings(max_examples=max(1, int(EXAMPLES[profile] * scale)), derandomize=True, database=None,
-                    deadline=None, suppress_health_check=list(HealthCheck), print_blob=True)
+    return settings(
+        max_examples=max(1, int(EXAMPLES[profile] * scale)),
+        derandomize=True,
+        database=None,
+        deadline=None,
+        suppress_health_check=list(HealthCheck),
+        print_blob=True,
+    )
 
 
 def _assert_good(cat: str) -> None:
@@ -76,10 +86,13 @@ def test_cli_arguments(profile):
     run()
 
 
-@pytest.mark.parametrize("argv", [
-    ["solve", "--model", "xu_zhang_1988", "--R", "nan", "--p", "0.99"],
-    ["analyze", "--model", "planar_2r", "--pose", "worst", "--tolerances", "coarse,,,l1=inf"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["solve", "--model", "xu_zhang_1988", "--R", "nan", "--p", "0.99"],
+        ["analyze", "--model", "planar_2r", "--pose", "worst", "--tolerances", "coarse,,,l1=inf"],
+    ],
+)
 def test_cli_subprocess_no_traceback(argv):
     """The real entry point in a fresh interpreter: exit status 2 and one line, no traceback."""
     out = subprocess.run([sys.executable, "-m", "tolsynth", *argv], capture_output=True, text=True, timeout=120)
@@ -97,6 +110,7 @@ def test_outcome_classifies():
 
     def warn():
         import warnings
+
         warnings.warn_explicit("x", RuntimeWarning, "tolsynth/stats.py", 1, module="tolsynth.probability.stats")
 
     def hang():

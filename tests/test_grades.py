@@ -114,8 +114,11 @@ def _worst_ok(spec, eps):
 def _planar_design(probability: str):
     """planar_2r's continuous optimum at R = 0.5 mm (p = 0.99, uniform errors, or the worst case)."""
     m = tolsynth.load_model("planar_2r")
-    kw = {"p": 0.99, "probability": "gaussian", "distribution": "uniform"} if probability == "gaussian" \
+    kw = (
+        {"p": 0.99, "probability": "gaussian", "distribution": "uniform"}
+        if probability == "gaussian"
         else {"probability": "worst_case"}
+    )
     return m, tolsynth.synthesize(m, R=0.5, **kw)
 
 
@@ -124,7 +127,7 @@ def _brute(res, choices, ok):
     best = (math.inf, None)
     for combo in itertools.product(*(choices[n].items() for n in names)):
         eps = np.array([v for _, v in combo])
-        c = float(np.sum(res.spec.k * eps ** -res.spec.alpha))
+        c = float(np.sum(res.spec.k * eps**-res.spec.alpha))
         if c < best[0] and ok(res.spec, eps):
             best = (c, {n: g for n, (g, _) in zip(names, combo)})
     return best
@@ -136,8 +139,11 @@ def test_grade_choice_matches_brute_force(probability):
     g = round_to_grades(m, res, table=ANGLES)
     choices = {n: {k: v for k, v in ANGLES["o*"].items()} for n in ("o1", "o2")}
     for n, size in (("l1", 500.0), ("l2", 300.0)):  # the nominal link lengths, ISO 286 in mm
-        choices[n] = {gr: v for gr, v in iso286.grades_for(size).items()
-                      if res.spec.lower[m.index(n)] <= v <= res.spec.upper[m.index(n)]}
+        choices[n] = {
+            gr: v
+            for gr, v in iso286.grades_for(size).items()
+            if res.spec.lower[m.index(n)] <= v <= res.spec.upper[m.index(n)]
+        }
     cost, grades = _brute(res, choices, _gaussian_ok if probability == "gaussian" else _worst_ok)
     assert g.proven and g.grades == grades
     assert g.cost == pytest.approx(cost, rel=1e-12)
@@ -211,11 +217,11 @@ def test_lagrangian_bound_holds_at_every_feasible_point(probability):
         if not ok(res.spec, eps):
             continue
         hits += 1
-        lagr = float(np.sum(res.spec.k * eps ** -res.spec.alpha + w * eps**q) - T)
-        assert float(np.sum(res.spec.k * eps ** -res.spec.alpha)) >= lagr - 1e-9
+        lagr = float(np.sum(res.spec.k * eps**-res.spec.alpha + w * eps**q) - T)
+        assert float(np.sum(res.spec.k * eps**-res.spec.alpha)) >= lagr - 1e-9
     assert hits > 30
     # at the continuous optimum the bound is tight (the multipliers are its own)
-    assert float(np.sum(res.spec.k * res.x ** -res.spec.alpha + w * res.x**q) - T) == pytest.approx(res.cost, rel=1e-6)
+    assert float(np.sum(res.spec.k * res.x**-res.spec.alpha + w * res.x**q) - T) == pytest.approx(res.cost, rel=1e-6)
 
 
 def test_exact_feasibility_is_the_certified_cover():

@@ -18,27 +18,30 @@ def planar():
     return tolsynth.load_model("planar_2r")
 
 
-@pytest.mark.parametrize("call, field", [
-    (lambda m: tolsynth.worst_pose(m, "coarse", step_tol=0), "step_tol"),
-    (lambda m: tolsynth.worst_pose(m, "coarse", step_tol=-1e-3), "step_tol"),
-    (lambda m: tolsynth.worst_pose(m, "coarse", step_tol=math.nan), "step_tol"),
-    (lambda m: tolsynth.worst_pose(tolsynth.load_model("xu_zhang_1988"), "figure3", grid=200), "grid"),
-    (lambda m: tolsynth.worst_pose(m, "coarse", grid=10**7), "grid"),
-    (lambda m: tolsynth.monte_carlo(m, "worst", "coarse", R=0.5, n=math.nan), "n"),
-    (lambda m: tolsynth.monte_carlo(m, "worst", "coarse", R=0.5, n=math.inf), "n"),
-    (lambda m: tolsynth.synthesize(m, 0.5, 1 - 1.1e-16), "p"),
-    (lambda m: tolsynth.synthesize(m, 0.5, 0.99, x0=[0.0, 0.1, 0.1, 0.1]), "x0[0]"),
-    (lambda m: tolsynth.synthesize(m, 0.5, 0.99, options={"tol": -1}), "options['tol']"),
-    (lambda m: tolsynth.synthesize(m, 0.5, 0.99, options={"tl": 1e-8}), "options"),
-    (lambda m: m.analyze("worst", np.full(4, 1e155), R=0.5), "tolerances[l1]"),
-    (lambda m: tolsynth.synthesize_workspace(m, 0.5, 0.99, max_rounds=0), "max_rounds"),
-    (lambda m: tolsynth.compare(m, 0.5, 0.99, options="tol"), "options"),
-    (lambda m: tolsynth.compare(m, 0.5, 0.99, options={"ipopt": "a"}), "options['ipopt']"),
-    (lambda m: tolsynth.compare(m, 0.5, 0.99, options={"ipopt": {"warm_start": 1}}), "options['warm_start']"),
-    (lambda m: m.tolerances({"l1": "a", "l2": 1, "o1": 1, "o2": 1}), "tolerances[l1]"),
-    (lambda m: m.fk(["a", "b"]), "q"),
-    (lambda m: m.index(["l1"]), "error parameter"),
-])
+@pytest.mark.parametrize(
+    "call, field",
+    [
+        (lambda m: tolsynth.worst_pose(m, "coarse", step_tol=0), "step_tol"),
+        (lambda m: tolsynth.worst_pose(m, "coarse", step_tol=-1e-3), "step_tol"),
+        (lambda m: tolsynth.worst_pose(m, "coarse", step_tol=math.nan), "step_tol"),
+        (lambda m: tolsynth.worst_pose(tolsynth.load_model("xu_zhang_1988"), "figure3", grid=200), "grid"),
+        (lambda m: tolsynth.worst_pose(m, "coarse", grid=10**7), "grid"),
+        (lambda m: tolsynth.monte_carlo(m, "worst", "coarse", R=0.5, n=math.nan), "n"),
+        (lambda m: tolsynth.monte_carlo(m, "worst", "coarse", R=0.5, n=math.inf), "n"),
+        (lambda m: tolsynth.synthesize(m, 0.5, 1 - 1.1e-16), "p"),
+        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, x0=[0.0, 0.1, 0.1, 0.1]), "x0[0]"),
+        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, options={"tol": -1}), "options['tol']"),
+        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, options={"tl": 1e-8}), "options"),
+        (lambda m: m.analyze("worst", np.full(4, 1e155), R=0.5), "tolerances[l1]"),
+        (lambda m: tolsynth.synthesize_workspace(m, 0.5, 0.99, max_rounds=0), "max_rounds"),
+        (lambda m: tolsynth.compare(m, 0.5, 0.99, options="tol"), "options"),
+        (lambda m: tolsynth.compare(m, 0.5, 0.99, options={"ipopt": "a"}), "options['ipopt']"),
+        (lambda m: tolsynth.compare(m, 0.5, 0.99, options={"ipopt": {"warm_start": 1}}), "options['warm_start']"),
+        (lambda m: m.tolerances({"l1": "a", "l2": 1, "o1": 1, "o2": 1}), "tolerances[l1]"),
+        (lambda m: m.fk(["a", "b"]), "q"),
+        (lambda m: m.index(["l1"]), "error parameter"),
+    ],
+)
 def test_typed_error_names_field(planar, call, field):
     with pytest.raises(TolsynthError) as info:
         call(planar)
@@ -97,18 +100,24 @@ def test_lengths_and_angles_take_unit_strings_everywhere(planar):
     assert info.value.field == "R"
 
 
-@pytest.mark.parametrize("call, field", [
-    (lambda m: tolsynth.best_accuracy(m, 20.0, p=0.99, rtol=math.nan, pose="elbow90"), "rtol"),
-    (lambda m: tolsynth.best_accuracy(m, 20.0, p=0.99, rtol=-1.0, pose="elbow90"), "rtol"),
-    (lambda m: tolsynth.best_accuracy(m, 20.0, p=0.99, max_solves=0, pose="elbow90"), "max_solves"),
-    (lambda m: tolsynth.best_accuracy(m, "20mm", p=0.99, pose="elbow90"), "budget"),
-    (lambda m: tolsynth.sweep(m, [0.5], 0.99, pose="elbow90", progress="x"), "progress"),
-    (lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", time_limit=0), "time_limit"),
-    (lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", time_limit=math.nan), "time_limit"),
-    (lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", time_limit="1"), "time_limit"),
-    (lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", probability="exact", options={"bogus": 1}), "options"),
-    (lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", probability="exact", options="a"), "options"),
-])
+@pytest.mark.parametrize(
+    "call, field",
+    [
+        (lambda m: tolsynth.best_accuracy(m, 20.0, p=0.99, rtol=math.nan, pose="elbow90"), "rtol"),
+        (lambda m: tolsynth.best_accuracy(m, 20.0, p=0.99, rtol=-1.0, pose="elbow90"), "rtol"),
+        (lambda m: tolsynth.best_accuracy(m, 20.0, p=0.99, max_solves=0, pose="elbow90"), "max_solves"),
+        (lambda m: tolsynth.best_accuracy(m, "20mm", p=0.99, pose="elbow90"), "budget"),
+        (lambda m: tolsynth.sweep(m, [0.5], 0.99, pose="elbow90", progress="x"), "progress"),
+        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", time_limit=0), "time_limit"),
+        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", time_limit=math.nan), "time_limit"),
+        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", time_limit="1"), "time_limit"),
+        (
+            lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", probability="exact", options={"bogus": 1}),
+            "options",
+        ),
+        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", probability="exact", options="a"), "options"),
+    ],
+)
 def test_bad_limits_are_typed_errors(planar, call, field):
     with pytest.raises(InputError) as info:
         call(planar)
@@ -119,12 +128,21 @@ def _processes():
     from tolsynth.model.cost import PowerLaw
     from tolsynth.synthesis.processes import Process
 
-    return {"h3": [Process("turning", PowerLaw(1.0, 0.7), 0.05, 0.5), Process("grinding", PowerLaw(3.0, 0.7), 0.005, 0.05)],
-            "a": [Process("turning", PowerLaw(1.0, 0.7), 0.05, 0.5), Process("lapping", PowerLaw(5.0, 0.7), 0.001, 0.05)]}
+    return {
+        "h3": [Process("turning", PowerLaw(1.0, 0.7), 0.05, 0.5), Process("grinding", PowerLaw(3.0, 0.7), 0.005, 0.05)],
+        "a": [Process("turning", PowerLaw(1.0, 0.7), 0.05, 0.5), Process("lapping", PowerLaw(5.0, 0.7), 0.001, 0.05)],
+    }
 
 
-@pytest.mark.parametrize("kw, field", [({"max_nodes": 0}, "max_nodes"), ({"max_nodes": 1}, "max_nodes"),
-                                       ({"rel_gap": -1.0}, "rel_gap"), ({"rel_gap": math.nan}, "rel_gap")])
+@pytest.mark.parametrize(
+    "kw, field",
+    [
+        ({"max_nodes": 0}, "max_nodes"),
+        ({"max_nodes": 1}, "max_nodes"),
+        ({"rel_gap": -1.0}, "rel_gap"),
+        ({"rel_gap": math.nan}, "rel_gap"),
+    ],
+)
 def test_process_search_limits_are_checked(kw, field):
     """A search that cannot start (fewer than the root's two solves) or a meaningless gap is an
     error, never a 'proven' optimum."""
@@ -138,7 +156,9 @@ def test_process_search_proof_matches_brute_force():
     combination solved by enumerate_processes)."""
     from tolsynth.synthesis.processes import enumerate_processes
 
-    brute = min(r.cost for _, r in enumerate_processes("xu_zhang_1988", 0.5, 0.99, _processes()) if r is not None and r.success)
+    brute = min(
+        r.cost for _, r in enumerate_processes("xu_zhang_1988", 0.5, 0.99, _processes()) if r is not None and r.success
+    )
     for limit in (2, 3, 10_000):
         best = tolsynth.synthesize_processes("xu_zhang_1988", R=0.5, p=0.99, processes=_processes(), max_nodes=limit)
         assert best.lower_bound <= brute * (1 + 1e-9)
@@ -153,8 +173,15 @@ def test_time_limit_ends_a_solve_honestly(planar):
     from tolsynth.problem.result import Status
 
     for solver in ("ipopt", "sumt"):
-        res = tolsynth.synthesize(planar, 0.5, 0.99, pose="elbow90", solver=solver, time_limit=1e-3,
-                                  options={"max_outer": 60} if solver == "sumt" else None)
+        res = tolsynth.synthesize(
+            planar,
+            0.5,
+            0.99,
+            pose="elbow90",
+            solver=solver,
+            time_limit=1e-3,
+            options={"max_outer": 60} if solver == "sumt" else None,
+        )
         assert res.status in (Status.TIME_LIMIT, Status.OPTIMAL)
         if solver == "sumt":  # its outer loop takes longer than 1 ms
             assert res.status is Status.TIME_LIMIT and not res.success and "time limit" in res.message
@@ -204,8 +231,10 @@ def test_from_dh_angles_are_radians_unless_stated():
     A table in degrees without the unit is refused (a twist of 90 is not 90 rad); with the unit it
     is the same robot as in radians (forward kinematics to 1e-12 mm)."""
     deg = [{"a": 500.0, "alpha": 90.0, "limits": (-170, 170)}, {"a": 300.0, "limits": (-150, 150)}]
-    rad = [{"a": 500.0, "alpha": math.pi / 2, "limits": (math.radians(-170), math.radians(170))},
-           {"a": 300.0, "limits": (math.radians(-150), math.radians(150))}]
+    rad = [
+        {"a": 500.0, "alpha": math.pi / 2, "limits": (math.radians(-170), math.radians(170))},
+        {"a": 300.0, "limits": (math.radians(-150), math.radians(150))},
+    ]
     with pytest.raises(InputError) as info:
         tolsynth.Mechanism.from_dh(deg)
     assert info.value.field == "angle_unit" and "angle_unit='deg'" in str(info.value)

@@ -54,8 +54,13 @@ def Ry(t):
 def clearance(d: dict, joint: str, length_unit: float) -> np.ndarray:
     """Tx Ty Tz Rx Ry of a clearance at ``joint`` (translations in length_unit, tilts in mrad)."""
     g = lambda s: float(d.get(f"{joint}.{s}", 0.0))  # noqa: E731
-    return (Tx(g("radial_x") * length_unit) @ Ty(g("radial_y") * length_unit) @ Tz(g("axial") * length_unit)
-            @ Rx(g("tilt_x") * 1e-3) @ Ry(g("tilt_y") * 1e-3))
+    return (
+        Tx(g("radial_x") * length_unit)
+        @ Ty(g("radial_y") * length_unit)
+        @ Tz(g("axial") * length_unit)
+        @ Rx(g("tilt_x") * 1e-3)
+        @ Ry(g("tilt_y") * 1e-3)
+    )
 
 
 def xu_fk_joints(q, d=None, servo_unit=1e-3, length_unit=1.0):
@@ -65,8 +70,13 @@ def xu_fk_joints(q, d=None, servo_unit=1e-3, length_unit=1.0):
     S = XU_SYM
     g = lambda k: float(d.get(k, 0.0)) * UNIT[XU_UNITS[k]]  # noqa: E731
     sv = lambda j: float(d.get(f"{j}.servo", 0.0)) * servo_unit  # noqa: E731
-    th1, thp2, th2, th4, th5 = (q[0] + sv("theta1"), q[1] + sv("thetap2"), q[2] + sv("theta2"),
-                                q[3] + sv("theta4"), q[4] + sv("theta5"))
+    th1, thp2, th2, th4, th5 = (
+        q[0] + sv("theta1"),
+        q[1] + sv("thetap2"),
+        q[2] + sv("theta2"),
+        q[3] + sv("theta4"),
+        q[4] + sv("theta5"),
+    )
     h2 = S["h2"] + g("h2")
     hp1 = S["hp1"] + g("h2")
     th3 = elbow_by_circles(th2, thp2, hp1, S["hp2"] + g("hp2"), S["hp3"] + g("hp3"), S["hp4"] + g("hp4"))
@@ -90,7 +100,14 @@ def puma_fk_joints(q, d=None, servo_unit=1e-3, length_unit=1.0):
     for i in range(1, 7):
         j = f"q{i}"
         qi = q[i - 1] + float(d.get(f"{j}.servo", 0.0)) * servo_unit
-        T = T @ clearance(d, j, length_unit) @ Rz(qi + A(f"o{i}")) @ Tz(L(f"d{i}")) @ Tx(L(f"a{i}")) @ Rx(A(f"alpha{i}"))
+        T = (
+            T
+            @ clearance(d, j, length_unit)
+            @ Rz(qi + A(f"o{i}"))
+            @ Tz(L(f"d{i}"))
+            @ Tx(L(f"a{i}"))
+            @ Rx(A(f"alpha{i}"))
+        )
     return T
 
 
@@ -226,7 +243,7 @@ def test_synthesis_with_fixed_joint_errors_is_checked_by_monte_carlo():
         assert r.tolerances[n] == pytest.approx(m.fixed_joint_errors[n], rel=1e-12)
     assert r.cost > r0.cost * 1.01  # the fixed errors cost nothing: this is the links' cost
     eps_links = [r.tolerances[n] for n in base.error_parameters]
-    assert r.cost == pytest.approx(sum(base.k[i] * e ** -0.7 for i, e in enumerate(eps_links)), rel=1e-12)
+    assert r.cost == pytest.approx(sum(base.k[i] * e**-0.7 for i, e in enumerate(eps_links)), rel=1e-12)
     # the linear prediction from central differences of the NumPy chain
     q = m.configurations["worst"]
     names = list(m.error_parameters)
@@ -265,13 +282,13 @@ def test_user_locks_and_costs_keep_the_fixed_joint_errors_fixed_and_free():
     assert r.tolerances["h3"] == pytest.approx(0.1, rel=1e-12)
     assert r.tolerances["theta2.servo"] == pytest.approx(0.05, rel=1e-12)
     eps = np.array([r.tolerances[n] for n in base.error_parameters])
-    assert r.cost == pytest.approx(float(np.sum(base.k * eps ** -0.7)), rel=1e-12)
+    assert r.cost == pytest.approx(float(np.sum(base.k * eps**-0.7)), rel=1e-12)
     for cost in (Chase(1.0, 0.4, 1.0), [Chase(1.0, 0.4, 1.0)] * m.n, {"h3": Chase(1.0, 0.4, 1.0)}):
         r = tolsynth.synthesize(m, R=0.5, p=0.99, cost=cost)
         eps = np.array([r.tolerances[n] for n in base.error_parameters])
         if isinstance(cost, dict):
             i = base.index("h3")
-            expect = sum(base.k[j] * e ** -0.7 for j, e in enumerate(eps) if j != i) + 1.0 + 0.4 / eps[i]
+            expect = sum(base.k[j] * e**-0.7 for j, e in enumerate(eps) if j != i) + 1.0 + 0.4 / eps[i]
         else:
             expect = float(np.sum(1.0 + 0.4 / eps))
         assert r.cost == pytest.approx(expect, rel=1e-10)
@@ -295,9 +312,14 @@ def test_designable_servo_is_a_design_variable():
     ratio = r2.tolerances["q1.servo"] / r2.tolerances["o1"]
     assert ratio == pytest.approx(0.1 ** (1 / 2.7), rel=1e-4)
     # a cost model for the joint error (Chase: A + B eps^-k)
-    r3 = tolsynth.synthesize(puma.with_joint_errors([JointError("q1", "servo", bounds=(0.001, 50.0),
-                                                                cost={"model": "chase", "A": 1.0, "B": 0.5, "k": 1.0})]),
-                             R=0.5, p=0.95, pose="qn")
+    r3 = tolsynth.synthesize(
+        puma.with_joint_errors(
+            [JointError("q1", "servo", bounds=(0.001, 50.0), cost={"model": "chase", "A": 1.0, "B": 0.5, "k": 1.0})]
+        ),
+        R=0.5,
+        p=0.95,
+        pose="qn",
+    )
     assert r3.success and r3.tolerances["q1.servo"] > 0
 
 
@@ -305,7 +327,8 @@ def test_designable_clearance_on_puma():
     """A designable radial clearance at the Puma's elbow (q3): two design variables x and y (the
     same bounds and cost); the specification is met and a Monte Carlo agrees."""
     m = tolsynth.load_model("puma560").with_joint_errors(
-        [JointError("q3", "clearance", bounds=(0.001, 0.5), unit="mm", k=2.0)])
+        [JointError("q3", "clearance", bounds=(0.001, 0.5), unit="mm", k=2.0)]
+    )
     assert m.error_parameters[-2:] == ("q3.radial_x", "q3.radial_y")
     r = tolsynth.synthesize(m, R=0.5, p=0.95, pose="qn", validate=40_000, seed=2)
     assert r.success and r.max_constraint <= 1 + 1e-6
@@ -316,31 +339,43 @@ def test_designable_clearance_on_puma():
 def test_clearance_model_numbers():
     """Tilt 2c/L in mrad, axial play in the clearance's unit, components named per joint."""
     m = tolsynth.load_model("puma560").with_joint_errors(
-        [JointError("q2", "clearance", value=10.0, unit="um", axial=4.0, length=40_000.0)])
-    assert m.fixed_joint_errors == pytest.approx({
-        "q2.radial_x": 10.0, "q2.radial_y": 10.0, "q2.axial": 4.0,
-        "q2.tilt_x": 2 * 10.0 / 40_000.0 * 1e3, "q2.tilt_y": 2 * 10.0 / 40_000.0 * 1e3})
+        [JointError("q2", "clearance", value=10.0, unit="um", axial=4.0, length=40_000.0)]
+    )
+    assert m.fixed_joint_errors == pytest.approx(
+        {
+            "q2.radial_x": 10.0,
+            "q2.radial_y": 10.0,
+            "q2.axial": 4.0,
+            "q2.tilt_x": 2 * 10.0 / 40_000.0 * 1e3,
+            "q2.tilt_y": 2 * 10.0 / 40_000.0 * 1e3,
+        }
+    )
     assert [m.units[m.index(n)] for n in m.joint_error_parameters] == ["um", "um", "um", "mrad", "mrad"]
 
 
-@pytest.mark.parametrize("kwargs, field", [
-    (dict(joint="theta3", kind="servo", value=0.1), "joint_errors[0].joint"),  # passive: no servo
-    (dict(joint="nope", kind="clearance", value=0.1), "joint_errors[0].joint"),
-    (dict(joint="theta1", kind="backlash", value=0.1), "joint_errors[0].kind"),
-    (dict(joint="theta1", kind="servo", value=0.1, unit="mm"), "joint_errors[0].unit"),
-    (dict(joint="theta1", kind="clearance", value=0.1, unit="mrad"), "joint_errors[0].unit"),
-    (dict(joint="theta1", kind="servo"), "joint_errors[0]"),
-    (dict(joint="theta1", kind="servo", value=0.1, bounds=(0.1, 1)), "joint_errors[0]"),
-    (dict(joint="theta1", kind="servo", value=-0.1), "joint_errors[0].value"),
-    (dict(joint="theta1", kind="servo", bounds=(1.0, 0.5)), "joint_errors[0].bounds.upper"),
-    (dict(joint="theta1", kind="servo", value=0.1, length=5.0), "joint_errors[0].length"),
-    (dict(joint="theta1", kind="clearance", bounds=(0.001, 0.1), axial=0.01), "joint_errors[0].axial"),
-    (dict(joint="theta1", kind="clearance", value=0.1, length=1.0), "joint_errors[0].length"),
-    (dict(joint="theta1", kind="servo", value=0.1, cost={"model": "chase", "A": 1, "B": 1, "k": 1}),
-     "joint_errors[0].cost"),
-    (dict(joint="theta1", kind="servo", value=0.1, k=2.0), "joint_errors[0].k"),  # given, not bought
-    (dict(joint="theta1", kind="servo", bounds=(0.1, 1.0), k=0.0), "joint_errors[0].k"),
-])
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        (dict(joint="theta3", kind="servo", value=0.1), "joint_errors[0].joint"),  # passive: no servo
+        (dict(joint="nope", kind="clearance", value=0.1), "joint_errors[0].joint"),
+        (dict(joint="theta1", kind="backlash", value=0.1), "joint_errors[0].kind"),
+        (dict(joint="theta1", kind="servo", value=0.1, unit="mm"), "joint_errors[0].unit"),
+        (dict(joint="theta1", kind="clearance", value=0.1, unit="mrad"), "joint_errors[0].unit"),
+        (dict(joint="theta1", kind="servo"), "joint_errors[0]"),
+        (dict(joint="theta1", kind="servo", value=0.1, bounds=(0.1, 1)), "joint_errors[0]"),
+        (dict(joint="theta1", kind="servo", value=-0.1), "joint_errors[0].value"),
+        (dict(joint="theta1", kind="servo", bounds=(1.0, 0.5)), "joint_errors[0].bounds.upper"),
+        (dict(joint="theta1", kind="servo", value=0.1, length=5.0), "joint_errors[0].length"),
+        (dict(joint="theta1", kind="clearance", bounds=(0.001, 0.1), axial=0.01), "joint_errors[0].axial"),
+        (dict(joint="theta1", kind="clearance", value=0.1, length=1.0), "joint_errors[0].length"),
+        (
+            dict(joint="theta1", kind="servo", value=0.1, cost={"model": "chase", "A": 1, "B": 1, "k": 1}),
+            "joint_errors[0].cost",
+        ),
+        (dict(joint="theta1", kind="servo", value=0.1, k=2.0), "joint_errors[0].k"),  # given, not bought
+        (dict(joint="theta1", kind="servo", bounds=(0.1, 1.0), k=0.0), "joint_errors[0].k"),
+    ],
+)
 def test_bad_joint_errors_name_the_field(kwargs, field):
     m = tolsynth.load_model("xu_zhang_1988")
     with pytest.raises(InputError) as info:
@@ -359,7 +394,7 @@ def test_a_joint_error_declared_twice():
 # ---------------------------------------------------------------------------------------------
 # model files
 # ---------------------------------------------------------------------------------------------
-JOINT_TABLES = '''
+JOINT_TABLES = """
 [[joint_errors]]
 joint = "theta1"
 kind = "servo"
@@ -380,7 +415,7 @@ joint = "theta2"
 kind = "servo"
 bounds = [0.001, 5.0]
 cost = { model = "power", k = 1.0, alpha = 0.7 }
-'''
+"""
 
 
 def _xu_text():
@@ -393,11 +428,13 @@ def test_model_file_joint_errors(tmp_path):
     path = tmp_path / "xu_joints.toml"
     path.write_text(_xu_text() + JOINT_TABLES)
     m = tolsynth.load_model(path)
-    api = tolsynth.load_model("xu_zhang_1988").with_joint_errors([
-        JointError("theta1", "servo", value=0.1, unit="mrad"),
-        JointError("theta3", "clearance", value=5.0, unit="um", axial=2.0, length=60000.0),
-        JointError("theta2", "servo", bounds=(0.001, 5.0), cost={"model": "power", "k": 1.0, "alpha": 0.7}),
-    ])
+    api = tolsynth.load_model("xu_zhang_1988").with_joint_errors(
+        [
+            JointError("theta1", "servo", value=0.1, unit="mrad"),
+            JointError("theta3", "clearance", value=5.0, unit="um", axial=2.0, length=60000.0),
+            JointError("theta2", "servo", bounds=(0.001, 5.0), cost={"model": "power", "k": 1.0, "alpha": 0.7}),
+        ]
+    )
     assert m.error_parameters == api.error_parameters
     assert m.fixed_joint_errors == api.fixed_joint_errors
     assert m.spec.reference_results == ()  # the paper's optima are for the links alone
@@ -410,19 +447,22 @@ def test_model_file_joint_errors(tmp_path):
 
 def test_model_file_tolerance_sets_get_the_fixed_values(tmp_path):
     path = tmp_path / "xu_fixed.toml"
-    path.write_text(_xu_text() + JOINT_TABLES.split("[[joint_errors]]\njoint = \"theta2\"")[0])
+    path.write_text(_xu_text() + JOINT_TABLES.split('[[joint_errors]]\njoint = "theta2"')[0])
     m = tolsynth.load_model(path)
     eps = m.tolerances("figure3")
     assert eps[m.index("theta1.servo")] == 0.1 and eps[m.index("theta3.tilt_x")] == pytest.approx(2 * 5 / 60000 * 1e3)
 
 
-@pytest.mark.parametrize("table, field, text", [
-    ('joint = "theta1"\nkind = "servo"\nvalu = 0.1', "joint_errors[0].valu", "did you mean `value`"),
-    ('joint = "theta9"\nkind = "servo"\nvalue = 0.1', "joint_errors[0].joint", "not an actuated joint"),
-    ('joint = "theta1"\nkind = "servo"\nvalue = -1', "joint_errors[0].value", "expected a finite number"),
-    ('joint = "theta1"\nkind = "servo"\nvalue = 0.1\nunit = "furlong"', "joint_errors[0].unit", "unknown unit"),
-    ('kind = "servo"\nvalue = 0.1', "joint_errors[0].joint", "missing required field"),
-])
+@pytest.mark.parametrize(
+    "table, field, text",
+    [
+        ('joint = "theta1"\nkind = "servo"\nvalu = 0.1', "joint_errors[0].valu", "did you mean `value`"),
+        ('joint = "theta9"\nkind = "servo"\nvalue = 0.1', "joint_errors[0].joint", "not an actuated joint"),
+        ('joint = "theta1"\nkind = "servo"\nvalue = -1', "joint_errors[0].value", "expected a finite number"),
+        ('joint = "theta1"\nkind = "servo"\nvalue = 0.1\nunit = "furlong"', "joint_errors[0].unit", "unknown unit"),
+        ('kind = "servo"\nvalue = 0.1', "joint_errors[0].joint", "missing required field"),
+    ],
+)
 def test_model_file_bad_joint_errors(tmp_path, table, field, text):
     path = tmp_path / "bad.toml"
     path.write_text(_xu_text() + "\n[[joint_errors]]\n" + table + "\n")
@@ -444,7 +484,7 @@ def test_command_line_reads_joint_errors_from_the_file(tmp_path, capsys):
     from tolsynth.probability.stats import covariance, p_components, principal
 
     path = tmp_path / "xu_fixed.toml"
-    path.write_text(_xu_text() + JOINT_TABLES.split("[[joint_errors]]\njoint = \"theta2\"")[0])
+    path.write_text(_xu_text() + JOINT_TABLES.split('[[joint_errors]]\njoint = "theta2"')[0])
     assert main(["solve", "--model", str(path), "--R", "0.5", "--p", "0.99", "--json"]) == 0
     import json
 
@@ -499,7 +539,9 @@ def test_sumt_solves_with_fixed_joint_errors_and_locks():
     optimum as IPOPT (cost 1e-7, tolerances 1e-4), the locked values exact, and the locked
     parameters' multipliers those of IPOPT (1e-3)."""
     m = tolsynth.load_model("xu_zhang_1988").with_joint_errors(
-        [JointError(j, "servo", value=0.15) for j in XU_JOINTS] + [JointError("theta2", "clearance", bounds=(0.0005, 0.1))])
+        [JointError(j, "servo", value=0.15) for j in XU_JOINTS]
+        + [JointError("theta2", "clearance", bounds=(0.0005, 0.1))]
+    )
     c = tolsynth.compare(m, R=0.5, p=0.99, locks={"h3": 0.2})
     i, s = c.ipopt, c.sumt
     assert i.success and s.success
@@ -519,12 +561,18 @@ def test_summary_marks_fixed_tolerances():
 def test_result_tables_record_the_joint_errors(tmp_path):
     pytest.importorskip("pandas")
     m = tolsynth.load_model("xu_zhang_1988").with_joint_errors(
-        [JointError("theta1", "servo", value=0.1), JointError("theta2", "clearance", bounds=(0.001, 0.1))])
+        [JointError("theta1", "servo", value=0.1), JointError("theta2", "clearance", bounds=(0.001, 0.1))]
+    )
     r = tolsynth.synthesize(m, R=0.5, p=0.99)
     r.to_json(tmp_path / "r.json")
     inputs = tolsynth.read_table(tmp_path / "r.json").attrs["inputs"]
     assert inputs["joint_errors"]["theta1.servo"] == {"joint": "theta1", "transform": "q", "unit": "mrad", "fixed": 0.1}
-    assert inputs["joint_errors"]["theta2.radial_y"] == {"joint": "theta2", "transform": "Ty", "unit": "mm", "fixed": None}
+    assert inputs["joint_errors"]["theta2.radial_y"] == {
+        "joint": "theta2",
+        "transform": "Ty",
+        "unit": "mm",
+        "fixed": None,
+    }
     assert tolsynth.synthesize("xu_zhang_1988", R=0.5, p=0.99).inputs["joint_errors"] is None
 
 

@@ -74,13 +74,19 @@ TOL_UNIT = {"mm": 1.0, "1e-2 rad": 1e-2, "mrad": 1e-3}
 # the paper's robot (docs/reconstruction.md), by hand
 # ---------------------------------------------------------------------------------------------
 _XU = _toml("xu_zhang_1988")
-XU_SYM = {
-    k: (math.radians(v) if (k.startswith("alpha") or k == "o1") else float(v))
-    for k, v in _XU["symbols"].items()
-}
+XU_SYM = {k: (math.radians(v) if (k.startswith("alpha") or k == "o1") else float(v)) for k, v in _XU["symbols"].items()}
 XU_UNITS = {  # error parameter -> tolerance unit, as the paper's section 5 states them
-    "h2": "mm", "h3": "mm", "h4": "mm", "hp2": "mm", "hp3": "mm", "hp4": "mm", "s1": "mm", "a": "mm",
-    "alpha1": "1e-2 rad", "alpha3": "1e-2 rad", "alpha4": "1e-2 rad",
+    "h2": "mm",
+    "h3": "mm",
+    "h4": "mm",
+    "hp2": "mm",
+    "hp3": "mm",
+    "hp4": "mm",
+    "s1": "mm",
+    "a": "mm",
+    "alpha1": "1e-2 rad",
+    "alpha3": "1e-2 rad",
+    "alpha4": "1e-2 rad",
 }
 XU_ORDER = ["h2", "h3", "h4", "hp2", "hp3", "hp4", "s1", "a", "alpha1", "alpha3", "alpha4"]
 
@@ -137,9 +143,7 @@ def xu_fk(q, d=None):
 # Puma 560, standard D-H, by hand
 # ---------------------------------------------------------------------------------------------
 _PUMA = _toml("puma560")
-PUMA_SYM = {
-    k: (math.radians(v) if k.startswith(("alpha", "o")) else float(v)) for k, v in _PUMA["symbols"].items()
-}
+PUMA_SYM = {k: (math.radians(v) if k.startswith(("alpha", "o")) else float(v)) for k, v in _PUMA["symbols"].items()}
 
 
 def puma_fk(q, d=None):
@@ -247,7 +251,12 @@ def test_model_files_declare_the_units_the_tests_assume(mechs):
     assert {p.name: p.unit for p in puma.parameters} == {
         f"{k}{i}": ("mm" if k in "ad" else "mrad") for i in range(1, 7) for k in ("a", "d", "alpha", "o")
     }
-    assert {p.name: p.unit for p in mechs["planar_2r"].parameters} == {"l1": "mm", "l2": "mm", "o1": "mrad", "o2": "mrad"}
+    assert {p.name: p.unit for p in mechs["planar_2r"].parameters} == {
+        "l1": "mm",
+        "l2": "mm",
+        "o1": "mrad",
+        "o2": "mrad",
+    }
 
 
 def test_numpy_parallelogram_is_a_parallelogram():

@@ -32,44 +32,75 @@ def _dup_loop(d):
 
 CASES = [
     # (model, edit, field named, fragment of the message)
-    ("xu_zhang_1988", lambda d: _rename(d, "error_parameters", "error_parameter"), "error_parameter",
-     "did you mean `error_parameters`?"),
+    (
+        "xu_zhang_1988",
+        lambda d: _rename(d, "error_parameters", "error_parameter"),
+        "error_parameter",
+        "did you mean `error_parameters`?",
+    ),
     ("planar_2r", lambda d: _rename(d["model"], "title", "titel"), "model.titel", "did you mean `title`?"),
-    ("planar_2r", lambda d: _rename(d, "configurations", "configuration"), "configuration",
-     "did you mean `configurations`?"),
-    ("planar_2r", _set(["error_parameters", 0, "bound"], [0.001, 1.0]), "error_parameters[0].bound",
-     "did you mean `bounds`?"),
+    (
+        "planar_2r",
+        lambda d: _rename(d, "configurations", "configuration"),
+        "configuration",
+        "did you mean `configurations`?",
+    ),
+    (
+        "planar_2r",
+        _set(["error_parameters", 0, "bound"], [0.001, 1.0]),
+        "error_parameters[0].bound",
+        "did you mean `bounds`?",
+    ),
     ("puma560", _set(["units", "lenght"], "mm"), "units.lenght", "did you mean `length`?"),
     ("xu_zhang_1988", _set(["loops", 0, "brnch"], 1), "loops[0].brnch", "did you mean `branch`?"),
-    ("planar_2r", _set(["tolerance_sets", "coarse", "l1"], {"value": 1.0, "units": "mm"}),
-     "tolerance_sets.coarse.l1.units", "did you mean `unit`?"),
-    ("planar_2r", _set(["configurations", "worst", "nots"], "x"), "configurations.worst.nots",
-     "did you mean `note`?"),
+    (
+        "planar_2r",
+        _set(["tolerance_sets", "coarse", "l1"], {"value": 1.0, "units": "mm"}),
+        "tolerance_sets.coarse.l1.units",
+        "did you mean `unit`?",
+    ),
+    ("planar_2r", _set(["configurations", "worst", "nots"], "x"), "configurations.worst.nots", "did you mean `note`?"),
     # types
     ("xu_zhang_1988", _set(["error_parameters", 0, "alias"], ["x1"]), "error_parameters[0].alias", "a list"),
-    ("xu_zhang_1988", _set(["configurations", "worst", "waive"], [["interference"]]),
-     "configurations.worst.waive[0]", "a list"),
+    (
+        "xu_zhang_1988",
+        _set(["configurations", "worst", "waive"], [["interference"]]),
+        "configurations.worst.waive[0]",
+        "a list",
+    ),
     ("planar_2r", _set(["tolerance_sets", "coarse"], "abc"), "tolerance_sets.coarse", "a string"),
     ("xu_zhang_1988", _set(["loops"], True), "loops", "a boolean"),
     ("xu_zhang_1988", _set(["joint_constraints"], True), "joint_constraints", "a boolean"),
     ("xu_zhang_1988", _set(["reference_results"], False), "reference_results", "a boolean"),
     ("xu_zhang_1988", _set(["reference_results", 0, "R"], "0.5"), "reference_results[0].R", "a string"),
-    ("xu_zhang_1988", _set(["reference_results", 0, "tolerances", 0], [1]), "reference_results[0].tolerances[0]",
-     "a list"),
+    (
+        "xu_zhang_1988",
+        _set(["reference_results", 0, "tolerances", 0], [1]),
+        "reference_results[0].tolerances[0]",
+        "a list",
+    ),
     ("planar_2r", _set(["model"], "planar"), "model", "a string"),
     ("planar_2r", _set(["joints", 0], 5), "joints[0]", "expected a table"),
     ("planar_2r", _set(["model", "assumptions"], "one"), "model.assumptions", "a string"),
     # duplicates
-    ("planar_2r", _set(["error_parameters", 0, "perturbs"], ["l1", "l1"]), "error_parameters[0].perturbs",
-     "more than once"),
+    (
+        "planar_2r",
+        _set(["error_parameters", 0, "perturbs"], ["l1", "l1"]),
+        "error_parameters[0].perturbs",
+        "more than once",
+    ),
     ("xu_zhang_1988", _dup_loop, "loops", "more than once"),
     ("planar_2r", _set(["joints", 1, "name"], "q1"), "joints", "more than once"),
     ("xu_zhang_1988", _set(["joint_constraints", 0, "name"], "theta1"), "joint_constraints", "more than once"),
     ("xu_zhang_1988", _set(["error_parameters", 1, "alias"], "x1"), "error_parameters[1].alias", "used twice"),
     # numbers that make no sense
     ("planar_2r", _set(["joints", 0, "limits"], [-math.inf, math.inf]), "joints[0].limits[0]", "finite"),
-    ("xu_zhang_1988", _set(["joint_constraints", 0, "terms", "theta2"], math.nan),
-     "joint_constraints[0].terms.theta2", "finite"),
+    (
+        "xu_zhang_1988",
+        _set(["joint_constraints", 0, "terms", "theta2"], math.nan),
+        "joint_constraints[0].terms.theta2",
+        "finite",
+    ),
     ("xu_zhang_1988", _set(["loops", 0, "crank_angle"], "theta2"), "loops[0].crank_angle", "ground_angle"),
     ("planar_2r", _set(["symbols", "l1"], 1e300), "symbols.l1", "1e+09"),
     ("planar_2r", _set(["error_parameters", 0, "k"], -1.0), "error_parameters[0].k", "1e-12"),
@@ -97,12 +128,15 @@ def test_round_trip_loads(tmp_path, model):
     assert m.spec.symbols == ref.spec.symbols and m.error_parameters == ref.error_parameters
 
 
-@pytest.mark.parametrize("blob, fragment", [
-    (b"\xff\xfe[model]\n", "UTF-8"),
-    (b"[model]\nname = \"\xe9\"\n", "UTF-8"),
-    (b"[model\n", "not valid TOML"),
-    (b"", "missing required field"),
-])
+@pytest.mark.parametrize(
+    "blob, fragment",
+    [
+        (b"\xff\xfe[model]\n", "UTF-8"),
+        (b'[model]\nname = "\xe9"\n', "UTF-8"),
+        (b"[model\n", "not valid TOML"),
+        (b"", "missing required field"),
+    ],
+)
 def test_bytes_that_are_not_a_model(tmp_path, blob, fragment):
     path = tmp_path / "m.toml"
     path.write_bytes(blob)
@@ -124,12 +158,24 @@ def test_format_table_lists_every_key_the_bundled_models_use():
                 assert set(item) <= set(FORMAT[section]), (name, section)
 
 
-@pytest.mark.parametrize("model, edit, field, fragment", [
-    ("planar_2r", _set(("configurations", "elbow90", "q2"), 160.0), "configurations.elbow90.q2",
-     "160 deg is outside the joint limits -150 to 150 deg"),
-    ("planar_2r", _set(("configurations", "stretched", "q1"), -171.0), "configurations.stretched.q1", "outside the joint limits"),
-    ("xu_zhang_1988", _set(("configurations", "home", "waive"), []), "configurations.home", None),
-])
+@pytest.mark.parametrize(
+    "model, edit, field, fragment",
+    [
+        (
+            "planar_2r",
+            _set(("configurations", "elbow90", "q2"), 160.0),
+            "configurations.elbow90.q2",
+            "160 deg is outside the joint limits -150 to 150 deg",
+        ),
+        (
+            "planar_2r",
+            _set(("configurations", "stretched", "q1"), -171.0),
+            "configurations.stretched.q1",
+            "outside the joint limits",
+        ),
+        ("xu_zhang_1988", _set(("configurations", "home", "waive"), []), "configurations.home", None),
+    ],
+)
 def test_configurations_outside_the_limits_fail_at_load(tmp_path, model, edit, field, fragment):
     """A model file whose own named pose lies outside a joint limit (or breaks a joint constraint
     it does not waive) is refused when read, naming the configuration and joint, not at its

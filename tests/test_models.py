@@ -90,16 +90,25 @@ def test_xu_figure3_tolerances(xz):
     """Figure 3 half-tolerances (the paper's section 5, printed in mm and rad, listed there in the
     order dh'1(=dh2), dh'2, dh'3, dh'4, dh3, dh4, ds1, da, dalpha1, dalpha3, dalpha4), in the
     model's tolerance units: the angles 0.0005 rad = 0.05 x 1e-2 rad."""
-    printed = dict(zip(["h2", "hp2", "hp3", "hp4", "h3", "h4", "s1", "a", "alpha1", "alpha3", "alpha4"],
-                       [0.06, 0.028, 0.06, 0.028, 0.08, 0.01, 0.01, 0.015, 0.0005, 0.0005, 0.0005]))
+    printed = dict(
+        zip(
+            ["h2", "hp2", "hp3", "hp4", "h3", "h4", "s1", "a", "alpha1", "alpha3", "alpha4"],
+            [0.06, 0.028, 0.06, 0.028, 0.08, 0.01, 0.01, 0.015, 0.0005, 0.0005, 0.0005],
+        )
+    )
     expect = [printed[n] / (0.01 if n.startswith("alpha") else 1.0) for n in TABLE_COLUMNS]
     assert np.allclose(xz.tolerances("figure3"), expect, rtol=1e-12, atol=0)
 
 
 def test_xu_joint_limits_as_printed(xz):
     """Ranges of the paper's section 5 (deg), and the interference limit 50 <= theta'2 - theta2 <= 130."""
-    printed = {"theta1": (-150, 150), "thetap2": (140, 200), "theta2": (50, 130),
-               "theta4": (-110, 110), "theta5": (-185, 185)}
+    printed = {
+        "theta1": (-150, 150),
+        "thetap2": (140, 200),
+        "theta2": (50, 130),
+        "theta4": (-110, 110),
+        "theta5": (-185, 185),
+    }
     assert {j.name for j in xz.spec.joints} == set(printed)
     for j in xz.spec.joints:
         assert (math.degrees(j.lower), math.degrees(j.upper)) == pytest.approx(printed[j.name], abs=1e-12)

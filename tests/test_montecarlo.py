@@ -112,9 +112,16 @@ def test_evaluator_matches_casadi(xz, graph, rng):
 
 def test_evaluator_covers_operations(rng):
     x = ca.SX.sym("x", 3)
-    exprs = [ca.atan2(x[0], x[1]), ca.if_else(x[0] > 0, x[1], 3.0), ca.fabs(x[0]) ** 2.5, ca.fmin(x[0], x[2]),
-             ca.sqrt(ca.fabs(x[2])) / (1 + x[1] ** 2), ca.acos(ca.tanh(x[0])), ca.exp(-x[1] ** 2) * ca.log(2 + x[2]),
-             ca.floor(x[0]) + ca.sign(x[1]) - ca.fmax(x[0], x[1]) * 2]
+    exprs = [
+        ca.atan2(x[0], x[1]),
+        ca.if_else(x[0] > 0, x[1], 3.0),
+        ca.fabs(x[0]) ** 2.5,
+        ca.fmin(x[0], x[2]),
+        ca.sqrt(ca.fabs(x[2])) / (1 + x[1] ** 2),
+        ca.acos(ca.tanh(x[0])),
+        ca.exp(-(x[1] ** 2)) * ca.log(2 + x[2]),
+        ca.floor(x[0]) + ca.sign(x[1]) - ca.fmax(x[0], x[1]) * 2,
+    ]
     f = ca.Function("f", [x], [ca.vertcat(*exprs)])
     X = rng.normal(0, 1, (3, 100))
     got = NumpyEvaluator(f)([X])[0]
@@ -143,13 +150,19 @@ def test_monte_carlo_matches_independent_sampler(xz):
     assert np.allclose(r.position, p0, atol=1e-6)
     # the two estimates differ by sampling noise only: 99.9 % interval of the difference
     se = math.sqrt(r.p_sphere * (1 - r.p_sphere) / n_mc + p_ind * (1 - p_ind) / n_ind)
-    print(f"\nP(|dr| <= 0.2 mm), figure3, uniform, worst pose: tolsynth MC {r.p_sphere:.5f} "
-          f"[{r.p_sphere_ci[0]:.5f}, {r.p_sphere_ci[1]:.5f}], independent {p_ind:.5f}, "
-          f"analytic (linear + Gaussian) {r.p_sphere_analytic:.5f}")
+    print(
+        f"\nP(|dr| <= 0.2 mm), figure3, uniform, worst pose: tolsynth MC {r.p_sphere:.5f} "
+        f"[{r.p_sphere_ci[0]:.5f}, {r.p_sphere_ci[1]:.5f}], independent {p_ind:.5f}, "
+        f"analytic (linear + Gaussian) {r.p_sphere_analytic:.5f}"
+    )
     assert abs(r.p_sphere - p_ind) <= Z999 * se
     # and the independent value lies inside the Monte Carlo interval widened to 99.9 %
     lo, hi = wilson_interval(round(r.p_sphere * n_mc), n_mc, 0.999)
-    assert lo - Z999 * math.sqrt(p_ind * (1 - p_ind) / n_ind) <= p_ind <= hi + Z999 * math.sqrt(p_ind * (1 - p_ind) / n_ind)
+    assert (
+        lo - Z999 * math.sqrt(p_ind * (1 - p_ind) / n_ind)
+        <= p_ind
+        <= hi + Z999 * math.sqrt(p_ind * (1 - p_ind) / n_ind)
+    )
     # covariances agree to sampling noise (sd of a sample covariance <= sqrt(2 V_ii V_jj / n))
     noise = np.sqrt(2 * np.outer(np.diag(cov_ind), np.diag(cov_ind)) * (1 / n_mc + 1 / n_ind))
     assert np.all(np.abs(r.covariance - cov_ind) <= 5 * noise)
@@ -236,8 +249,17 @@ def test_report_and_dict(xz):
     assert "analytic outside CI" in text and "Wilson" in text and "kurtosis" in text
     d = r.to_dict()
     json.dumps(d)
-    for key in ("p_sphere", "p_sphere_ci", "p_components", "covariance", "n", "seed", "p_sphere_analytic",
-                "p_components_analytic", "covariance_analytic"):
+    for key in (
+        "p_sphere",
+        "p_sphere_ci",
+        "p_components",
+        "covariance",
+        "n",
+        "seed",
+        "p_sphere_analytic",
+        "p_components_analytic",
+        "covariance_analytic",
+    ):
         assert key in d
 
 
@@ -275,8 +297,16 @@ def test_validate_needs_R_and_p(xz):
 # ---------------------------------------------------------------------------------------------
 @pytest.mark.parametrize(
     "kwargs, field",
-    [({"n": 0}, "n"), ({"n": -5}, "n"), ({"n": 2.5}, "n"), ({"R": 0.0}, "R"), ({"R": -1.0}, "R"),
-     ({"seed": -1}, "seed"), ({"distribution": "lognormal"}, "distribution"), ({"batch": 0}, "batch")],
+    [
+        ({"n": 0}, "n"),
+        ({"n": -5}, "n"),
+        ({"n": 2.5}, "n"),
+        ({"R": 0.0}, "R"),
+        ({"R": -1.0}, "R"),
+        ({"seed": -1}, "seed"),
+        ({"distribution": "lognormal"}, "distribution"),
+        ({"batch": 0}, "batch"),
+    ],
 )
 def test_bad_input_names_the_field(xz, kwargs, field):
     args = dict(q="worst", tolerances="figure3", R=0.2, n=100, seed=0)
@@ -302,12 +332,39 @@ def test_wilson_interval_against_scipy():
 def test_cli_montecarlo_json(capsys):
     from tolsynth.cli import main
 
-    rc = main(["montecarlo", "--model", "xu_zhang_1988", "--tolerances", "figure3", "--dist", "uniform",
-               "--R", "0.2", "--n", "50000", "--seed", "3", "--json"])
+    rc = main(
+        [
+            "montecarlo",
+            "--model",
+            "xu_zhang_1988",
+            "--tolerances",
+            "figure3",
+            "--dist",
+            "uniform",
+            "--R",
+            "0.2",
+            "--n",
+            "50000",
+            "--seed",
+            "3",
+            "--json",
+        ]
+    )
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
-    for key in ("p_sphere", "p_sphere_ci", "p_components", "covariance", "n", "seed", "p_sphere_analytic",
-                "p_components_analytic", "covariance_analytic", "n_loop_failures", "kurtosis"):
+    for key in (
+        "p_sphere",
+        "p_sphere_ci",
+        "p_components",
+        "covariance",
+        "n",
+        "seed",
+        "p_sphere_analytic",
+        "p_components_analytic",
+        "covariance_analytic",
+        "n_loop_failures",
+        "kurtosis",
+    ):
         assert key in out
     assert out["n"] == 50000 and out["seed"] == 3
     rc = main(["montecarlo", "--model", "xu_zhang_1988", "--tolerances", "figure3", "--R", "0.2", "--n", "0"])

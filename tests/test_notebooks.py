@@ -33,8 +33,9 @@ def test_notebooks_found():
 
 #: every notebook runs with the slow tests: together they take minutes, more than the default run's
 #: budget, and CI's slow step executes each once and keeps its outputs for the docs build
-@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) for p in NOTEBOOKS],
-                         ids=[p.stem for p in NOTEBOOKS])
+@pytest.mark.parametrize(
+    "path", [pytest.param(p, marks=pytest.mark.slow) for p in NOTEBOOKS], ids=[p.stem for p in NOTEBOOKS]
+)
 def test_notebook_executes(path, monkeypatch):
     # the kernel inherits this process's environment: figures as inline outputs (the docs' pages
     # show them), and plain-text progress bars
@@ -76,6 +77,7 @@ def _keep_for_the_docs(path, source, executed):
     ext = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(ext)
     cache = get_cache(str(ext.notebook_cache_dir()))
-    cache.cache_notebook_bundle(CacheBundleIn(executed, str(ROOT / "docs" / "notebooks" / path.name)),
-                                check_validity=False, overwrite=True)
+    cache.cache_notebook_bundle(
+        CacheBundleIn(executed, str(ROOT / "docs" / "notebooks" / path.name)), check_validity=False, overwrite=True
+    )
     assert cache.match_cache_notebook(source) is not None

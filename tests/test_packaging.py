@@ -53,9 +53,11 @@ def _require_build_tools():
 def source_copy(tmp_path_factory):
     dest = tmp_path_factory.mktemp("src") / "tolsynth-src"
     shutil.copytree(
-        ROOT, dest,
-        ignore=shutil.ignore_patterns(".git", ".venv", "venv", "build", "dist", "*.egg-info", "__pycache__",
-                                      ".pytest_cache", ".ipynb_checkpoints"),
+        ROOT,
+        dest,
+        ignore=shutil.ignore_patterns(
+            ".git", ".venv", "venv", "build", "dist", "*.egg-info", "__pycache__", ".pytest_cache", ".ipynb_checkpoints"
+        ),
     )
     return dest
 
@@ -110,8 +112,10 @@ def test_non_editable_install_finds_the_models(fresh_venv, tmp_path):
 def test_installed_console_script(fresh_venv, tmp_path):
     venv, py, site = fresh_venv
     exe = py.parent / ("tolsynth.exe" if sys.platform == "win32" else "tolsynth")
-    run = _run([exe, "analyze", "--model", "puma560", "--pose", "qz", "--tolerances", "fine", "--R", "0.1",
-                "--json"], cwd=tmp_path)
+    run = _run(
+        [exe, "analyze", "--model", "puma560", "--pose", "qz", "--tolerances", "fine", "--R", "0.1", "--json"],
+        cwd=tmp_path,
+    )
     out = json.loads(run.stdout)
     assert abs(out["position"][0] - 452.1) < 1e-9 and abs(out["position"][2] - (26.45 * 25.4 + 431.8)) < 1e-9
 
@@ -119,8 +123,21 @@ def test_installed_console_script(fresh_venv, tmp_path):
 def test_wheel_contains_the_model_files(source_copy, tmp_path):
     _require_build_tools()
     wheels = tmp_path / "wheels"
-    _run([sys.executable, "-m", "pip", "wheel", "--no-index", "--no-deps", "--no-build-isolation", "-w", wheels,
-          source_copy], cwd=tmp_path)
+    _run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-index",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            wheels,
+            source_copy,
+        ],
+        cwd=tmp_path,
+    )
     (whl,) = wheels.glob("tolsynth-*.whl")
     names = set(zipfile.ZipFile(whl).namelist())
     for name in MODELS:

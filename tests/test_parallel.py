@@ -22,10 +22,25 @@ S3 = math.sqrt(3.0) / 2.0
 
 # LinuxCNC src/emc/kinematics/genhexkins.h, DEFAULT_BASE_i / DEFAULT_PLATFORM_i (inch);
 # configs/sim/axis/vismach/hexapod-sim/hexapod.ini: HOME = 0 0 20 0 0 0 (inch, deg), struts 29.7466 in
-HEX_BASE = np.array([[-22.95, 13.25, 0], [22.95, 13.25, 0], [22.95, 13.25, 0],
-                     [0, -26.5, 0], [0, -26.5, 0], [-22.95, 13.25, 0]]) * INCH
-HEX_PLATFORM = np.array([[-1.0, 11.5, 0], [1.0, 11.5, 0], [10.459, -4.884, 0],
-                         [9.459, -6.616, 0], [-9.459, -6.616, 0], [-10.459, -4.884, 0]]) * INCH
+HEX_BASE = (
+    np.array(
+        [[-22.95, 13.25, 0], [22.95, 13.25, 0], [22.95, 13.25, 0], [0, -26.5, 0], [0, -26.5, 0], [-22.95, 13.25, 0]]
+    )
+    * INCH
+)
+HEX_PLATFORM = (
+    np.array(
+        [
+            [-1.0, 11.5, 0],
+            [1.0, 11.5, 0],
+            [10.459, -4.884, 0],
+            [9.459, -6.616, 0],
+            [-9.459, -6.616, 0],
+            [-10.459, -4.884, 0],
+        ]
+    )
+    * INCH
+)
 # Williams, "The Delta Parallel Robot: Kinematics Solutions" (2016), ABB FlexPicker IRB 360-1/1600 (mm):
 # sB = 567, sP = 76, L = 524, l = 1244, and the source's formulas wB = sB sqrt(3)/6, uP = sP sqrt(3)/3,
 # wP = sP sqrt(3)/6 (p. 6)
@@ -213,8 +228,9 @@ def test_singular_pose_is_a_typed_error_and_conditioning_grows(models):
         tolsynth.monte_carlo(m, q_s, "coarse", R=0.1, n=100, check_limits=False, progress=False)
 
 
-@pytest.mark.parametrize("name, R", [("delta", 0.3), ("stewart_gough", 0.05),
-                                     pytest.param("planar_3rrr", 0.02, marks=pytest.mark.slow)])
+@pytest.mark.parametrize(
+    "name, R", [("delta", 0.3), ("stewart_gough", 0.05), pytest.param("planar_3rrr", 0.02, marks=pytest.mark.slow)]
+)
 def test_monte_carlo_through_the_nonlinear_fk_matches_the_exact_probability(models, name, R):
     """P(|dr| <= R) by Monte Carlo through Newton's forward kinematics against the exact
     probability of the linear model (FFT-free series of tolsynth.probability.exact)."""

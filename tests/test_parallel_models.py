@@ -43,7 +43,12 @@ CASES = [
     ("delta", _set(["platform", "assembly"], {"rz": 0.0}), "platform.assembly.rz", "not a pose coordinate"),
     ("stewart_gough", _set(["platform", "assembly"], {"z": 0.0}), "platform.assembly", "does not assemble"),
     ("delta", _drop(["configurations", "home"]), "configurations.home", "missing"),
-    ("delta", _set(["configurations", "home", "theta1"], 95.0), "configurations.home.theta1", "outside the joint limits"),
+    (
+        "delta",
+        _set(["configurations", "home", "theta1"], 95.0),
+        "configurations.home.theta1",
+        "outside the joint limits",
+    ),
     ("stewart_gough", lambda d: _far_strut(d), "configurations.far", "cannot be assembled"),
     ("delta", _set(["errors", "select"], ["*.bx", "*.arms"]), "errors.select[1]", "selects no leg dimension"),
     ("delta", _set(["errors", "k"], {"lenght": 1.0}), "errors.k[lenght]", "did you mean"),
@@ -134,8 +139,9 @@ def test_workspace_design_holds_over_the_actuator_box():
     assert ws.success
     lo, hi = (np.array([getattr(j, k) for j in m.spec.joints]) for k in ("lower", "upper"))
     g = np.linspace(0, 1, 7)
-    worst = max(_sigma(m, lo + (hi - lo) * np.array(u), ws.result.x)
-                for u in np.array(np.meshgrid(g, g, g)).reshape(3, -1).T)
+    worst = max(
+        _sigma(m, lo + (hi - lo) * np.array(u), ws.result.x) for u in np.array(np.meshgrid(g, g, g)).reshape(3, -1).T
+    )
     assert worst * z_of_p(0.99) / 0.1 <= 1 + 2e-3
 
 

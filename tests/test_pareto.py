@@ -34,14 +34,22 @@ def test_process_staircase_lies_above_the_continuous_front():
     from tolsynth.model.cost import Chase
     from tolsynth.synthesis.processes import Process
 
-    lengths = [Process("turning", Chase(1.0, 0.4, 1.0), 0.1, 1.0), Process("grinding", Chase(3.0, 0.3, 1.0), 0.02, 0.06)]
+    lengths = [
+        Process("turning", Chase(1.0, 0.4, 1.0), 0.1, 1.0),
+        Process("grinding", Chase(3.0, 0.3, 1.0), 0.02, 0.06),
+    ]
     procs = {"l1": lengths, "l2": lengths}
     Rs = [0.15, 0.3, 0.6]
     stairs = pareto_front("planar_2r", R=Rs, p=0.99, processes=procs)
     assert all("processes" in r for r in stairs.rows)
     finite = [r["cost"] for r in stairs.rows if np.isfinite(r["cost"])]
     assert np.all(np.diff(finite) <= 1e-9)
-    cont = pareto_front("planar_2r", R=Rs, p=0.99, cost={nm: Chase(1.0, 0.4, 1.0) for nm in procs},
-                        bounds={"l1": (0.02, 1.0), "l2": (0.02, 1.0)})
+    cont = pareto_front(
+        "planar_2r",
+        R=Rs,
+        p=0.99,
+        cost={nm: Chase(1.0, 0.4, 1.0) for nm in procs},
+        bounds={"l1": (0.02, 1.0), "l2": (0.02, 1.0)},
+    )
     for s, c in zip(stairs.rows, cont.rows):  # each process has costs >= turning's curve
         assert s["cost"] >= c["cost"] * (1 - 1e-9)

@@ -10,8 +10,11 @@ from tolsynth.synthesis.processes import Process, enumerate_processes, synthesiz
 
 
 def _processes():
-    lengths = [Process("turning", Chase(1.0, 0.4, 1.0), 0.1, 1.0), Process("grinding", Chase(3.0, 0.3, 1.0), 0.02, 0.06),
-               Process("lapping", Exponential(12.0, 20.0), 0.002, 0.015)]
+    lengths = [
+        Process("turning", Chase(1.0, 0.4, 1.0), 0.1, 1.0),
+        Process("grinding", Chase(3.0, 0.3, 1.0), 0.02, 0.06),
+        Process("lapping", Exponential(12.0, 20.0), 0.002, 0.015),
+    ]
     angles = [Process("standard", PowerLaw(1.5, 0.7), 0.5, 5.0), Process("precision", PowerLaw(6.0, 0.7), 0.05, 0.4)]
     return {"l1": lengths, "l2": lengths, "o1": angles, "o2": angles}
 
@@ -50,7 +53,10 @@ def test_process_errors():
         synthesize_processes(mech, 0.5, 0.99, {"zz": [Process("x", PowerLaw(1, 1), 0.1, 1.0)]})
     p = Process.make({"name": "t", "cost": {"model": "power", "k": 1, "alpha": 0.7}, "lower": 0.1, "upper": 1})
     assert p.cost == PowerLaw(1, 0.7)
-    only_coarse = {"l1": [Process("turning", PowerLaw(1, 0.7), 3.0, 5.0)], "l2": [Process("turning", PowerLaw(1, 0.7), 3.0, 5.0)]}
+    only_coarse = {
+        "l1": [Process("turning", PowerLaw(1, 0.7), 3.0, 5.0)],
+        "l2": [Process("turning", PowerLaw(1, 0.7), 3.0, 5.0)],
+    }
     with pytest.raises(tolsynth.InfeasibleSpecificationError):
         synthesize_processes(mech, 0.05, 0.99, only_coarse)
     assert math.isfinite(synthesize_processes(mech, 0.5, 0.99, {"l1": _processes()["l1"]}).cost)
@@ -63,8 +69,11 @@ def test_worst_case_process_choice_matches_brute_force():
     still proves the brute-force optimum over the 36 combinations (23.168 at R 0.5; ~13 s)."""
     mech = tolsynth.load_model("planar_2r")
     best = synthesize_processes(mech, 0.5, None, _processes(), probability="worst_case")
-    brute = [(c, r) for c, r in enumerate_processes(mech, 0.5, None, _processes(), probability="worst_case")
-             if r is not None and r.success]
+    brute = [
+        (c, r)
+        for c, r in enumerate_processes(mech, 0.5, None, _processes(), probability="worst_case")
+        if r is not None and r.success
+    ]
     choice, ref = min(brute, key=lambda cr: cr[1].cost)
     assert best.proven and best.result.success and best.processes == choice
     assert best.cost == pytest.approx(ref.cost, rel=1e-7)
@@ -78,8 +87,11 @@ def test_exact_process_choice_matches_brute_force():
     mech = tolsynth.load_model("planar_2r")
     procs = {"l1": _processes()["l1"][:2]}
     best = synthesize_processes(mech, 0.5, 0.9, procs, probability="exact")
-    brute = [(c, r) for c, r in enumerate_processes(mech, 0.5, 0.9, procs, probability="exact")
-             if r is not None and r.success]
+    brute = [
+        (c, r)
+        for c, r in enumerate_processes(mech, 0.5, 0.9, procs, probability="exact")
+        if r is not None and r.success
+    ]
     choice, ref = min(brute, key=lambda cr: cr[1].cost)
     assert best.proven and best.processes == choice
     assert best.cost == pytest.approx(ref.cost, rel=1e-7)

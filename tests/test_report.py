@@ -95,8 +95,16 @@ def test_html_is_well_formed_and_self_contained(xu_report):
 
     assert all(base64.b64decode(s.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n" for s in imgs)
     body = "".join(c.text)
-    for section in ("1. Specification", "2. Model", "3. Optimal tolerances", "4. Certificate", "5. Contributions",
-                    "6. Monte Carlo validation", "7. Workspace", "Worst pose"):
+    for section in (
+        "1. Specification",
+        "2. Model",
+        "3. Optimal tolerances",
+        "4. Certificate",
+        "5. Contributions",
+        "6. Monte Carlo validation",
+        "7. Workspace",
+        "Worst pose",
+    ):
         assert section in body
     assert rep.mechanism.source.split()[0] in body and rep.mechanism.assumptions[0][:40] in body
 
@@ -114,7 +122,7 @@ def test_report_holds_the_numbers_of_the_result(xu_report):
         assert rows[name][1] == f"{eps:.6g}" and rows[name][2] == res.units[name]
     # independent: the cost recomputed from the printed tolerances and the model's k (alpha 0.7)
     printed = np.array([float(rows[n][1]) for n in m.error_parameters])
-    cost = float(np.sum(np.asarray(m.k) * printed ** -0.7))
+    cost = float(np.sum(np.asarray(m.k) * printed**-0.7))
     assert cost == pytest.approx(res.cost, rel=5e-6)
 
 
@@ -129,7 +137,7 @@ def test_monte_carlo_interval_as_printed_and_by_closed_form(xu_report):
     _, rep, text = xu_report
     c = _parse(text)
     table = _table_with(c, "probability")
-    (label, v), = rep.validations
+    ((label, v),) = rep.validations
     assert label == "worst" and v.n == N_MC
     for j in range(3):
         row = table[1 + j]
@@ -145,7 +153,7 @@ def test_monte_carlo_interval_as_printed_and_by_closed_form(xu_report):
 def test_orientation_rows_with_phi():
     """With an orientation specification the Monte Carlo section has its rows (validate(Phi=...))."""
     rep = tolsynth.report("xu_zhang_1988", R=0.5, p=0.99, Phi=0.002, mc_samples=2000, map_n=0, worst_grid=0)
-    (_, v), = rep.validations
+    ((_, v),) = rep.validations
     mc = v.montecarlo
     assert mc.Phi == 0.002 and mc.p_orientation_components.shape == (3,)
     table = _table_with(_parse(rep.to_html()), "probability")
@@ -164,8 +172,13 @@ def test_text_is_escaped_and_markdown_writes_figures(tmp_path):
 
     text = open(load_model("planar_2r").spec.path, encoding="utf-8").read()
     evil = 'Planar <b>2R</b> & "x" <script>alert(1)</script>'
-    text = re.sub(r"^title = .*$", lambda _: 'title = "Planar <b>2R</b> & \\"x\\" <script>alert(1)</script>"', text,
-                  count=1, flags=re.M)
+    text = re.sub(
+        r"^title = .*$",
+        lambda _: 'title = "Planar <b>2R</b> & \\"x\\" <script>alert(1)</script>"',
+        text,
+        count=1,
+        flags=re.M,
+    )
     model = tmp_path / "evil.toml"
     model.write_text(text, encoding="utf-8")
     m = load_model(model)
@@ -199,8 +212,25 @@ def test_report_api_rejects_bad_input():
 
 def test_cli_writes_the_report(tmp_path, capsys):
     out = tmp_path / "rep.html"
-    rc = main(["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--mc-samples", "1000",
-               "--map-n", "0", "--worst-grid", "0", "--out", str(out)])
+    rc = main(
+        [
+            "report",
+            "--model",
+            "planar_2r",
+            "--R",
+            "0.5",
+            "--p",
+            "0.99",
+            "--mc-samples",
+            "1000",
+            "--map-n",
+            "0",
+            "--worst-grid",
+            "0",
+            "--out",
+            str(out),
+        ]
+    )
     cap = capsys.readouterr()
     assert rc == 0, cap.err
     res = tolsynth.synthesize("planar_2r", 0.5, 0.99)  # the same solve, through the API
@@ -210,16 +240,19 @@ def test_cli_writes_the_report(tmp_path, capsys):
     assert str(out) in cap.out
 
 
-@pytest.mark.parametrize("argv, fragment", [
-    (["--p", "1.5"], "--p"),
-    (["--p", "0.99", "--mc-samples", "-5"], "--mc-samples"),
-    (["--p", "0.99", "--map-n", "3"], "--map-n"),
-    (["--p", "0.99", "--out", "/nonexistent/dir/r.html"], "does not exist"),
-    (["--p", "0.99", "--format", "pdf"], "--format"),
-    (["--p", "0.99", "--format", "md"], "named as html"),  # Markdown into a file named .html
-    (["--p", "0.99", "--pose", "nowhere"], "nowhere"),
-    (["--p", "0.99", "--hand-axis", "1,2"], "--hand-axis"),
-])
+@pytest.mark.parametrize(
+    "argv, fragment",
+    [
+        (["--p", "1.5"], "--p"),
+        (["--p", "0.99", "--mc-samples", "-5"], "--mc-samples"),
+        (["--p", "0.99", "--map-n", "3"], "--map-n"),
+        (["--p", "0.99", "--out", "/nonexistent/dir/r.html"], "does not exist"),
+        (["--p", "0.99", "--format", "pdf"], "--format"),
+        (["--p", "0.99", "--format", "md"], "named as html"),  # Markdown into a file named .html
+        (["--p", "0.99", "--pose", "nowhere"], "nowhere"),
+        (["--p", "0.99", "--hand-axis", "1,2"], "--hand-axis"),
+    ],
+)
 def test_cli_bad_input_exits_2_without_traceback(tmp_path, argv, fragment):
     args = ["report", "--model", "planar_2r", "--R", "0.5"] + argv
     if "--out" not in argv:
@@ -245,8 +278,18 @@ def test_exact_and_verified_design_says_so(tmp_path):
     loop's Monte Carlo, whose printed interval is the Wilson interval of its printed estimate and n
     (closed form, recomputed here)."""
     path = tmp_path / "exact.html"
-    rep = tolsynth.report("planar_2r", R=0.5, p=0.9, probability="exact", verify=4000, mc_samples=1000, seed=2,
-                          map_n=0, worst_grid=0, path=path)
+    rep = tolsynth.report(
+        "planar_2r",
+        R=0.5,
+        p=0.9,
+        probability="exact",
+        verify=4000,
+        mc_samples=1000,
+        seed=2,
+        map_n=0,
+        worst_grid=0,
+        path=path,
+    )
     res = rep.result
     assert res.inputs["probability"] == "exact" and res.inputs["verify"] == 4000
     text = path.read_text(encoding="utf-8")
@@ -291,14 +334,29 @@ def test_exact_report_does_not_claim_a_certificate_the_result_lacks(tmp_path):
     from tolsynth.io.report_layout import _layout
     from tolsynth.problem.result import Status
 
-    rep = tolsynth.report("planar_2r", R=0.5, p=0.9, probability="exact", mc_samples=500, seed=3,
-                          map_n=0, worst_grid=0, path=tmp_path / "a.md")
+    rep = tolsynth.report(
+        "planar_2r",
+        R=0.5,
+        p=0.9,
+        probability="exact",
+        mc_samples=500,
+        seed=3,
+        map_n=0,
+        worst_grid=0,
+        path=tmp_path / "a.md",
+    )
     assert rep.result.success
     good = " ".join(str(b[1]) for b in _layout(rep) if b[0] in ("ok", "note"))
     assert "Exact probabilities, certified optimum" in good
-    rep = dataclasses.replace(rep, result=dataclasses.replace(rep.result, status=Status.OPTIMAL_INACCURATE,
-                                                              success=False,
-                                                              message="exact probabilities: not certified (test)"))
+    rep = dataclasses.replace(
+        rep,
+        result=dataclasses.replace(
+            rep.result,
+            status=Status.OPTIMAL_INACCURATE,
+            success=False,
+            message="exact probabilities: not certified (test)",
+        ),
+    )
     bad = " ".join(str(b[1]) for b in _layout(rep) if b[0] in ("ok", "note"))
     assert "Exact probabilities, NOT certified" in bad and "certified optimum" not in bad
     assert "not certified (test)" in bad
@@ -306,8 +364,27 @@ def test_exact_report_does_not_claim_a_certificate_the_result_lacks(tmp_path):
 
 def test_cli_report_takes_probability_and_verify(tmp_path, capsys):
     out = tmp_path / "r.md"
-    rc = main(["report", "--model", "planar_2r", "--R", "0.5", "--p", "0.9", "--probability", "exact",
-               "--mc-samples", "1000", "--map-n", "0", "--worst-grid", "0", "--out", str(out)])
+    rc = main(
+        [
+            "report",
+            "--model",
+            "planar_2r",
+            "--R",
+            "0.5",
+            "--p",
+            "0.9",
+            "--probability",
+            "exact",
+            "--mc-samples",
+            "1000",
+            "--map-n",
+            "0",
+            "--worst-grid",
+            "0",
+            "--out",
+            str(out),
+        ]
+    )
     assert rc == 0, capsys.readouterr().err
     text = out.read_text(encoding="utf-8")
     exact = tolsynth.synthesize("planar_2r", 0.5, 0.9, probability="exact")

@@ -111,7 +111,9 @@ def test_default_bounds_grid_where_upper_bounds_become_active(solver):
 @pytest.mark.slow
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_default_bounds_grid_full(solver):
-    _grid(tolsynth.bundled_models(), [0.05, 0.5, 2.0, 5.0, 10.0], [0.5, 0.9, 0.99, 0.9999], [0.3, 0.7, 1.0, 3.0], solver)
+    _grid(
+        tolsynth.bundled_models(), [0.05, 0.5, 2.0, 5.0, 10.0], [0.5, 0.9, 0.99, 0.9999], [0.3, 0.7, 1.0, 3.0], solver
+    )
 
 
 @pytest.mark.parametrize("solver", SOLVERS)
@@ -144,8 +146,14 @@ def test_extreme_scales_are_solved_not_misreported(solver):
         V = A @ np.diag(np.exp(2 * u) / spec.c) @ A.T
         return 1.0 - np.linalg.eigvalsh(V).max()
 
-    best = minimize(f, np.log(res.x) - 0.1, constraints=[{"type": "ineq", "fun": g}], method="SLSQP",
-                    bounds=list(zip(np.log(spec.lower), np.log(spec.upper))), options={"ftol": 1e-14, "maxiter": 500})
+    best = minimize(
+        f,
+        np.log(res.x) - 0.1,
+        constraints=[{"type": "ineq", "fun": g}],
+        method="SLSQP",
+        bounds=list(zip(np.log(spec.lower), np.log(spec.upper))),
+        options={"ftol": 1e-14, "maxiter": 500},
+    )
     assert res.cost <= f(best.x) * (1 + 1e-6)
 
 

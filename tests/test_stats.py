@@ -47,8 +47,16 @@ def ball_probability_scipy(variances, R, epsabs=1e-14):
     if len(lam) == 2:
         l1, l2 = lam
         a = R / math.sqrt(l1)
-        f = lambda t: (math.exp(-0.5 * (a * math.sin(t)) ** 2) * a * math.cos(t) / math.sqrt(2 * math.pi)  # noqa: E731
-                       * special.erf(R * math.cos(t) / math.sqrt(2 * l2)))
+
+        def f(t):
+            return (
+                math.exp(-0.5 * (a * math.sin(t)) ** 2)
+                * a
+                * math.cos(t)
+                / math.sqrt(2 * math.pi)
+                * special.erf(R * math.cos(t) / math.sqrt(2 * l2))
+            )
+
         value, _ = integrate.quad(f, -math.pi / 2, math.pi / 2, epsabs=1e-14, epsrel=1e-13, limit=200)
         return value
     l1, l2, l3 = lam
@@ -56,9 +64,17 @@ def ball_probability_scipy(variances, R, epsabs=1e-14):
 
     def f(u, t):
         b = R * math.cos(t) / math.sqrt(l2)
-        return (math.exp(-0.5 * (a * math.sin(t)) ** 2) * a * math.cos(t) / math.sqrt(2 * math.pi)
-                * math.exp(-0.5 * (b * math.sin(u)) ** 2) * b * math.cos(u) / math.sqrt(2 * math.pi)
-                * special.erf(R * math.cos(t) * math.cos(u) / math.sqrt(2 * l3)))
+        return (
+            math.exp(-0.5 * (a * math.sin(t)) ** 2)
+            * a
+            * math.cos(t)
+            / math.sqrt(2 * math.pi)
+            * math.exp(-0.5 * (b * math.sin(u)) ** 2)
+            * b
+            * math.cos(u)
+            / math.sqrt(2 * math.pi)
+            * special.erf(R * math.cos(t) * math.cos(u) / math.sqrt(2 * l3))
+        )
 
     value, _ = integrate.dblquad(f, -math.pi / 2, math.pi / 2, -math.pi / 2, math.pi / 2, epsabs=epsabs, epsrel=1e-13)
     return value
@@ -327,13 +343,16 @@ def test_p_ball_thin_third_variance_vs_perturbation_series(l3):
     assert abs(p_ball((1.0, 1.0, l3), R) - series) <= 1e-12 + 10 * l3**2
 
 
-@pytest.mark.parametrize("lam, R", [
-    ((1.0, 0.5, 0.1), 1e-3),  # R far inside every sigma: P ~ R^3 (the series of the kernel)
-    ((1.0, 1.0, 1.0), 1e-4),
-    ((1.0, 1e-2, 1e-6), 1e-2),  # a flat ellipsoid: R beyond sigma3, far inside sigma1, sigma2
-    ((4.0, 1.0, 1e-8), 1e-3),
-    ((1.0, 0.3, 0.29), 0.05),
-])
+@pytest.mark.parametrize(
+    "lam, R",
+    [
+        ((1.0, 0.5, 0.1), 1e-3),  # R far inside every sigma: P ~ R^3 (the series of the kernel)
+        ((1.0, 1.0, 1.0), 1e-4),
+        ((1.0, 1e-2, 1e-6), 1e-2),  # a flat ellipsoid: R beyond sigma3, far inside sigma1, sigma2
+        ((4.0, 1.0, 1e-8), 1e-3),
+        ((1.0, 0.3, 0.29), 0.05),
+    ],
+)
 def test_p_ball_small_probabilities_keep_relative_accuracy(lam, R):
     """Probabilities of 1e-13 .. 5e-4: relative agreement with a SciPy dblquad run with a purely
     relative tolerance (the 1-D kernel is evaluated without cancellation)."""

@@ -48,8 +48,17 @@ def test_compiled_and_python_powell_find_the_same_minimiser():
     mech = tolsynth.load_model("xu_zhang_1988")
     nlp = ToleranceNLP(make_specification(mech, 0.5, 0.99))
     F = penalty_graph(nlp.spec.n, 1, 0, 0, nlp.costs.signature)
-    values = [nlp.P, nlp.theta, nlp.lu, nlp.uu, np.array([2.0]), np.array([1.0]), np.array([0.01]),
-              np.zeros(0), np.zeros(0)]
+    values = [
+        nlp.P,
+        nlp.theta,
+        nlp.lu,
+        nlp.uu,
+        np.array([2.0]),
+        np.array([1.0]),
+        np.array([0.01]),
+        np.zeros(0),
+        np.zeros(0),
+    ]
     u0 = np.log(nlp.interior_start())
     comp = cpowell.compile_powell(F)
     assert comp is not None
@@ -86,11 +95,18 @@ def test_library_is_cached_on_disk(tmp_path, monkeypatch):
     # loaded, and dlopen hands back the loaded one by its path)
     (tmp_path / "damaged").write_bytes(b"not a library")
     (tmp_path / "damaged").replace(files[0])  # a new file: the loaded one stays mapped
-    code = ("import tolsynth; from tolsynth.solvers import cpowell; "
-            "r = tolsynth.synthesize('planar_2r', 0.1, 0.9, solver='sumt'); "
-            "print(cpowell.backend_status()['backend'], repr(r.cost))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         env={**os.environ, "TOLSYNTH_CACHE_DIR": str(tmp_path)}).stdout.split()
+    code = (
+        "import tolsynth; from tolsynth.solvers import cpowell; "
+        "r = tolsynth.synthesize('planar_2r', 0.1, 0.9, solver='sumt'); "
+        "print(cpowell.backend_status()['backend'], repr(r.cost))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**os.environ, "TOLSYNTH_CACHE_DIR": str(tmp_path)},
+    ).stdout.split()
     assert out[0] == "compiled" and float(out[1]) == pytest.approx(first.cost, rel=1e-12)
     assert files[0].stat().st_size > 1000
 

@@ -26,8 +26,15 @@ def _check_against_synthesize(df, mech):
             assert row["error"].startswith("InfeasibleSpecificationError")
             assert np.isnan(row["cost"])
             continue
-        ref = tolsynth.synthesize(mech, R=row["R"], p=row["p"], distribution=row["distribution"],
-                                  alpha=row["alpha"], criterion=row["criterion"], solver=row["solver"])
+        ref = tolsynth.synthesize(
+            mech,
+            R=row["R"],
+            p=row["p"],
+            distribution=row["distribution"],
+            alpha=row["alpha"],
+            criterion=row["criterion"],
+            solver=row["solver"],
+        )
         assert row["status"] == str(ref.status) == "optimal" and row["success"] and row["error"] == ""
         assert row["cost"] == pytest.approx(ref.cost, rel=1e-8)
         if row["criterion"] == "components":  # certified; the sphere's bound is its relaxation's
@@ -70,8 +77,10 @@ def test_sweep_auto_engine(xz, monkeypatch):
 
 def test_sweep_on_dask_local_cluster(xz):
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+    with (
+        distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster,
+        distributed.Client(cluster) as client,
+    ):
         df = tolsynth.sweep(xz, **GRID, client=client)
         assert df.attrs["summary"]["engine"].startswith("dask")
         _check_against_synthesize(df, xz)
@@ -83,29 +92,34 @@ def test_sweep_on_dask_local_cluster(xz):
 def test_sweep_on_dask_worker_processes(xz):
     """Two worker processes (the model is scattered to each), both solvers."""
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+    with (
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+        distributed.Client(cluster) as client,
+    ):
         df = tolsynth.sweep(xz, R=[0.5, 1e-7], p=[0.9, 0.99], solver=["ipopt", "sumt"], client=client)
         _check_against_synthesize(df, xz)
 
 
-@pytest.mark.parametrize("kwargs, error, match", [
-    (dict(R=[]), InputError, "R: empty list"),
-    (dict(R=[0.5, -1.0]), OutOfRangeError, "R"),
-    (dict(p=[0.9, 1.5]), OutOfRangeError, "p"),
-    (dict(alpha=[0.7, 0.0]), OutOfRangeError, "alpha"),
-    (dict(alpha=[{"h2": 0.5}]), InputError, "alpha"),
-    (dict(distribution=["uniform", "cauchy"]), InputError, "distribution"),
-    (dict(criterion="box"), InputError, "criterion"),
-    (dict(solver=["ipopt", "snopt"]), InputError, "solver"),
-    (dict(client="threads"), InputError, "client"),
-    (dict(client=3), InputError, "client"),
-    (dict(workers=0), OutOfRangeError, "workers"),
-    (dict(validate=100), InputError, "validate"),
-    (dict(tolerance=0.1), InputError, "tolerance"),
-    (dict(k={"nope": 1.0}), UnknownNameError, "nope"),
-    (dict(R=[0.1] * 1001, p=[0.9] * 1000), OutOfRangeError, "grid"),
-])
+@pytest.mark.parametrize(
+    "kwargs, error, match",
+    [
+        (dict(R=[]), InputError, "R: empty list"),
+        (dict(R=[0.5, -1.0]), OutOfRangeError, "R"),
+        (dict(p=[0.9, 1.5]), OutOfRangeError, "p"),
+        (dict(alpha=[0.7, 0.0]), OutOfRangeError, "alpha"),
+        (dict(alpha=[{"h2": 0.5}]), InputError, "alpha"),
+        (dict(distribution=["uniform", "cauchy"]), InputError, "distribution"),
+        (dict(criterion="box"), InputError, "criterion"),
+        (dict(solver=["ipopt", "snopt"]), InputError, "solver"),
+        (dict(client="threads"), InputError, "client"),
+        (dict(client=3), InputError, "client"),
+        (dict(workers=0), OutOfRangeError, "workers"),
+        (dict(validate=100), InputError, "validate"),
+        (dict(tolerance=0.1), InputError, "tolerance"),
+        (dict(k={"nope": 1.0}), UnknownNameError, "nope"),
+        (dict(R=[0.1] * 1001, p=[0.9] * 1000), OutOfRangeError, "grid"),
+    ],
+)
 def test_sweep_bad_grids(xz, kwargs, error, match):
     args = dict(R=0.5, p=0.99)
     args.update(kwargs)

@@ -36,10 +36,14 @@ def max_sigma_z_over_R(mech, eps, R, p, dist, pose="worst"):
 # ------------------------------------------------------------------------------------------
 # all 18 columns of Tables 1-3: IPOPT and SUMT agree, IPOPT meets every constraint
 # ------------------------------------------------------------------------------------------
-COLUMNS = [(r.table, r.R, r.p, r.alpha, r.distribution) for r in tolsynth.load_model("xu_zhang_1988").spec.reference_results]
+COLUMNS = [
+    (r.table, r.R, r.p, r.alpha, r.distribution) for r in tolsynth.load_model("xu_zhang_1988").spec.reference_results
+]
 
 
-@pytest.mark.parametrize("table,R,p,alpha,dist", COLUMNS, ids=[f"{c[0]}-R{c[1]}-p{c[2]}-a{c[3]}-{c[4]}" for c in COLUMNS])
+@pytest.mark.parametrize(
+    "table,R,p,alpha,dist", COLUMNS, ids=[f"{c[0]}-R{c[1]}-p{c[2]}-a{c[3]}-{c[4]}" for c in COLUMNS]
+)
 def test_ipopt_and_sumt_agree_on_every_column(xz, table, R, p, alpha, dist):
     ip = synthesize(xz, R, p, dist, alpha, solver="ipopt")
     su = synthesize(xz, R, p, dist, alpha, solver="sumt")
@@ -52,7 +56,7 @@ def test_ipopt_and_sumt_agree_on_every_column(xz, table, R, p, alpha, dist):
     assert max_sigma_z_over_R(xz, ip.x, R, p, dist) <= 1 + 1e-8
     # the cost is what the paper's formula says
     k = xz.k
-    assert ip.cost == pytest.approx(float(np.sum(k * ip.x ** -alpha)), rel=1e-12)
+    assert ip.cost == pytest.approx(float(np.sum(k * ip.x**-alpha)), rel=1e-12)
     # at the paper's optimum two principal sigma are active at once (coinciding eigenvalues)
     assert ip.constraints[0].active.sum() == 2
     # the certificate: the dual bound closes the gap
@@ -262,8 +266,27 @@ def test_non_convergence_is_not_success(xz, solver, options):
 def test_cli_solve_json_matches_api(xz, capsys):
     from tolsynth.cli import main
 
-    assert main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--dist", "uniform",
-                 "--alpha", "0.7", "--solver", "ipopt", "--json"]) == 0
+    assert (
+        main(
+            [
+                "solve",
+                "--model",
+                "xu_zhang_1988",
+                "--R",
+                "0.5",
+                "--p",
+                "0.99",
+                "--dist",
+                "uniform",
+                "--alpha",
+                "0.7",
+                "--solver",
+                "ipopt",
+                "--json",
+            ]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert out["success"] is True
     eps = np.array([out["tolerances"][n] for n in xz.error_parameters])
@@ -400,8 +423,10 @@ def test_function_evaluations_are_per_solve():
     grew by 846 per solve before), at least one objective and one constraint evaluation per IPOPT
     iteration, and no more than ten per iteration and round."""
     m = tolsynth.load_model("xu_zhang_1988")
-    runs = [tolsynth.synthesize(m, 0.5, 0.99, "uniform", 0.7, solver="ipopt", options={"warm_start": False})
-            for _ in range(3)]
+    runs = [
+        tolsynth.synthesize(m, 0.5, 0.99, "uniform", 0.7, solver="ipopt", options={"warm_start": False})
+        for _ in range(3)
+    ]
     counts = {r.function_evaluations for r in runs}
     assert len(counts) == 1, counts
     r = runs[0]

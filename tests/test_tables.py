@@ -45,9 +45,16 @@ def _read_plain(path):
 
 @pytest.fixture(scope="module")
 def solved(xz):
-    return tolsynth.synthesize(xz, R=0.5, p=0.99, distribution="normal",
-                               alpha={n: 0.5 if n == "h3" else 0.7 for n in xz.error_parameters},
-                               k={"a": 2.0}, bounds={"h2": (0.05, 1.0)}, options={"tol": 1e-10})
+    return tolsynth.synthesize(
+        xz,
+        R=0.5,
+        p=0.99,
+        distribution="normal",
+        alpha={n: 0.5 if n == "h3" else 0.7 for n in xz.error_parameters},
+        k={"a": 2.0},
+        bounds={"h2": (0.05, 1.0)},
+        options={"tol": 1e-10},
+    )
 
 
 @pytest.mark.parametrize("fmt", FORMATS)
@@ -58,16 +65,22 @@ def test_synthesis_round_trip(solved, tmp_path, fmt):
     assert list(frame["parameter"]) == list(solved.tolerances)
     np.testing.assert_array_equal(frame["tolerance"].to_numpy(), solved.x)  # exact, every format
     np.testing.assert_array_equal(frame["lower"].to_numpy(), solved.spec.lower)
-    assert frame.set_index("parameter").loc["h2", "bound_active"] == solved.bounds_active.get("h2", "") or \
-        (pd.isna(frame.set_index("parameter").loc["h2", "bound_active"]) and "h2" not in solved.bounds_active)
+    assert frame.set_index("parameter").loc["h2", "bound_active"] == solved.bounds_active.get("h2", "") or (
+        pd.isna(frame.set_index("parameter").loc["h2", "bound_active"]) and "h2" not in solved.bounds_active
+    )
     # the per-parameter cost column sums to the result's cost (an independent sum of k eps^-alpha)
     k = np.array([2.0 if n == "a" else k0 for n, k0 in zip(solved.tolerances, solved.spec.k)])
     alpha = np.array([0.5 if n == "h3" else 0.7 for n in solved.tolerances])
-    assert np.sum(k * solved.x ** -alpha) == pytest.approx(solved.cost, rel=1e-12)
+    assert np.sum(k * solved.x**-alpha) == pytest.approx(solved.cost, rel=1e-12)
     assert frame["cost"].sum() == pytest.approx(solved.cost, rel=1e-12)
     inputs, summary = meta["inputs"], meta["summary"]
     assert inputs["model"]["name"] == "xu_zhang_1988"
-    assert (inputs["R_mm"], inputs["p"], inputs["distribution"], inputs["criterion"]) == (0.5, 0.99, "normal", "components")
+    assert (inputs["R_mm"], inputs["p"], inputs["distribution"], inputs["criterion"]) == (
+        0.5,
+        0.99,
+        "normal",
+        "components",
+    )
     assert inputs["alpha"]["h3"] == 0.5 and inputs["alpha"]["h2"] == 0.7 and inputs["k"]["a"] == 2.0
     assert inputs["bounds"]["h2"] == [0.05, 1.0]
     assert inputs["solver"] == "auto" and inputs["options"] == {"tol": 1e-10}
@@ -170,8 +183,9 @@ def test_plain_pandas_reads_numeric_columns(solved, tmp_path, fmt):
 def test_excel_round_trip_of_other_results(xz, solved, compared_and_mapped, tmp_path):
     r = tolsynth.monte_carlo(xz, "worst", solved.x, "normal", R=0.5, n=4000, seed=3)
     rows = pd.read_excel(_saved_excel(r, tmp_path / "mc.xlsx")).set_index("quantity")
-    np.testing.assert_allclose(rows.loc[[f"p_component_{j}" for j in (1, 2, 3)], "monte_carlo"], r.p_components,
-                               rtol=1e-15)
+    np.testing.assert_allclose(
+        rows.loc[[f"p_component_{j}" for j in (1, 2, 3)], "monte_carlo"], r.p_components, rtol=1e-15
+    )
     c, pm = compared_and_mapped
     frame = pd.read_excel(_saved_excel(pm, tmp_path / "map.xlsx"))
     np.testing.assert_allclose(frame["P"].to_numpy(), pm.P.ravel(), rtol=1e-15, equal_nan=True)  # empty cells: NaN
@@ -236,8 +250,10 @@ def test_read_table_on_devices_and_folders(tmp_path):
 
 def test_csv_of_earlier_versions_still_reads(tmp_path):
     path = tmp_path / "old.csv"
-    path.write_text('# tolsynth 0.1.0 SynthesisResult\n# {"kind": "SynthesisResult", "summary": {"cost": 1.5}}\n'
-                    "parameter,tolerance\nh2,0.1\n")
+    path.write_text(
+        '# tolsynth 0.1.0 SynthesisResult\n# {"kind": "SynthesisResult", "summary": {"cost": 1.5}}\n'
+        "parameter,tolerance\nh2,0.1\n"
+    )
     back = tolsynth.read_table(path)
     assert back.attrs["summary"]["cost"] == 1.5 and back.attrs["tolsynth_version"] == "0.1.0"
     assert back["tolerance"].tolist() == [0.1]

@@ -32,8 +32,9 @@ def test_phi_against_the_density(beta):
 @pytest.mark.parametrize("beta", [0.5, 2.0, 8.0])
 def test_derivatives_against_central_differences(beta):
     # on both sides of the switch between the two forms (y = 5 is s = 5 beta sqrt 2)
-    s = np.concatenate([np.linspace(0.3, 25.0, 40), 5.0 * beta * math.sqrt(2.0) + np.array([-0.01, 0.01]),
-                        [60.0, 300.0, 2500.0]])
+    s = np.concatenate(
+        [np.linspace(0.3, 25.0, 40), 5.0 * beta * math.sqrt(2.0) + np.array([-0.01, 0.01]), [60.0, 300.0, 2500.0]]
+    )
     phi, d1, d2 = cf3(s, beta, 2)
     h = 1e-5
     fp, _, _ = cf3(s + h, beta)

@@ -57,8 +57,13 @@ def _rodrigues(axis, angle):
 
 def _numpy_chain(path, base, tip):
     """(fk(q) -> 4x4 in mm, movable joint names): yourdfpy's origin matrices, our own motion."""
-    robot = yourdfpy.URDF.load(str(path), build_scene_graph=False, load_meshes=False,
-                               build_collision_scene_graph=False, load_collision_meshes=False).robot
+    robot = yourdfpy.URDF.load(
+        str(path),
+        build_scene_graph=False,
+        load_meshes=False,
+        build_collision_scene_graph=False,
+        load_collision_meshes=False,
+    ).robot
     by_child = {j.child: j for j in robot.joints}
     chain, link = [], tip
     while link != base:
@@ -111,8 +116,11 @@ def test_fk_matches_an_independent_numpy_chain(robot):
 
 def test_joint_limits_come_from_the_file():
     m = tolsynth.load_urdf(_file(PANDA[0]), *PANDA[1:])
-    limits = {j.get("name"): (float(j.find("limit").get("lower")), float(j.find("limit").get("upper")))
-              for j in ET.parse(_file(PANDA[0])).getroot().findall("joint") if j.get("type") == "revolute"}
+    limits = {
+        j.get("name"): (float(j.find("limit").get("lower")), float(j.find("limit").get("upper")))
+        for j in ET.parse(_file(PANDA[0])).getroot().findall("joint")
+        if j.get("type") == "revolute"
+    }
     for j in m.spec.joints:
         assert (j.lower, j.upper) == limits[j.name]
     # Franka's published limits for joint 4: -3.0718 .. -0.0698 rad
@@ -133,8 +141,13 @@ def _param_chain(path, base, tip):
     """FK from the file's own xyz/rpy numbers (ElementTree), with those numbers perturbable:
     fk(q, {"joint.field": delta in mm or rad})."""
     origins = _file_origins(path)
-    robot = yourdfpy.URDF.load(str(path), build_scene_graph=False, load_meshes=False,
-                               build_collision_scene_graph=False, load_collision_meshes=False).robot
+    robot = yourdfpy.URDF.load(
+        str(path),
+        build_scene_graph=False,
+        load_meshes=False,
+        build_collision_scene_graph=False,
+        load_collision_meshes=False,
+    ).robot
     by_child = {j.child: j for j in robot.joints}
     chain, link = [], tip
     while link != base:
@@ -144,8 +157,11 @@ def _param_chain(path, base, tip):
 
     def rot(axis, a):
         c, s = math.cos(a), math.sin(a)
-        return {"x": np.array([[1, 0, 0], [0, c, -s], [0, s, c]]), "y": np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]),
-                "z": np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])}[axis]
+        return {
+            "x": np.array([[1, 0, 0], [0, c, -s], [0, s, c]]),
+            "y": np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]),
+            "z": np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]),
+        }[axis]
 
     def fk(q, d):
         T = np.eye(4)
@@ -194,8 +210,13 @@ def test_axis_tilts_match_central_differences():
     rel, base, tip = UR5
     m = tolsynth.load_urdf(_file(rel), base, tip, errors=["elbow_joint.axis"])
     assert m.error_parameters == ("elbow_joint.tilt1", "elbow_joint.tilt2")
-    robot = yourdfpy.URDF.load(str(_file(rel)), build_scene_graph=False, load_meshes=False,
-                               build_collision_scene_graph=False, load_collision_meshes=False).robot
+    robot = yourdfpy.URDF.load(
+        str(_file(rel)),
+        build_scene_graph=False,
+        load_meshes=False,
+        build_collision_scene_graph=False,
+        load_collision_meshes=False,
+    ).robot
     elbow = next(j for j in robot.joints if j.name == "elbow_joint")
     axis = np.asarray(elbow.axis, float)  # (0, 1, 0): tolsynth's A = Rz(90 deg) . Ry(90 deg)
     fk, _ = _numpy_chain(_file(rel), base, tip)
@@ -207,8 +228,10 @@ def test_axis_tilts_match_central_differences():
     h = 1e-6
     for col, u in ((0, A[:, 0]), (1, A[:, 1])):
         # perturb the chain copy held by _numpy_chain: rebuild it with the tilted axis
-        Tp, Tm = _tilted_fk(rel, base, tip, "elbow_joint", _rodrigues(u, h) @ axis, q), \
-            _tilted_fk(rel, base, tip, "elbow_joint", _rodrigues(u, -h) @ axis, q)
+        Tp, Tm = (
+            _tilted_fk(rel, base, tip, "elbow_joint", _rodrigues(u, h) @ axis, q),
+            _tilted_fk(rel, base, tip, "elbow_joint", _rodrigues(u, -h) @ axis, q),
+        )
         R0 = fk(q)[:3, :3]
         dp = (Tp[:3, 3] - Tm[:3, 3]) / (2 * h) * 1e-3  # per mrad
         W = (Tp[:3, :3] - Tm[:3, :3]) / (2 * h) * 1e-3 @ R0.T
@@ -217,8 +240,13 @@ def test_axis_tilts_match_central_differences():
 
 
 def _tilted_fk(rel, base, tip, joint, new_axis, q):
-    robot = yourdfpy.URDF.load(str(_file(rel)), build_scene_graph=False, load_meshes=False,
-                               build_collision_scene_graph=False, load_collision_meshes=False).robot
+    robot = yourdfpy.URDF.load(
+        str(_file(rel)),
+        build_scene_graph=False,
+        load_meshes=False,
+        build_collision_scene_graph=False,
+        load_collision_meshes=False,
+    ).robot
     by_child = {j.child: j for j in robot.joints}
     chain, link = [], tip
     while link != base:
@@ -282,14 +310,38 @@ def test_fixed_joints_are_folded_and_prismatic_joints_slide(tmp_path):
 def test_error_selection_by_pattern(tmp_path):
     path = _urdf(tmp_path, TOY)
     m = tolsynth.load_urdf(path, "base", "tip", errors=["*.xyz", "j1.rpy"])
-    assert m.error_parameters == ("j1.x", "j1.y", "j1.z", "j1.roll", "j1.pitch", "j1.yaw",
-                                  "f1.x", "f1.y", "f1.z", "f2.x", "f2.y", "f2.z", "j2.x", "j2.y", "j2.z",
-                                  "f3.x", "f3.y", "f3.z")
+    assert m.error_parameters == (
+        "j1.x",
+        "j1.y",
+        "j1.z",
+        "j1.roll",
+        "j1.pitch",
+        "j1.yaw",
+        "f1.x",
+        "f1.y",
+        "f1.z",
+        "f2.x",
+        "f2.y",
+        "f2.z",
+        "j2.x",
+        "j2.y",
+        "j2.z",
+        "f3.x",
+        "f3.y",
+        "f3.z",
+    )
     units = dict(zip(m.error_parameters, m.units))
     assert units["j1.x"] == "mm" and units["j1.yaw"] == "mrad"
     assert dict(zip(m.error_parameters, m.k))["j1.yaw"] == 1.5
-    m2 = tolsynth.load_urdf(path, "base", "tip", errors="all", k={"length": 2.0, "j1.yaw": 3.0},
-                            bounds={"angle": (0.01, 10.0)}, tolerance_units={"length": "um"})
+    m2 = tolsynth.load_urdf(
+        path,
+        "base",
+        "tip",
+        errors="all",
+        k={"length": 2.0, "j1.yaw": 3.0},
+        bounds={"angle": (0.01, 10.0)},
+        tolerance_units={"length": "um"},
+    )
     assert "j2.tilt2" in m2.error_parameters and "j1.tilt1" in m2.error_parameters
     p = {q.name: q for q in m2.parameters}
     assert p["f1.x"].unit == "um" and p["f1.x"].k == 2.0 and p["j1.yaw"].k == 3.0 and p["j1.roll"].k == 1.5
@@ -384,7 +436,7 @@ def test_model_file_with_a_urdf_chain(tmp_path):
     [
         ("[symbols]\na = 1.0\n", "symbols: not allowed with chain.urdf"),
         ("[[error_parameter]]\nname = 'x'\n", "error_parameter: unknown key (did you mean `error_parameters`"),
-        ("[tolerance_sets.t]\n\"elbow_joint.zz\" = 0.1\n", "tolerance_sets.t.elbow_joint.zz: unknown error parameter"),
+        ('[tolerance_sets.t]\n"elbow_joint.zz" = 0.1\n', "tolerance_sets.t.elbow_joint.zz: unknown error parameter"),
     ],
 )
 def test_model_file_with_a_urdf_chain_rejects_bad_input(tmp_path, extra, field):
@@ -414,9 +466,14 @@ def _dh_numpy(q):
         ct, st = math.cos(q[i]), math.sin(q[i])
         al = math.radians(UR5_DH["alpha"][i])
         ca, sa = math.cos(al), math.sin(al)
-        T = T @ np.array([[ct, -st * ca, st * sa, UR5_DH["a"][i] * ct],
-                          [st, ct * ca, -ct * sa, UR5_DH["a"][i] * st],
-                          [0, sa, ca, UR5_DH["d"][i]], [0, 0, 0, 1]])
+        T = T @ np.array(
+            [
+                [ct, -st * ca, st * sa, UR5_DH["a"][i] * ct],
+                [st, ct * ca, -ct * sa, UR5_DH["a"][i] * st],
+                [0, sa, ca, UR5_DH["d"][i]],
+                [0, 0, 0, 1],
+            ]
+        )
     return T
 
 
@@ -433,8 +490,11 @@ def test_ur5_urdf_and_dh_table_describe_the_same_arm():
     worst = 0.0
     for q in _random_q(m, 50, 3):
         T, D = m.fk(q), _dh_numpy(q)
-        worst = max(worst, np.abs(T[:3, 3] - RZ180 @ D[:3, 3]).max() / np.linalg.norm(D[:3, 3]),
-                    np.abs(T[:3, :3] - RZ180 @ D[:3, :3]).max())
+        worst = max(
+            worst,
+            np.abs(T[:3, 3] - RZ180 @ D[:3, 3]).max() / np.linalg.norm(D[:3, 3]),
+            np.abs(T[:3, :3] - RZ180 @ D[:3, :3]).max(),
+        )
     assert worst < 1e-10, worst
     if "ur5" in tolsynth.bundled_models():  # the bundled file is the same table
         d = tolsynth.load_model("ur5")
@@ -445,19 +505,34 @@ def test_ur5_urdf_and_dh_table_describe_the_same_arm():
 #: D-H error parameter -> the URDF origin number with the same effect (up to sign) at every pose
 #: (found by comparing the columns at random poses; asserted below)
 DH_TO_URDF = {
-    "a1": "shoulder_lift_joint.x", "d1": "shoulder_pan_joint.z", "o1": "shoulder_pan_joint.yaw",
-    "a2": "elbow_joint.z", "d2": "shoulder_lift_joint.y", "o2": "shoulder_lift_joint.pitch",
-    "a3": "wrist_1_joint.z", "d3": "elbow_joint.y", "o3": "elbow_joint.pitch",
-    "a4": "wrist_2_joint.x", "d4": "wrist_1_joint.y", "alpha4": "wrist_2_joint.roll", "o4": "wrist_1_joint.pitch",
-    "a5": "wrist_3_joint.x", "d5": "wrist_2_joint.z", "alpha5": "wrist_3_joint.roll", "o5": "wrist_2_joint.yaw",
-    "a6": "wrist_3_link-tool0_fixed_joint.x", "d6": "wrist_3_joint.y",
-    "alpha6": "wrist_3_link-tool0_fixed_joint.roll", "o6": "wrist_3_joint.pitch",
+    "a1": "shoulder_lift_joint.x",
+    "d1": "shoulder_pan_joint.z",
+    "o1": "shoulder_pan_joint.yaw",
+    "a2": "elbow_joint.z",
+    "d2": "shoulder_lift_joint.y",
+    "o2": "shoulder_lift_joint.pitch",
+    "a3": "wrist_1_joint.z",
+    "d3": "elbow_joint.y",
+    "o3": "elbow_joint.pitch",
+    "a4": "wrist_2_joint.x",
+    "d4": "wrist_1_joint.y",
+    "alpha4": "wrist_2_joint.roll",
+    "o4": "wrist_1_joint.pitch",
+    "a5": "wrist_3_joint.x",
+    "d5": "wrist_2_joint.z",
+    "alpha5": "wrist_3_joint.roll",
+    "o5": "wrist_2_joint.yaw",
+    "a6": "wrist_3_link-tool0_fixed_joint.x",
+    "d6": "wrist_3_joint.y",
+    "alpha6": "wrist_3_link-tool0_fixed_joint.roll",
+    "o6": "wrist_3_joint.pitch",
 }
 
 
 def _dh_mechanism(errors):
-    links = [{"d": UR5_DH["d"][i], "a": UR5_DH["a"][i], "alpha": UR5_DH["alpha"][i], "limits": (-360, 360)}
-             for i in range(6)]
+    links = [
+        {"d": UR5_DH["d"][i], "a": UR5_DH["a"][i], "alpha": UR5_DH["alpha"][i], "limits": (-360, 360)} for i in range(6)
+    ]
     # the table's twists and limits are degrees (as the UR data sheet gives them): said, not guessed
     return tolsynth.Mechanism.from_dh(links, name="ur5_dh", errors=errors, angle_unit="deg")
 
@@ -565,8 +640,21 @@ def test_cli_solves_a_model_file_with_a_urdf_chain(tmp_path, capsys):
 
     (tmp_path / "ur5_robot.urdf").write_bytes(_file(UR5[0]).read_bytes())
     (tmp_path / "m.toml").write_text(_model_text())
-    rc = main(["solve", "--model", str(tmp_path / "m.toml"), "--R", "0.5", "--p", "0.99", "--pose", "bent",
-               "--k", "elbow_joint.z=2"])
+    rc = main(
+        [
+            "solve",
+            "--model",
+            str(tmp_path / "m.toml"),
+            "--R",
+            "0.5",
+            "--p",
+            "0.99",
+            "--pose",
+            "bent",
+            "--k",
+            "elbow_joint.z=2",
+        ]
+    )
     out = capsys.readouterr().out
     assert rc == 0 and "elbow_joint.z = " in out and "wrist_3_link-tool0_fixed_joint.yaw" in out
 
@@ -582,33 +670,70 @@ TWO = """
 """
 
 
-@pytest.mark.parametrize("joints, extra_links, fragment", [
-    (TWO.replace('<axis xyz="0 0 1"/>', '<axis xyz="1 0"/>', 1), "", r"joint 'j1': axis xyz='1 0': expected three finite numbers"),
-    (TWO.replace('<axis xyz="0 0 1"/>', '<axis xyz="1e308 1e308 0"/>', 1), "", r"joint 'j1': axis xyz="),
-    (TWO.replace('<axis xyz="0 0 1"/>', '<axis xyz="0 0 0"/>', 1), "", r"joint 'j1': axis \[0.0, 0.0, 0.0\] has no direction"),
-    (TWO.replace('xyz="0.3 0 0"', 'xyz="1e308 0 0"'), "", r"joint 'j2': origin xyz='1e308 0 0'"),
-    (TWO.replace('xyz="0.3 0 0"', 'xyz="nan 0 0"'), "", r"joint 'j2': origin xyz"),
-    (TWO + '<joint name="j3" type="fixed"><parent link="tip"/><child link="l1"/></joint>', "",
-     r"link 'l1' is also the child of joint 'j1': a closed loop"),
-    (TWO, '<link name="l1"/>', r"link 'l1': declared twice"),
-    (TWO + '<joint name="j2" type="fixed"><parent link="tip"/><child link="t2"/></joint>', "", r"joint 'j2': declared twice"),
-], ids=["axis-2-numbers", "axis-overflow", "axis-zero", "xyz-1e308", "xyz-nan", "closed-loop", "duplicate-link",
-        "duplicate-joint"])
+@pytest.mark.parametrize(
+    "joints, extra_links, fragment",
+    [
+        (
+            TWO.replace('<axis xyz="0 0 1"/>', '<axis xyz="1 0"/>', 1),
+            "",
+            r"joint 'j1': axis xyz='1 0': expected three finite numbers",
+        ),
+        (TWO.replace('<axis xyz="0 0 1"/>', '<axis xyz="1e308 1e308 0"/>', 1), "", r"joint 'j1': axis xyz="),
+        (
+            TWO.replace('<axis xyz="0 0 1"/>', '<axis xyz="0 0 0"/>', 1),
+            "",
+            r"joint 'j1': axis \[0.0, 0.0, 0.0\] has no direction",
+        ),
+        (TWO.replace('xyz="0.3 0 0"', 'xyz="1e308 0 0"'), "", r"joint 'j2': origin xyz='1e308 0 0'"),
+        (TWO.replace('xyz="0.3 0 0"', 'xyz="nan 0 0"'), "", r"joint 'j2': origin xyz"),
+        (
+            TWO + '<joint name="j3" type="fixed"><parent link="tip"/><child link="l1"/></joint>',
+            "",
+            r"link 'l1' is also the child of joint 'j1': a closed loop",
+        ),
+        (TWO, '<link name="l1"/>', r"link 'l1': declared twice"),
+        (
+            TWO + '<joint name="j2" type="fixed"><parent link="tip"/><child link="t2"/></joint>',
+            "",
+            r"joint 'j2': declared twice",
+        ),
+    ],
+    ids=[
+        "axis-2-numbers",
+        "axis-overflow",
+        "axis-zero",
+        "xyz-1e308",
+        "xyz-nan",
+        "closed-loop",
+        "duplicate-link",
+        "duplicate-joint",
+    ],
+)
 def test_malformed_urdf_is_a_typed_error(tmp_path, joints, extra_links, fragment):
     import re
 
     links = sorted(set(re.findall(r'link="([^"]+)"', joints)))
     path = tmp_path / "bad.urdf"
-    path.write_text('<robot name="bad">' + "".join(f'<link name="{n}"/>' for n in links) + extra_links + joints + "</robot>")
+    path.write_text(
+        '<robot name="bad">' + "".join(f'<link name="{n}"/>' for n in links) + extra_links + joints + "</robot>"
+    )
     with pytest.raises(ModelFileError, match=fragment):
         tolsynth.load_urdf(path, "base", "tip")
 
 
-@pytest.mark.parametrize("kw, field", [
-    (dict(errors=5), "errors"), (dict(errors=[5]), "errors"), (dict(configurations="abc"), "configurations"),
-    (dict(configurations={"a": "x"}), "configurations[a]"), (dict(tolerance_sets="x"), "tolerance_sets"),
-    (dict(tolerance_sets={"s": 3}), "tolerance_sets[s]"), (dict(assumptions=5), "assumptions"), (dict(name=5), "name"),
-])
+@pytest.mark.parametrize(
+    "kw, field",
+    [
+        (dict(errors=5), "errors"),
+        (dict(errors=[5]), "errors"),
+        (dict(configurations="abc"), "configurations"),
+        (dict(configurations={"a": "x"}), "configurations[a]"),
+        (dict(tolerance_sets="x"), "tolerance_sets"),
+        (dict(tolerance_sets={"s": 3}), "tolerance_sets[s]"),
+        (dict(assumptions=5), "assumptions"),
+        (dict(name=5), "name"),
+    ],
+)
 def test_bad_load_urdf_arguments_are_typed_errors(tmp_path, kw, field):
     from tolsynth.errors import InputError
 

@@ -40,8 +40,16 @@ def closed_form_ik(x, z):
     tp2 = t2 + g
     t4 = e2 - g
     r = math.radians
-    margin = min(t2 - r(50), r(130) - t2, tp2 - r(140), r(200) - tp2, (g - r(50)) / math.sqrt(2),
-                 (r(130) - g) / math.sqrt(2), t4 + r(110), r(110) - t4)
+    margin = min(
+        t2 - r(50),
+        r(130) - t2,
+        tp2 - r(140),
+        r(200) - tp2,
+        (g - r(50)) / math.sqrt(2),
+        (r(130) - g) / math.sqrt(2),
+        t4 + r(110),
+        r(110) - t4,
+    )
     return np.array([0.0, tp2, t2, t4, 0.0]), margin
 
 
@@ -152,8 +160,16 @@ def test_map_is_nan_exactly_outside_the_reachable_region(fig3map):
     assert pm.n_alternative_solutions == 0
 
 
-@pytest.mark.parametrize("x, z, reachable", [(925.0, 1200.0, True), (800.0, 800.0, True), (300.0, 600.0, False),
-                                             (1300.0, 900.0, False), (600.0, 1550.0, False)])
+@pytest.mark.parametrize(
+    "x, z, reachable",
+    [
+        (925.0, 1200.0, True),
+        (800.0, 800.0, True),
+        (300.0, 600.0, False),
+        (1300.0, 900.0, False),
+        (600.0, 1550.0, False),
+    ],
+)
 def test_map_points_checked_one_by_one(xz, x, z, reachable):
     pm = probability_map(xz, "figure3", R=0.2, n=5, extent=(x - 1, x + 1, z - 1, z + 1), progress=False)
     q, margin = closed_form_ik(x, z)
@@ -207,8 +223,25 @@ def test_cli_map_and_worst_pose(tmp_path, capsys):
     from tolsynth.cli import main
 
     out = tmp_path / "map.png"
-    rc = main(["map", "--model", "xu_zhang_1988", "--tolerances", "figure3", "--dist", "uniform", "--R", "0.2",
-               "--out", str(out), "--n", "30", "--json", "--quiet"])
+    rc = main(
+        [
+            "map",
+            "--model",
+            "xu_zhang_1988",
+            "--tolerances",
+            "figure3",
+            "--dist",
+            "uniform",
+            "--R",
+            "0.2",
+            "--out",
+            str(out),
+            "--n",
+            "30",
+            "--json",
+            "--quiet",
+        ]
+    )
     assert rc == 0 and out.exists()
     data = json.loads(capsys.readouterr().out)
     assert data["out"] == str(out) and len(data["P"]) == 30
@@ -342,8 +375,21 @@ def test_synthesize_workspace_reports_rounds_certificate_and_violation(xz, capsy
     # the command line prints the certificate and the largest value found afterwards
     from tolsynth.cli import main
 
-    rc = main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--dist", "uniform",
-               "--everywhere", "--json"])
+    rc = main(
+        [
+            "solve",
+            "--model",
+            "xu_zhang_1988",
+            "--R",
+            "0.5",
+            "--p",
+            "0.99",
+            "--dist",
+            "uniform",
+            "--everywhere",
+            "--json",
+        ]
+    )
     assert rc == 0
     data = json.loads(capsys.readouterr().out)
     # (a re-solve: the same optimum to the solver's tolerance, not bit for bit; the worst value is

@@ -96,13 +96,16 @@ def _cvxpy_worst_case(spec):
     return prob.value, eps.value
 
 
-@pytest.mark.parametrize("model,kw", [
-    ("planar_2r", {"R": 0.5}),
-    ("planar_2r", {"R": 0.5, "Phi": 0.0006}),  # the orientation block active as well
-    ("planar_2r", {"R": 0.3, "poses": [[0.3, 1.2], [1.0, -2.0], [2.5, 0.4]]}),
-    ("planar_2r", {"R": 0.5, "cost": "mixed"}),  # Chase's and the exponential model beside the power law
-    pytest.param("xu_zhang_1988", {"R": 0.8}, marks=pytest.mark.slow),  # 11 parameters: 2048 cones, ~20 s
-])
+@pytest.mark.parametrize(
+    "model,kw",
+    [
+        ("planar_2r", {"R": 0.5}),
+        ("planar_2r", {"R": 0.5, "Phi": 0.0006}),  # the orientation block active as well
+        ("planar_2r", {"R": 0.3, "poses": [[0.3, 1.2], [1.0, -2.0], [2.5, 0.4]]}),
+        ("planar_2r", {"R": 0.5, "cost": "mixed"}),  # Chase's and the exponential model beside the power law
+        pytest.param("xu_zhang_1988", {"R": 0.8}, marks=pytest.mark.slow),  # 11 parameters: 2048 cones, ~20 s
+    ],
+)
 def test_design_matches_cvxpy_with_every_sign_pattern(model, kw):
     if kw.get("cost") == "mixed":
         from tolsynth.model.cost import Chase, Exponential
@@ -189,8 +192,7 @@ def test_time_limit_reaches_the_worst_case_solve():
         with pytest.raises(InputError, match="time_limit"):
             tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case", time_limit=bad)
     with pytest.raises(InputError, match="time_limit"):
-        tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case", time_limit=5.0,
-                            options={"time_limit": 5.0})
+        tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case", time_limit=5.0, options={"time_limit": 5.0})
 
 
 def test_table_of_a_worst_case_design():

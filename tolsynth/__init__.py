@@ -9,7 +9,9 @@ Units: mm and rad throughout the API; tolerances in each error parameter's own u
 mm and 1e-2 rad); cost in the paper's units (sum of k * eps**-alpha on those numbers).
 """
 
-from tolsynth.interrupts import guard_start as _guard_start; _guard_start()  # noqa: E702,I001  (Ctrl-C while the command starts: one line)
+from tolsynth.interrupts import guard_start as _guard_start
+
+_guard_start()  # noqa: E702,I001  (Ctrl-C while the command starts: one line)
 from tolsynth.analysis.certify import Certificate, certify_worst_pose
 from tolsynth.analysis.certify_map import CertifiedMap, certified_map
 from tolsynth.analysis.contributions import Contributions, contributions

@@ -57,8 +57,7 @@ def find_compiler() -> str | None:
     key = tuple(os.environ.get(k) for k in ("TOLSYNTH_CC", "CC", "PATH"))
     if key not in _found:
         name = key[0] or key[1]
-        _found[key] = (shutil.which(name) if name
-                       else shutil.which("cc") or shutil.which("gcc") or shutil.which("clang"))
+        _found[key] = shutil.which(name) if name else shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
     return _found[key]
 
 
@@ -90,8 +89,7 @@ def _build(source: str, name: str, cc: str) -> Path:
         fh.write(source)
     tmp_so = c_path[:-2] + ".so"
     try:
-        proc = subprocess.run([cc, *CFLAGS, "-o", tmp_so, c_path, "-lm"], capture_output=True, text=True,
-                              timeout=300)
+        proc = subprocess.run([cc, *CFLAGS, "-o", tmp_so, c_path, "-lm"], capture_output=True, text=True, timeout=300)
         if proc.returncode != 0:
             raise RuntimeError(proc.stderr.strip()[-2000:] or f"{cc} exited {proc.returncode}")
         os.replace(tmp_so, target)
@@ -142,8 +140,15 @@ class GraphLibraries:
     build included (not retried in this process).
     """
 
-    def __init__(self, prefix: str, driver: str, symbols: tuple[str, ...], fallback: str,
-                 max_instructions: int, defines: Callable[[ca.Function], dict] | None = None):
+    def __init__(
+        self,
+        prefix: str,
+        driver: str,
+        symbols: tuple[str, ...],
+        fallback: str,
+        max_instructions: int,
+        defines: Callable[[ca.Function], dict] | None = None,
+    ):
         self.prefix = prefix
         self.driver = driver
         self.symbols = symbols
@@ -172,8 +177,7 @@ class GraphLibraries:
         cg.add(F)
         name = F.name()
         defines = {"TS_F": name, "TS_F_WORK": f"{name}_work", **(self.defines(F) if self.defines else {})}
-        source = (cg.dump() + "".join(f"\n#define {k} {v}" for k, v in defines.items()) + "\n" + C_INCLUDES
-                  + self.driver)
+        source = cg.dump() + "".join(f"\n#define {k} {v}" for k, v in defines.items()) + "\n" + C_INCLUDES + self.driver
         try:
             lib, path = load_library(source, self.prefix, cc, self.symbols)
             out, reason = wrap(lib, path), ""

@@ -68,7 +68,11 @@ DEFAULT_TIME_LIMIT = 600.0
 
 def _with_units(allowed: str, unit: str) -> str:
     kind = unit_kind(unit)
-    return f"{allowed}; or a string with a{'n' if kind == 'angle' else ''} {kind} unit ({suffixes(kind)})" if kind else allowed
+    return (
+        f"{allowed}; or a string with a{'n' if kind == 'angle' else ''} {kind} unit ({suffixes(kind)})"
+        if kind
+        else allowed
+    )
 
 
 def _as_float(x: Any, field: str, allowed: str, unit: str = "") -> float:
@@ -142,8 +146,9 @@ def check_seed(seed: Any, field: str = "seed") -> int:
     return int(seed)
 
 
-def check_vector(x: Any, field: str, size: int | None = None, unit: str = "",
-                 lower: float = -HUGE, upper: float = HUGE, names=None) -> np.ndarray:
+def check_vector(
+    x: Any, field: str, size: int | None = None, unit: str = "", lower: float = -HUGE, upper: float = HUGE, names=None
+) -> np.ndarray:
     """A 1-D float array of finite numbers in ``[lower, upper]`` (of length ``size`` if given);
     an offending element is named ``field[names[i]]`` (or ``field[i]``)."""
 
@@ -160,8 +165,9 @@ def check_vector(x: Any, field: str, size: int | None = None, unit: str = "",
     if arr.ndim > 1 and arr.size == max(arr.shape):
         arr = arr.ravel()
     if arr.ndim != 1 or (size is not None and arr.shape != (size,)):
-        raise InputError(field, f"expected {size if size is not None else 'a vector of'} values, "
-                                f"got shape {arr.shape}", allowed())
+        raise InputError(
+            field, f"expected {size if size is not None else 'a vector of'} values, got shape {arr.shape}", allowed()
+        )
     bad = ~(np.isfinite(arr) & (arr >= lower) & (arr <= upper))
     if bad.any():
         i = int(bad.nonzero()[0][0])
@@ -243,7 +249,9 @@ def check_writable_path(path: Any, field: str = "path") -> str:
             pass
     except OSError as exc:
         why = "the name is too long" if exc.errno == errno.ENAMETOOLONG else (exc.strerror or type(exc).__name__)
-        raise InputError(field, f"{path!r} cannot be written: {why}", "a writable file path in an existing folder") from None
+        raise InputError(
+            field, f"{path!r} cannot be written: {why}", "a writable file path in an existing folder"
+        ) from None
     if not existed:
         try:
             os.remove(path)

@@ -15,8 +15,18 @@ import math
 import sys
 import time
 
-__all__ = ["make_bar", "Progress", "LineProgress", "AUTO_PROGRESS_DELAY", "time_limit", "remaining",
-           "limit_seconds", "check_deadline", "Working", "interactive"]
+__all__ = [
+    "make_bar",
+    "Progress",
+    "LineProgress",
+    "AUTO_PROGRESS_DELAY",
+    "time_limit",
+    "remaining",
+    "limit_seconds",
+    "check_deadline",
+    "Working",
+    "interactive",
+]
 
 AUTO_PROGRESS_DELAY = 2.0  # s: with progress=None the bar appears only on runs longer than this
 
@@ -27,8 +37,9 @@ class LineProgress:
     ``every`` s, and a last line when closed (only if a line was printed).  The interface is the
     part of tqdm's that the package uses: ``update(step)``, ``n``, ``total``, ``close()``."""
 
-    def __init__(self, total: int, desc: str, unit: str, delay: float = AUTO_PROGRESS_DELAY,
-                 every: float = 5.0, file=None):
+    def __init__(
+        self, total: int, desc: str, unit: str, delay: float = AUTO_PROGRESS_DELAY, every: float = 5.0, file=None
+    ):
         self.total, self.desc, self.unit = int(total), desc, unit
         self.delay, self.every = float(delay), float(every)
         self.file = file if file is not None else sys.stderr

@@ -102,22 +102,31 @@ def _version() -> str:
     return __version__
 
 
-def make_frame(rows, kind: str, inputs: dict, summary: dict | None = None, units: dict | None = None,
-               columns=None):
+def make_frame(rows, kind: str, inputs: dict, summary: dict | None = None, units: dict | None = None, columns=None):
     """A DataFrame of ``rows`` (list of dicts, or dict of columns) with the standard ``attrs``."""
     pd = require_pandas(f"{kind}.to_frame()")
     frame = pd.DataFrame(rows, columns=columns)
-    frame.attrs.update(tolsynth_version=_version(), kind=kind, inputs=jsonable(inputs),
-                       summary=jsonable(summary or {}), units=jsonable(units or {}))
+    frame.attrs.update(
+        tolsynth_version=_version(),
+        kind=kind,
+        inputs=jsonable(inputs),
+        summary=jsonable(summary or {}),
+        units=jsonable(units or {}),
+    )
     return frame
 
 
 def spec_inputs(spec) -> dict:
     """The resolved inputs held by a :class:`tolsynth.problem.specification.Specification`."""
     out = {
-        "R_mm": spec.R, "p": spec.p, "distribution": spec.distribution, "criterion": spec.criterion,
-        "Phi_rad": spec.Phi, "p_orientation": spec.p_orientation,
-        "error_parameters": list(spec.names), "tolerance_units": dict(zip(spec.names, spec.units)),
+        "R_mm": spec.R,
+        "p": spec.p,
+        "distribution": spec.distribution,
+        "criterion": spec.criterion,
+        "Phi_rad": spec.Phi,
+        "p_orientation": spec.p_orientation,
+        "error_parameters": list(spec.names),
+        "tolerance_units": dict(zip(spec.names, spec.units)),
         "alpha": dict(zip(spec.names, np.asarray(spec.alpha, dtype=float))),
         "k": dict(zip(spec.names, np.asarray(spec.k, dtype=float))),
         "bounds": {n: [float(lo), float(hi)] for n, lo, hi in zip(spec.names, spec.lower, spec.upper)},
@@ -139,11 +148,19 @@ def _synthesis_inputs(res) -> dict:
 
 
 def synthesis_summary(res) -> dict:
-    return {"solver": res.solver, "status": str(res.status), "success": bool(res.success), "message": res.message,
-            "cost": res.cost, "lower_bound": res.lower_bound, "gap": res.gap,
-            "max_constraint": res.max_constraint if res.constraints else None,
-            "iterations": res.iterations, "function_evaluations": res.function_evaluations,
-            "wall_time_s": res.wall_time}
+    return {
+        "solver": res.solver,
+        "status": str(res.status),
+        "success": bool(res.success),
+        "message": res.message,
+        "cost": res.cost,
+        "lower_bound": res.lower_bound,
+        "gap": res.gap,
+        "max_constraint": res.max_constraint if res.constraints else None,
+        "iterations": res.iterations,
+        "function_evaluations": res.function_evaluations,
+        "wall_time_s": res.wall_time,
+    }
 
 
 def synthesis_row(res, prefix: str = "eps_") -> dict:

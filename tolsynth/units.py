@@ -21,8 +21,18 @@ from __future__ import annotations
 import math
 import re
 
-__all__ = ["LENGTH_UNITS", "ANGLE_UNITS", "unit_kind", "to_base", "BASE_UNIT", "SUFFIXES", "QUANTITY", "split_quantity",
-           "convert_quantity", "suffixes"]
+__all__ = [
+    "LENGTH_UNITS",
+    "ANGLE_UNITS",
+    "unit_kind",
+    "to_base",
+    "BASE_UNIT",
+    "SUFFIXES",
+    "QUANTITY",
+    "split_quantity",
+    "convert_quantity",
+    "suffixes",
+]
 
 #: factor from the unit to mm
 LENGTH_UNITS: dict[str, float] = {

@@ -130,14 +130,21 @@ class Certificate:
         head = "certified" if self.certified else "NOT certified"
         lines = []
         if self.upper_bound is not None:
-            lines.append(f"{head}: largest principal sigma <= {self.upper_bound:.6g} mm over the whole joint space; "
-                         f"{self.best_value if self.criterion == 'sigma' else self.upper_bound:.6g} mm reached")
+            lines.append(
+                f"{head}: largest principal sigma <= {self.upper_bound:.6g} mm over the whole joint space; "
+                f"{self.best_value if self.criterion == 'sigma' else self.upper_bound:.6g} mm reached"
+            )
         if self.probability_lower_bound is not None:
-            lines.append(f"{head}: every component P(|u.dr| <= {self.R:g} mm) >= {self.probability_lower_bound:.8f} "
-                         f"({self.probability}); lowest found {self.best_value:.8f}" if self.criterion == "components"
-                         else f"  (Gaussian per-component probability >= {self.probability_lower_bound:.8f})")
-        lines.append(f"  pose (deg) ({', '.join(f'{v:.3f}' for v in np.degrees(self.q))}), {self.boxes} boxes, "
-                     f"{self.elapsed_s:.1f} s" + ("" if self.certified else f"; {self.reason}"))
+            lines.append(
+                f"{head}: every component P(|u.dr| <= {self.R:g} mm) >= {self.probability_lower_bound:.8f} "
+                f"({self.probability}); lowest found {self.best_value:.8f}"
+                if self.criterion == "components"
+                else f"  (Gaussian per-component probability >= {self.probability_lower_bound:.8f})"
+            )
+        lines.append(
+            f"  pose (deg) ({', '.join(f'{v:.3f}' for v in np.degrees(self.q))}), {self.boxes} boxes, "
+            f"{self.elapsed_s:.1f} s" + ("" if self.certified else f"; {self.reason}")
+        )
         if self.held:
             lines.append("  held: " + "; ".join(f"{k} ({v})" for k, v in self.held.items()))
         if self.dropped:
@@ -249,11 +256,25 @@ def _full(dom: _Domain, x: np.ndarray, nq: int) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------
-def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str = "sigma", R: float | None = None,
-                       probability: str = "gaussian", *, rtol: float | None = None, tol: float | None = None,
-                       max_boxes: int = DEFAULT_MAX_BOXES, x0=None, base_q=None, progress=None,
-                       time_limit: float | None = None, target: float | None = None,
-                       stop_at: float | None = None, keep_boxes: bool = False) -> Certificate:
+def certify_worst_pose(
+    mechanism,
+    tolerances,
+    distribution=None,
+    criterion: str = "sigma",
+    R: float | None = None,
+    probability: str = "gaussian",
+    *,
+    rtol: float | None = None,
+    tol: float | None = None,
+    max_boxes: int = DEFAULT_MAX_BOXES,
+    x0=None,
+    base_q=None,
+    progress=None,
+    time_limit: float | None = None,
+    target: float | None = None,
+    stop_at: float | None = None,
+    keep_boxes: bool = False,
+) -> Certificate:
     """A proven bound of the worst accuracy over the whole joint space (module docstring).
 
     Parameters
@@ -324,8 +345,11 @@ def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str 
     elif criterion == "components":
         raise InputError("R", "the per-component probability needs a radius", "a finite number > 0 (mm)")
     if probability == "exact" and criterion != "components":
-        raise InputError("probability", "'exact' is a reading of the per-component probability",
-                         "criterion='components' with probability='exact', or probability='gaussian'")
+        raise InputError(
+            "probability",
+            "'exact' is a reading of the per-component probability",
+            "criterion='components' with probability='exact', or probability='gaussian'",
+        )
     max_boxes = check_count(max_boxes, "max_boxes", 1, 10**9)
     rtol = DEFAULT_RTOL if rtol is None else check_positive(rtol, "rtol", "relative", upper=0.5, lower=1e-12)
     distribution = resolve(distribution, mech)
@@ -369,15 +393,34 @@ def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str 
         if criterion == "sigma" or probability == "gaussian":
             bounds, method = _sigma_bounds(st, dom, nq, (eps**2 / c)[cols])
             if criterion == "components" and (target is not None or stop_at is not None):
-                raise InputError("target", "given with the Gaussian per-component probability",
-                                 "criterion='sigma' with a target in mm")
-            r = maximize(lambda L, H: _with_split(bounds.bound(L, H)), bounds.point, dom.lo, dom.hi, tol=0.0,
-                         rtol=rtol, max_boxes=max_boxes, constraint_fn=dom.constraint_fn, x0=seeds,
-                         callback=callback, stop=stop, batch=512, target=target, stop_above=stop_at,
-                         leaves=leaves)
+                raise InputError(
+                    "target",
+                    "given with the Gaussian per-component probability",
+                    "criterion='sigma' with a target in mm",
+                )
+            r = maximize(
+                lambda L, H: _with_split(bounds.bound(L, H)),
+                bounds.point,
+                dom.lo,
+                dom.hi,
+                tol=0.0,
+                rtol=rtol,
+                max_boxes=max_boxes,
+                constraint_fn=dom.constraint_fn,
+                x0=seeds,
+                callback=callback,
+                stop=stop,
+                batch=512,
+                target=target,
+                stop_above=stop_at,
+                leaves=leaves,
+            )
             if not np.isfinite(r.best_value):
-                raise OutOfRangeError("joint limits", "no pose satisfies every joint limit and constraint",
-                                      "a non-empty feasible joint space")
+                raise OutOfRangeError(
+                    "joint limits",
+                    "no pose satisfies every joint limit and constraint",
+                    "a non-empty feasible joint space",
+                )
             ub = float(r.upper_bound)
             q = _full(dom, r.best_x, nq)
             best = float(r.best_value)
@@ -386,30 +429,62 @@ def certify_worst_pose(mechanism, tolerances, distribution=None, criterion: str 
                 p_lb = _dn(math.erf(R / (math.sqrt(2.0) * ub)) - 1e-15) if ub > 0 else 1.0
             if criterion == "components":
                 best = math.erf(R / (math.sqrt(2.0) * best)) if best > 0 else 1.0
-            cert = dict(certified=r.certified, upper_bound=ub, probability_lower_bound=p_lb, best_value=best,
-                        boxes=r.boxes_processed, open_boxes=r.open_boxes, reason=r.reason)
+            cert = dict(
+                certified=r.certified,
+                upper_bound=ub,
+                probability_lower_bound=p_lb,
+                best_value=best,
+                boxes=r.boxes_processed,
+                open_boxes=r.open_boxes,
+                reason=r.reason,
+            )
         else:
             from tolsynth.analysis.certify_exact import certify_components_exact
 
-            out = certify_components_exact(mech, st, dom, eps, distribution, R, tol=tol, max_boxes=max_boxes,
-                                           seeds=seeds, callback=callback, stop=stop, target=target, stop_at=stop_at,
-                                           leaves=leaves)
+            out = certify_components_exact(
+                mech,
+                st,
+                dom,
+                eps,
+                distribution,
+                R,
+                tol=tol,
+                max_boxes=max_boxes,
+                seeds=seeds,
+                callback=callback,
+                stop=stop,
+                target=target,
+                stop_at=stop_at,
+                leaves=leaves,
+            )
             q = _full(dom, out["x"], nq)
             direction = out["direction"]
             method = out["method"]
-            cert = {k: out[k] for k in ("certified", "probability_lower_bound", "best_value", "boxes", "open_boxes",
-                                        "reason")}
+            cert = {
+                k: out[k]
+                for k in ("certified", "probability_lower_bound", "best_value", "boxes", "open_boxes", "reason")
+            }
             cert["upper_bound"] = None
     finally:
         bar.close()
     return Certificate(
-        model=mech.name, criterion=criterion, probability=probability, R=R,
-        tolerances=dict(zip(mech.error_parameters, eps.tolist())), q=q, direction=direction,
-        elapsed_s=time.perf_counter() - t0, rtol=rtol,
+        model=mech.name,
+        criterion=criterion,
+        probability=probability,
+        R=R,
+        tolerances=dict(zip(mech.error_parameters, eps.tolist())),
+        q=q,
+        direction=direction,
+        elapsed_s=time.perf_counter() - t0,
+        rtol=rtol,
         held={names[j]: f"{math.degrees(v):g} deg, {dom.why[j]}" for j, v in dom.held.items()},
         searched=tuple(names[j] for j in dom.free),
         dropped=tuple(mech.error_parameters[i] for i in range(mech.n) if i not in st.columns),
-        method=method, history=tuple(history), leaves=_leaves(leaves, len(dom.free), sign), **cert)
+        method=method,
+        history=tuple(history),
+        leaves=_leaves(leaves, len(dom.free), sign),
+        **cert,
+    )
 
 
 def _leaves(leaves, k, sign):

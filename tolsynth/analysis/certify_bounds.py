@@ -65,8 +65,11 @@ def _largest_root(a1, a2, a3):
         p = ((lam - a1) * lam + a2) * lam - a3
         dp = (3.0 * lam - 2.0 * a1) * lam + a2
         ddp = 3.0 * lam - a1
-        ok = (p > 16 * _U * mag) & (dp > 16 * _U * (3.0 * lam * lam + 2.0 * np.abs(a1) * lam + np.abs(a2))) \
+        ok = (
+            (p > 16 * _U * mag)
+            & (dp > 16 * _U * (3.0 * lam * lam + 2.0 * np.abs(a1) * lam + np.abs(a2)))
             & (ddp > 16 * _U * (3.0 * lam + np.abs(a1)))
+        )
         if ok.all():
             return lam
         lam = np.where(ok, lam, lam * (1.0 + 1e-9 * 8.0**t) + 1e-300)
@@ -83,8 +86,14 @@ def _char_poly(G):
     p2 = [g00 * g11, g01 * g01, g00 * g22, g02 * g02, g11 * g22, g12 * g12]
     c2 = p2[0] - p2[1] + p2[2] - p2[3] + p2[4] - p2[5]
     c2 = c2 - 8.0 * _U * sum(np.abs(t) for t in p2)
-    p3 = [g00 * (g11 * g22), g00 * (g12 * g12), g01 * (g01 * g22), g01 * (g12 * g02), g02 * (g01 * g12),
-          g02 * (g11 * g02)]
+    p3 = [
+        g00 * (g11 * g22),
+        g00 * (g12 * g12),
+        g01 * (g01 * g22),
+        g01 * (g12 * g02),
+        g02 * (g01 * g12),
+        g02 * (g11 * g02),
+    ]
     c3 = p3[0] - p3[1] - p3[2] + p3[3] + p3[4] - p3[5]
     c3 = c3 + 12.0 * _U * sum(np.abs(t) for t in p3)
     return c1, c2, c3
@@ -97,8 +106,11 @@ def _above_roots(lam, a1, a2, a3):
     p = ((lam - a1) * lam + a2) * lam - a3
     dp = (3.0 * lam - 2.0 * a1) * lam + a2
     ddp = 3.0 * lam - a1
-    return (p > 16 * _U * mag) & (dp > 16 * _U * (3.0 * lam * lam + 2.0 * np.abs(a1) * lam + np.abs(a2))) \
+    return (
+        (p > 16 * _U * mag)
+        & (dp > 16 * _U * (3.0 * lam * lam + 2.0 * np.abs(a1) * lam + np.abs(a2)))
         & (ddp > 16 * _U * (3.0 * lam + np.abs(a1)))
+    )
 
 
 def _prove(cand: np.ndarray, a1, a2, a3) -> None:
@@ -261,8 +273,10 @@ class SigmaBounds:
             def natural(rows):  # Weyl on the interval matrix; on small boxes the corners are tighter
                 rows = rows & nat_ok
                 if rows.any():
-                    nat[rows] = _up(largest_singular_bound(_mat(amid[rows], m) * self.sw)
-                                    + largest_singular_bound(_mat(arad[rows], m) * self.sw))
+                    nat[rows] = _up(
+                        largest_singular_bound(_mat(amid[rows], m) * self.sw)
+                        + largest_singular_bound(_mat(arad[rows], m) * self.sw)
+                    )
 
             if k == 0:
                 natural(np.ones(nb, dtype=bool))
@@ -331,8 +345,10 @@ def arc_polygons(a: np.ndarray, b: np.ndarray):
     xmin = np.where(hits(np.pi), -1.0, np.minimum(ca_, cb_))
     ymax = np.where(hits(np.pi / 2), 1.0, np.maximum(sa_, sb_))
     ymin = np.where(hits(-np.pi / 2), -1.0, np.minimum(sa_, sb_))
-    P_big = np.stack([np.stack([xmin, ymin], 1), np.stack([xmax, ymin], 1), np.stack([xmax, ymax], 1),
-                      np.stack([xmin, ymax], 1)], axis=1)
+    P_big = np.stack(
+        [np.stack([xmin, ymin], 1), np.stack([xmax, ymin], 1), np.stack([xmax, ymax], 1), np.stack([xmin, ymax], 1)],
+        axis=1,
+    )
     P = np.where(small[:, None, None], P_small, P_big)
     # library sin/cos are within an ulp or two; the angles' own rounding moves a point along the
     # tangent lines by at most the same relative amount: 64 units of roundoff cover both
@@ -364,8 +380,11 @@ def _eig_estimate(G: np.ndarray) -> np.ndarray:
     d0, d1, d2 = G[..., 0, 0] - q, G[..., 1, 1] - q, G[..., 2, 2] - q
     p = np.sqrt(np.maximum((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0, 0.0))
     with np.errstate(all="ignore"):
-        det = (d0 * (d1 * d2 - G[..., 1, 2] ** 2) - G[..., 0, 1] * (G[..., 0, 1] * d2 - G[..., 1, 2] * G[..., 0, 2])
-               + G[..., 0, 2] * (G[..., 0, 1] * G[..., 1, 2] - d1 * G[..., 0, 2]))
+        det = (
+            d0 * (d1 * d2 - G[..., 1, 2] ** 2)
+            - G[..., 0, 1] * (G[..., 0, 1] * d2 - G[..., 1, 2] * G[..., 0, 2])
+            + G[..., 0, 2] * (G[..., 0, 1] * G[..., 1, 2] - d1 * G[..., 0, 2])
+        )
         r = np.where(p > 0, det / (2.0 * p**3), 0.0)
     phi = np.arccos(np.clip(r, -1.0, 1.0)) / 3.0
     lam = q + 2.0 * p * np.cos(phi)
@@ -386,8 +405,12 @@ def lambda_max_bound(G: np.ndarray, err: np.ndarray, reduce_last: bool = False) 
     a1, a2, a3 = c1 / s, c2 / (s * s), c3 / (s * s * s)
     cand = np.maximum(lam / s, 0.0) * (1.0 + 1e-12) + 1e-13
     _prove(cand, a1, a2, a3)
-    frob = np.sqrt(err[..., 0] ** 2 + err[..., 1] ** 2 + err[..., 2] ** 2
-                   + 2.0 * (err[..., 3] ** 2 + err[..., 4] ** 2 + err[..., 5] ** 2))
+    frob = np.sqrt(
+        err[..., 0] ** 2
+        + err[..., 1] ** 2
+        + err[..., 2] ** 2
+        + 2.0 * (err[..., 3] ** 2 + err[..., 4] ** 2 + err[..., 5] ** 2)
+    )
     out = _up(cand * s * (1.0 + 8.0 * _U) + frob * (1.0 + 8.0 * _U))
     return out.max(axis=-1) if reduce_last else out
 
@@ -426,7 +449,7 @@ class PolygonSigmaBounds:
         gam, gabs = [], []
         for r, c in _SYM:
             P = Tw[:, r, :].T @ T3[:, c, :]  # (3^k, 3^k): coefficient of b_alpha b_beta
-            Pabs = (np.abs(Tw[:, r, :]).T @ np.abs(T3[:, c, :]))
+            Pabs = np.abs(Tw[:, r, :]).T @ np.abs(T3[:, c, :])
             gam.append(self._fold(P))
             gabs.append(self._fold(Pabs))
         self.gamma = np.stack(gam).reshape(6, 6**k)
@@ -450,7 +473,7 @@ class PolygonSigmaBounds:
         summed (six terms each time, as a plain sum) is always the last axis: one batched matrix
         product per joint."""
         n, k = V[0].shape[0], self.k
-        X = np.matmul(g.reshape(1, 6 ** k, 6), np.swapaxes(V[k - 1], 1, 2))  # (n, 6 * 6^(k-1), p_k)
+        X = np.matmul(g.reshape(1, 6**k, 6), np.swapaxes(V[k - 1], 1, 2))  # (n, 6 * 6^(k-1), p_k)
         done = V[k - 1].shape[1]
         for j in range(k - 2, -1, -1):
             rest = X.shape[1] // 6

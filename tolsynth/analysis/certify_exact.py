@@ -144,8 +144,9 @@ class ComponentBounds:
                 k = self.k
                 Dq, use = polytope_vertices(C[todo, :k], r[todo, :k], self.linear)
                 du = np.array(list(itertools.product([-1.0, 1.0], repeat=2)))
-                D = np.concatenate([np.repeat(Dq, 4, axis=1), np.tile(du[None] * r[todo, None, k:], (1, Dq.shape[1], 1))],
-                                   axis=2)
+                D = np.concatenate(
+                    [np.repeat(Dq, 4, axis=1), np.tile(du[None] * r[todo, None, k:], (1, Dq.shape[1], 1))], axis=2
+                )
                 use = np.repeat(use, 4, axis=1)
                 Et = E[todo] + (1e-12 * np.einsum("bkn,bk->bn", np.abs(Jm[todo]), r[todo]) if self.linear else 0.0)
                 Y = ym[todo, None, :] + np.einsum("bkn,bck->bcn", Jm[todo], D)
@@ -173,8 +174,23 @@ def _signed_columns(B: ComponentBounds, x: np.ndarray) -> np.ndarray:
     return np.array(rows)
 
 
-def certify_components_exact(mech, st, dom, eps, distribution, R, *, tol=None, max_boxes, seeds=None, callback=None,
-                             stop=None, target=None, stop_at=None, leaves=None) -> dict:
+def certify_components_exact(
+    mech,
+    st,
+    dom,
+    eps,
+    distribution,
+    R,
+    *,
+    tol=None,
+    max_boxes,
+    seeds=None,
+    callback=None,
+    stop=None,
+    target=None,
+    stop_at=None,
+    leaves=None,
+) -> dict:
     """The search of the module docstring on the domain of :func:`tolsynth.analysis.certify.certify_worst_pose`."""
     from tolsynth.probability.distributions import shapes_of
 
@@ -190,8 +206,10 @@ def certify_components_exact(mech, st, dom, eps, distribution, R, *, tol=None, m
     k = len(dom.free)
     cfn = None
     if dom.constraint_fn is not None:
+
         def cfn(L, H):
             return dom.constraint_fn(L[:, :k], H[:, :k])
+
     x0 = None
     if seeds is not None and len(seeds):
         x0 = np.array([np.concatenate([s, _direction_angles(B, s)]) for s in np.atleast_2d(seeds)])
@@ -205,15 +223,35 @@ def certify_components_exact(mech, st, dom, eps, distribution, R, *, tol=None, m
         if callback is not None:
             callback(n, ub, best)
 
-    r = maximize(bound, lambda X: -B.point(X), lo, hi, tol=tol, max_boxes=max_boxes, constraint_fn=cfn, x0=x0,
-                 callback=cb, stop=stop, batch=128, target=None if target is None else -float(target),
-                 stop_above=None if stop_at is None else -float(stop_at), leaves=leaves)
+    r = maximize(
+        bound,
+        lambda X: -B.point(X),
+        lo,
+        hi,
+        tol=tol,
+        max_boxes=max_boxes,
+        constraint_fn=cfn,
+        x0=x0,
+        callback=cb,
+        stop=stop,
+        batch=128,
+        target=None if target is None else -float(target),
+        stop_above=None if stop_at is None else -float(stop_at),
+        leaves=leaves,
+    )
     if not np.isfinite(r.best_value):
-        raise OutOfRangeError("joint limits", "no pose satisfies every joint limit and constraint",
-                              "a non-empty feasible joint space")
+        raise OutOfRangeError(
+            "joint limits", "no pose satisfies every joint limit and constraint", "a non-empty feasible joint space"
+        )
     th, ph = r.best_x[k], r.best_x[k + 1]
-    return dict(x=r.best_x[:k], direction=np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph),
-                                                    math.cos(th)]),
-                certified=r.certified, probability_lower_bound=max(0.0, -float(r.upper_bound)),
-                best_value=-float(r.best_value), boxes=r.boxes_processed, open_boxes=r.open_boxes, reason=r.reason,
-                method="exact probabilities at quasi-concave corners of (joints, direction) boxes")
+    return dict(
+        x=r.best_x[:k],
+        direction=np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)]),
+        certified=r.certified,
+        probability_lower_bound=max(0.0, -float(r.upper_bound)),
+        best_value=-float(r.best_value),
+        boxes=r.boxes_processed,
+        open_boxes=r.open_boxes,
+        reason=r.reason,
+        method="exact probabilities at quasi-concave corners of (joints, direction) boxes",
+    )

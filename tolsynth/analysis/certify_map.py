@@ -60,8 +60,9 @@ class CertifiedMap:
     elapsed_s: float
 
 
-def certified_map(mechanism, tolerances, distribution=None, joints=None, n: int = 40, slices: int = 40, *,
-                  base_q=None) -> CertifiedMap:
+def certified_map(
+    mechanism, tolerances, distribution=None, joints=None, n: int = 40, slices: int = 40, *, base_q=None
+) -> CertifiedMap:
     """Proven bounds of sigma_1 on an ``n x n`` grid of cells over two joints (module docstring).
 
     Parameters
@@ -110,8 +111,11 @@ def certified_map(mechanism, tolerances, distribution=None, joints=None, n: int 
     searched = [names[j] for j in dom.free]
     if joints is None:
         if len(searched) < 2:
-            raise InputError("joints", f"{len(searched)} joint(s) searched ({', '.join(searched) or 'none'})",
-                             "a mechanism with two joints that change sigma_1")
+            raise InputError(
+                "joints",
+                f"{len(searched)} joint(s) searched ({', '.join(searched) or 'none'})",
+                "a mechanism with two joints that change sigma_1",
+            )
         joints = searched[:2]
     joints = tuple(joints)
     if len(joints) != 2 or joints[0] == joints[1]:
@@ -123,8 +127,9 @@ def certified_map(mechanism, tolerances, distribution=None, joints=None, n: int 
     others = [i for i in range(len(searched)) if i not in (ia, ib)]
     total = n * n * slices ** len(others)
     if total > MAX_MAP_BOXES:
-        raise OutOfRangeError("n, slices", f"{n}**2 * {slices}**{len(others)} = {total} boxes",
-                              f"at most {MAX_MAP_BOXES} boxes")
+        raise OutOfRangeError(
+            "n, slices", f"{n}**2 * {slices}**{len(others)} = {total} boxes", f"at most {MAX_MAP_BOXES} boxes"
+        )
     c = np.broadcast_to(np.asarray(variance_divisor(distribution, mech), dtype=float), (mech.n,))
     bounds, _ = _sigma_bounds(st, dom, nq, (eps**2 / c)[list(st.columns)])
     edges = [np.linspace(dom.lo[i], dom.hi[i], (n if i in (ia, ib) else slices) + 1) for i in range(len(searched))]
@@ -133,7 +138,7 @@ def certified_map(mechanism, tolerances, distribution=None, joints=None, n: int 
     sampled = np.full(n * n, -np.inf)
     cell = index[:, ib] * n + index[:, ia]
     for s in range(0, len(index), CHUNK):
-        idx = index[s:s + CHUNK]
+        idx = index[s : s + CHUNK]
         L = np.stack([edges[i][idx[:, i]] for i in range(len(edges))], axis=1)
         H = np.stack([edges[i][idx[:, i] + 1] for i in range(len(edges))], axis=1)
         keep = np.ones(len(L), dtype=bool)
@@ -144,15 +149,14 @@ def certified_map(mechanism, tolerances, distribution=None, joints=None, n: int 
             continue
         ub = np.asarray(bounds.bound(L[keep], H[keep])[0], dtype=float)
         ub = np.where(np.isnan(ub), np.inf, ub)
-        np.maximum.at(upper, cell[s:s + CHUNK][keep], ub)
+        np.maximum.at(upper, cell[s : s + CHUNK][keep], ub)
         X = 0.5 * (L[keep] + H[keep])
         v = np.asarray(bounds.point(X), dtype=float)
         if dom.constraint_fn is not None:
             _, g_hi = dom.constraint_fn(X, X)
             v = np.where((np.asarray(g_hi, dtype=float).reshape(len(X), -1) <= 0.0).all(axis=1), v, -np.inf)
-        np.maximum.at(sampled, cell[s:s + CHUNK][keep], np.where(np.isnan(v), -np.inf, v))
+        np.maximum.at(sampled, cell[s : s + CHUNK][keep], np.where(np.isnan(v), -np.inf, v))
     shape = (n, n)
     upper = np.where(np.isfinite(upper) | (upper == np.inf), upper, np.nan).reshape(shape)
     sampled = np.where(np.isfinite(sampled), sampled, np.nan).reshape(shape)
-    return CertifiedMap(mech.name, joints, (edges[ia], edges[ib]), upper, sampled, len(index),
-                        time.perf_counter() - t0)
+    return CertifiedMap(mech.name, joints, (edges[ia], edges[ib]), upper, sampled, len(index), time.perf_counter() - t0)

@@ -48,8 +48,6 @@ from tolsynth.model.parallel import is_parallel
 __all__ = ["Structure", "structure", "position_sensitivity"]
 
 
-
-
 @dataclass(frozen=True)
 class Structure:
     """What the certified search may leave out (see the module docstring).
@@ -87,17 +85,24 @@ def position_sensitivity(mech) -> ca.Function:
     if is_parallel(mech.spec):
         # the interval extension of the unrolled Newton steps and their assembly test is not finite,
         # even on a box 1e-6 rad wide: the branch and bound would split until its box limit
-        raise InputError("certify", f"{mech.name} is a parallel robot: its sensitivities come from Newton's method "
-                         "unrolled from the home pose, which interval arithmetic cannot bound, so the certified "
-                         "search cannot prove anything", "certify=False (the sampled worst-pose search)")
+        raise InputError(
+            "certify",
+            f"{mech.name} is a parallel robot: its sensitivities come from Newton's method "
+            "unrolled from the home pose, which interval arithmetic cannot bound, so the certified "
+            "search cannot prove anything",
+            "certify=False (the sampled worst-pose search)",
+        )
     S = mech.graphs.sensitivity
     if not isinstance(S, ca.Function):
         raise InputError("mechanism", f"{mech.name}: no sensitivity graph", "a model with CasADi graphs")
     try:
         S = S if S.is_a("SXFunction") else S.expand()
     except RuntimeError as err:
-        raise InputError("mechanism", f"{mech.name}: its sensitivity graph cannot be expanded to scalar "
-                         f"operations ({err})", "a serial chain or loops solved in closed form") from None
+        raise InputError(
+            "mechanism",
+            f"{mech.name}: its sensitivity graph cannot be expanded to scalar operations ({err})",
+            "a serial chain or loops solved in closed form",
+        ) from None
     nq = S.nnz_in(0)
     q = ca.SX.sym("q", nq)
     A = ca.densify(S.call([q, ca.DM.zeros(S.nnz_in(1))])[0][:3, :])
@@ -189,9 +194,12 @@ def _periodic(f: ca.Function, j: int) -> bool:
         if any(uses):
             if op in (ca.OP_SIN, ca.OP_COS):
                 pass
-            elif op == ca.OP_ASSIGN or (op in (ca.OP_ADD, ca.OP_SUB) and sum(uses) == 1
-                                        and all(a in consts for a, u in zip(args, uses) if not u)
-                                        and (op == ca.OP_ADD or uses[0])):
+            elif op == ca.OP_ASSIGN or (
+                op in (ca.OP_ADD, ca.OP_SUB)
+                and sum(uses) == 1
+                and all(a in consts for a, u in zip(args, uses) if not u)
+                and (op == ca.OP_ADD or uses[0])
+            ):
                 new_angle = True
             else:
                 return False
@@ -388,7 +396,7 @@ def _rotation_proof(f: ca.Function, j: int) -> tuple[bool, str]:
     A = pw.outputs  # column-major 3 x n
     try:
         for col in range(len(A) // 3):
-            x, y, zz = A[3 * col: 3 * col + 3]
+            x, y, zz = A[3 * col : 3 * col + 3]
             x1, y1, z1 = (_substitute(p, {C: 1, S: 0}) for p in (x, y, zz))
             cv, sv = {((C, 1),): Fraction(1)}, {((S, 1),): Fraction(1)}
             # Rz(C, S) (x1, y1, z1) - (x, y, z) must vanish term by term

@@ -111,13 +111,20 @@ class Contributions:
         lines = []
         for b, pose in enumerate(self.poses):
             s = ", ".join(f"{v:.4g}" for v in self.sigma[b])
-            lines.append(f"pose {pose}: principal sigma ({s}) mm"
-                         + (f", P(|dr| <= {self.R:g}) = {self.P_sphere[b]:.6f}" if self.P_sphere is not None else ""))
-            head = f"  {'parameter':>10} {'tolerance':>19} {'sigma1 %':>9} {'sigma2 %':>9} {'sigma3 %':>9} {'total %':>8}"
+            lines.append(
+                f"pose {pose}: principal sigma ({s}) mm"
+                + (f", P(|dr| <= {self.R:g}) = {self.P_sphere[b]:.6f}" if self.P_sphere is not None else "")
+            )
+            head = (
+                f"  {'parameter':>10} {'tolerance':>19} {'sigma1 %':>9} {'sigma2 %':>9} {'sigma3 %':>9} {'total %':>8}"
+            )
             lines.append(head + (f" {'1-P %':>7}" if self.sphere_share is not None else ""))
             for i in np.argsort(-self.shares[b, :, 0], kind="stable"):
-                row = (f"  {self.names[i]:>10} {self.tolerances[i]:>9.4g} {self.units[i]:<9}"
-                       + " ".join(f"{100 * v:>9.2f}" for v in self.shares[b, i]) + f" {100 * self.total_share[b, i]:>8.2f}")
+                row = (
+                    f"  {self.names[i]:>10} {self.tolerances[i]:>9.4g} {self.units[i]:<9}"
+                    + " ".join(f"{100 * v:>9.2f}" for v in self.shares[b, i])
+                    + f" {100 * self.total_share[b, i]:>8.2f}"
+                )
                 if self.sphere_share is not None:
                     row += f" {100 * self.sphere_share[b, i]:>7.2f}"
                 lines.append(row)
@@ -161,8 +168,9 @@ def _position_rows(spec) -> list[tuple[str, np.ndarray]]:
     return out
 
 
-def contributions(source, tolerances=None, *, pose="worst", poses=None, distribution=None, R=None,
-                  mechanism=None) -> Contributions:
+def contributions(
+    source, tolerances=None, *, pose="worst", poses=None, distribution=None, R=None, mechanism=None
+) -> Contributions:
     """Each parameter's share of each principal variance (and of the sphere probability's loss).
 
     Parameters
@@ -200,13 +208,18 @@ def contributions(source, tolerances=None, *, pose="worst", poses=None, distribu
         distribution = distribution or spec.distribution
         R = spec.R if R is None else R
         if mechanism is not None and poses is not None:
-            mats = [(str(i) if not isinstance(q, str) else q, mechanism.sensitivity(q, check_limits=False)[:3])
-                    for i, q in enumerate(poses)]
+            mats = [
+                (str(i) if not isinstance(q, str) else q, mechanism.sensitivity(q, check_limits=False)[:3])
+                for i, q in enumerate(poses)
+            ]
         else:
             mats = _position_rows(spec)
             if not mats:
-                raise InputError("source", "the result has no position constraint to attribute",
-                                 "a result with a position specification, or a mechanism and poses")
+                raise InputError(
+                    "source",
+                    "the result has no position constraint to attribute",
+                    "a result with a position specification, or a mechanism and poses",
+                )
     else:
         mech = source if isinstance(source, Mechanism) else load_model(source)
         if tolerances is None:
@@ -217,8 +230,10 @@ def contributions(source, tolerances=None, *, pose="worst", poses=None, distribu
 
         distribution = resolve(distribution, mech)
         plist = list(poses) if poses is not None else [pose]
-        mats = [(q if isinstance(q, str) else f"#{i}", mech.sensitivity(mech.joints(q), check_limits=False)[:3])
-                for i, q in enumerate(plist)]
+        mats = [
+            (q if isinstance(q, str) else f"#{i}", mech.sensitivity(mech.joints(q), check_limits=False)[:3])
+            for i, q in enumerate(plist)
+        ]
     c = variance_divisor(distribution, names)
     if np.ndim(c):  # per-parameter divisors: scale the columns to one divisor (3)
         mats = [(lbl, A * np.sqrt(3.0 / c)) for lbl, A in mats]
@@ -241,8 +256,9 @@ def contributions(source, tolerances=None, *, pose="worst", poses=None, distribu
         total[b] = col / col.sum() if col.sum() > 0 else 0.0
         if R is not None:
             sphere[b], Pb[b] = _sphere_shares(A, eps, c, R)
-    return Contributions(names, units, np.asarray(eps, dtype=float), tuple(p for p, _ in mats), sigma, dirs,
-                         shares, total, sphere, Pb, R)
+    return Contributions(
+        names, units, np.asarray(eps, dtype=float), tuple(p for p, _ in mats), sigma, dirs, shares, total, sphere, Pb, R
+    )
 
 
 def _sphere_shares(A: np.ndarray, eps: np.ndarray, c: float, R: float) -> tuple[np.ndarray, float]:

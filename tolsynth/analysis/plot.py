@@ -69,28 +69,52 @@ def plot_map(pmap, path=None, ax=None, levels=None):
     cs = ax.contour(U, V, P, levels=levels, cmap="viridis_r", linewidths=1.1)
     ax.clabel(cs, fmt=lambda x: f"{x:.{digits}f}", fontsize=8, inline=True)
     wu, wv, wp = pmap.worst
-    ax.plot([wu], [wv], marker="v", color="crimson", ms=9, ls="none",
-            label=f"lowest P on the map: {wp:.3f} at ({wu:.0f}, {wv:.0f}) mm")
+    ax.plot(
+        [wu],
+        [wv],
+        marker="v",
+        color="crimson",
+        ms=9,
+        ls="none",
+        label=f"lowest P on the map: {wp:.3f} at ({wu:.0f}, {wv:.0f}) mm",
+    )
     if pmap.reference_point is not None:
         ru, rv = pmap.reference_point
-        ax.plot([ru], [rv], marker="*", color="black", ms=12, ls="none",
-                label=f"configuration '{pmap.reference}' ({ru:.0f}, {rv:.0f}) mm, P = {pmap.reference_P:.3f}")
+        ax.plot(
+            [ru],
+            [rv],
+            marker="*",
+            color="black",
+            ms=12,
+            ls="none",
+            label=f"configuration '{pmap.reference}' ({ru:.0f}, {rv:.0f}) mm, P = {pmap.reference_P:.3f}",
+        )
     an, bn = _AXIS_NAMES[iu], _AXIS_NAMES[iv]
     ax.set_xlabel(f"{an}0 (mm)")
     ax.set_ylabel(f"{bn}0 (mm)")
     ax.set_aspect("equal")
     ax.grid(True, color="0.9", lw=0.5)
-    ax.set_title(f"{pmap.model}: P(|dr| <= {pmap.R:g} mm), {pmap.distribution} errors, tolerances "
-                 f"'{pmap.tolerance_label}'\nlinear + Gaussian model (Eq. 5); blank = not reachable", fontsize=10)
+    ax.set_title(
+        f"{pmap.model}: P(|dr| <= {pmap.R:g} mm), {pmap.distribution} errors, tolerances "
+        f"'{pmap.tolerance_label}'\nlinear + Gaussian model (Eq. 5); blank = not reachable",
+        fontsize=10,
+    )
     deg = lambda x: f"{math.degrees(x):g} deg"  # noqa: E731
-    axis_txt = ("hand z axis " + "(" + ", ".join(f"{c:g}" for c in pmap.hand_axis) + ")"
-                + (" = vertical, up" if pmap.hand_axis is not None and np.allclose(pmap.hand_axis, [0, 0, 1]) else "")
-                if pmap.hand_axis is not None else "hand orientation free")
+    axis_txt = (
+        "hand z axis "
+        + "("
+        + ", ".join(f"{c:g}" for c in pmap.hand_axis)
+        + ")"
+        + (" = vertical, up" if pmap.hand_axis is not None and np.allclose(pmap.hand_axis, [0, 0, 1]) else "")
+        if pmap.hand_axis is not None
+        else "hand orientation free"
+    )
     lines = [
         f"plane {pmap.plane} at {'XYZ'[PLANES[pmap.plane][2]]}0 = {pmap.offset:g} mm; {axis_txt}",
         "held: " + ("; ".join(f"{k} = {deg(v)} ({why})" for k, (v, why) in pmap.fixed.items()) or "none"),
         "IK on the fk graph (Levenberg-Marquardt), branch: " + pmap.branch,
-        "reachable = IK solution inside all joint limits" + (" and " + "; ".join(pmap.constraints) if pmap.constraints else ""),
+        "reachable = IK solution inside all joint limits"
+        + (" and " + "; ".join(pmap.constraints) if pmap.constraints else ""),
     ]
     import textwrap
 

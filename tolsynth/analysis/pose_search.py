@@ -125,8 +125,11 @@ class WorstPose(Tabular):
     def report(self, joint_names: Sequence[str] | None = None, joint_units: Sequence[str] | None = None) -> str:
         """Readable table: the worst pose found beside the reference (joints in deg, or in mm where
         ``joint_units`` says so, as :attr:`tolsynth.Mechanism.joint_units` does; hand in mm)."""
-        unit = {"sigma": "mm (largest principal sigma)", "probability": "(P(|dr|<={R:g} mm))",
-                "components": "(smallest P(|u.dr|<={R:g} mm))"}[self.criterion].format(R=self.R)
+        unit = {
+            "sigma": "mm (largest principal sigma)",
+            "probability": "(P(|dr|<={R:g} mm))",
+            "components": "(smallest P(|u.dr|<={R:g} mm))",
+        }[self.criterion].format(R=self.R)
         names = joint_names or [f"q{i + 1}" for i in range(len(self.q))]
         units = tuple(joint_units or ["deg"] * len(self.q))
         lines = [f"worst pose   criterion {self.criterion} {unit}, {self.distribution} errors; {self.method}"]
@@ -138,19 +141,30 @@ class WorstPose(Tabular):
             lines.append(f"{label:22}{found:>42}" + (f"  {'-' if ref is None else ref:>38}" if has_ref else ""))
 
         row("", "found", f"reference ({self.reference})")
-        row("joints (" + "/".join(sorted(set(units))) + ")", fmt(shown(self.q)),
-            None if self.reference_q is None else fmt(shown(self.reference_q)))
+        row(
+            "joints (" + "/".join(sorted(set(units))) + ")",
+            fmt(shown(self.q)),
+            None if self.reference_q is None else fmt(shown(self.reference_q)),
+        )
         row("hand (mm)", fmt(self.position), None if self.reference_position is None else fmt(self.reference_position))
         row("criterion", f"{self.value:.6f}", None if self.reference_value is None else f"{self.reference_value:.6f}")
-        row("principal sigma (mm)", fmt(self.principal_std),
-            None if self.reference_principal_std is None else fmt(self.reference_principal_std))
+        row(
+            "principal sigma (mm)",
+            fmt(self.principal_std),
+            None if self.reference_principal_std is None else fmt(self.reference_principal_std),
+        )
         if self.p_sphere is not None:
-            row("P(|dr|<=R)", f"{self.p_sphere:.6f}",
-                None if self.reference_p_sphere is None else f"{self.reference_p_sphere:.6f}")
+            row(
+                "P(|dr|<=R)",
+                f"{self.p_sphere:.6f}",
+                None if self.reference_p_sphere is None else f"{self.reference_p_sphere:.6f}",
+            )
         if self.certificate is not None:
             lines.append("certificate  " + self.certificate.summary().replace("\n", "\n             "))
         lines.append("joint order  " + ", ".join(names))
-        lines.append("held         " + (", ".join(f"{k} = {math.degrees(v):g} deg" for k, v in self.held_joints.items()) or "-"))
+        lines.append(
+            "held         " + (", ".join(f"{k} = {math.degrees(v):g} deg" for k, v in self.held_joints.items()) or "-")
+        )
         lines.append("active       " + (", ".join(self.active) or "none (interior)"))
         return "\n".join(lines)
 
@@ -285,10 +299,12 @@ def worst_pose(
     if certify and criterion == "probability":
         # a proven bound of the sphere probability needs enclosures of all three principal
         # variances and of a quadrature's error; the per-component probability needs sigma_1 alone
-        raise InputError("certify", "the sphere probability P(|dr| <= R) has no certified search; the smallest "
-                         "per-component probability P(|u.dr| <= R) has one (criterion 'components')",
-                         "criterion 'components' (probability_lower_bound, with R) or 'sigma' (upper_bound, mm) "
-                         "with certify=True")
+        raise InputError(
+            "certify",
+            "the sphere probability P(|dr| <= R) has no certified search; the smallest "
+            "per-component probability P(|u.dr| <= R) has one (criterion 'components')",
+            "criterion 'components' (probability_lower_bound, with R) or 'sigma' (upper_bound, mm) with certify=True",
+        )
     from tolsynth.probability.distributions import resolve
 
     distribution = resolve(distribution, mechanism)
@@ -301,8 +317,10 @@ def worst_pose(
     max_grid_points = check_count(max_grid_points, "max_grid_points", 1, MAX_GRID_POINTS)
     grid = None if grid is None else check_count(grid, "grid", 2, MAX_GRID_POINTS)
     seed = check_seed(seed)
-    fixed = {name: check_real(v, f"fixed[{name}]", "rad")
-             for name, v in check_mapping(fixed, "fixed", "a dict joint name -> value (rad)").items()}
+    fixed = {
+        name: check_real(v, f"fixed[{name}]", "rad")
+        for name, v in check_mapping(fixed, "fixed", "a dict joint name -> value (rad)").items()
+    }
     eps = mechanism.tolerances(tolerances)
     ref_name, ref_q = _reference(mechanism, reference)
     lo, hi = _limits(mechanism)
@@ -319,8 +337,11 @@ def worst_pose(
         if name not in names:
             raise UnknownNameError("fixed", f"unknown joint {name!r}", "one of " + ", ".join(names))
         if not lo[names.index(name)] <= float(v) <= hi[names.index(name)]:
-            raise OutOfRangeError(f"fixed[{name}]", f"{math.degrees(v):g} deg",
-                                  f"{math.degrees(lo[names.index(name)]):g} to {math.degrees(hi[names.index(name)]):g} deg")
+            raise OutOfRangeError(
+                f"fixed[{name}]",
+                f"{math.degrees(v):g} deg",
+                f"{math.degrees(lo[names.index(name)]):g} to {math.degrees(hi[names.index(name)]):g} deg",
+            )
         held[names.index(name)] = float(v)
     free = [j for j in range(nq) if j not in held]
     k = len(free)
@@ -355,15 +376,21 @@ def worst_pose(
         if g < 2:
             raise OutOfRangeError("grid", f"got {grid}", "an integer >= 2")
         if g**k > MAX_GRID_POINTS:
-            raise OutOfRangeError("grid", f"{g}**{k} searched joints = {g**k} points",
-                                  f"at most {MAX_GRID_POINTS} points (grid <= {int(MAX_GRID_POINTS ** (1 / k))})")
+            raise OutOfRangeError(
+                "grid",
+                f"{g}**{k} searched joints = {g**k} points",
+                f"at most {MAX_GRID_POINTS} points (grid <= {int(MAX_GRID_POINTS ** (1 / k))})",
+            )
         axes = [np.linspace(0.0, 1.0, g)] * k
         U = np.array([a.ravel() for a in np.meshgrid(*axes, indexing="ij")])
         vals = evaluate(U, GRID_P_TOL)  # the grid only ranks the starts
     feasible = np.isfinite(vals)
     if not np.any(feasible):
-        raise OutOfRangeError("joint limits", "no grid point satisfies every joint limit and constraint",
-                              "a non-empty feasible joint space")
+        raise OutOfRangeError(
+            "joint limits",
+            "no grid point satisfies every joint limit and constraint",
+            "a non-empty feasible joint space",
+        )
     n_grid = int(np.count_nonzero(feasible))
 
     # (3) local generating-set search from the best separated grid points
@@ -403,12 +430,24 @@ def worst_pose(
     if certify:
         from tolsynth.analysis.certify import certify_worst_pose
 
-        cert = certify_worst_pose(mechanism, eps, distribution, "components" if criterion == "components" else "sigma",
-                                  R, probability, rtol=rtol, max_boxes=max_boxes or 400_000, x0=[q],
-                                  base_q=base_q, progress=progress)
-        better = cert.best_value > _value_at(mechanism, q, eps, distribution, R, criterion, probability) \
-            if criterion == "sigma" else cert.best_value < _value_at(mechanism, q, eps, distribution, R, criterion,
-                                                                       probability)
+        cert = certify_worst_pose(
+            mechanism,
+            eps,
+            distribution,
+            "components" if criterion == "components" else "sigma",
+            R,
+            probability,
+            rtol=rtol,
+            max_boxes=max_boxes or 400_000,
+            x0=[q],
+            base_q=base_q,
+            progress=progress,
+        )
+        better = (
+            cert.best_value > _value_at(mechanism, q, eps, distribution, R, criterion, probability)
+            if criterion == "sigma"
+            else cert.best_value < _value_at(mechanism, q, eps, distribution, R, criterion, probability)
+        )
         if better:
             q = cert.q
     value, sig, P = _criterion_batch(mechanism, q[:, None], eps, distribution, search_criterion, R)
@@ -433,14 +472,22 @@ def worst_pose(
         if abs(v - c.upper) <= tol_a:
             active.append(f"{c.name} upper ({math.degrees(c.upper):g} deg)")
 
-    ref = dict(reference_q=None, reference_position=None, reference_value=None,
-               reference_principal_std=None, reference_p_sphere=None)
+    ref = dict(
+        reference_q=None,
+        reference_position=None,
+        reference_value=None,
+        reference_principal_std=None,
+        reference_p_sphere=None,
+    )
     if ref_q is not None:
         rv, rs, rp = _criterion_batch(mechanism, ref_q[:, None], eps, distribution, search_criterion, R)
         ref.update(
             reference_q=ref_q,
             reference_position=np.asarray(mechanism.fk(ref_name if ref_name != "given" else ref_q))[:3, 3],
-            reference_value=float(rs[0, 0]) if criterion == "sigma" else float(rp[0]) if criterion == "probability"
+            reference_value=float(rs[0, 0])
+            if criterion == "sigma"
+            else float(rp[0])
+            if criterion == "probability"
             else _value_at(mechanism, ref_q, eps, distribution, R, criterion, probability),
             reference_principal_std=rs[0],
             reference_p_sphere=float(p_ball(rs[0] ** 2, R)) if R is not None else None,
@@ -453,7 +500,10 @@ def worst_pose(
         tolerances=dict(zip(mechanism.error_parameters, eps.tolist())),
         q=q,
         position=position,
-        value=float(sig[0, 0]) if criterion == "sigma" else float(P[0]) if criterion == "probability"
+        value=float(sig[0, 0])
+        if criterion == "sigma"
+        else float(P[0])
+        if criterion == "probability"
         else _value_at(mechanism, q, eps, distribution, R, criterion, probability),
         principal_std=sig[0],
         p_sphere=p_sph,

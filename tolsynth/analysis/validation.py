@@ -72,8 +72,11 @@ class ValidationResult(Tabular):
 
     def to_dict(self) -> dict:
         """Plain dict (arrays as lists) for JSON, with :attr:`met`."""
-        out = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()
-               if k not in ("montecarlo", "per_pose")}
+        out = {
+            k: (v.tolist() if isinstance(v, np.ndarray) else v)
+            for k, v in self.__dict__.items()
+            if k not in ("montecarlo", "per_pose")
+        }
         out["pose"] = self.pose if isinstance(self.pose, str) else np.asarray(self.pose).tolist()
         out["met"] = self.met
         if len(self.per_pose) > 1:
@@ -83,20 +86,30 @@ class ValidationResult(Tabular):
     def report(self) -> str:
         """Readable table: achieved probabilities with intervals against ``p`` and the analytic values."""
         pct = int(round(100 * self.montecarlo.confidence))
-        lines = [f"validation   p = {self.p:g} asked, R = {self.R:g} mm, {self.distribution}, n = {self.n}, seed = {self.seed}"]
+        lines = [
+            f"validation   p = {self.p:g} asked, R = {self.R:g} mm, {self.distribution}, n = {self.n}, seed = {self.seed}"
+        ]
         for j in range(3):
             lo, hi = self.p_components_ci[j]
-            state = "met" if self.components_met[j] else ("SHORT" if self.components_short[j] else "below p (within noise)")
-            lines.append(f"P(|w{j + 1}|<=R)  {self.p_components[j]:.5f} [{lo:.5f}, {hi:.5f}] ({pct}%)  analytic "
-                         f"{self.p_components_analytic[j]:.5f}  {state}")
+            state = (
+                "met" if self.components_met[j] else ("SHORT" if self.components_short[j] else "below p (within noise)")
+            )
+            lines.append(
+                f"P(|w{j + 1}|<=R)  {self.p_components[j]:.5f} [{lo:.5f}, {hi:.5f}] ({pct}%)  analytic "
+                f"{self.p_components_analytic[j]:.5f}  {state}"
+            )
         lo, hi = self.p_sphere_ci
-        lines.append(f"P(|dr|<=R)  {self.p_sphere:.5f} [{lo:.5f}, {hi:.5f}]  analytic {self.p_sphere_analytic:.5f}  "
-                     + ("met" if self.sphere_met else "below p (sphere is stricter than Eq. 20)"))
+        lines.append(
+            f"P(|dr|<=R)  {self.p_sphere:.5f} [{lo:.5f}, {hi:.5f}]  analytic {self.p_sphere_analytic:.5f}  "
+            + ("met" if self.sphere_met else "below p (sphere is stricter than Eq. 20)")
+        )
         if len(self.per_pose) > 1:
             lines[0] += f"; the worst of {len(self.per_pose)} poses shown ({_label(self)})"
             for v in self.per_pose:
-                lines.append(f"  pose {_label(v)}: lowest P(|w_j|<=R) {float(np.min(v.p_components)):.5f}, "
-                             f"{'met' if v.met else 'NOT met'}")
+                lines.append(
+                    f"  pose {_label(v)}: lowest P(|w_j|<=R) {float(np.min(v.p_components)):.5f}, "
+                    f"{'met' if v.met else 'NOT met'}"
+                )
         return "\n".join(lines)
 
 
@@ -180,15 +193,28 @@ def validate(
         if designed:  # a result: the poses it was designed at
             pose = list(designed.values())
     if isinstance(pose, list) and pose and not all(is_real(v) for v in pose):
-        runs = [validate(mechanism, tol, R, p, distribution, q, n, seed + k, batch, confidence, progress, Phi)
-                for k, q in enumerate(pose)]
+        runs = [
+            validate(mechanism, tol, R, p, distribution, q, n, seed + k, batch, confidence, progress, Phi)
+            for k, q in enumerate(pose)
+        ]
         worst = min(runs, key=lambda v: float(np.min(v.p_components)) - v.p)
         from dataclasses import replace
 
         return replace(worst, per_pose=tuple(runs))
     # distribution None: the model's own shapes, as everywhere
-    mc = monte_carlo(mechanism, pose, tol, distribution, R=R, n=n, seed=seed, batch=batch,
-                     confidence=confidence, progress=progress, Phi=Phi)
+    mc = monte_carlo(
+        mechanism,
+        pose,
+        tol,
+        distribution,
+        R=R,
+        n=n,
+        seed=seed,
+        batch=batch,
+        confidence=confidence,
+        progress=progress,
+        Phi=Phi,
+    )
     return ValidationResult(
         p=p,
         R=mc.R,
@@ -339,13 +365,21 @@ class WorkspaceCheck:
         where = self.mechanism.format_joints(q)
         text = f"workspace check ({how}): largest {what} {worst:.4f} at q = {where}"
         if worst > 1.0 + self.WARN:
-            return (text + f": {100 * (worst - 1):.3g} % over the specification there; the design meets it only at "
-                    "the poses it was made for (tolsynth.synthesize_workspace, or solve --everywhere, designs for "
-                    "every pose)")
+            return (
+                text + f": {100 * (worst - 1):.3g} % over the specification there; the design meets it only at "
+                "the poses it was made for (tolsynth.synthesize_workspace, or solve --everywhere, designs for "
+                "every pose)"
+            )
         checked = f"each of the {self.EXACT} poses checked" if self.exact else "every sampled pose"
         return text + f": within the specification at {checked} (a sample, not a proof)"
 
     def to_dict(self) -> dict:
         worst, q, n = self._compute()
-        return {"worst": worst, "q": None if q is None else np.asarray(q).tolist(), "n_poses": n,
-                "exceeds": self.exceeds, "seed": self.seed, "probabilities": "exact" if self.exact else "gaussian"}
+        return {
+            "worst": worst,
+            "q": None if q is None else np.asarray(q).tolist(),
+            "n_poses": n,
+            "exceeds": self.exceeds,
+            "seed": self.seed,
+            "probabilities": "exact" if self.exact else "gaussian",
+        }

@@ -63,14 +63,18 @@ class Verification(Tabular):
     def report(self) -> str:
         lo, hi = self.ci
         pct = round(100 * self.confidence)
-        lines = [f"verify       p = {self.p:g} asked, R = {self.R:g} mm, {self.criterion}; nonlinear Monte Carlo, "
-                 f"n = {self.n} per pose, {pct}% Wilson intervals",
-                 f"achieved     {self.achieved:.5f} [{lo:.5f}, {hi:.5f}]  "
-                 + ("verified: the lower end reaches p" if self.verified else "NOT verified: the lower end is below p"),
-                 f"design       target p = {self.p_target:.6g} after {len(self.rounds)} round(s)"]
+        lines = [
+            f"verify       p = {self.p:g} asked, R = {self.R:g} mm, {self.criterion}; nonlinear Monte Carlo, "
+            f"n = {self.n} per pose, {pct}% Wilson intervals",
+            f"achieved     {self.achieved:.5f} [{lo:.5f}, {hi:.5f}]  "
+            + ("verified: the lower end reaches p" if self.verified else "NOT verified: the lower end is below p"),
+            f"design       target p = {self.p_target:.6g} after {len(self.rounds)} round(s)",
+        ]
         for r in self.rounds:
-            lines.append(f"  round {r['round']}: target {r['p_target']:.6g}, cost {r['cost']:.6g}, "
-                         f"P {r['estimate']:.5f} [{r['ci'][0]:.5f}, {r['ci'][1]:.5f}] at pose {r['pose']}")
+            lines.append(
+                f"  round {r['round']}: target {r['p_target']:.6g}, cost {r['cost']:.6g}, "
+                f"P {r['estimate']:.5f} [{r['ci'][0]:.5f}, {r['ci'][1]:.5f}] at pose {r['pose']}"
+            )
         return "\n".join(lines)
 
 
@@ -85,8 +89,18 @@ def _achieved(mechanism, result, R, distribution, n, seed, confidence):
         if not sphere:
             cols = [b.directions for b in result.constraints if b.pose == label and b.kind.startswith("position")]
             dirs = np.column_stack(cols) if cols else None
-        mc = monte_carlo(mechanism, q, result.x, distribution, R=R, n=n, seed=seed + k, directions=dirs,
-                         confidence=confidence, check_limits=False)
+        mc = monte_carlo(
+            mechanism,
+            q,
+            result.x,
+            distribution,
+            R=R,
+            n=n,
+            seed=seed + k,
+            directions=dirs,
+            confidence=confidence,
+            check_limits=False,
+        )
         if sphere:
             vals, cis = np.array([mc.p_sphere]), np.array([mc.p_sphere_ci])
         else:
@@ -97,8 +111,19 @@ def _achieved(mechanism, result, R, distribution, n, seed, confidence):
     return best
 
 
-def closed_loop(solve, mechanism, result, *, p: float, R: float, distribution, n=None, seed: int = 0,
-                confidence: float = 0.99, max_rounds: int = 6):
+def closed_loop(
+    solve,
+    mechanism,
+    result,
+    *,
+    p: float,
+    R: float,
+    distribution,
+    n=None,
+    seed: int = 0,
+    confidence: float = 0.99,
+    max_rounds: int = 6,
+):
     """Run the loop of the module docstring; ``solve(p_target)`` re-solves the same problem with
     another probability.  Returns the last result with its :class:`Verification` attached."""
     from tolsynth.checks import check_count
@@ -108,8 +133,17 @@ def closed_loop(solve, mechanism, result, *, p: float, R: float, distribution, n
     p_target = p
     for rnd in range(max_rounds):
         est, ci, pose = _achieved(mechanism, result, R, distribution, n, seed + 1000 * rnd, confidence)
-        rounds.append({"round": rnd, "p_target": p_target, "cost": result.cost, "estimate": est,
-                       "ci": ci.tolist(), "pose": pose, "success": result.success})
+        rounds.append(
+            {
+                "round": rnd,
+                "p_target": p_target,
+                "cost": result.cost,
+                "estimate": est,
+                "ci": ci.tolist(),
+                "pose": pose,
+                "success": result.success,
+            }
+        )
         if ci[0] >= p or not result.success:
             break
         if rnd == max_rounds - 1:
@@ -117,7 +151,16 @@ def closed_loop(solve, mechanism, result, *, p: float, R: float, distribution, n
         p_target = min(p_target + (p - ci[0]), 1.0 - 1e-9)
         result = solve(p_target)
     last = rounds[-1]
-    ver = Verification(p=p, R=R, criterion=result.spec.criterion, achieved=last["estimate"],
-                       ci=np.array(last["ci"]), confidence=confidence, verified=bool(last["ci"][0] >= p),
-                       p_target=p_target, n=n, rounds=rounds)
+    ver = Verification(
+        p=p,
+        R=R,
+        criterion=result.spec.criterion,
+        achieved=last["estimate"],
+        ci=np.array(last["ci"]),
+        confidence=confidence,
+        verified=bool(last["ci"][0] >= p),
+        p_target=p_target,
+        n=n,
+        rounds=rounds,
+    )
     return replace(result, verification=ver)

@@ -260,7 +260,8 @@ def probability_map(
         iu, iv, inorm = PLANES[plane]
 
         ik = (ParallelGridIK if is_parallel(mechanism.spec) else _GridIK)(
-            mechanism, free, held, ref_q, axis, plane, offset, int(seeds))
+            mechanism, free, held, ref_q, axis, plane, offset, int(seeds)
+        )
         if given_extent is not None:
             break
         # extent: reachable bounding box from a coarse pass
@@ -289,8 +290,11 @@ def probability_map(
             del held[yaw_held]
             yaw_held = None
             continue
-        raise InputError("plane", f"no reachable point found in the {plane} plane at offset {offset:g} mm "
-                         "with this hand axis", "a plane and hand axis the arm can reach")
+        raise InputError(
+            "plane",
+            f"no reachable point found in the {plane} plane at offset {offset:g} mm with this hand axis",
+            "a plane and hand axis the arm can reach",
+        )
     if given_extent is not None:
         extent = tuple(float(e) for e in given_extent)
         if len(extent) != 4 or not (extent[0] < extent[1] and extent[2] < extent[3]):
@@ -325,11 +329,19 @@ def probability_map(
         diff = np.max(np.abs(Q[list(free)] - np.tile(Qs[list(free)][:, chk], nseed)), axis=0)
         alt = np.any((good & (diff > 1e-5)).reshape(nseed, chk.size), axis=0)
     n_alt = int(np.count_nonzero(alt))
-    branch = getattr(ik, "branch_note", None) or ("continuation from the reference configuration"
-              + (f"; loop branch {', '.join(f'{lp.name} {lp.branch:+d}' for lp in mechanism.spec.loops)} (model file)"
-                 if mechanism.spec.loops else "")
-              + (f"; unique within the limits at {chk.size} checked points" if n_alt == 0
-                 else f"; ANOTHER valid solution exists at {n_alt} of {chk.size} checked points"))
+    branch = getattr(ik, "branch_note", None) or (
+        "continuation from the reference configuration"
+        + (
+            f"; loop branch {', '.join(f'{lp.name} {lp.branch:+d}' for lp in mechanism.spec.loops)} (model file)"
+            if mechanism.spec.loops
+            else ""
+        )
+        + (
+            f"; unique within the limits at {chk.size} checked points"
+            if n_alt == 0
+            else f"; ANOTHER valid solution exists at {n_alt} of {chk.size} checked points"
+        )
+    )
 
     Pg = Pv.reshape(n, n)
     if np.any(ok):
@@ -374,7 +386,10 @@ def probability_map(
         reference_P=ref_P,
         constraints=tuple(
             f"{c.name}: {math.degrees(c.lower):g} <= "
-            + " ".join(f"{'+' if coef > 0 else '-'} {'' if abs(coef) == 1 else f'{abs(coef):g}*'}{jn}" for jn, coef in c.terms.items()).lstrip("+ ")
+            + " ".join(
+                f"{'+' if coef > 0 else '-'} {'' if abs(coef) == 1 else f'{abs(coef):g}*'}{jn}"
+                for jn, coef in c.terms.items()
+            ).lstrip("+ ")
             + f" <= {math.degrees(c.upper):g} deg"
             for c in mechanism.spec.joint_constraints
         ),

@@ -52,13 +52,15 @@ EXIT_OK, EXIT_NOT_CONVERGED, EXIT_INPUT, EXIT_INTERRUPTED, EXIT_PIPE = 0, 1, 2, 
 def build_parser() -> argparse.ArgumentParser:
     doc = __doc__.split("\n\n")
     parser = argparse.ArgumentParser(
-        prog="tolsynth", formatter_class=HelpFormatter,
+        prog="tolsynth",
+        formatter_class=HelpFormatter,
         description="Cheapest manufacturing tolerances for a robot's link parameters that meet its pose "
-                    "accuracy with a stated probability (Xu & Zhang 1988, and beyond).",
+        "accuracy with a stated probability (Xu & Zhang 1988, and beyond).",
         epilog=doc[1].replace("\n", " ") + "\n\nRun 'tolsynth COMMAND --help' for the options of a command.",
     )
-    parser.add_argument("--version", action="version", version=f"tolsynth {version()}",
-                        help="print the package version and exit")
+    parser.add_argument(
+        "--version", action="version", version=f"tolsynth {version()}", help="print the package version and exit"
+    )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", title="commands")
     for module in COMMANDS:
         module.register(sub)
@@ -138,8 +140,11 @@ def _main(argv) -> int:
             if os.environ.get("TOLSYNTH_DEBUG"):
                 raise
             text = " ".join(str(exc).split())[:300]
-            print(f"{command}: internal error: {type(exc).__name__}: {text} (a bug: please report it with the "
-                  "command line; TOLSYNTH_DEBUG=1 shows the traceback)", file=sys.stderr)
+            print(
+                f"{command}: internal error: {type(exc).__name__}: {text} (a bug: please report it with the "
+                "command line; TOLSYNTH_DEBUG=1 shows the traceback)",
+                file=sys.stderr,
+            )
             return EXIT_NOT_CONVERGED
 
 

@@ -28,16 +28,29 @@ def cmd_analyze(args) -> int:
     pose_name = pose_label(q) if isinstance(q, str) else args.pose
     if args.json:
         out = {
-            "inputs": inputs_record(args, mech, pose=pose_label(q), q_rad=a.q, tolerances=a.tolerances,
-                                    distribution=args.dist, R_mm=args.R, Phi_rad=args.Phi),
+            "inputs": inputs_record(
+                args,
+                mech,
+                pose=pose_label(q),
+                q_rad=a.q,
+                tolerances=a.tolerances,
+                distribution=args.dist,
+                R_mm=args.R,
+                Phi_rad=args.Phi,
+            ),
             "model": mech.name,
             "pose": pose_name,
             "q_rad": a.q,
             "distribution": args.dist,
             "tolerances": a.tolerances,
-            "units": {"position": "mm", "covariance": "mm^2", "principal_std": "mm", "R": "mm",
-                      "sensitivity": "rows mm, mm, mm, rad, rad, rad per tolerance unit",
-                      "tolerances": dict(zip(mech.error_parameters, mech.units))},
+            "units": {
+                "position": "mm",
+                "covariance": "mm^2",
+                "principal_std": "mm",
+                "R": "mm",
+                "sensitivity": "rows mm, mm, mm, rad, rad, rad per tolerance unit",
+                "tolerances": dict(zip(mech.error_parameters, mech.units)),
+            },
             "position": a.position,
             "sensitivity": a.sensitivity,
             "covariance": a.covariance,
@@ -49,9 +62,13 @@ def cmd_analyze(args) -> int:
             "p_sphere": a.p_sphere,
         }
         if args.Phi is not None:
-            out.update(Phi=a.Phi, orientation_covariance=a.orientation_covariance,
-                       orientation_principal_std=a.orientation_principal_std,
-                       p_orientation_components=a.p_orientation_components, p_cone=a.p_cone)
+            out.update(
+                Phi=a.Phi,
+                orientation_covariance=a.orientation_covariance,
+                orientation_principal_std=a.orientation_principal_std,
+                p_orientation_components=a.p_orientation_components,
+                p_cone=a.p_cone,
+            )
         emit_json(out)
         return 0
     print(f"model        {mech.name}: {mech.title}")
@@ -79,9 +96,12 @@ def cmd_analyze(args) -> int:
 
 def register(sub) -> None:
     """Add ``tolsynth analyze`` to the sub-command parser."""
-    p = sub.add_parser("analyze", help="linearised, Gaussian error analysis of one pose",
-                       description="Linearised, Gaussian error analysis of one pose: covariance, principal "
-                                   "standard deviations and the probabilities of the paper's Eqs. 5-8.")
+    p = sub.add_parser(
+        "analyze",
+        help="linearised, Gaussian error analysis of one pose",
+        description="Linearised, Gaussian error analysis of one pose: covariance, principal "
+        "standard deviations and the probabilities of the paper's Eqs. 5-8.",
+    )
     add_pose_arguments(p)
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
     p.set_defaults(func=cmd_analyze, task="the analysis")

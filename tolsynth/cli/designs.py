@@ -30,8 +30,17 @@ from tolsynth.cli.args import (
 from tolsynth.cli.params import parse_per_parameter
 from tolsynth.errors import InputError
 
-__all__ = ["design_command", "add_design_arguments", "add_R_p_arguments", "add_max_nodes_argument", "add_output_arguments",
-           "design_kwargs", "parse_range", "read_table_file", "finish"]
+__all__ = [
+    "design_command",
+    "add_design_arguments",
+    "add_R_p_arguments",
+    "add_max_nodes_argument",
+    "add_output_arguments",
+    "design_kwargs",
+    "parse_range",
+    "read_table_file",
+    "finish",
+]
 
 #: the probabilities these commands accept (the library's default when not given)
 PROBABILITIES = ("gaussian", "exact")
@@ -41,15 +50,30 @@ def add_design_arguments(p) -> None:
     """--model, --dist, --alpha, --pose (repeatable), --Phi, --probability."""
     add_model_argument(p)
     add_dist_argument(p)
-    p.add_argument("--alpha", default=None,
-                   help="cost exponent: VALUE for every parameter, name=VALUE or pattern=VALUE overrides; default: 0.7")
-    p.add_argument("--pose", action="append", default=None,
-                   help=POSE_HELP + "; repeat for several poses; default: the model's reference pose")
-    p.add_argument("--Phi", type=angle_rad("--Phi"), default=None,
-                   help="orientation accuracy half-angle, rad (or with a suffix: 2mrad); default: none")
-    p.add_argument("--probability", choices=list(PROBABILITIES), default=None,
-                   help="gaussian (the paper's) or exact (the exact probabilities of the linear error model); "
-                        "default: the library's (tolsynth.synthesize)")
+    p.add_argument(
+        "--alpha",
+        default=None,
+        help="cost exponent: VALUE for every parameter, name=VALUE or pattern=VALUE overrides; default: 0.7",
+    )
+    p.add_argument(
+        "--pose",
+        action="append",
+        default=None,
+        help=POSE_HELP + "; repeat for several poses; default: the model's reference pose",
+    )
+    p.add_argument(
+        "--Phi",
+        type=angle_rad("--Phi"),
+        default=None,
+        help="orientation accuracy half-angle, rad (or with a suffix: 2mrad); default: none",
+    )
+    p.add_argument(
+        "--probability",
+        choices=list(PROBABILITIES),
+        default=None,
+        help="gaussian (the paper's) or exact (the exact probabilities of the linear error model); "
+        "default: the library's (tolsynth.synthesize)",
+    )
 
 
 def design_command(sub, name: str, help: str, description: str, R_and_p: bool = True):
@@ -65,15 +89,23 @@ def design_command(sub, name: str, help: str, description: str, R_and_p: bool = 
 def add_R_p_arguments(p) -> None:
     """--R and --p, both required: the specification a design meets."""
     p.add_argument("--R", type=length_mm("--R"), required=True, help="position accuracy radius, mm (suffixes: 500um)")
-    p.add_argument("--p", type=number("--p", "0 < p < 1", lambda v: 0 < v < 1), required=True,
-                   help="probability per principal component, 0 < p < 1")
+    p.add_argument(
+        "--p",
+        type=number("--p", "0 < p < 1", lambda v: 0 < v < 1),
+        required=True,
+        help="probability per principal component, 0 < p < 1",
+    )
 
 
 def add_max_nodes_argument(p, default: int, what: str) -> None:
     """--max-nodes: the limit of a proven search (past it the choice is not proven optimal)."""
-    p.add_argument("--max-nodes", dest="max_nodes", type=number("--max-nodes", "a whole number >= 1",
-                                                                lambda v: v >= 1, integer=True), default=default,
-                   help=f"limit on {what} (then the optimum is not proven)")
+    p.add_argument(
+        "--max-nodes",
+        dest="max_nodes",
+        type=number("--max-nodes", "a whole number >= 1", lambda v: v >= 1, integer=True),
+        default=default,
+        help=f"limit on {what} (then the optimum is not proven)",
+    )
 
 
 def add_output_arguments(p, table: str, printed: str = "the report") -> None:
@@ -132,8 +164,13 @@ def design_kwargs(mech, args) -> tuple[dict, dict]:
         kw["Phi"] = args.Phi
     if args.probability is not None:
         kw["probability"] = args.probability
-    record = dict(distribution=dist, alpha=kw["alpha"], poses=[pose_label(q) for q in poses], Phi_rad=args.Phi,
-                  probability=args.probability)
+    record = dict(
+        distribution=dist,
+        alpha=kw["alpha"],
+        poses=[pose_label(q) for q in poses],
+        Phi_rad=args.Phi,
+        probability=args.probability,
+    )
     return kw, record
 
 
@@ -148,8 +185,9 @@ def parse_range(text: str, field: str, check, unit_parse) -> list[float]:
         try:
             n = int(parts[2])
         except ValueError:
-            raise InputError(field, f"{text!r}: N = {parts[2]!r} is not a whole number",
-                             "START:STOP:N with 2 <= N <= 1000") from None
+            raise InputError(
+                field, f"{text!r}: N = {parts[2]!r} is not a whole number", "START:STOP:N with 2 <= N <= 1000"
+            ) from None
         if not 2 <= n <= 1000:
             raise InputError(field, f"{text!r}: N = {n}", "START:STOP:N with 2 <= N <= 1000")
         if not start < stop:

@@ -64,8 +64,9 @@ def cmd_grades(args) -> int:
     sizes = parse_sizes(args.sizes)
     table = None
     if args.grades is not None:
-        table = read_table_file(args.grades, "--grades",
-                                "a TOML or JSON file: parameter name or pattern -> {grade label: tolerance}")
+        table = read_table_file(
+            args.grades, "--grades", "a TOML or JSON file: parameter name or pattern -> {grade label: tolerance}"
+        )
     kw, record = design_kwargs(mech, args)
     res = synthesize(mech, args.R, args.p, **kw)
     if not res.success:
@@ -74,23 +75,41 @@ def cmd_grades(args) -> int:
         return 1
     g = round_to_grades(mech, res, sizes=sizes, table=table, max_nodes=args.max_nodes)
     record.update(R_mm=args.R, p=args.p, sizes=sizes, grades_file=args.grades, max_nodes=args.max_nodes)
-    return finish(args, mech, record, frame=g.to_frame, data=lambda: dict(g.to_dict(), continuous=res.to_dict()),
-                  text=lambda: f"{mech.name}: R = {args.R:g} mm, p = {args.p:g}; the continuous optimum costs "
-                               f"{res.cost:.8g}\n{g.summary()}",
-                  ok=g.proven, failure="the grade choice is not proven optimal (node limit)")
+    return finish(
+        args,
+        mech,
+        record,
+        frame=g.to_frame,
+        data=lambda: dict(g.to_dict(), continuous=res.to_dict()),
+        text=lambda: (
+            f"{mech.name}: R = {args.R:g} mm, p = {args.p:g}; the continuous optimum costs "
+            f"{res.cost:.8g}\n{g.summary()}"
+        ),
+        ok=g.proven,
+        failure="the grade choice is not proven optimal (node limit)",
+    )
 
 
 def register(sub) -> None:
     """Add ``tolsynth grades`` to the sub-command parser."""
-    p = design_command(sub, "grades", "optimal tolerances rounded to standard grades, with a proven optimum",
-                       "The continuous optimum rounded to ISO 286 IT grades (lengths, at their nominal "
-                       "sizes) or to a grade table of your own (angles): the cheapest combination that "
-                       "still meets the specification (tolsynth.round_to_grades).")
-    p.add_argument("--sizes", default=None,
-                   help=f"nominal sizes of the lengths: {_SIZES}; default: each dimension's nominal value")
-    p.add_argument("--grades", default=None, metavar="FILE",
-                   help="grade table, TOML or JSON: parameter or pattern -> {label: tolerance in its unit}; "
-                        "needed for angles (ISO 286 has none); default: ISO 286 only")
+    p = design_command(
+        sub,
+        "grades",
+        "optimal tolerances rounded to standard grades, with a proven optimum",
+        "The continuous optimum rounded to ISO 286 IT grades (lengths, at their nominal "
+        "sizes) or to a grade table of your own (angles): the cheapest combination that "
+        "still meets the specification (tolsynth.round_to_grades).",
+    )
+    p.add_argument(
+        "--sizes", default=None, help=f"nominal sizes of the lengths: {_SIZES}; default: each dimension's nominal value"
+    )
+    p.add_argument(
+        "--grades",
+        default=None,
+        metavar="FILE",
+        help="grade table, TOML or JSON: parameter or pattern -> {label: tolerance in its unit}; "
+        "needed for angles (ISO 286 has none); default: ISO 286 only",
+    )
     add_max_nodes_argument(p, 5000, "the search's solves and checks")
     add_output_arguments(p, "the chosen grades and tolerances")
     p.set_defaults(func=cmd_grades, task="the grade choice")

@@ -18,11 +18,18 @@ def model_rows() -> list[dict]:
     for name in bundled_models():
         m = load_model(name)
         source = " ".join(str(getattr(m.spec, "source", "") or "").split())
-        rows.append({"name": name, "title": m.title, "source": source,
-                     "source_line": _first_sentence(source),
-                     "joints": len(m.joint_names), "error_parameters": m.n,
-                     "configurations": ", ".join(m.configurations),
-                     "file": str(getattr(m.spec, "path", "") or "")})
+        rows.append(
+            {
+                "name": name,
+                "title": m.title,
+                "source": source,
+                "source_line": _first_sentence(source),
+                "joints": len(m.joint_names),
+                "error_parameters": m.n,
+                "configurations": ", ".join(m.configurations),
+                "file": str(getattr(m.spec, "path", "") or ""),
+            }
+        )
     return rows
 
 
@@ -46,8 +53,10 @@ def cmd_models(args) -> int:
     width = max(len(r["name"]) for r in rows)
     for r in rows:
         print(f"{r['name']:<{width}}  {r['title']}")
-        print(f"{'':<{width}}  {r['joints']} joints, {r['error_parameters']} error parameters; "
-              f"configurations: {r['configurations']}")
+        print(
+            f"{'':<{width}}  {r['joints']} joints, {r['error_parameters']} error parameters; "
+            f"configurations: {r['configurations']}"
+        )
         if r["source_line"]:
             print(f"{'':<{width}}  source: {r['source_line']}")
     print(f"{len(rows)} models; use one with --model NAME, or give a path to your own .toml file")
@@ -56,9 +65,12 @@ def cmd_models(args) -> int:
 
 def register(sub) -> None:
     """Add ``tolsynth models`` to the sub-command parser."""
-    p = sub.add_parser("models", help="list the bundled models with their source",
-                       description="The models shipped with tolsynth: name, title, joints, error parameters, "
-                                   "named configurations and where their numbers come from.")
+    p = sub.add_parser(
+        "models",
+        help="list the bundled models with their source",
+        description="The models shipped with tolsynth: name, title, joints, error parameters, "
+        "named configurations and where their numbers come from.",
+    )
     add_table_out_argument(p, "the list of models")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the list")
     p.set_defaults(func=cmd_models, task="the list of models")

@@ -24,8 +24,11 @@ def cmd_pareto(args) -> int:
     check_table_out(args)
     swept = [name for name, text in (("R", args.R), ("p", args.p)) if ":" in text or "," in text]
     if len(swept) != 1:
-        raise InputError("--R/--p", "give one as a range START:STOP:N (or comma-separated values) and the other "
-                                    "as one number", "e.g. --R 0.2:2:10 --p 0.99, or --R 0.5 --p 0.9:0.999:5")
+        raise InputError(
+            "--R/--p",
+            "give one as a range START:STOP:N (or comma-separated values) and the other as one number",
+            "e.g. --R 0.2:2:10 --p 0.99, or --R 0.5 --p 0.9:0.999:5",
+        )
     mech = load_model(args.model)
     kw, record = design_kwargs(mech, args)
     prob = _number("--p", "0 < p < 1", lambda v: 0 < v < 1)
@@ -44,33 +47,65 @@ def cmd_pareto(args) -> int:
     failed = [r for r in front.rows if not r["success"] and math.isfinite(r["cost"])]
 
     def text():
-        lines = [f"{mech.name}: optimal cost against {front.axis} "
-                 + (f"at p = {p:g}" if front.axis == "R" else f"at R = {R:g} mm"),
-                 f"{'R, mm':>12} {'p':>10} {'cost':>14} {'lower bound':>14}  status"]
+        lines = [
+            f"{mech.name}: optimal cost against {front.axis} "
+            + (f"at p = {p:g}" if front.axis == "R" else f"at R = {R:g} mm"),
+            f"{'R, mm':>12} {'p':>10} {'cost':>14} {'lower bound':>14}  status",
+        ]
         for r in front.rows:
             status = "optimal" if r["success"] else ("infeasible" if not math.isfinite(r["cost"]) else "NOT certified")
             lines.append(f"{r['R']:>12.6g} {r['p']:>10.6g} {r['cost']:>14.8g} {r['lower_bound']:>14.8g}  {status}")
-        lines += [f"  the paper's {ref['table']} at R = {ref['R']:g}, p = {ref['p']:g}: printed tolerances cost "
-                  f"{ref['cost']:.8g}" for ref in front.reference]
+        lines += [
+            f"  the paper's {ref['table']} at R = {ref['R']:g}, p = {ref['p']:g}: printed tolerances cost "
+            f"{ref['cost']:.8g}"
+            for ref in front.reference
+        ]
         lines.append(f"{len(front.rows)} solves in {front.wall_time:.2f} s")
         return "\n".join(lines)
 
-    return finish(args, mech, record,
-                  frame=lambda: make_frame(rows, "ParetoFront", record, {"axis": front.axis, "reference": front.reference,
-                                                                         "wall_time_s": front.wall_time}, units),
-                  data=lambda: {"axis": front.axis, "rows": front.rows, "reference": front.reference,
-                                "wall_time": front.wall_time},
-                  text=text, ok=not failed, failure=f"{len(failed)} point(s) not certified; their numbers are not optima")
+    return finish(
+        args,
+        mech,
+        record,
+        frame=lambda: make_frame(
+            rows,
+            "ParetoFront",
+            record,
+            {"axis": front.axis, "reference": front.reference, "wall_time_s": front.wall_time},
+            units,
+        ),
+        data=lambda: {
+            "axis": front.axis,
+            "rows": front.rows,
+            "reference": front.reference,
+            "wall_time": front.wall_time,
+        },
+        text=text,
+        ok=not failed,
+        failure=f"{len(failed)} point(s) not certified; their numbers are not optima",
+    )
 
 
 def register(sub) -> None:
     """Add ``tolsynth pareto`` to the sub-command parser."""
-    p = design_command(sub, "pareto", "optimal cost against R (or p): a Pareto front",
-                       "Certified optima along a sweep of the radius R at a fixed p, or of p at a fixed "
-                       "R (tolsynth.pareto_front); each solve starts from the previous point.", R_and_p=False)
-    p.add_argument("--R", required=True, help="radius, mm: START:STOP:N (N evenly spaced values), comma-separated "
-                                              "values, or one value when --p is the range (suffixes allowed: 500um)")
-    p.add_argument("--p", required=True, help="probability, 0 < p < 1: one value, or START:STOP:N / comma-separated "
-                                              "values when R is fixed")
+    p = design_command(
+        sub,
+        "pareto",
+        "optimal cost against R (or p): a Pareto front",
+        "Certified optima along a sweep of the radius R at a fixed p, or of p at a fixed "
+        "R (tolsynth.pareto_front); each solve starts from the previous point.",
+        R_and_p=False,
+    )
+    p.add_argument(
+        "--R",
+        required=True,
+        help="radius, mm: START:STOP:N (N evenly spaced values), comma-separated "
+        "values, or one value when --p is the range (suffixes allowed: 500um)",
+    )
+    p.add_argument(
+        "--p",
+        required=True,
+        help="probability, 0 < p < 1: one value, or START:STOP:N / comma-separated values when R is fixed",
+    )
     add_output_arguments(p, "the front (one row per point)", printed="the table")
     p.set_defaults(func=cmd_pareto, task="the Pareto sweep")

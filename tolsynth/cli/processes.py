@@ -51,8 +51,9 @@ def cmd_processes(args) -> int:
     elif mech.processes:
         procs = None  # the model file's
     else:
-        raise InputError("--table", f"not given, and model {mech.name} declares no processes",
-                         "a process table file: " + _SHAPE)
+        raise InputError(
+            "--table", f"not given, and model {mech.name} declares no processes", "a process table file: " + _SHAPE
+        )
     kw, record = design_kwargs(mech, args)
     dist = kw.pop("distribution")
     best = synthesize_processes(mech, args.R, args.p, procs, dist, max_nodes=args.max_nodes, **kw)
@@ -67,21 +68,38 @@ def cmd_processes(args) -> int:
         table.attrs["kind"] = "ProcessChoice"
         return table
 
-    return finish(args, mech, record, frame=frame, data=lambda: dict(best.to_dict(), result=res.to_dict()),
-                  text=lambda: f"{mech.name}: R = {args.R:g} mm, p = {args.p:g}, processes from "
-                               f"{args.table or 'the model file'}\n{best.summary()}",
-                  ok=best.proven, failure="the optimum is not proven (node limit or an uncertified solve)")
+    return finish(
+        args,
+        mech,
+        record,
+        frame=frame,
+        data=lambda: dict(best.to_dict(), result=res.to_dict()),
+        text=lambda: (
+            f"{mech.name}: R = {args.R:g} mm, p = {args.p:g}, processes from "
+            f"{args.table or 'the model file'}\n{best.summary()}"
+        ),
+        ok=best.proven,
+        failure="the optimum is not proven (node limit or an uncertified solve)",
+    )
 
 
 def register(sub) -> None:
     """Add ``tolsynth processes`` to the sub-command parser."""
-    p = design_command(sub, "processes", "the cheapest process per parameter, with a proven optimum",
-                       "One manufacturing process per parameter and the tolerances within it at minimum "
-                       "total cost, by branch and bound (tolsynth.synthesize_processes); the processes "
-                       "from --table or from the model file.")
-    p.add_argument("--table", default=None, metavar="FILE",
-                   help="process table, TOML or JSON: parameter -> list of {name, cost, lower, upper}; "
-                        "default: the model file's processes")
+    p = design_command(
+        sub,
+        "processes",
+        "the cheapest process per parameter, with a proven optimum",
+        "One manufacturing process per parameter and the tolerances within it at minimum "
+        "total cost, by branch and bound (tolsynth.synthesize_processes); the processes "
+        "from --table or from the model file.",
+    )
+    p.add_argument(
+        "--table",
+        default=None,
+        metavar="FILE",
+        help="process table, TOML or JSON: parameter -> list of {name, cost, lower, upper}; "
+        "default: the model file's processes",
+    )
     add_max_nodes_argument(p, 10_000, "the continuous solves of the search")
     add_output_arguments(p, "the chosen processes and tolerances")
     p.set_defaults(func=cmd_processes, task="the process choice")

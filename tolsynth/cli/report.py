@@ -34,16 +34,38 @@ def _cmd_report(args) -> int:
     if args.lock:
         kw["locks"] = _parse_locks(mech, args.lock)
     with Working("tolsynth report: the solve, Monte Carlo, map and worst pose of the report"):
-        rep = report(mech, args.R, args.p, args.dist, alpha, solver=args.solver, processes=True if args.processes else None,
-                     mc_samples=args.mc_samples, seed=args.seed, map_n=args.map_n, map_plane=args.plane,
-                     map_hand_axis=_hand_axis(args.hand_axis), worst_grid=args.worst_grid, **kw)
+        rep = report(
+            mech,
+            args.R,
+            args.p,
+            args.dist,
+            alpha,
+            solver=args.solver,
+            processes=True if args.processes else None,
+            mc_samples=args.mc_samples,
+            seed=args.seed,
+            map_n=args.map_n,
+            map_plane=args.plane,
+            map_hand_axis=_hand_axis(args.hand_axis),
+            worst_grid=args.worst_grid,
+            **kw,
+        )
     files = rep.write(args.out, fmt)
     res = rep.result
     if args.json:
-        emit_json({"files": files, "cost": res.cost, "lower_bound": res.lower_bound, "gap": res.gap,
-                   "success": res.success, "tolerances": res.tolerances, "elapsed_s": rep.elapsed_s,
-                   "skipped": rep.skipped, "inputs": inputs_record(args, mech, R_mm=args.R, p=args.p,
-                                                                    distribution=args.dist, alpha=alpha)})
+        emit_json(
+            {
+                "files": files,
+                "cost": res.cost,
+                "lower_bound": res.lower_bound,
+                "gap": res.gap,
+                "success": res.success,
+                "tolerances": res.tolerances,
+                "elapsed_s": rep.elapsed_s,
+                "skipped": rep.skipped,
+                "inputs": inputs_record(args, mech, R_mm=args.R, p=args.p, distribution=args.dist, alpha=alpha),
+            }
+        )
     else:
         print(f"report       {files[0]}" + (f" (+ {len(files) - 1} figure files)" if len(files) > 1 else ""))
         print(f"optimum      cost {res.cost:.8g}, dual bound {res.lower_bound:.8g}, gap {res.gap:.2e} ({res.status})")
@@ -51,8 +73,10 @@ def _cmd_report(args) -> int:
             print(f"left out     {name}: {why}")
         print(f"time         {rep.elapsed_s:.2f} s")
     if not res.success:
-        print("tolsynth report: the solver did not converge; the report says so and shows its last iterate",
-              file=sys.stderr)
+        print(
+            "tolsynth report: the solver did not converge; the report says so and shows its last iterate",
+            file=sys.stderr,
+        )
         return 1
     return 0
 
@@ -60,33 +84,71 @@ def _cmd_report(args) -> int:
 def register(sub) -> None:
     """Add ``tolsynth report`` to the sub-command parser."""
     p = sub.add_parser(
-        "report", help="a design-review report of the optimum (HTML with figures, or Markdown + PNG)",
+        "report",
+        help="a design-review report of the optimum (HTML with figures, or Markdown + PNG)",
         description="Solves one specification and writes a report for a design review: the specification and "
-                    "the model with its source and assumptions, the optimal tolerance table (units, bounds, "
-                    "active bounds, process or cost model), the certificate (dual bound, gap), each parameter's "
-                    "contribution, a Monte Carlo check with confidence intervals, the workspace map of "
-                    "P(|dr| <= R) and the worst pose.  Needs matplotlib (pip install \"tolsynth[plot]\").")
+        "the model with its source and assumptions, the optimal tolerance table (units, bounds, "
+        "active bounds, process or cost model), the certificate (dual bound, gap), each parameter's "
+        "contribution, a Monte Carlo check with confidence intervals, the workspace map of "
+        'P(|dr| <= R) and the worst pose.  Needs matplotlib (pip install "tolsynth[plot]").',
+    )
     add_specification_arguments(p)
-    p.add_argument("--processes", action="store_true",
-                   help="choose a process per parameter among the model file's processes (branch and bound)")
-    p.add_argument("--mc-samples", dest="mc_samples", type=number("--mc-samples", "an integer >= 0", lambda v: v >= 0, integer=True),
-                   default=20_000, help="Monte Carlo samples per pose (0: no Monte Carlo section)")
-    p.add_argument("--seed", type=number("--seed", "an integer >= 0", lambda v: v >= 0, integer=True), default=0,
-                   help="seed of the Monte Carlo run (recorded)")
-    p.add_argument("--map-n", dest="map_n", type=number("--map-n", "0 (no map) or an integer from 5 to 2000",
-                                                       lambda v: v == 0 or 5 <= v <= 2000, integer=True),
-                   default=30, help="points per axis of the workspace map (0: no map)")
+    p.add_argument(
+        "--processes",
+        action="store_true",
+        help="choose a process per parameter among the model file's processes (branch and bound)",
+    )
+    p.add_argument(
+        "--mc-samples",
+        dest="mc_samples",
+        type=number("--mc-samples", "an integer >= 0", lambda v: v >= 0, integer=True),
+        default=20_000,
+        help="Monte Carlo samples per pose (0: no Monte Carlo section)",
+    )
+    p.add_argument(
+        "--seed",
+        type=number("--seed", "an integer >= 0", lambda v: v >= 0, integer=True),
+        default=0,
+        help="seed of the Monte Carlo run (recorded)",
+    )
+    p.add_argument(
+        "--map-n",
+        dest="map_n",
+        type=number(
+            "--map-n", "0 (no map) or an integer from 5 to 2000", lambda v: v == 0 or 5 <= v <= 2000, integer=True
+        ),
+        default=30,
+        help="points per axis of the workspace map (0: no map)",
+    )
     p.add_argument("--plane", choices=["xy", "xz", "yz"], default="xz", help="base-frame plane of the map")
-    p.add_argument("--hand-axis", default="0,0,1",
-                   help="hand z axis of the map in the base frame (3 numbers), or 'free'")
-    p.add_argument("--worst-grid", dest="worst_grid", type=number("--worst-grid", "0 (no search) or an integer from 2 to 1000",
-                                                                lambda v: v == 0 or 2 <= v <= 1000, integer=True),
-                   default=None, help="grid points per joint of the worst-pose search (0: no search); "
-                                      "default: the search's own (a grid under 20000 points)")
-    p.add_argument("--out", required=True, metavar="FILE",
-                   help="the report file: .html (one file, figures embedded) or .md (Markdown, figures as PNG in "
-                        "FILE_files/ beside it)")
-    p.add_argument("--format", choices=["html", "md"], default=None,
-                   help="html or md; default: from the suffix of --out (.md Markdown, else HTML)")
+    p.add_argument(
+        "--hand-axis", default="0,0,1", help="hand z axis of the map in the base frame (3 numbers), or 'free'"
+    )
+    p.add_argument(
+        "--worst-grid",
+        dest="worst_grid",
+        type=number(
+            "--worst-grid",
+            "0 (no search) or an integer from 2 to 1000",
+            lambda v: v == 0 or 2 <= v <= 1000,
+            integer=True,
+        ),
+        default=None,
+        help="grid points per joint of the worst-pose search (0: no search); "
+        "default: the search's own (a grid under 20000 points)",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="FILE",
+        help="the report file: .html (one file, figures embedded) or .md (Markdown, figures as PNG in "
+        "FILE_files/ beside it)",
+    )
+    p.add_argument(
+        "--format",
+        choices=["html", "md"],
+        default=None,
+        help="html or md; default: from the suffix of --out (.md Markdown, else HTML)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the summary")
     p.set_defaults(func=_cmd_report, task="the report")

@@ -48,12 +48,14 @@ def side_by_side(c, width: int = 22) -> str:
     def rel(a, b):
         return f"{abs(b - a) / abs(a):.2e}" if a not in (0, None) and np.isfinite(a) and np.isfinite(b) else "-"
 
-    lines = [row("", "IPOPT", "SUMT + Powell", "rel. diff"),
-             row("status", str(i.status), str(s.status)),
-             row("cost", f"{i.cost:.8g}", f"{s.cost:.8g}", rel(i.cost, s.cost)),
-             row("dual lower bound", f"{i.lower_bound:.8g}", f"{s.lower_bound:.8g}"),
-             row("gap (cost - bound)", f"{i.gap:.2e}", f"{s.gap:.2e}"),
-             row("max sigma z / limit", f"{i.max_constraint:.6f}", f"{s.max_constraint:.6f}")]
+    lines = [
+        row("", "IPOPT", "SUMT + Powell", "rel. diff"),
+        row("status", str(i.status), str(s.status)),
+        row("cost", f"{i.cost:.8g}", f"{s.cost:.8g}", rel(i.cost, s.cost)),
+        row("dual lower bound", f"{i.lower_bound:.8g}", f"{s.lower_bound:.8g}"),
+        row("gap (cost - bound)", f"{i.gap:.2e}", f"{s.gap:.2e}"),
+        row("max sigma z / limit", f"{i.max_constraint:.6f}", f"{s.max_constraint:.6f}"),
+    ]
     lines.append("tolerances (bound markers: [lower] / [upper] = at that bound)")
     for name, v in i.tolerances.items():
         u = i.units[name]
@@ -64,13 +66,25 @@ def side_by_side(c, width: int = 22) -> str:
     lines.append("constraints: sigma z / limit (for the sphere (1-P)/(1-p)), <= 1; (Lagrange multiplier)")
     for bi, bs in zip(i.constraints, s.constraints):
         for j in range(len(bi.values)):
-            lines.append(row(f"  {bi.label} [{j + 1}]", f"{bi.values[j]:.6f} ({bi.multipliers[j]:.4g})",
-                             f"{bs.values[j]:.6f} ({bs.multipliers[j]:.4g})"))
-    lines += [row("iterations", str(i.iterations), str(s.iterations)),
-              row("evaluations", str(i.function_evaluations), str(s.function_evaluations)),
-              row("time (ms)", f"{i.wall_time * 1e3:.2f}", f"{s.wall_time * 1e3:.2f}",
-                  f"{c.time_ratio:.1f}x" if i.wall_time > 0 else "-"),
-              f"IPOPT: {i.message}", f"SUMT:  {s.message}"]
+            lines.append(
+                row(
+                    f"  {bi.label} [{j + 1}]",
+                    f"{bi.values[j]:.6f} ({bi.multipliers[j]:.4g})",
+                    f"{bs.values[j]:.6f} ({bs.multipliers[j]:.4g})",
+                )
+            )
+    lines += [
+        row("iterations", str(i.iterations), str(s.iterations)),
+        row("evaluations", str(i.function_evaluations), str(s.function_evaluations)),
+        row(
+            "time (ms)",
+            f"{i.wall_time * 1e3:.2f}",
+            f"{s.wall_time * 1e3:.2f}",
+            f"{c.time_ratio:.1f}x" if i.wall_time > 0 else "-",
+        ),
+        f"IPOPT: {i.message}",
+        f"SUMT:  {s.message}",
+    ]
     return "\n".join(lines)
 
 
@@ -85,8 +99,10 @@ def _contributions(args, results: dict) -> dict:
 
 def _print_contributions(reps: dict) -> None:
     for label, rep in reps.items():
-        print(f"contributions{' of ' + label if len(reps) > 1 else ''} (share of each principal variance, of tr V "
-              "and of 1 - P(sphere)):")
+        print(
+            f"contributions{' of ' + label if len(reps) > 1 else ''} (share of each principal variance, of tr V "
+            "and of 1 - P(sphere)):"
+        )
         print(rep.format())
 
 
@@ -97,8 +113,11 @@ def _spec_kwargs(mech, args) -> tuple:
         kw["probability"] = probability
     if args.verify is not None:
         if args.solver == "both" or getattr(args, "everywhere", False):
-            raise InputError("--verify", "given with " + ("--solver both" if args.solver == "both" else "--everywhere"),
-                             "one solve at given poses (verify an everywhere design with tolsynth montecarlo)")
+            raise InputError(
+                "--verify",
+                "given with " + ("--solver both" if args.solver == "both" else "--everywhere"),
+                "one solve at given poses (verify an everywhere design with tolsynth montecarlo)",
+            )
         kw["verify"] = True if args.verify == "auto" else int(args.verify)
     if args.p_orientation is not None:
         if args.Phi is None:
@@ -123,22 +142,40 @@ def cmd_solve(args) -> int:
     if hasattr(args, "dist"):
         args.dist = dist_for(args, mech)
     if args.probability == "worst_case":
-        for flag, given in (("--solver both", args.solver == "both"), ("--everywhere", args.everywhere),
-                            ("--criterion sphere", args.criterion == "sphere")):
+        for flag, given in (
+            ("--solver both", args.solver == "both"),
+            ("--everywhere", args.everywhere),
+            ("--criterion sphere", args.criterion == "sphere"),
+        ):
             if given:
-                raise InputError(flag.split()[0], f"{flag} with --probability worst_case",
-                                 "one worst-case solve at given poses (ipopt; every direction, so no sphere option)")
+                raise InputError(
+                    flag.split()[0],
+                    f"{flag} with --probability worst_case",
+                    "one worst-case solve at given poses (ipopt; every direction, so no sphere option)",
+                )
     elif args.p is None:
         raise InputError("--p", "missing", "0 < p < 1 (only --probability worst_case reads no p)")
     alpha, kw = _spec_kwargs(mech, args)
     p_text = "worst case" if args.p is None else f"p={args.p:g}"
-    head = (f"{mech.name}: R={args.R:g} mm, {p_text}, alpha={args.alpha or 0.7}, "
-            + ("errors anywhere in their bands" if args.p is None else f"{dist_label(args.dist)} errors")
-            + (f", Phi={args.Phi:g} rad" if args.Phi is not None else ""))
-    record = dict(R_mm=args.R, p=args.p, distribution=args.dist, alpha=alpha, criterion=args.criterion,
-                  Phi_rad=args.Phi, p_orientation=kw.get("p_orientation"), solver=args.solver,
-                  k=kw.get("k", mech.k), bounds=kw.get("bounds", mech.bounds), probability=args.probability,
-                  verify=args.verify)
+    head = (
+        f"{mech.name}: R={args.R:g} mm, {p_text}, alpha={args.alpha or 0.7}, "
+        + ("errors anywhere in their bands" if args.p is None else f"{dist_label(args.dist)} errors")
+        + (f", Phi={args.Phi:g} rad" if args.Phi is not None else "")
+    )
+    record = dict(
+        R_mm=args.R,
+        p=args.p,
+        distribution=args.dist,
+        alpha=alpha,
+        criterion=args.criterion,
+        Phi_rad=args.Phi,
+        p_orientation=kw.get("p_orientation"),
+        solver=args.solver,
+        k=kw.get("k", mech.k),
+        bounds=kw.get("bounds", mech.bounds),
+        probability=args.probability,
+        verify=args.verify,
+    )
     if args.lock:
         kw["locks"] = _parse_locks(mech, args.lock)
         record["locks"] = kw["locks"]
@@ -155,50 +192,83 @@ def cmd_solve(args) -> int:
         else:
             name, q = _reference(mech, parse_reference(mech, args.reference))
             start = name if (name is not None and name != "given") else q  # None: the search's worst pose
-        ex = {k: v for k, v in (("certify", args.certify or None), ("max_rounds", args.max_rounds), ("tol", args.tol))
-              if v is not None}
-        with Working("tolsynth solve: the design for every reachable pose (exchange rounds with the worst-pose search)"):
+        ex = {
+            k: v
+            for k, v in (("certify", args.certify or None), ("max_rounds", args.max_rounds), ("tol", args.tol))
+            if v is not None
+        }
+        with Working(
+            "tolsynth solve: the design for every reachable pose (exchange rounds with the worst-pose search)"
+        ):
             w = synthesize_workspace(mech, args.R, args.p, args.dist, alpha, solver=args.solver, pose=start, **ex, **kw)
         reps = _contributions(args, {"the design": w.result})
         if args.out:  # the tolerance table; the exchange's rounds beside the summary
             frame = w.result.to_frame()
             frame.attrs["summary"].update(converged=w.converged, rounds=w.to_frame().to_dict(orient="records"))
-            write_out(frame, args, mech, start_pose=pose_label(start) if start is not None else None,
-                      everywhere=True, **record)
+            write_out(
+                frame,
+                args,
+                mech,
+                start_pose=pose_label(start) if start is not None else None,
+                everywhere=True,
+                **record,
+            )
         if args.json:
             out = w.result.to_dict()
-            out.update(converged=w.converged, rounds=w.rounds, poses=w.poses, worst_value=w.worst_value,
-                       max_violation=w.max_violation, certified=w.certified, upper_bound=w.upper_bound,
-                       probability_lower_bound=w.probability_lower_bound, reason=w.reason)
+            out.update(
+                converged=w.converged,
+                rounds=w.rounds,
+                poses=w.poses,
+                worst_value=w.worst_value,
+                max_violation=w.max_violation,
+                certified=w.certified,
+                upper_bound=w.upper_bound,
+                probability_lower_bound=w.probability_lower_bound,
+                reason=w.reason,
+            )
             if reps:
                 out["contributions"] = reps["the design"].to_dict()
-            out["inputs"] = inputs_record(args, mech, start_pose=pose_label(start) if start is not None else None,
-                                          everywhere=True, **record)
+            out["inputs"] = inputs_record(
+                args, mech, start_pose=pose_label(start) if start is not None else None, everywhere=True, **record
+            )
             emit_json(out)
         else:
             print(f"{head}, every pose")
             for k, r in enumerate(w.rounds):
-                print(f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.6g}, worst sigma z/R over the "
-                      f"workspace {r['worst_value']:.5f} at hand {_fmt(r['worst_position'])} mm")
-            print(f"  certificate: lower bound {w.lower_bound:.8g} (valid at every pose), gap {w.gap:.2e}; "
-                  f"afterwards the largest value found anywhere is {w.worst_value:.6f} "
-                  f"(violation {w.max_violation:.2e})")
+                print(
+                    f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.6g}, worst sigma z/R over the "
+                    f"workspace {r['worst_value']:.5f} at hand {_fmt(r['worst_position'])} mm"
+                )
+            print(
+                f"  certificate: lower bound {w.lower_bound:.8g} (valid at every pose), gap {w.gap:.2e}; "
+                f"afterwards the largest value found anywhere is {w.worst_value:.6f} "
+                f"(violation {w.max_violation:.2e})"
+            )
             if w.certified is not None:  # the certified search's proof (or why there is none)
                 print("  " + w.certificate_line())
             print(w.result.summary())
             _print_contributions(reps)
         if not w.success:
-            print(f"tolsynth solve: no convergence over the workspace ({w.reason or 'the last solve failed'}); the "
-                  "numbers above are not an optimum", file=sys.stderr)
+            print(
+                f"tolsynth solve: no convergence over the workspace ({w.reason or 'the last solve failed'}); the "
+                "numbers above are not an optimum",
+                file=sys.stderr,
+            )
             return 1
         return 0
-    for flag, given in (("--certify", args.certify), ("--max-rounds", args.max_rounds is not None),
-                        ("--tol", args.tol is not None)):
+    for flag, given in (
+        ("--certify", args.certify),
+        ("--max-rounds", args.max_rounds is not None),
+        ("--tol", args.tol is not None),
+    ):
         if given:
             raise InputError(flag, "only used with --everywhere", "--everywhere " + flag)
     if args.reference is not None:
-        raise InputError("--reference", "only used with --everywhere (the pose the search starts from)",
-                         "--pose for the poses of a single solve")
+        raise InputError(
+            "--reference",
+            "only used with --everywhere (the pose the search starts from)",
+            "--pose for the poses of a single solve",
+        )
     poses = parse_poses(mech, args.pose)
     kw["poses"] = poses
     record["poses"] = [pose_label(q) for q in poses]
@@ -212,7 +282,10 @@ def cmd_solve(args) -> int:
         if args.json:
             out = c.to_dict()
             if reps:
-                out["contributions"] = {"ipopt": reps["IPOPT's optimum"].to_dict(), "sumt": reps["SUMT's optimum"].to_dict()}
+                out["contributions"] = {
+                    "ipopt": reps["IPOPT's optimum"].to_dict(),
+                    "sumt": reps["SUMT's optimum"].to_dict(),
+                }
             out["inputs"] = inputs_record(args, mech, **record)
             emit_json(out)
         else:
@@ -221,7 +294,10 @@ def cmd_solve(args) -> int:
             _print_contributions(reps)
         ok = c.ipopt.success and c.sumt.success
     else:
-        with Working(f"tolsynth solve: {SOLVER_LABELS[args.solver]}" + (f" ({args.probability.replace('_', '-')} probabilities)" if args.probability != "gaussian" else "")):
+        with Working(
+            f"tolsynth solve: {SOLVER_LABELS[args.solver]}"
+            + (f" ({args.probability.replace('_', '-')} probabilities)" if args.probability != "gaussian" else "")
+        ):
             res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
         reps = _contributions(args, {"the optimum": res})
         if args.out:
@@ -268,13 +344,18 @@ def _parse_locks(mech, items) -> dict:
         i = mech.index(name)  # UnknownNameError naming the parameter and the allowed names
         canon, unit = mech.error_parameters[i], mech.units[i]
         if canon in out:
-            raise InputError(f"--lock {canon}", f"given twice ({out[canon][1]!r} and {item!r})", "each parameter locked once")
+            raise InputError(
+                f"--lock {canon}", f"given twice ({out[canon][1]!r} and {item!r})", "each parameter locked once"
+            )
         parsed = split_quantity(value)
         kind = unit_kind(unit)
         if parsed is None or (parsed[1] is not None and unit_kind(parsed[1]) != kind):
-            raise InputError(f"--lock {canon}", f"{value!r} is not a tolerance",
-                             f"a number in {unit} (its tolerance unit), or with a{'n' if kind == 'angle' else ''} {kind} "
-                             "unit suffix (5um, 0.02mm, 2mrad, 0.01deg)")
+            raise InputError(
+                f"--lock {canon}",
+                f"{value!r} is not a tolerance",
+                f"a number in {unit} (its tolerance unit), or with a{'n' if kind == 'angle' else ''} {kind} "
+                "unit suffix (5um, 0.02mm, 2mrad, 0.01deg)",
+            )
         v = parsed[0] if parsed[1] is None else parsed[0] * to_base(parsed[1]) / to_base(unit)
         out[canon] = (v, item)
     return {k: v for k, (v, _) in out.items()}
@@ -283,27 +364,48 @@ def _parse_locks(mech, items) -> dict:
 def register(sub) -> None:
     """Add ``tolsynth solve`` to the sub-command parser."""
     p = sub.add_parser(
-        "solve", help="optimal tolerances for one specification",
+        "solve",
+        help="optimal tolerances for one specification",
         description="Cheapest tolerances such that each principal component of the hand position error "
-                    "stays within R with probability p (the paper's Eq. 20), or the sphere P(|dr| <= R) >= p; "
-                    "at one or more poses, or at every reachable pose (--everywhere).")
+        "stays within R with probability p (the paper's Eq. 20), or the sphere P(|dr| <= R) >= p; "
+        "at one or more poses, or at every reachable pose (--everywhere).",
+    )
     add_specification_arguments(p, ("auto", "ipopt", "sumt", "both"), worst_case=True)
-    p.add_argument("--everywhere", action="store_true",
-                   help="impose the constraint at every reachable pose (exchange method with the worst-pose search)")
-    p.add_argument("--reference", default=None,
-                   help="with --everywhere: the pose the exchange method starts from: NAME, none (the search's "
-                        "worst pose at mid-bound tolerances), or joint values in deg; default: the model's "
-                        "reference pose (its 'worst' configuration if it has one, else none)")
-    p.add_argument("--certify", action="store_true",
-                   help="with --everywhere: prove the specification at every pose of the continuous joint space "
-                        "(branch and bound) instead of a sampled search; not proven: exit status 1")
-    p.add_argument("--max-rounds", type=number("--max-rounds", "an integer >= 1", lambda v: v >= 1, integer=True),
-                   default=None,
-                   help="with --everywhere: exchange rounds before giving up (default 12); reached: not converged")
-    p.add_argument("--tol", type=number("--tol", "a number in (0, 1]", lambda v: 0 < v <= 1), default=None,
-                   help="with --everywhere: relative tolerance on the specification (default 1e-3)")
-    p.add_argument("--contributions", action="store_true",
-                   help="also report each parameter's share of each principal variance and of 1 - P(sphere)")
+    p.add_argument(
+        "--everywhere",
+        action="store_true",
+        help="impose the constraint at every reachable pose (exchange method with the worst-pose search)",
+    )
+    p.add_argument(
+        "--reference",
+        default=None,
+        help="with --everywhere: the pose the exchange method starts from: NAME, none (the search's "
+        "worst pose at mid-bound tolerances), or joint values in deg; default: the model's "
+        "reference pose (its 'worst' configuration if it has one, else none)",
+    )
+    p.add_argument(
+        "--certify",
+        action="store_true",
+        help="with --everywhere: prove the specification at every pose of the continuous joint space "
+        "(branch and bound) instead of a sampled search; not proven: exit status 1",
+    )
+    p.add_argument(
+        "--max-rounds",
+        type=number("--max-rounds", "an integer >= 1", lambda v: v >= 1, integer=True),
+        default=None,
+        help="with --everywhere: exchange rounds before giving up (default 12); reached: not converged",
+    )
+    p.add_argument(
+        "--tol",
+        type=number("--tol", "a number in (0, 1]", lambda v: 0 < v <= 1),
+        default=None,
+        help="with --everywhere: relative tolerance on the specification (default 1e-3)",
+    )
+    p.add_argument(
+        "--contributions",
+        action="store_true",
+        help="also report each parameter's share of each principal variance and of 1 - P(sphere)",
+    )
     add_table_out_argument(p, "the tolerance table (with --solver both: side by side)")
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
     p.set_defaults(func=cmd_solve, task="the solve")

@@ -31,12 +31,12 @@ __all__ = ["register", "GRID_KEYS", "read_grid_file"]
 #: keys of a grid file (TOML), each a value or a list of values; the command line overrides them
 GRID_KEYS = {
     "model": "model name or path",
-    "R": "radius, mm (numbers, or strings with a unit: \"500um\")",
+    "R": 'radius, mm (numbers, or strings with a unit: "500um")',
     "p": "probability, 0 < p < 1",
     "alpha": "cost exponent > 0",
-    "distribution": "\"uniform\", \"normal\", \"triangular\", \"truncnormal\" or \"truncnormal(beta)\"",
-    "criterion": "\"components\" or \"sphere\"",
-    "solver": "\"auto\", \"ipopt\" or \"sumt\"",
+    "distribution": '"uniform", "normal", "triangular", "truncnormal" or "truncnormal(beta)"',
+    "criterion": '"components" or "sphere"',
+    "solver": '"auto", "ipopt" or "sumt"',
 }
 
 
@@ -52,14 +52,19 @@ def read_grid_file(path: str) -> dict:
         with open(path, "rb") as fh:
             data = tomllib.load(fh)
     except FileNotFoundError:
-        raise InputError("--grid", f"{path!r} does not exist", "a TOML file with keys " + ", ".join(GRID_KEYS)) from None
+        raise InputError(
+            "--grid", f"{path!r} does not exist", "a TOML file with keys " + ", ".join(GRID_KEYS)
+        ) from None
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise InputError("--grid", f"{path!r} cannot be read as TOML: {exc}", "a TOML file") from None
     for key, value in data.items():
         if key not in GRID_KEYS:
             near = difflib.get_close_matches(key, list(GRID_KEYS), n=1)
-            raise InputError(f"--grid {path}: {key}", "unknown key" + (f" (did you mean {near[0]!r}?)" if near else ""),
-                             ", ".join(GRID_KEYS))
+            raise InputError(
+                f"--grid {path}: {key}",
+                "unknown key" + (f" (did you mean {near[0]!r}?)" if near else ""),
+                ", ".join(GRID_KEYS),
+            )
         values = value if isinstance(value, list) else [value]
         if key == "model":
             if not isinstance(value, str):
@@ -85,7 +90,9 @@ def cmd_sweep(args) -> int:
     grid = read_grid_file(args.grid) if args.grid else {}
     model = args.model or grid.get("model")
     if model is None:
-        raise InputError("--model", "not given (and no 'model' in the grid file)", "a bundled model name or a .toml path")
+        raise InputError(
+            "--model", "not given (and no 'model' in the grid file)", "a bundled model name or a .toml path"
+        )
     if args.R is not None:
         grid["R"] = _numbers(args.R, "--R", lambda t: quantity(t, "--R", "length", "mm"))
     if args.p is not None:
@@ -117,27 +124,49 @@ def cmd_sweep(args) -> int:
     else:
         client = "serial" if args.workers == 1 else "processes"
     axes = {a: grid[a] for a in ("R", "p", "alpha", "distribution", "criterion", "solver") if a in grid}
-    df = sweep(mech, client=client, workers=args.workers if client in (None, "processes") else None,
-               progress=False if args.quiet else None, **axes, **kw)
-    record = dict(grid=axes, poses=[pose_label(q) for q in kw.get("poses", [])] or None,
-                  k=kw.get("k", mech.k), bounds=kw.get("bounds", mech.bounds), Phi_rad=args.Phi, engine=client)
+    df = sweep(
+        mech,
+        client=client,
+        workers=args.workers if client in (None, "processes") else None,
+        progress=False if args.quiet else None,
+        **axes,
+        **kw,
+    )
+    record = dict(
+        grid=axes,
+        poses=[pose_label(q) for q in kw.get("poses", [])] or None,
+        k=kw.get("k", mech.k),
+        bounds=kw.get("bounds", mech.bounds),
+        Phi_rad=args.Phi,
+        engine=client,
+    )
     if args.out is not None:
         write_out(df, args, mech, **record)
     if args.json:
-        emit_json({"inputs": inputs_record(args, mech, **record), "summary": df.attrs["summary"],
-                   "rows": df.to_dict(orient="records")})
+        emit_json(
+            {
+                "inputs": inputs_record(args, mech, **record),
+                "summary": df.attrs["summary"],
+                "rows": df.to_dict(orient="records"),
+            }
+        )
     else:
         cols = ["R", "p", "alpha", "distribution", "criterion", "solver", "status", "cost", "gap", "time_s"]
         print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.6g}"))
         for _, row in df[df["error"] != ""].iterrows():
             print(f"row {row['row']}: {row['error']}")
         s = df.attrs["summary"]
-        print(f"{s['rows']} solves, {s['succeeded']} succeeded, {s['failed']} failed; {s['engine']}; "
-              f"{s['elapsed_s']:.2f} s ({s['rows_per_s']:.1f} rows/s)" + (f"; written to {args.out}" if args.out else ""))
+        print(
+            f"{s['rows']} solves, {s['succeeded']} succeeded, {s['failed']} failed; {s['engine']}; "
+            f"{s['elapsed_s']:.2f} s ({s['rows_per_s']:.1f} rows/s)" + (f"; written to {args.out}" if args.out else "")
+        )
     failed = int(df.attrs["summary"]["failed"])
     if failed:
-        print(f"tolsynth sweep: {failed} of {len(df)} solves did not succeed (see the status and error columns); "
-              "their numbers are not optima", file=sys.stderr)
+        print(
+            f"tolsynth sweep: {failed} of {len(df)} solves did not succeed (see the status and error columns); "
+            "their numbers are not optima",
+            file=sys.stderr,
+        )
         return 1
     return 0
 
@@ -145,40 +174,79 @@ def cmd_sweep(args) -> int:
 def register(sub) -> None:
     """Add ``tolsynth sweep`` to the sub-command parser."""
     p = sub.add_parser(
-        "sweep", help="a grid of solves (R x p x alpha x ...), one row each, locally or on a Dask cluster",
+        "sweep",
+        help="a grid of solves (R x p x alpha x ...), one row each, locally or on a Dask cluster",
         description="Solves the tolerance problem for every combination of the values given (R x p x alpha x "
-                    "distribution x criterion x solver) and writes one row per solve (inputs, status, cost, "
-                    "bound, gap, every tolerance, time, error). Runs on processes on this machine, or on a "
-                    "Dask cluster with --scheduler. A failed solve is a row, never a lost grid.")
-    p.add_argument("--model", default=None,
-                   help="bundled model name or path to a .toml model file; default: the grid file's 'model'")
-    p.add_argument("--grid", default=None, metavar="FILE.toml",
-                   help="grid file (TOML) with keys " + ", ".join(GRID_KEYS) + ", each a value or a list; "
-                        "options given on the command line replace its values; default: none")
+        "distribution x criterion x solver) and writes one row per solve (inputs, status, cost, "
+        "bound, gap, every tolerance, time, error). Runs on processes on this machine, or on a "
+        "Dask cluster with --scheduler. A failed solve is a row, never a lost grid.",
+    )
+    p.add_argument(
+        "--model",
+        default=None,
+        help="bundled model name or path to a .toml model file; default: the grid file's 'model'",
+    )
+    p.add_argument(
+        "--grid",
+        default=None,
+        metavar="FILE.toml",
+        help="grid file (TOML) with keys " + ", ".join(GRID_KEYS) + ", each a value or a list; "
+        "options given on the command line replace its values; default: none",
+    )
     p.add_argument("--R", default=None, help="radii, mm, comma-separated (suffixes allowed: 300um,0.5mm)")
     p.add_argument("--p", default=None, help="probabilities, comma-separated, each 0 < p < 1")
-    p.add_argument("--alpha", default=None, help="cost exponents (the same for every parameter), comma-separated; "
-                                                   "default: 0.7")
-    p.add_argument("--dist", default=None, help="distributions, comma-separated: uniform, normal, triangular, truncnormal, truncnormal(beta) "
-                        "(one shape for every error per row); default: uniform")
-    p.add_argument("--criterion", default=None, help="criteria, comma-separated: components, sphere; default: components")
-    p.add_argument("--solver", default=None, help="solvers, comma-separated: auto, ipopt, sumt (" + SOLVER_HELP
-                   + "); default: auto")
-    p.add_argument("--k", default=None,
-                   help="cost factors k for every row: VALUE, name=VALUE, pattern=VALUE; default: the model's")
-    p.add_argument("--bounds", default=None,
-                   help="tolerance bounds LOW:HIGH for every row (as for solve); default: the model's")
-    p.add_argument("--pose", action="append", default=None,
-                   help=POSE_HELP + "; repeat for several poses; default: the model's reference pose")
-    p.add_argument("--Phi", type=angle_rad("--Phi"), default=None,
-                   help="orientation accuracy half-angle for every row, rad (suffixes allowed); default: none")
+    p.add_argument(
+        "--alpha", default=None, help="cost exponents (the same for every parameter), comma-separated; default: 0.7"
+    )
+    p.add_argument(
+        "--dist",
+        default=None,
+        help="distributions, comma-separated: uniform, normal, triangular, truncnormal, truncnormal(beta) "
+        "(one shape for every error per row); default: uniform",
+    )
+    p.add_argument(
+        "--criterion", default=None, help="criteria, comma-separated: components, sphere; default: components"
+    )
+    p.add_argument(
+        "--solver",
+        default=None,
+        help="solvers, comma-separated: auto, ipopt, sumt (" + SOLVER_HELP + "); default: auto",
+    )
+    p.add_argument(
+        "--k", default=None, help="cost factors k for every row: VALUE, name=VALUE, pattern=VALUE; default: the model's"
+    )
+    p.add_argument(
+        "--bounds", default=None, help="tolerance bounds LOW:HIGH for every row (as for solve); default: the model's"
+    )
+    p.add_argument(
+        "--pose",
+        action="append",
+        default=None,
+        help=POSE_HELP + "; repeat for several poses; default: the model's reference pose",
+    )
+    p.add_argument(
+        "--Phi",
+        type=angle_rad("--Phi"),
+        default=None,
+        help="orientation accuracy half-angle for every row, rad (suffixes allowed); default: none",
+    )
     add_table_out_argument(p, "the table, one row per solve")
-    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run on a Dask cluster: the scheduler's address, e.g. tcp://host:8786 (the workers need "
-                        "tolsynth installed); default: processes on this machine")
-    p.add_argument("--workers", type=number("--workers", "an integer >= 1", lambda v: v >= 1, integer=True), default=None,
-                   help="worker processes on this machine (1: in this process); default: one per CPU, used only when "
-                        "the grid is large enough to pay for starting them (the first solves are timed here)")
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run on a Dask cluster: the scheduler's address, e.g. tcp://host:8786 (the workers need "
+        "tolsynth installed); default: processes on this machine",
+    )
+    p.add_argument(
+        "--workers",
+        type=number("--workers", "an integer >= 1", lambda v: v >= 1, integer=True),
+        default=None,
+        help="worker processes on this machine (1: in this process); default: one per CPU, used only when "
+        "the grid is large enough to pay for starting them (the first solves are timed here)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress report on stderr")
-    p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded, every row) instead of the table")
+    p.add_argument(
+        "--json", action="store_true", help="print one JSON object (inputs recorded, every row) instead of the table"
+    )
     p.set_defaults(func=cmd_sweep, task="the sweep")

@@ -33,8 +33,10 @@ from tolsynth.progress import Working
 
 __all__ = ["register"]
 
-REFERENCE_HELP = ("reference pose: a configuration NAME, none, or joint values in deg, comma-separated; "
-                  "default: the model's reference pose (its 'worst' configuration if it has one, else none)")
+REFERENCE_HELP = (
+    "reference pose: a configuration NAME, none, or joint values in deg, comma-separated; "
+    "default: the model's reference pose (its 'worst' configuration if it has one, else none)"
+)
 
 
 def _hand_axis(text: str):
@@ -72,7 +74,9 @@ def _tolerances(mech, text: str | None):
     if sets:
         return mech.tolerances(sets[0]), f"{sets[0]} (the model's first tolerance set; --tolerances not given)"
     lo, hi = (np.asarray(b, dtype=float) for b in mech.bounds)
-    return np.sqrt(lo * hi), "the geometric middle of the bounds (the model has no tolerance set; --tolerances not given)"
+    return np.sqrt(
+        lo * hi
+    ), "the geometric middle of the bounds (the model has no tolerance set; --tolerances not given)"
 
 
 def _cmd_map(args) -> int:
@@ -85,9 +89,19 @@ def _cmd_map(args) -> int:
     extent = _extent(args.extent)
     axis = _hand_axis(args.hand_axis)
     reference = parse_reference(mech, args.reference)
-    pm = probability_map(mech, eps, R=args.R, distribution=args.dist, n=args.n, plane=args.plane,
-                         offset=args.offset, hand_axis=axis, extent=extent, reference=reference,
-                         progress=False if args.quiet else None)
+    pm = probability_map(
+        mech,
+        eps,
+        R=args.R,
+        distribution=args.dist,
+        n=args.n,
+        plane=args.plane,
+        offset=args.offset,
+        hand_axis=axis,
+        extent=extent,
+        reference=reference,
+        progress=False if args.quiet else None,
+    )
     pm = ProbabilityMap(**{**pm.__dict__, "tolerance_label": label})
     if args.out:
         import matplotlib
@@ -96,8 +110,17 @@ def _cmd_map(args) -> int:
         from tolsynth.analysis.plot import plot_map
 
         plot_map(pm, path=args.out)
-    record = dict(tolerances=pm.tolerances, distribution=args.dist, R_mm=args.R, plane=args.plane,
-                  offset_mm=args.offset, hand_axis=axis, extent_mm=extent, reference=pm.reference, n=args.n)
+    record = dict(
+        tolerances=pm.tolerances,
+        distribution=args.dist,
+        R_mm=args.R,
+        plane=args.plane,
+        offset_mm=args.offset,
+        hand_axis=axis,
+        extent_mm=extent,
+        reference=pm.reference,
+        n=args.n,
+    )
     if args.data:
         write_out(pm.to_frame(), args, mech, "--data", **record)
     if args.json:
@@ -115,7 +138,10 @@ def _cmd_map(args) -> int:
             print(f"lowest P     {pm.worst[2]:.4f} at ({pm.worst[0]:.1f}, {pm.worst[1]:.1f}) mm")
         print(f"reference    {pm.reference or 'none'}")
         print(f"branch       {pm.branch}")
-        print("held         " + ("; ".join(f"{k} = {math.degrees(v):g} deg ({w})" for k, (v, w) in pm.fixed.items()) or "none"))
+        print(
+            "held         "
+            + ("; ".join(f"{k} = {math.degrees(v):g} deg ({w})" for k, (v, w) in pm.fixed.items()) or "none")
+        )
         print(f"time         {pm.elapsed_s:.2f} s")
         if args.out:
             print(f"figure       {args.out}")
@@ -132,67 +158,131 @@ def _cmd_worst(args) -> int:
     eps, label = _tolerances(mech, args.tolerances)
     what = "the grid and pattern search" + (", then the certified branch and bound" if args.certify else "")
     with Working(f"tolsynth worst-pose: {what}"):
-        w = worst_pose(mech, eps, criterion=args.criterion, R=args.R, distribution=args.dist, grid=args.grid,
-                       reference=parse_reference(mech, args.reference), certify=args.certify,
-                       probability=args.probability)
-    record = dict(tolerances=w.tolerances, distribution=args.dist, R_mm=args.R, criterion=args.criterion,
-                  reference=w.reference)
+        w = worst_pose(
+            mech,
+            eps,
+            criterion=args.criterion,
+            R=args.R,
+            distribution=args.dist,
+            grid=args.grid,
+            reference=parse_reference(mech, args.reference),
+            certify=args.certify,
+            probability=args.probability,
+        )
+    record = dict(
+        tolerances=w.tolerances, distribution=args.dist, R_mm=args.R, criterion=args.criterion, reference=w.reference
+    )
     unproven = args.certify and not w.certified
-    return finish(args, mech, record, frame=w.to_frame, data=w.to_dict,
-                  text=lambda: f"tolerances   {label}\n{w.report(mech.joint_names, mech.joint_units)}", ok=not unproven,
-                  failure=f"the bound is not certified ({w.certificate.reason}); it holds, the gap did not close"
-                  if unproven else "")
+    return finish(
+        args,
+        mech,
+        record,
+        frame=w.to_frame,
+        data=w.to_dict,
+        text=lambda: f"tolerances   {label}\n{w.report(mech.joint_names, mech.joint_units)}",
+        ok=not unproven,
+        failure=f"the bound is not certified ({w.certificate.reason}); it holds, the gap did not close"
+        if unproven
+        else "",
+    )
 
 
 def register(sub) -> None:
     """Add ``tolsynth map`` and ``tolsynth worst-pose`` to the sub-command parser."""
-    p = sub.add_parser("map", help="P(dr <= R) over the reachable part of a plane (the paper's Figure 3)",
-                       description="P(|dr| <= R) of the linear, Gaussian model over the reachable part of a "
-                                   "base-frame plane for a fixed hand axis, by inverse kinematics on the model's "
-                                   "forward-kinematics graph; optionally drawn as the paper's Figure 3.")
+    p = sub.add_parser(
+        "map",
+        help="P(dr <= R) over the reachable part of a plane (the paper's Figure 3)",
+        description="P(|dr| <= R) of the linear, Gaussian model over the reachable part of a "
+        "base-frame plane for a fixed hand axis, by inverse kinematics on the model's "
+        "forward-kinematics graph; optionally drawn as the paper's Figure 3.",
+    )
     add_model_argument(p)
-    p.add_argument("--tolerances", default=None,
-                   help=TOLERANCES_HELP + "; default: the model's figure3 set (the paper's model), else its first "
-                                          "tolerance set, else the geometric middle of the bounds (said in the output)")
+    p.add_argument(
+        "--tolerances",
+        default=None,
+        help=TOLERANCES_HELP + "; default: the model's figure3 set (the paper's model), else its first "
+        "tolerance set, else the geometric middle of the bounds (said in the output)",
+    )
     add_dist_argument(p)
-    p.add_argument("--R", type=length_mm("--R"), default=0.2, help="radius of the accuracy sphere, mm (suffixes allowed)")
-    p.add_argument("--n", type=number("--n", "an integer >= 5", integer=True), default=100,
-                   help="grid points per axis")
+    p.add_argument(
+        "--R", type=length_mm("--R"), default=0.2, help="radius of the accuracy sphere, mm (suffixes allowed)"
+    )
+    p.add_argument("--n", type=number("--n", "an integer >= 5", integer=True), default=100, help="grid points per axis")
     p.add_argument("--plane", choices=sorted(PLANES), default="xz", help="base-frame plane of the map")
-    p.add_argument("--offset", type=length_mm("--offset"), default=0.0,
-                   help="offset of the plane along its normal, mm (suffixes allowed)")
-    p.add_argument("--hand-axis", default="0,0,1",
-                   help="hand z axis in the base frame (3 numbers, normalised), or 'free' for any orientation")
-    p.add_argument("--extent", default=None,
-                   help="umin,umax,vmin,vmax of the grid, mm (suffixes allowed); default: the reachable box")
-    p.add_argument("--reference", default=None, help=REFERENCE_HELP + "; the continuation starts there and it is marked")
-    p.add_argument("--out", default=None,
-                   help="figure file (.png, .pdf, .svg, ...; needs matplotlib: pip install \"tolsynth[plot]\"); default: none")
+    p.add_argument(
+        "--offset",
+        type=length_mm("--offset"),
+        default=0.0,
+        help="offset of the plane along its normal, mm (suffixes allowed)",
+    )
+    p.add_argument(
+        "--hand-axis",
+        default="0,0,1",
+        help="hand z axis in the base frame (3 numbers, normalised), or 'free' for any orientation",
+    )
+    p.add_argument(
+        "--extent",
+        default=None,
+        help="umin,umax,vmin,vmax of the grid, mm (suffixes allowed); default: the reachable box",
+    )
+    p.add_argument(
+        "--reference", default=None, help=REFERENCE_HELP + "; the continuation starts there and it is marked"
+    )
+    p.add_argument(
+        "--out",
+        default=None,
+        help='figure file (.png, .pdf, .svg, ...; needs matplotlib: pip install "tolsynth[plot]"); default: none',
+    )
     p.add_argument("--quiet", action="store_true", help="no progress report on stderr")
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")
     add_table_out_argument(p, "the map's points (u, v, P, sigma, joints)", "--data")
     p.set_defaults(func=_cmd_map, task="the workspace map")
 
-    p = sub.add_parser("worst-pose", help="search the joint space for the pose of worst accuracy",
-                       description="Grid plus pattern search over the joint space (inside the joint limits and "
-                                   "constraints) for the pose of largest principal sigma or lowest P(|dr| <= R).")
+    p = sub.add_parser(
+        "worst-pose",
+        help="search the joint space for the pose of worst accuracy",
+        description="Grid plus pattern search over the joint space (inside the joint limits and "
+        "constraints) for the pose of largest principal sigma or lowest P(|dr| <= R).",
+    )
     add_model_argument(p)
-    p.add_argument("--tolerances", default=None,
-                   help=TOLERANCES_HELP + "; default: the model's figure3 set (the paper's model), else its first "
-                                          "tolerance set, else the geometric middle of the bounds (said in the output)")
+    p.add_argument(
+        "--tolerances",
+        default=None,
+        help=TOLERANCES_HELP + "; default: the model's figure3 set (the paper's model), else its first "
+        "tolerance set, else the geometric middle of the bounds (said in the output)",
+    )
     add_dist_argument(p)
-    p.add_argument("--criterion", choices=["sigma", "probability", "components"], default="sigma",
-                   help="largest principal standard deviation, lowest P(|dr| <= R), or lowest per-component "
-                        "probability P(|u.dr| <= R) over directions u (the last two need --R)")
-    p.add_argument("--certify", action="store_true",
-                   help="also prove a bound over the whole continuous joint space (branch and bound; sigma or "
-                        "components); not proven: exit status 1")
-    p.add_argument("--probability", choices=["gaussian", "exact"], default="gaussian",
-                   help="reading of the per-component probability (--criterion components)")
-    p.add_argument("--R", type=length_mm("--R"), default=None,
-                   help="radius, mm (suffixes allowed); needed for --criterion probability; default: none")
-    p.add_argument("--grid", type=number("--grid", "an integer >= 2", integer=True), default=None,
-                   help="grid points per searched joint; default: as many as keep the grid under 20000 points")
+    p.add_argument(
+        "--criterion",
+        choices=["sigma", "probability", "components"],
+        default="sigma",
+        help="largest principal standard deviation, lowest P(|dr| <= R), or lowest per-component "
+        "probability P(|u.dr| <= R) over directions u (the last two need --R)",
+    )
+    p.add_argument(
+        "--certify",
+        action="store_true",
+        help="also prove a bound over the whole continuous joint space (branch and bound; sigma or "
+        "components); not proven: exit status 1",
+    )
+    p.add_argument(
+        "--probability",
+        choices=["gaussian", "exact"],
+        default="gaussian",
+        help="reading of the per-component probability (--criterion components)",
+    )
+    p.add_argument(
+        "--R",
+        type=length_mm("--R"),
+        default=None,
+        help="radius, mm (suffixes allowed); needed for --criterion probability; default: none",
+    )
+    p.add_argument(
+        "--grid",
+        type=number("--grid", "an integer >= 2", integer=True),
+        default=None,
+        help="grid points per searched joint; default: as many as keep the grid under 20000 points",
+    )
     p.add_argument("--reference", default=None, help=REFERENCE_HELP + "; reported beside the result")
     add_table_out_argument(p, "the worst and the reference pose")
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the report")

@@ -43,8 +43,11 @@ def _ik_evaluator(mech, free: tuple[int, ...], with_axis: bool) -> NumpyEvaluato
         J = ca.densify(ca.jacobian(r, q[list(free)]))
         # common subexpressions merged (cse): the residual and its Jacobian share most of the fk
         # graph; about 13 % fewer operations per evaluation for xu_zhang_1988
-        c[key] = NumpyEvaluator(ca.Function("ik_residual", [q, target, axis], [ca.densify(r), J],
-                                            ["q", "target", "axis"], ["r", "J"], {"cse": True}))
+        c[key] = NumpyEvaluator(
+            ca.Function(
+                "ik_residual", [q, target, axis], [ca.densify(r), J], ["q", "target", "axis"], ["r", "J"], {"cse": True}
+            )
+        )
     return c[key]
 
 
@@ -77,8 +80,15 @@ def _spd_solve(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return x, ok & np.all(np.isfinite(x), axis=0)
 
 
-def _solve_ik(ev: NumpyEvaluator, free: tuple[int, ...], Q0: np.ndarray, targets: np.ndarray,
-              axis: np.ndarray, tol: float = 1e-7, max_iter: int = 60) -> tuple[np.ndarray, np.ndarray]:
+def _solve_ik(
+    ev: NumpyEvaluator,
+    free: tuple[int, ...],
+    Q0: np.ndarray,
+    targets: np.ndarray,
+    axis: np.ndarray,
+    tol: float = 1e-7,
+    max_iter: int = 60,
+) -> tuple[np.ndarray, np.ndarray]:
     """Levenberg-Marquardt on all columns at once, each column independent of the others (the
     iteration keeps compact arrays of the columns still running).  Returns joints (nq, N) and a
     converged flag (residual norm below ``tol``: mm, and 1e-3 * tol in the axis direction)."""
@@ -296,9 +306,10 @@ class _GridIK:
                 break
             first = len(pending) == len(self.seed_set)
             batch = pending[:1] if first else pending[: self.seed_batch or len(pending)]
-            pending = pending[len(batch):]
-            Qa, good, mg = self.attempt(np.repeat(np.column_stack(batch), rest.size, axis=1),
-                                        np.tile(T[:, rest], len(batch)))
+            pending = pending[len(batch) :]
+            Qa, good, mg = self.attempt(
+                np.repeat(np.column_stack(batch), rest.size, axis=1), np.tile(T[:, rest], len(batch))
+            )
             for i in range(len(batch)):
                 left = np.flatnonzero(~ok[rest])
                 if left.size == 0:

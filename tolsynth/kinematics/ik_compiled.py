@@ -251,9 +251,19 @@ class CompiledLM:
         self.nf = F.size2_out(1)
         self._fn = lib.tolsynth_lm
         self._fn.restype = ctypes.c_int
-        self._fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_long, ctypes.c_int,
-                             ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_double, ctypes.c_int,
-                             ctypes.c_void_p]
+        self._fn.argtypes = [
+            ctypes.c_void_p,
+            ctypes.c_void_p,
+            ctypes.c_void_p,
+            ctypes.c_long,
+            ctypes.c_int,
+            ctypes.c_void_p,
+            ctypes.c_int,
+            ctypes.c_int,
+            ctypes.c_double,
+            ctypes.c_int,
+            ctypes.c_void_p,
+        ]
         self._lstsq = lib.tolsynth_sym_lstsq
         self._lstsq.restype = None
         self._lstsq.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
@@ -271,8 +281,9 @@ class CompiledLM:
         self._lstsq(n, A.ctypes.data, b.ctypes.data, x.ctypes.data)
         return x
 
-    def solve(self, free, Q0: np.ndarray, targets: np.ndarray, axis: np.ndarray, tol: float,
-              max_iter: int) -> tuple[np.ndarray, np.ndarray]:
+    def solve(
+        self, free, Q0: np.ndarray, targets: np.ndarray, axis: np.ndarray, tol: float, max_iter: int
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Joints (nq, N) and the converged flag (N,), as :func:`tolsynth.kinematics.ik._solve_ik`."""
         N = Q0.shape[1]
         Qt = np.array(Q0.T, dtype=float, order="C")  # row b = column b of the joints; written to
@@ -285,9 +296,19 @@ class CompiledLM:
         ptr = ctypes.c_void_p
 
         def run(lo: int, hi: int) -> int:  # columns lo..hi-1 (ctypes releases the GIL during the call)
-            return self._fn(ptr(Qt.ctypes.data + lo * Qt.strides[0]), ptr(Tt.ctypes.data + lo * Tt.strides[0]),
-                            ax.ctypes.data, hi - lo, self.nq, fr.ctypes.data, self.nf, self.nr, float(tol),
-                            int(max_iter), ptr(conv.ctypes.data + lo))
+            return self._fn(
+                ptr(Qt.ctypes.data + lo * Qt.strides[0]),
+                ptr(Tt.ctypes.data + lo * Tt.strides[0]),
+                ax.ctypes.data,
+                hi - lo,
+                self.nq,
+                fr.ctypes.data,
+                self.nf,
+                self.nr,
+                float(tol),
+                int(max_iter),
+                ptr(conv.ctypes.data + lo),
+            )
 
         workers = _workers()
         if workers > 1 and N >= PARALLEL_MIN:

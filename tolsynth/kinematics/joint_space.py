@@ -83,8 +83,9 @@ def _reference(mech, reference) -> tuple[str | None, np.ndarray | None]:
         return None, None
     if isinstance(reference, str):
         if reference not in mech.configurations:
-            raise UnknownNameError("reference", f"unknown configuration {reference!r}",
-                                   "one of " + ", ".join(mech.configurations))
+            raise UnknownNameError(
+                "reference", f"unknown configuration {reference!r}", "one of " + ", ".join(mech.configurations)
+            )
         return reference, mech.joints(reference)
     return "given", mech.joints(reference)
 

@@ -66,7 +66,9 @@ def load_urdf(path, base_link: str, tip_link: str, **kwargs) -> "Mechanism":
 
 
 # one copy of the arguments' documentation: the model builder's
-load_urdf.__doc__ = "A :class:`Mechanism` from the " + urdf_spec.__doc__.split(" ", 4)[4].replace(", for :func:`tolsynth.load_urdf`", "", 1)
+load_urdf.__doc__ = "A :class:`Mechanism` from the " + urdf_spec.__doc__.split(" ", 4)[4].replace(
+    ", for :func:`tolsynth.load_urdf`", "", 1
+)
 
 
 def as_mechanism(mechanism, field: str = "mechanism") -> "Mechanism":
@@ -76,8 +78,7 @@ def as_mechanism(mechanism, field: str = "mechanism") -> "Mechanism":
         return mechanism
     if isinstance(mechanism, (str, os.PathLike)):
         return load_model(mechanism)
-    raise InputError(field, f"got {type(mechanism).__name__}",
-                     "a Mechanism, a bundled model name or a model file path")
+    raise InputError(field, f"got {type(mechanism).__name__}", "a Mechanism, a bundled model name or a model file path")
 
 
 #: sensitivities remembered per Mechanism (poses x error vectors)
@@ -162,7 +163,9 @@ class Mechanism:
         return cls(dh_spec(links, convention, **kwargs))
 
     def __repr__(self) -> str:
-        return f"<Mechanism {self.name!r}: {len(self.joint_names)} joints, {len(self.error_parameters)} error parameters>"
+        return (
+            f"<Mechanism {self.name!r}: {len(self.joint_names)} joints, {len(self.error_parameters)} error parameters>"
+        )
 
     # ------------------------------------------------------------------ graphs
     def __getstate__(self):
@@ -189,12 +192,15 @@ class Mechanism:
         every solve asks for them, and a warm solve takes well under a millisecond.  Arrays are
         read-only; the properties hand out copies (and new dicts)."""
         ps = self.parameters
-        out = {"units": tuple(p.unit for p in ps), "k": np.array([p.k for p in ps], dtype=float),
-               "lower": np.array([p.lower for p in ps], dtype=float),
-               "upper": np.array([p.upper for p in ps], dtype=float),
-               "cost_models": {p.name: p.cost for p in ps if p.cost is not None},
-               "locks": {p.name: p.lock for p in ps if p.lock is not None},
-               "fixed_joint_errors": {p.name: p.lock for p in ps if p.at_joint is not None and p.lock is not None}}
+        out = {
+            "units": tuple(p.unit for p in ps),
+            "k": np.array([p.k for p in ps], dtype=float),
+            "lower": np.array([p.lower for p in ps], dtype=float),
+            "upper": np.array([p.upper for p in ps], dtype=float),
+            "cost_models": {p.name: p.cost for p in ps if p.cost is not None},
+            "locks": {p.name: p.lock for p in ps if p.lock is not None},
+            "fixed_joint_errors": {p.name: p.lock for p in ps if p.at_joint is not None and p.lock is not None},
+        }
         for key in ("k", "lower", "upper"):
             out[key].setflags(write=False)
         return out
@@ -309,12 +315,19 @@ class Mechanism:
             i = self.index(name)
             par = params[i]
             if unit_kind(unit) != par.kind:
-                raise OutOfRangeError(f"units[{name}]", f"{unit!r} is not a unit of {par.kind}",
-                                      "a unit of " + par.kind)
+                raise OutOfRangeError(
+                    f"units[{name}]", f"{unit!r} is not a unit of {par.kind}", "a unit of " + par.kind
+                )
             f = par.scale / to_base(unit)  # old unit -> new unit
             factors[i] = f
-            params[i] = replace(par, unit=unit, scale=to_base(unit), lower=par.lower * f, upper=par.upper * f,
-                                lock=None if par.lock is None else par.lock * f)
+            params[i] = replace(
+                par,
+                unit=unit,
+                scale=to_base(unit),
+                lower=par.lower * f,
+                upper=par.upper * f,
+                lock=None if par.lock is None else par.lock * f,
+            )
         sets = {k: {n: v * factors[self.index(n)] for n, v in s.items()} for k, s in self.spec.tolerance_sets.items()}
         return Mechanism(replace(self.spec, error_parameters=tuple(params), tolerance_sets=sets, reference_results=()))
 
@@ -351,10 +364,12 @@ class Mechanism:
             for j, v in zip(self.spec.joints, qv):
                 if j.name not in waive and not (j.lower - eps <= v <= j.upper + eps):
                     if j.name in lengths:
-                        raise OutOfRangeError(f"q[{j.name}]", f"{v:.4f} mm is outside the joint limits",
-                                              f"{j.lower:g} to {j.upper:g} mm")
+                        raise OutOfRangeError(
+                            f"q[{j.name}]", f"{v:.4f} mm is outside the joint limits", f"{j.lower:g} to {j.upper:g} mm"
+                        )
                     raise OutOfRangeError(
-                        f"q[{j.name}]", f"{math.degrees(v):.4f} deg is outside the joint limits",
+                        f"q[{j.name}]",
+                        f"{math.degrees(v):.4f} deg is outside the joint limits",
                         f"{math.degrees(j.lower):g} to {math.degrees(j.upper):g} deg",
                     )
             names = list(self.joint_names)
@@ -365,7 +380,8 @@ class Mechanism:
                 if not (c.lower - eps <= v <= c.upper + eps):
                     expr = " ".join(f"{coef:+g}*{jn}" for jn, coef in c.terms.items())
                     raise OutOfRangeError(
-                        f"q ({c.name}: {expr})", f"{math.degrees(v):.4f} deg is outside the limit",
+                        f"q ({c.name}: {expr})",
+                        f"{math.degrees(v):.4f} deg is outside the limit",
                         f"{math.degrees(c.lower):g} to {math.degrees(c.upper):g} deg",
                     )
             if isinstance(q, str):
@@ -392,7 +408,8 @@ class Mechanism:
         if isinstance(tolerances, str):
             if tolerances not in self.tolerance_sets:
                 raise UnknownNameError(
-                    "tolerances", f"unknown tolerance set {tolerances!r}",
+                    "tolerances",
+                    f"unknown tolerance set {tolerances!r}",
                     "one of " + (", ".join(self.tolerance_sets) or "(none in this model)"),
                 )
             tolerances = self.tolerance_sets[tolerances]
@@ -402,7 +419,9 @@ class Mechanism:
             for name, value in tolerances.items():
                 i = self.index(name)
                 if given[i]:
-                    raise InputError(f"tolerances[{name}]", "given twice (by name and alias)", "one value per parameter")
+                    raise InputError(
+                        f"tolerances[{name}]", "given twice (by name and alias)", "one value per parameter"
+                    )
                 out[i] = check_real(value, f"tolerances[{name}]", "tolerance units", 0.0, HUGE)
                 given[i] = True
             missing = [self.error_parameters[i] for i in np.flatnonzero(~given)]
@@ -487,7 +506,8 @@ class Mechanism:
             for loop, value in zip(self.spec.loops, c):
                 if not abs(value) <= 1.0:
                     raise ModelFileError(
-                        self.spec.path, f"loops.{loop.name}",
+                        self.spec.path,
+                        f"loops.{loop.name}",
                         f"the loop cannot close at configuration {name!r} (cosine argument {value:.4f})",
                     )
 
@@ -526,9 +546,7 @@ class Mechanism:
         if R is not None:
             extra.update(R=R, p_components=p_components(sig, R), p_sphere=p_ball(sig**2, R))
         if Phi is not None:
-            extra.update(
-                Phi=Phi, p_orientation_components=p_components(sig_o, Phi), p_cone=p_cone(Vo, T[:3, 2], Phi)
-            )
+            extra.update(Phi=Phi, p_orientation_components=p_components(sig_o, Phi), p_cone=p_cone(Vo, T[:3, 2], Phi))
         return Analysis(
             model=self.name,
             q=qv,

@@ -147,7 +147,8 @@ class NumpyEvaluator:
             const = f.instruction_constant(k) if op == ca.OP_CONST else None
             if op not in _UNARY and op not in _BINARY and op not in (ca.OP_CONST, ca.OP_INPUT, ca.OP_OUTPUT):
                 raise InputError(
-                    "f", f"operation {_OP_NAMES.get(op, op)} in {f.name()} has no NumPy counterpart here",
+                    "f",
+                    f"operation {_OP_NAMES.get(op, op)} in {f.name()} has no NumPy counterpart here",
                     "elementwise SX operations (no calls, no parameters)",
                 )
             code.append((op, ins, outs, const))
@@ -186,8 +187,10 @@ class NumpyEvaluator:
         varying = [np.asarray(v, dtype=bool).reshape(-1) for v in varying]
         fixed = [np.asarray(v, dtype=float).reshape(-1) for v in fixed]
         try:
-            key = (b"".join(v.tobytes() for v in varying),
-                   b"".join(np.where(vv, 0.0, fv).tobytes() for fv, vv in zip(fixed, varying)))
+            key = (
+                b"".join(v.tobytes() for v in varying),
+                b"".join(np.where(vv, 0.0, fv).tobytes() for fv, vv in zip(fixed, varying)),
+            )
         except ValueError:  # shapes wrong: _BoundProgram names the input
             return _BoundProgram(self, fixed, varying)
         cache = self.__dict__.setdefault("_bound", OrderedDict())

@@ -92,11 +92,17 @@ def _check_joint_errors(spec: ParallelSpec) -> None:
             continue
         joint, op = par.at_joint
         if op != "q":
-            raise InputError(f"joint_errors[{par.name}]", "a parallel robot's legs have ball joints, not modelled "
-                                                          "clearances", "kind 'servo' on a revolute actuator")
+            raise InputError(
+                f"joint_errors[{par.name}]",
+                "a parallel robot's legs have ball joints, not modelled clearances",
+                "kind 'servo' on a revolute actuator",
+            )
         if joint in prismatic:
-            raise InputError(f"joint_errors[{par.name}]", f"{joint!r} is a strut: its length error is the leg's "
-                                                          "offset parameter", "kind 'servo' on a revolute actuator")
+            raise InputError(
+                f"joint_errors[{par.name}]",
+                f"{joint!r} is a strut: its length error is the leg's offset parameter",
+                "kind 'servo' on a revolute actuator",
+            )
 
 
 def _anchors(leg, value):
@@ -191,16 +197,19 @@ class ParallelGraphs:
             raise LoopClosureError(
                 f"the platform cannot be assembled at {where} (mm / rad): outside the workspace reachable from the "
                 f"home pose, or at a singularity, where Newton's method does not converge (residual "
-                f"{c[0] * self.residual_tol:.3g} mm after the continuation, at most {self.residual_tol:.3g} mm accepted)")
+                f"{c[0] * self.residual_tol:.3g} mm after the continuation, at most {self.residual_tol:.3g} mm accepted)"
+            )
         if not abs(c[1]) <= 1.0:
             raise LoopClosureError(
                 f"the platform at {where} (mm / rad) is past a singularity or on another assembly branch "
-                f"(det df/dx changed sign or vanished on the way from the home pose)")
+                f"(det df/dx changed sign or vanished on the way from the home pose)"
+            )
         cond = self.conditioning(q, delta)
         if not cond <= COND_LIMIT:
             raise LoopClosureError(
                 f"the platform at {where} (mm / rad) is at a singularity: condition number {cond:.3g} of df/dx "
-                f"(at most {COND_LIMIT:.0e} accepted); the error model is not defined there")
+                f"(at most {COND_LIMIT:.0e} accepted); the error model is not defined there"
+            )
 
 
 def _solve_home(spec: ParallelSpec, step: ca.Function, res: ca.Function, q0, zero, tol: float) -> np.ndarray:
@@ -224,9 +233,12 @@ def _solve_home(spec: ParallelSpec, step: ca.Function, res: ca.Function, q0, zer
             t *= 0.5
         else:
             break
-    raise ModelFileError(spec.path, "platform.assembly",
-                         f"Newton's method from this pose does not assemble the platform at configuration 'home' "
-                         f"(residual {r:.3g} mm): give a pose closer to the home pose, on the wanted assembly mode")
+    raise ModelFileError(
+        spec.path,
+        "platform.assembly",
+        f"Newton's method from this pose does not assemble the platform at configuration 'home' "
+        f"(residual {r:.3g} mm): give a pose closer to the home pose, on the wanted assembly mode",
+    )
 
 
 def build_parallel_graphs(spec: ParallelSpec) -> ParallelGraphs:
@@ -243,8 +255,9 @@ def build_parallel_graphs(spec: ParallelSpec) -> ParallelGraphs:
 
     lengths = [abs(v) for s, v in spec.symbols.items() if spec.symbol_kinds[s] == "length"]
     residual_tol = RESIDUAL_REL * max([1.0, *lengths])
-    radius = max([1.0] + [math.dist((0, 0, 0), [spec.symbols[leg.symbol(f)] for f in ("px", "py", "pz")])
-                          for leg in spec.legs])
+    radius = max(
+        [1.0] + [math.dist((0, 0, 0), [spec.symbols[leg.symbol(f)] for f in ("px", "py", "pz")]) for leg in spec.legs]
+    )
     q0 = np.array(spec.configurations["home"].q)
     zero = np.zeros(ne)
     home = _solve_home(spec, step, res, q0, zero, residual_tol)
@@ -255,10 +268,16 @@ def build_parallel_graphs(spec: ParallelSpec) -> ParallelGraphs:
     bs = ca.SX.sym("branch", nq)
     ik_of = ca.Function("ik_branches", [xs, ds, bs], list(_ik(spec, xs, value, bs, lower)))
     up, down = (np.asarray(ik_of(home, zero, b * np.ones(nq))[0], dtype=float).ravel() for b in (1.0, -1.0))
-    branches = tuple(0 if leg.actuation == "prismatic"
-                     else (1 if abs(math.remainder(up[i] - q0[i], 2 * math.pi))
-                           <= abs(math.remainder(down[i] - q0[i], 2 * math.pi)) else -1)
-                     for i, leg in enumerate(spec.legs))
+    branches = tuple(
+        0
+        if leg.actuation == "prismatic"
+        else (
+            1
+            if abs(math.remainder(up[i] - q0[i], 2 * math.pi)) <= abs(math.remainder(down[i] - q0[i], 2 * math.pi))
+            else -1
+        )
+        for i, leg in enumerate(spec.legs)
+    )
 
     # forward kinematics: continuation from the home pose, then the errors
     x = ca.SX(ca.DM(home))

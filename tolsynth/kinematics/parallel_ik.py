@@ -29,13 +29,16 @@ ROUND_TRIP_TOL = 1e-6
 class ParallelGridIK:
     """Closed-form inverse kinematics of a parallel robot on a grid of a base-frame plane."""
 
-    branch_note = "closed-form inverse kinematics, each revolute leg on the home configuration's branch; " \
-                  "forward kinematics (Newton from the home pose) checked at every point"
+    branch_note = (
+        "closed-form inverse kinematics, each revolute leg on the home configuration's branch; "
+        "forward kinematics (Newton from the home pose) checked at every point"
+    )
 
     def __init__(self, mech, free, held, ref_q, axis, plane, offset, seeds):
         if held:
-            raise InputError("fixed", "a parallel robot's actuators cannot be held: the platform pose sets them all",
-                             "None")
+            raise InputError(
+                "fixed", "a parallel robot's actuators cannot be held: the platform pose sets them all", "None"
+            )
         g = mech.graphs
         self.mech = mech
         self.iu, self.iv, self.inorm = PLANES[plane]
@@ -43,12 +46,18 @@ class ParallelGridIK:
         self.ref_q = ref_q.copy()
         x_ref = np.asarray(g.pose(ref_q, np.zeros(mech.n)), dtype=float).ravel()
         if not np.all(np.isfinite(x_ref)):
-            raise InputError("reference", "the platform is not assembled at the reference configuration",
-                             "a configuration inside the workspace")
+            raise InputError(
+                "reference",
+                "the platform is not assembled at the reference configuration",
+                "a configuration inside the workspace",
+            )
         T_ref = np.asarray(g.fk(ref_q, np.zeros(mech.n)), dtype=float)
         if axis is not None and not np.allclose(axis, T_ref[:3, 2], atol=1e-9):
-            raise InputError("hand_axis", f"{np.round(axis, 6).tolist()}: the map keeps the reference pose's platform "
-                                          "orientation", f"{np.round(T_ref[:3, 2], 9).tolist()} or None")
+            raise InputError(
+                "hand_axis",
+                f"{np.round(axis, 6).tolist()}: the map keeps the reference pose's platform orientation",
+                f"{np.round(T_ref[:3, 2], 9).tolist()} or None",
+            )
         self.x_ref, self.R_ref = x_ref, T_ref[:3, :3]
         self.lever = self.R_ref @ np.asarray(mech.spec.tool_point, dtype=float)  # platform origin -> hand
         self.seed_set = [self.ref_q]

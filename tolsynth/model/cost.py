@@ -398,10 +398,13 @@ class Tabulated(CostModel):
             e = np.asarray(self.eps, dtype=float).ravel()
             c = np.asarray(self.costs, dtype=float).ravel()
         except (TypeError, ValueError):
-            raise InputError("cost.eps/cost.costs", "not numbers", "two equal-length lists of positive numbers") from None
+            raise InputError(
+                "cost.eps/cost.costs", "not numbers", "two equal-length lists of positive numbers"
+            ) from None
         if e.size < 2 or e.size != c.size:
-            raise InputError("cost.eps/cost.costs", f"got {e.size} tolerances and {c.size} costs",
-                             "two lists of equal length >= 2")
+            raise InputError(
+                "cost.eps/cost.costs", f"got {e.size} tolerances and {c.size} costs", "two lists of equal length >= 2"
+            )
         for i, (a, b) in enumerate(zip(e, c)):
             _positive(float(a), f"cost.eps[{i}]")
             _positive(float(b), f"cost.costs[{i}]")
@@ -464,8 +467,11 @@ class Tabulated(CostModel):
 
     def check_range(self, lo, hi, field_name):
         if lo < self.eps[0] * (1 - 1e-12) or hi > self.eps[-1] * (1 + 1e-12):
-            raise OutOfRangeError(field_name, f"tolerance range [{lo:g}, {hi:g}] leaves the table",
-                                  f"within the tabulated [{self.eps[0]:g}, {self.eps[-1]:g}]")
+            raise OutOfRangeError(
+                field_name,
+                f"tolerance range [{lo:g}, {hi:g}] leaves the table",
+                f"within the tabulated [{self.eps[0]:g}, {self.eps[-1]:g}]",
+            )
 
     def _quartic_min(self, lo, hi, with_y: bool) -> float:
         """Exact minimum over ``[ln lo, ln hi]`` of ``g'' + g'^2 - 2 g'`` (``with_y``) or of
@@ -553,7 +559,9 @@ def cost_model(spec) -> CostModel:
     if isinstance(spec, CostModel):
         return spec
     if not isinstance(spec, Mapping):
-        raise InputError("cost", f"got {spec!r}", "a CostModel or a dict {'model': 'power'|'chase'|'exponential'|'tabulated', ...}")
+        raise InputError(
+            "cost", f"got {spec!r}", "a CostModel or a dict {'model': 'power'|'chase'|'exponential'|'tabulated', ...}"
+        )
     spec = dict(spec)
     name = spec.pop("model", None)
     if name not in MODELS:
@@ -562,6 +570,9 @@ def cost_model(spec) -> CostModel:
     missing = [f for f in fields if f not in spec]
     extra = [f for f in spec if f not in fields]
     if missing or extra:
-        raise InputError(f"cost ({name})", f"missing {missing}" if missing else f"unknown fields {extra}",
-                         f"exactly the fields {list(fields)}")
+        raise InputError(
+            f"cost ({name})",
+            f"missing {missing}" if missing else f"unknown fields {extra}",
+            f"exactly the fields {list(fields)}",
+        )
     return cls(**spec)

@@ -86,7 +86,9 @@ class CostSet:
         pl = self.power_law()
         if pl is None:
             return None
-        return math.fsum(PowerLaw._expr(np.asarray(u, dtype=float), pl, np).tolist())  # fsum: faster than .sum() on a few
+        return math.fsum(
+            PowerLaw._expr(np.asarray(u, dtype=float), pl, np).tolist()
+        )  # fsum: faster than .sum() on a few
 
     def du(self, u) -> np.ndarray:
         """``dc_i/du_i`` per parameter at ``u`` (for the stationarity condition)."""
@@ -111,8 +113,15 @@ class CostSet:
         """Per parameter: ``min over [lu_i, uu_i] of c_i(u) + w_i e^{2u}`` and its argmin."""
         pl = self.power_law()
         if pl is not None:  # every parameter the paper's power law: one vectorised closed form
-            return _power_dual_min(np.asarray(w, dtype=float), pl[0], pl[1], 0.0, np.asarray(lu, dtype=float),
-                                   np.asarray(uu, dtype=float), self._power_consts)
+            return _power_dual_min(
+                np.asarray(w, dtype=float),
+                pl[0],
+                pl[1],
+                0.0,
+                np.asarray(lu, dtype=float),
+                np.asarray(uu, dtype=float),
+                self._power_consts,
+            )
         vals, us = zip(*(m.dual_min(np.asarray(wi, dtype=float), a, b) for m, wi, a, b in zip(self.models, w, lu, uu)))
         return np.array(vals, dtype=float), np.array(us, dtype=float)
 

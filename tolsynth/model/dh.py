@@ -131,8 +131,11 @@ def dh_spec(
     angle_given = angle_unit is not None
     angle_unit = "rad" if angle_unit is None else angle_unit
     if not isinstance(convention, str) or convention not in CONVENTIONS:
-        raise InputError("convention", f"unknown convention {convention!r}{_nearest(str(convention), CONVENTIONS)}",
-                         " or ".join(CONVENTIONS))
+        raise InputError(
+            "convention",
+            f"unknown convention {convention!r}{_nearest(str(convention), CONVENTIONS)}",
+            " or ".join(CONVENTIONS),
+        )
     if isinstance(links, (str, bytes, Mapping)) or not isinstance(links, Sequence) or not links:
         raise InputError("links", "expected a non-empty list of dicts, one per link", "a list of dicts")
     fields = _FIELDS[convention]
@@ -146,8 +149,9 @@ def dh_spec(
     for i, link in enumerate(links):
         where = f"links[{i}]"
         if not isinstance(link, Mapping):
-            raise InputError(where, f"expected a dict of D-H fields, got {type(link).__name__}",
-                             "a dict with " + ", ".join(allowed))
+            raise InputError(
+                where, f"expected a dict of D-H fields, got {type(link).__name__}", "a dict with " + ", ".join(allowed)
+            )
         values: dict[str, Any] = {}
         for key, value in link.items():
             if key not in allowed:
@@ -158,11 +162,16 @@ def dh_spec(
                 )
             field = aliases.get(key, key)
             if field in values:
-                raise InputError(f"{where}.{key}", f"{field!r} given twice (as {field!r} and by its alias)",
-                                 "one of " + " or ".join([field] + [a for a, f in aliases.items() if f == field]))
+                raise InputError(
+                    f"{where}.{key}",
+                    f"{field!r} given twice (as {field!r} and by its alias)",
+                    "one of " + " or ".join([field] + [a for a, f in aliases.items() if f == field]),
+                )
             values[field] = (key, value)
         if "limits" not in values:
-            raise InputError(f"{where}.limits", "missing: every joint needs its limits", f"(lower, upper) in {angle_unit}")
+            raise InputError(
+                f"{where}.limits", "missing: every joint needs its limits", f"(lower, upper) in {angle_unit}"
+            )
         n = i + 1
         joint = _plain(values["name"][1]) if "name" in values else f"q{n}"
         raw_link: dict[str, Any] = {"theta": joint}
@@ -187,13 +196,22 @@ def dh_spec(
             raise InputError(part, "expected a list of (transform, value) pairs", "e.g. [('Tz', 100.0)]")
         out = []
         for j, item in enumerate(items):
-            if (isinstance(item, (str, bytes)) or not isinstance(item, Sequence) or len(item) not in (2, 3)
-                    or item[0] not in ELEMENTARY):
-                raise InputError(f"{part}[{j}]", f"expected (transform, value) or (transform, value, name), got {item!r:.60}",
-                                 "transform one of " + ", ".join(ELEMENTARY))
+            if (
+                isinstance(item, (str, bytes))
+                or not isinstance(item, Sequence)
+                or len(item) not in (2, 3)
+                or item[0] not in ELEMENTARY
+            ):
+                raise InputError(
+                    f"{part}[{j}]",
+                    f"expected (transform, value) or (transform, value, name), got {item!r:.60}",
+                    "transform one of " + ", ".join(ELEMENTARY),
+                )
             sym = item[2] if len(item) == 3 else f"{part}{j + 1}"
             if not isinstance(sym, str) or not sym.strip():
-                raise InputError(f"{part}[{j}]", f"the name must be a non-empty string, got {sym!r:.60}", "a symbol name")
+                raise InputError(
+                    f"{part}[{j}]", f"the name must be a non-empty string, got {sym!r:.60}", "a symbol name"
+                )
             if sym in symbols:
                 raise InputError(f"{part}[{j}]", f"name {sym!r} is already a symbol", "a name not used by the links")
             symbols[sym], kinds[sym] = _plain(item[1]), ELEMENTARY[item[0]]
@@ -207,17 +225,23 @@ def dh_spec(
     if isinstance(errors, str):
         errors = [errors]
     if isinstance(errors, (bytes, Mapping)) or not isinstance(errors, Sequence) or not errors:
-        raise InputError("errors", "expected 'all' or a non-empty list of symbol names/patterns",
-                         "'all' or e.g. ['a*', 'd*', 'o2']")
+        raise InputError(
+            "errors", "expected 'all' or a non-empty list of symbol names/patterns", "'all' or e.g. ['a*', 'd*', 'o2']"
+        )
     order = base_syms + [s for s in symbols if s not in base_syms]  # base, links, tool
     selected: list[str] = []
     for j, pattern in enumerate(errors):
         if not isinstance(pattern, str):
-            raise InputError(f"errors[{j}]", f"expected a string, got {type(pattern).__name__}", "a symbol name or pattern")
+            raise InputError(
+                f"errors[{j}]", f"expected a string, got {type(pattern).__name__}", "a symbol name or pattern"
+            )
         hits = order if pattern == "all" else [s for s in order if fnmatch.fnmatchcase(s, pattern)]
         if not hits:
-            raise UnknownNameError(f"errors[{j}]", f"{pattern!r} selects no symbol{_nearest(pattern, order)}",
-                                   "'all' or names/patterns of " + ", ".join(order))
+            raise UnknownNameError(
+                f"errors[{j}]",
+                f"{pattern!r} selects no symbol{_nearest(pattern, order)}",
+                "'all' or names/patterns of " + ", ".join(order),
+            )
         selected += [s for s in hits if s not in selected]
     selected = [s for s in order if s in selected]  # link order, whatever the pattern order
     sel_kinds = {s: kinds[s] for s in selected}
@@ -229,8 +253,9 @@ def dh_spec(
         bounds_of = {s: bounds for s in selected}
     raw_errors = []
     for i, sym in enumerate(selected):
-        raw_errors.append({"name": sym, "perturbs": [sym], "unit": units_of[sym],
-                           "k": k_of[sym], "bounds": _plain(bounds_of[sym])})
+        raw_errors.append(
+            {"name": sym, "perturbs": [sym], "unit": units_of[sym], "k": k_of[sym], "bounds": _plain(bounds_of[sym])}
+        )
         for key, arg in (("unit", "tolerance_units"), ("k", "k"), ("bounds", "bounds")):
             origin[f"error_parameters[{i}].{key}"] = f"{arg}[{sym}]"
         origin[f"error_parameters[{i}]"] = f"errors ({sym})"
@@ -246,20 +271,30 @@ def dh_spec(
         elif isinstance(value, list) and len(value) == len(joint_names):
             raw_configs[cname] = dict(zip(joint_names, value))
         else:
-            raise InputError(f"configurations[{cname}]", f"expected {len(joint_names)} joint values, got {value!r:.60}",
-                             f"a list of {len(joint_names)} values in {angle_unit} or a dict joint -> value")
+            raise InputError(
+                f"configurations[{cname}]",
+                f"expected {len(joint_names)} joint values, got {value!r:.60}",
+                f"a list of {len(joint_names)} values in {angle_unit} or a dict joint -> value",
+            )
 
     if not angle_given:
         _degrees_guard(symbols, kinds, joints, raw_configs, joint_names)
     lines = [
         f"{convention.capitalize()} D-H chain {CONVENTIONS[convention][1]} for each of the {len(links)} links"
-        + (", with a base transform" if base else "") + (", with a tool transform" if tool else "")
-        + "; hand point = origin of the last frame" + (" after the tool" if tool else "") + ".",
+        + (", with a base transform" if base else "")
+        + (", with a tool transform" if tool else "")
+        + "; hand point = origin of the last frame"
+        + (" after the tool" if tool else "")
+        + ".",
         f"Error parameters: {', '.join(selected)}; each perturbs its own symbol.",
     ]
     data = {
-        "model": {"name": name, "title": title if title is not None else name, "source": source,
-                  "assumptions": [*assumptions, *lines]},
+        "model": {
+            "name": name,
+            "title": title if title is not None else name,
+            "source": source,
+            "assumptions": [*assumptions, *lines],
+        },
         "units": {"length": length_unit, "angle": angle_unit},
         "symbols": symbols,
         "chain": raw_chain,
@@ -279,8 +314,6 @@ def dh_spec(
     return spec
 
 
-
-
 def _degrees_guard(symbols, kinds, joints, raw_configs, joint_names) -> None:
     """Without an explicit ``angle_unit`` the angles are radians; one beyond 2 pi (a twist of 90,
     limits of 170) reads like a degree and would otherwise be taken silently as radians."""
@@ -297,8 +330,11 @@ def _degrees_guard(symbols, kinds, joints, raw_configs, joint_names) -> None:
     for cname, raw in raw_configs.items():
         found += [f"configurations[{cname}][{j}] = {raw[j]:g}" for j in joint_names if j in raw and big(raw[j])]
     if found:
-        raise InputError("angle_unit", f"not given, and {found[0]} is beyond 2 pi rad (degrees meant?)",
-                         "angle_unit='deg' for a table in degrees, or angle_unit='rad' to read these numbers as radians")
+        raise InputError(
+            "angle_unit",
+            f"not given, and {found[0]} is beyond 2 pi rad (degrees meant?)",
+            "angle_unit='deg' for a table in degrees, or angle_unit='rad' to read these numbers as radians",
+        )
 
 
 def _rename(field: str, origin: dict[str, str]) -> str:
@@ -306,13 +342,15 @@ def _rename(field: str, origin: dict[str, str]) -> str:
     known prefix is replaced (``joints[0].limits`` -> ``links[0].limits``)."""
     best = ""
     for prefix in origin:
-        if (field == prefix or field.startswith(prefix + ".") or field.startswith(prefix + "[")) and len(prefix) > len(best):
+        if (field == prefix or field.startswith(prefix + ".") or field.startswith(prefix + "[")) and len(prefix) > len(
+            best
+        ):
             best = prefix
-    return origin[best] + field[len(best):] if best else field
+    return origin[best] + field[len(best) :] if best else field
 
 
 def _message(err: ModelFileError) -> str:
     """The parser's message without its ``path: field:`` prefix."""
     text = str(err)
     prefix = f"{err.path}: {err.field}: "
-    return text[len(prefix):] if text.startswith(prefix) else text
+    return text[len(prefix) :] if text.startswith(prefix) else text

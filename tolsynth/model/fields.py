@@ -129,9 +129,7 @@ def _nearest(key: str, valid) -> str:
 
 
 def _type_name(value: Any) -> str:
-    return {dict: "a table", list: "a list", str: "a string", bool: "a boolean"}.get(
-        type(value), type(value).__name__
-    )
+    return {dict: "a table", list: "a list", str: "a string", bool: "a boolean"}.get(type(value), type(value).__name__)
 
 
 # --------------------------------------------------------------------------------------------
@@ -297,8 +295,10 @@ def _tolerance_sets(r, raw_sets, eparams) -> dict[str, dict[str, float]]:
         values = {}
         for key, value in raw.items():
             if key not in by_name:
-                raise r.fail(f"{where}.{key}",
-                             f"unknown error parameter{_nearest(key, by_name)} (known: {[p.name for p in eparams]})")
+                raise r.fail(
+                    f"{where}.{key}",
+                    f"unknown error parameter{_nearest(key, by_name)} (known: {[p.name for p in eparams]})",
+                )
             par = by_name[key]
             if par.name in values:
                 raise r.fail(f"{where}.{key}", f"{par.name!r} is given twice (by its name and its alias)")
@@ -349,7 +349,8 @@ def _by_kind(arg: Any, argname: str, default: dict, selectable: dict[str, str]) 
         if key not in ("length", "angle") and key not in selectable:
             valid = ["length", "angle", *selectable]
             raise UnknownNameError(
-                f"{argname}[{key}]", f"not 'length', 'angle' or a selected error parameter{_nearest(key, valid)}",
+                f"{argname}[{key}]",
+                f"not 'length', 'angle' or a selected error parameter{_nearest(key, valid)}",
                 "'length', 'angle' or one of " + ", ".join(selectable),
             )
     for name, kind in selectable.items():  # by kind first, then by name
@@ -379,14 +380,21 @@ def _check_configurations(r: _Reader, configurations: dict, joints, constraints=
             if j.name in length_joints:
                 what = f"{v:.6g} mm is outside the joint limits {j.lower:g} to {j.upper:g} mm"
             else:
-                what = (f"{math.degrees(v):.6g} deg is outside the joint limits {math.degrees(j.lower):g} to "
-                        f"{math.degrees(j.upper):g} deg")
-            raise r.fail(f"configurations.{cname}.{j.name}", what + " (or waive the limit with 'waive' and say why in 'note')")
+                what = (
+                    f"{math.degrees(v):.6g} deg is outside the joint limits {math.degrees(j.lower):g} to "
+                    f"{math.degrees(j.upper):g} deg"
+                )
+            raise r.fail(
+                f"configurations.{cname}.{j.name}", what + " (or waive the limit with 'waive' and say why in 'note')"
+            )
         for c in constraints:
             if c.name in waive:
                 continue
             v = sum(coef * cfg.q[names.index(jn)] for jn, coef in c.terms.items())
             if not c.lower - LIMIT_SLACK <= v <= c.upper + LIMIT_SLACK:
-                raise r.fail(f"configurations.{cname}", f"{math.degrees(v):.6g} deg breaks joint constraint {c.name!r} "
-                                                        f"({math.degrees(c.lower):g} to {math.degrees(c.upper):g} deg; "
-                                                        "or waive it with 'waive' and say why in 'note')")
+                raise r.fail(
+                    f"configurations.{cname}",
+                    f"{math.degrees(v):.6g} deg breaks joint constraint {c.name!r} "
+                    f"({math.degrees(c.lower):g} to {math.degrees(c.upper):g} deg; "
+                    "or waive it with 'waive' and say why in 'note')",
+                )

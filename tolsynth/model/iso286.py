@@ -26,7 +26,17 @@ import math
 
 from tolsynth.errors import OutOfRangeError, UnknownNameError
 
-__all__ = ["FACTOR_MULTIPLE", "GRADES", "IT_TABLE", "SIZE_STEPS", "factor", "grades_for", "half_width", "it_width", "size_range"]
+__all__ = [
+    "FACTOR_MULTIPLE",
+    "GRADES",
+    "IT_TABLE",
+    "SIZE_STEPS",
+    "factor",
+    "grades_for",
+    "half_width",
+    "it_width",
+    "size_range",
+]
 
 #: the grades, finest first
 GRADES = ("IT01", "IT0") + tuple(f"IT{g}" for g in range(1, 19))
@@ -51,16 +61,78 @@ IT_TABLE: dict[str, tuple[float, ...]] = {
     "IT8": (14, 18, 22, 27, 33, 39, 46, 54, 63, 72, 81, 89, 97, 110, 125, 140, 165, 195, 230, 280, 330),
     "IT9": (25, 30, 36, 43, 52, 62, 74, 87, 100, 115, 130, 140, 155, 175, 200, 230, 260, 310, 370, 440, 540),
     "IT10": (40, 48, 58, 70, 84, 100, 120, 140, 160, 185, 210, 230, 250, 280, 320, 360, 420, 500, 600, 700, 860),
-    "IT11": (60, 75, 90, 110, 130, 160, 190, 220, 250, 290, 320, 360, 400, 440, 500, 560, 660, 780, 920, 1100,
-             1350),
+    "IT11": (60, 75, 90, 110, 130, 160, 190, 220, 250, 290, 320, 360, 400, 440, 500, 560, 660, 780, 920, 1100, 1350),
 }
 _MM_ROWS = {
-    "IT12": (0.1, 0.12, 0.15, 0.18, 0.21, 0.25, 0.3, 0.35, 0.4, 0.46, 0.52, 0.57, 0.63, 0.7, 0.8, 0.9, 1.05, 1.25,
-             1.5, 1.75, 2.1),
-    "IT13": (0.14, 0.18, 0.22, 0.27, 0.33, 0.39, 0.46, 0.54, 0.63, 0.72, 0.81, 0.89, 0.97, 1.1, 1.25, 1.4, 1.65, 1.95,
-             2.3, 2.8, 3.3),
-    "IT14": (0.25, 0.3, 0.36, 0.43, 0.52, 0.62, 0.74, 0.87, 1, 1.15, 1.3, 1.4, 1.55, 1.75, 2, 2.3, 2.6, 3.1, 3.7,
-             4.4, 5.4),
+    "IT12": (
+        0.1,
+        0.12,
+        0.15,
+        0.18,
+        0.21,
+        0.25,
+        0.3,
+        0.35,
+        0.4,
+        0.46,
+        0.52,
+        0.57,
+        0.63,
+        0.7,
+        0.8,
+        0.9,
+        1.05,
+        1.25,
+        1.5,
+        1.75,
+        2.1,
+    ),
+    "IT13": (
+        0.14,
+        0.18,
+        0.22,
+        0.27,
+        0.33,
+        0.39,
+        0.46,
+        0.54,
+        0.63,
+        0.72,
+        0.81,
+        0.89,
+        0.97,
+        1.1,
+        1.25,
+        1.4,
+        1.65,
+        1.95,
+        2.3,
+        2.8,
+        3.3,
+    ),
+    "IT14": (
+        0.25,
+        0.3,
+        0.36,
+        0.43,
+        0.52,
+        0.62,
+        0.74,
+        0.87,
+        1,
+        1.15,
+        1.3,
+        1.4,
+        1.55,
+        1.75,
+        2,
+        2.3,
+        2.6,
+        3.1,
+        3.7,
+        4.4,
+        5.4,
+    ),
     "IT15": (0.4, 0.48, 0.58, 0.7, 0.84, 1, 1.2, 1.4, 1.6, 1.85, 2.1, 2.3, 2.5, 2.8, 3.2, 3.6, 4.2, 5, 6, 7, 8.6),
     "IT16": (0.6, 0.75, 0.9, 1.1, 1.3, 1.6, 1.9, 2.2, 2.5, 2.9, 3.2, 3.6, 4, 4.4, 5, 5.6, 6.6, 7.8, 9.2, 11, 13.5),
     "IT17": (1, 1.2, 1.5, 1.8, 2.1, 2.5, 3, 3.5, 4, 4.6, 5.2, 5.7, 6.3, 7, 8, 9, 10.5, 12.5, 15, 17.5, 21),
@@ -69,8 +141,22 @@ _MM_ROWS = {
 IT_TABLE.update({g: tuple(round(v * _MM, 6) for v in row) for g, row in _MM_ROWS.items()})
 
 #: multiples of the tolerance factor (i up to 500 mm, I beyond) per grade
-FACTOR_MULTIPLE = {"IT5": 7, "IT6": 10, "IT7": 16, "IT8": 25, "IT9": 40, "IT10": 64, "IT11": 100, "IT12": 160,
-                   "IT13": 250, "IT14": 400, "IT15": 640, "IT16": 1000, "IT17": 1600, "IT18": 2500}
+FACTOR_MULTIPLE = {
+    "IT5": 7,
+    "IT6": 10,
+    "IT7": 16,
+    "IT8": 25,
+    "IT9": 40,
+    "IT10": 64,
+    "IT11": 100,
+    "IT12": 160,
+    "IT13": 250,
+    "IT14": 400,
+    "IT15": 640,
+    "IT16": 1000,
+    "IT17": 1600,
+    "IT18": 2500,
+}
 
 
 def size_range(size: float, field: str = "size") -> int:
@@ -103,8 +189,11 @@ def it_width(grade: str, size: float, field: str = "grade") -> float:
     k = size_range(size)
     row = IT_TABLE[grade]
     if k >= len(row):
-        raise OutOfRangeError(field, f"{grade} at {size:g} mm", f"{grade} is defined up to {SIZE_STEPS[len(row) - 1]} mm "
-                                                                "(ISO 286-1 Table A.1)")
+        raise OutOfRangeError(
+            field,
+            f"{grade} at {size:g} mm",
+            f"{grade} is defined up to {SIZE_STEPS[len(row) - 1]} mm (ISO 286-1 Table A.1)",
+        )
     if float(size) <= 1.0 and grade in ("IT14", "IT15", "IT16", "IT17", "IT18"):
         raise OutOfRangeError(field, f"{grade} at {size:g} mm", "IT14 to IT18 apply to nominal sizes over 1 mm")
     return row[k] / 1000.0

@@ -186,8 +186,11 @@ def _check(je: JointError, i: int, spec) -> JointError:
         units = ANGLE_UNITS if want == "angle" else LENGTH_UNITS
         raise OutOfRangeError(f"{where}.unit", f"{unit!r} is not a unit of {want}", ", ".join(units))
     if (je.value is None) == (je.bounds is None):
-        raise InputError(where, "give either value (a fixed error) or bounds (a designable one)",
-                         "value = half-width, or bounds = (lower, upper), in " + unit)
+        raise InputError(
+            where,
+            "give either value (a fixed error) or bounds (a designable one)",
+            "value = half-width, or bounds = (lower, upper), in " + unit,
+        )
     value = bounds = None
     if je.value is not None:
         value = check_positive(je.value, f"{where}.value", unit)
@@ -207,22 +210,31 @@ def _check(je: JointError, i: int, spec) -> JointError:
     else:
         for key in ("axial", "length"):
             if getattr(je, key) is not None and value is None:
-                raise InputError(f"{where}.{key}", "given for a designable clearance (bounds)",
-                                 "a fixed clearance (value) only: the tilt and axial play of a designable "
-                                 "clearance are not design variables of their own")
+                raise InputError(
+                    f"{where}.{key}",
+                    "given for a designable clearance (bounds)",
+                    "a fixed clearance (value) only: the tilt and axial play of a designable "
+                    "clearance are not design variables of their own",
+                )
         if je.axial is not None:
             axial = check_positive(je.axial, f"{where}.axial", unit)
         if je.length is not None:
             length = check_positive(je.length, f"{where}.length", unit)
             if 2 * value / length > 0.1:
-                raise OutOfRangeError(f"{where}.length", f"tilt 2c/L = {2 * value / length:.3g} rad",
-                                      "a small tilt (2 value / length <= 0.1 rad): the model is first-order")
+                raise OutOfRangeError(
+                    f"{where}.length",
+                    f"tilt 2c/L = {2 * value / length:.3g} rad",
+                    "a small tilt (2 value / length <= 0.1 rad): the model is first-order",
+                )
     from tolsynth.model.cost import CostModel, Given, cost_model
 
     for key in ("k", "cost"):
         if getattr(je, key) is not None and value is not None:
-            raise InputError(f"{where}.{key}", "given for a fixed joint error (value): it is given, not bought",
-                             "a cost for a designable joint error (bounds) only")
+            raise InputError(
+                f"{where}.{key}",
+                "given for a fixed joint error (value): it is given, not bought",
+                "a cost for a designable joint error (bounds) only",
+            )
     k = 1.0 if je.k is None else check_positive(je.k, f"{where}.k")
     cost = je.cost
     if cost is not None and not isinstance(cost, CostModel):
@@ -248,16 +260,30 @@ def joint_parameters(spec, joint_errors: Sequence[JointError]) -> tuple:
         je = _check(raw, i, spec)
         for name in je.names:
             if name in taken:
-                raise InputError(f"joint_errors[{i}]", f"error parameter {name!r} is declared twice",
-                                 "one joint error of each kind per joint")
+                raise InputError(
+                    f"joint_errors[{i}]",
+                    f"error parameter {name!r} is declared twice",
+                    "one joint error of each kind per joint",
+                )
             taken.add(name)
         scale = to_base(je.unit)
         lo, hi = (je.value, je.value) if je.fixed else je.bounds
         common = dict(k=je.k, cost=je.cost, lock=je.value)
         if je.kind == "servo":
-            out.append(ErrorParameter(
-                name=f"{je.joint}.servo", perturbs=(), unit=je.unit, scale=scale, lower=lo, upper=hi,
-                label=f"servo error of {je.joint}", kind="angle", at_joint=(je.joint, "q"), **common))
+            out.append(
+                ErrorParameter(
+                    name=f"{je.joint}.servo",
+                    perturbs=(),
+                    unit=je.unit,
+                    scale=scale,
+                    lower=lo,
+                    upper=hi,
+                    label=f"servo error of {je.joint}",
+                    kind="angle",
+                    at_joint=(je.joint, "q"),
+                    **common,
+                )
+            )
             continue
         for suffix in ("radial_x", "radial_y", "axial", "tilt_x", "tilt_y"):
             name = f"{je.joint}.{suffix}"
@@ -269,17 +295,38 @@ def joint_parameters(spec, joint_errors: Sequence[JointError]) -> tuple:
             elif suffix.startswith("tilt"):
                 v = 2 * je.value / je.length * (1.0 / to_base(TILT_UNIT))  # rad -> mrad
             else:
-                out.append(ErrorParameter(
-                    name=name, perturbs=(), unit=je.unit, scale=scale, lower=lo, upper=hi,
-                    label=f"clearance of {je.joint}: {suffix.replace('_', ' ')}", kind="length",
-                    at_joint=(je.joint, op), **common))
+                out.append(
+                    ErrorParameter(
+                        name=name,
+                        perturbs=(),
+                        unit=je.unit,
+                        scale=scale,
+                        lower=lo,
+                        upper=hi,
+                        label=f"clearance of {je.joint}: {suffix.replace('_', ' ')}",
+                        kind="length",
+                        at_joint=(je.joint, op),
+                        **common,
+                    )
+                )
                 continue
             unit = TILT_UNIT if suffix.startswith("tilt") else je.unit
-            out.append(ErrorParameter(
-                name=name, perturbs=(), unit=unit, scale=to_base(unit), lower=v, upper=v,
-                label=f"clearance of {je.joint}: {suffix.replace('_', ' ')}",
-                kind="angle" if suffix.startswith("tilt") else "length",
-                at_joint=(je.joint, op), k=je.k, cost=je.cost, lock=v))
+            out.append(
+                ErrorParameter(
+                    name=name,
+                    perturbs=(),
+                    unit=unit,
+                    scale=to_base(unit),
+                    lower=v,
+                    upper=v,
+                    label=f"clearance of {je.joint}: {suffix.replace('_', ' ')}",
+                    kind="angle" if suffix.startswith("tilt") else "length",
+                    at_joint=(je.joint, op),
+                    k=je.k,
+                    cost=je.cost,
+                    lock=v,
+                )
+            )
     return tuple(out)
 
 
@@ -297,8 +344,9 @@ def add_joint_errors(spec, joint_errors: Sequence[JointError]):
     sets: dict = {}
     if all(p.lock is not None for p in params):
         sets = {k: {**s, **{p.name: p.lock for p in params}} for k, s in spec.tolerance_sets.items()}
-    return replace(spec, error_parameters=tuple(spec.error_parameters) + params, tolerance_sets=sets,
-                   reference_results=())
+    return replace(
+        spec, error_parameters=tuple(spec.error_parameters) + params, tolerance_sets=sets, reference_results=()
+    )
 
 
 def with_given_costs(mechanism, cost):
@@ -307,8 +355,11 @@ def with_given_costs(mechanism, cost):
     the others: None, one model for every parameter, a list of n models, or a dict."""
     from tolsynth.model.cost import CostModel, Given
 
-    given = {p.name: p.cost for p in mechanism.parameters
-             if p.at_joint is not None and p.lock is not None and p.cost is not None}
+    given = {
+        p.name: p.cost
+        for p in mechanism.parameters
+        if p.at_joint is not None and p.lock is not None and p.cost is not None
+    }
     if not given:
         return cost
     names = mechanism.error_parameters
@@ -322,8 +373,11 @@ def with_given_costs(mechanism, cost):
         out = {names[mechanism.index(k)]: v for k, v in cost.items()}  # aliases -> names
         for name in out:
             if name in given and not isinstance(out[name], Given):  # Given passes: a result's own costs
-                raise InputError(f"cost[{name}]", "a cost for a fixed joint error: it is given, not bought",
-                                 "costs for the design variables only (a designable joint error has bounds)")
+                raise InputError(
+                    f"cost[{name}]",
+                    "a cost for a fixed joint error: it is given, not bought",
+                    "costs for the design variables only (a designable joint error has bounds)",
+                )
     else:
         return cost  # malformed: tolsynth.model.cost.cost_set raises naming it
     out.update(given)

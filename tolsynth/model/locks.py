@@ -59,8 +59,11 @@ def apply_locks(mechanism, bounds, locks) -> dict:
         # or a unit slip (a lock below the lower bound once cost 3243 silently)
         if not float(a) * (1 - 1e-12) <= v <= float(b) * (1 + 1e-12):
             unit = mechanism.units[mechanism.index(nm)]
-            raise OutOfRangeError(f"locks[{nm}]", f"{v:g} {unit} is outside the parameter's bounds",
-                                  f"{float(a):g} to {float(b):g} {unit} (its bounds; widen them with bounds= to lock outside)")
+            raise OutOfRangeError(
+                f"locks[{nm}]",
+                f"{v:g} {unit} is outside the parameter's bounds",
+                f"{float(a):g} to {float(b):g} {unit} (its bounds; widen them with bounds= to lock outside)",
+            )
         out[nm] = (v, v)
     return out
 
@@ -83,9 +86,9 @@ def check_locks(nlp, joint_errors=()) -> None:
     for label, vals in zip(labels, nlp.all_values(eps)):
         if vals[0] > 1.0:
             raise InfeasibleSpecificationError(
-                label, float(vals[0]),
+                label,
+                float(vals[0]),
                 f"infeasible specification: {what} alone break the {label} "
                 f"(constraint value {vals[0]:.6g} > 1 with every other tolerance at zero).  Loosen R/Phi "
                 f"or p, or tighten the locked tolerances (or the fixed joint errors).",
             )
-

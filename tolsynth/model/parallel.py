@@ -63,8 +63,16 @@ FIELD_GROUPS = {
     "anchors": ("bx", "by", "bz", "px", "py", "pz"),
     "lengths": ("offset", "arm", "link"),
 }
-_LABELS = {"bx": "base anchor x", "by": "base anchor y", "bz": "base anchor z", "px": "platform anchor x",
-           "py": "platform anchor y", "pz": "platform anchor z", "arm": "arm length", "link": "link length"}
+_LABELS = {
+    "bx": "base anchor x",
+    "by": "base anchor y",
+    "bz": "base anchor z",
+    "px": "platform anchor x",
+    "py": "platform anchor y",
+    "pz": "platform anchor z",
+    "arm": "arm length",
+    "link": "link length",
+}
 #: a revolute leg's axis and arm direction must be perpendicular to this (cosine of the angle)
 _ORTHOGONAL = 1e-6
 
@@ -136,11 +144,15 @@ def _parse_legs(r: _Reader, data: dict, lf: float, af: float):
         where = f"leg[{i}]"
         name = r.get(raw, "name", where, str)
         if not all(ch.isalnum() or ch == "_" for ch in name):
-            raise r.fail(f"{where}.name", f"{name!r}: letters, digits and '_' only (it starts the symbols '{name}.bx', ...)")
+            raise r.fail(
+                f"{where}.name", f"{name!r}: letters, digits and '_' only (it starts the symbols '{name}.bx', ...)"
+            )
         actuation = r.get(raw, "actuation", where, str)
         if actuation not in LEG_FIELDS:
-            raise r.fail(f"{where}.actuation", f"unknown actuation {actuation!r}{_nearest(actuation, LEG_FIELDS)} "
-                                               f"(known: {', '.join(LEG_FIELDS)})")
+            raise r.fail(
+                f"{where}.actuation",
+                f"unknown actuation {actuation!r}{_nearest(actuation, LEG_FIELDS)} (known: {', '.join(LEG_FIELDS)})",
+            )
         if actuation == "prismatic":
             for key in ("arm", "link", "axis", "zero"):
                 if key in raw:
@@ -164,8 +176,10 @@ def _parse_legs(r: _Reader, data: dict, lf: float, af: float):
             zero = _unit_vector(r, r.get(raw, "zero", where), f"{where}.zero")
             dot = sum(a * z for a, z in zip(axis, zero))
             if abs(dot) > _ORTHOGONAL:
-                raise r.fail(f"{where}.zero", f"not perpendicular to the axis (cosine {dot:.3g}): the arm turns in "
-                                              "the plane normal to its axis")
+                raise r.fail(
+                    f"{where}.zero",
+                    f"not perpendicular to the axis (cosine {dot:.3g}): the arm turns in the plane normal to its axis",
+                )
         legs.append(Leg(name, joint, actuation, axis, zero))
         symbols.update({f"{name}.{f}": v for f, v in values.items()})
     _unique(r, [leg.name for leg in legs], "leg", "leg name")
@@ -178,16 +192,24 @@ def _parse_platform(r: _Reader, data: dict, n_legs: int, lf: float, af: float):
     dof = r.names(r.get(plat, "dof", "platform", list), "platform.dof", allow_empty=False)
     for i, d in enumerate(dof):
         if d not in POSE_COORDINATES:
-            raise r.fail(f"platform.dof[{i}]", f"unknown pose coordinate {d!r}{_nearest(d, POSE_COORDINATES)} "
-                                               f"(known: {', '.join(POSE_COORDINATES)})")
+            raise r.fail(
+                f"platform.dof[{i}]",
+                f"unknown pose coordinate {d!r}{_nearest(d, POSE_COORDINATES)} (known: {', '.join(POSE_COORDINATES)})",
+            )
     dof = tuple(d for d in POSE_COORDINATES if d in dof)  # the pose vector's order
     if len(dof) != n_legs:
-        raise r.fail("platform.dof", f"{len(dof)} pose coordinates {list(dof)} for {n_legs} legs: each leg sets one, "
-                                     "so there must be as many as legs")
+        raise r.fail(
+            "platform.dof",
+            f"{len(dof)} pose coordinates {list(dof)} for {n_legs} legs: each leg sets one, "
+            "so there must be as many as legs",
+        )
     start = r.table(r.get(plat, "assembly", "platform"), "platform.assembly")
     for key in start:
         if key not in dof:
-            raise r.fail(f"platform.assembly.{key}", f"not a pose coordinate of the platform{_nearest(key, dof)} (dof: {list(dof)})")
+            raise r.fail(
+                f"platform.assembly.{key}",
+                f"not a pose coordinate of the platform{_nearest(key, dof)} (dof: {list(dof)})",
+            )
     assembly = tuple(r.number(start.get(d, 0.0), f"platform.assembly.{d}") * (lf if len(d) == 1 else af) for d in dof)
     tool = _point(r, plat.get("tool", [0.0, 0.0, 0.0]), "platform.tool", lf)
     return dof, assembly, tool
@@ -200,8 +222,11 @@ def _select(r: _Reader, pattern: str, where: str, names: list[str]) -> list[str]
     expanded = [f"{head}.{f}" for f in FIELD_GROUPS[group]] if head and group in FIELD_GROUPS else [pattern]
     hit = [n for n in names if any(fnmatch.fnmatchcase(n, e) for e in expanded)]
     if not hit:
-        raise r.fail(where, f"{pattern!r} selects no leg dimension{_nearest(pattern, names)} (names are <leg>.<field> "
-                            f"with fields {', '.join(LEG_FIELDS['revolute'])}; groups .{', .'.join(FIELD_GROUPS)})")
+        raise r.fail(
+            where,
+            f"{pattern!r} selects no leg dimension{_nearest(pattern, names)} (names are <leg>.<field> "
+            f"with fields {', '.join(LEG_FIELDS['revolute'])}; groups .{', .'.join(FIELD_GROUPS)})",
+        )
     return hit
 
 
@@ -237,9 +262,20 @@ def _parse_errors(r: _Reader, data: dict, symbols: dict, kinds: dict) -> list[Er
                 raise r.fail(f"errors.distribution[{n}]", f"got {dist!r}; allowed: {exc.allowed}") from None
         leg, _, fname = n.partition(".")
         label = f"{leg} {_LABELS.get(fname, 'leg-length offset' if kind == 'length' else 'arm zero offset')}"
-        out.append(ErrorParameter(name=n, perturbs=(n,), unit=unit, scale=to_base(unit),
-                                  k=r.positive(ks[n], f"errors.k[{n}]"), lower=lo, upper=hi, label=label,
-                                  kind=kind, distribution=dist))
+        out.append(
+            ErrorParameter(
+                name=n,
+                perturbs=(n,),
+                unit=unit,
+                scale=to_base(unit),
+                k=r.positive(ks[n], f"errors.k[{n}]"),
+                lower=lo,
+                upper=hi,
+                label=label,
+                kind=kind,
+                distribution=dist,
+            )
+        )
     return out
 
 
@@ -285,9 +321,26 @@ def _parse_parallel_model(data: dict, r: _Reader) -> ParallelSpec:
     lengths = tuple(leg.joint for leg in legs if leg.actuation == "prismatic")
     _check_configurations(r, configurations, joints, length_joints=lengths)
     return ParallelSpec(
-        name=name, title=title, source=source, assumptions=tuple(assumptions), path=r.path, convention="parallel",
-        base=(), tool=(), links=(), symbols=symbols, symbol_kinds=kinds, joints=tuple(joints), loops=(),
-        joint_constraints=(), configurations=configurations, error_parameters=tuple(eparams),
-        tolerance_sets=_expand_tolerance_sets(r, data.get("tolerance_sets", {}), eparams), notes=notes,
-        legs=tuple(legs), dof=dof, assembly=assembly, tool_point=tool,
+        name=name,
+        title=title,
+        source=source,
+        assumptions=tuple(assumptions),
+        path=r.path,
+        convention="parallel",
+        base=(),
+        tool=(),
+        links=(),
+        symbols=symbols,
+        symbol_kinds=kinds,
+        joints=tuple(joints),
+        loops=(),
+        joint_constraints=(),
+        configurations=configurations,
+        error_parameters=tuple(eparams),
+        tolerance_sets=_expand_tolerance_sets(r, data.get("tolerance_sets", {}), eparams),
+        notes=notes,
+        legs=tuple(legs),
+        dof=dof,
+        assembly=assembly,
+        tool_point=tool,
     )

@@ -62,9 +62,7 @@ def _models_dir():
 
 def bundled_models() -> list[str]:
     """Names of the models shipped with the package."""
-    return sorted(
-        p.name[: -len(".toml")] for p in _models_dir().iterdir() if p.name.endswith(".toml")
-    )
+    return sorted(p.name[: -len(".toml")] for p in _models_dir().iterdir() if p.name.endswith(".toml"))
 
 
 def model_path(name_or_path: str | os.PathLike) -> Path:
@@ -114,8 +112,10 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
     chain = r.table(data["chain"], "chain", "chain")
     convention = r.get(chain, "convention", "chain", str)
     if convention not in CONVENTIONS:
-        raise r.fail("chain.convention",
-                     f"unknown convention {convention!r}{_nearest(convention, CONVENTIONS)} (known: {', '.join(CONVENTIONS)})")
+        raise r.fail(
+            "chain.convention",
+            f"unknown convention {convention!r}{_nearest(convention, CONVENTIONS)} (known: {', '.join(CONVENTIONS)})",
+        )
     fields, _ = CONVENTIONS[convention]
     raw_symbols = r.table(data["symbols"], "symbols")
     symbol_kinds: dict[str, str] = {}
@@ -132,15 +132,17 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
 
     def elementary(items: Any, where: str) -> tuple[tuple[str, str], ...]:
         if not isinstance(items, list):
-            raise r.fail(where, "expected a list of one-key tables like { Tz = \"s0\" }")
+            raise r.fail(where, 'expected a list of one-key tables like { Tz = "s0" }')
         out = []
         for i, item in enumerate(items):
             if not isinstance(item, dict) or len(item) != 1:
-                raise r.fail(f"{where}[{i}]", "expected a one-key table like { Tz = \"s0\" }")
-            (op, sym), = item.items()
+                raise r.fail(f"{where}[{i}]", 'expected a one-key table like { Tz = "s0" }')
+            ((op, sym),) = item.items()
             if op not in ELEMENTARY:
-                raise r.fail(f"{where}[{i}].{op}",
-                             f"unknown transform{_nearest(op, ELEMENTARY)} (known: {', '.join(ELEMENTARY)})")
+                raise r.fail(
+                    f"{where}[{i}].{op}",
+                    f"unknown transform{_nearest(op, ELEMENTARY)} (known: {', '.join(ELEMENTARY)})",
+                )
             out.append((op, use_symbol(sym, ELEMENTARY[op], f"{where}[{i}].{op}")))
         return tuple(out)
 
@@ -211,11 +213,16 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
         )
         for key in ("ground_angle", "crank_angle"):
             if getattr(loop, key) not in joint_names:
-                raise r.fail(f"{where}.{key}", f"{getattr(loop, key)!r} is not an actuated joint "
-                                               f"{_nearest(getattr(loop, key), joint_names)}(joints: {joint_names})")
+                raise r.fail(
+                    f"{where}.{key}",
+                    f"{getattr(loop, key)!r} is not an actuated joint "
+                    f"{_nearest(getattr(loop, key), joint_names)}(joints: {joint_names})",
+                )
         if loop.crank_angle == loop.ground_angle:
-            raise r.fail(f"{where}.crank_angle", f"is the same joint as ground_angle ({loop.ground_angle!r}): "
-                                                 "the loop would not move")
+            raise r.fail(
+                f"{where}.crank_angle",
+                f"is the same joint as ground_angle ({loop.ground_angle!r}): the loop would not move",
+            )
         if loop.passive_joint in joint_names:
             raise r.fail(f"{where}.passive_joint", f"{loop.passive_joint!r} is declared as an actuated joint")
         loops.append(loop)
@@ -251,12 +258,18 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
             raise r.fail(f"{where}.terms", "names no joint")
         for jn, coef in terms.items():
             if jn not in joint_names:
-                raise r.fail(f"{where}.terms.{jn}", f"not an actuated joint{_nearest(jn, joint_names)} (joints: {joint_names})")
+                raise r.fail(
+                    f"{where}.terms.{jn}", f"not an actuated joint{_nearest(jn, joint_names)} (joints: {joint_names})"
+                )
             if r.number(coef, f"{where}.terms.{jn}") == 0:
                 raise r.fail(f"{where}.terms.{jn}", "a coefficient of 0 (leave the joint out)")
         lo, hi = r.pair(r.get(raw, "limits", where), f"{where}.limits")
-        jcons.append(JointConstraint(r.get(raw, "name", where, str), {k: float(v) for k, v in terms.items()}, lo * af, hi * af))
-    _unique(r, joint_names + [c.name for c in jcons], "joint_constraints", "name (joints and joint constraints share names)")
+        jcons.append(
+            JointConstraint(r.get(raw, "name", where, str), {k: float(v) for k, v in terms.items()}, lo * af, hi * af)
+        )
+    _unique(
+        r, joint_names + [c.name for c in jcons], "joint_constraints", "name (joints and joint constraints share names)"
+    )
 
     # ---- configurations ---------------------------------------------------------------------
     configurations = {}

@@ -10,7 +10,18 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["MechanismSpec", "Link", "Joint", "FourBarLoop", "JointConstraint", "Configuration", "ErrorParameter", "ReferenceResult", "CONVENTIONS", "ELEMENTARY"]
+__all__ = [
+    "MechanismSpec",
+    "Link",
+    "Joint",
+    "FourBarLoop",
+    "JointConstraint",
+    "Configuration",
+    "ErrorParameter",
+    "ReferenceResult",
+    "CONVENTIONS",
+    "ELEMENTARY",
+]
 
 
 CONVENTIONS = {

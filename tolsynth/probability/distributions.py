@@ -39,7 +39,18 @@ import numpy as np
 
 from tolsynth.errors import InputError, OutOfRangeError
 
-__all__ = ["Shape", "SHAPES", "shape", "shapes_of", "divisors", "divisor_of", "resolve", "describe", "label", "DEFAULT_SHAPE"]
+__all__ = [
+    "Shape",
+    "SHAPES",
+    "shape",
+    "shapes_of",
+    "divisors",
+    "divisor_of",
+    "resolve",
+    "describe",
+    "label",
+    "DEFAULT_SHAPE",
+]
 
 DEFAULT_SHAPE = "uniform"
 _EXACT_DIVISORS = {"uniform": 3.0, "normal": 9.0, "triangular": 6.0}
@@ -195,7 +206,9 @@ def _cf_truncnormal(s, beta: float, lib=np):
     large = 0
     for a, w in zip(xi, wi):
         sg = 0.5 * _TN_SIGMA * (1.0 + a)
-        large = large + (0.5 * _TN_SIGMA * w) * lib.exp(-sg + sg * sg / (4.0 * yl * yl)) * lib.sin(2.0 * x * yl - x * sg / yl)
+        large = large + (0.5 * _TN_SIGMA * w) * lib.exp(-sg + sg * sg / (4.0 * yl * yl)) * lib.sin(
+            2.0 * x * yl - x * sg / yl
+        )
     large = large / (2.0 * yl)
     if lib is np:
         I = np.where(y <= _TN_SPLIT, small, large)
@@ -252,8 +265,11 @@ def shapes_of(distribution, names: Sequence[str], index=None) -> tuple[Shape, ..
     names = list(names)
     if isinstance(distribution, (list, tuple)) and not isinstance(distribution, str):
         if len(distribution) != len(names):
-            raise InputError("distribution", f"{len(distribution)} shapes for {len(names)} parameters",
-                             "a shape name, a mapping name -> shape, or one shape per parameter")
+            raise InputError(
+                "distribution",
+                f"{len(distribution)} shapes for {len(names)} parameters",
+                "a shape name, a mapping name -> shape, or one shape per parameter",
+            )
         out = []
         for nm, value in zip(names, distribution):
             try:
@@ -263,7 +279,9 @@ def shapes_of(distribution, names: Sequence[str], index=None) -> tuple[Shape, ..
         return tuple(out)
     if isinstance(distribution, Mapping):
         if not distribution:
-            raise InputError("distribution", "an empty mapping", "a shape name, or a mapping parameter name -> shape name")
+            raise InputError(
+                "distribution", "an empty mapping", "a shape name, or a mapping parameter name -> shape name"
+            )
         default = shape(distribution.get("*", DEFAULT_SHAPE))
         out = [default] * len(names)
         for key, value in distribution.items():

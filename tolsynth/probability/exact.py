@@ -99,8 +99,7 @@ def series_terms(b: np.ndarray, shapes: tuple[Shape, ...], L: np.ndarray, K: int
     return out
 
 
-def direction_probability_batch(B, shapes, R, tol: float = DEFAULT_TOL, kmax: int = KMAX,
-                                return_method: bool = False):
+def direction_probability_batch(B, shapes, R, tol: float = DEFAULT_TOL, kmax: int = KMAX, return_method: bool = False):
     """``P(|sum_i B[j, i] Y_i| <= R_j)`` for every row j of ``B`` (m, n) (mm), ``Y_i`` of the given
     shapes (one per column), and a rigorous bound on each error.
 
@@ -123,13 +122,14 @@ def direction_probability_batch(B, shapes, R, tol: float = DEFAULT_TOL, kmax: in
         Rv = np.full(b.shape[0], check_positive(float(Rv), "R"))
     elif Rv.shape != (b.shape[0],) or not np.all(np.isfinite(Rv)) or np.any(Rv <= 0):
         raise OutOfRangeError("R", f"shape {Rv.shape} or a value <= 0", f"a number > 0 or {b.shape[0]} of them")
-    P, err, method = evaluate(b, tuple(part_of(s) for s in sh), Rv, check_tol(tol), False, check_count(kmax, "kmax", 16))
+    P, err, method = evaluate(
+        b, tuple(part_of(s) for s in sh), Rv, check_tol(tol), False, check_count(kmax, "kmax", 16)
+    )
     P = np.clip(P, 0.0, 1.0)
     return (P, err, method) if return_method else (P, err)
 
 
-def direction_probability(b, shapes, R: float, tol: float = DEFAULT_TOL, kmax: int = KMAX,
-                          return_error: bool = False):
+def direction_probability(b, shapes, R: float, tol: float = DEFAULT_TOL, kmax: int = KMAX, return_error: bool = False):
     """``P(|sum_i b_i Y_i| <= R)`` for rows of coefficients ``b`` (mm; shape (n,) or (M, n)),
     ``Y_i`` of the given shapes (one per column), exactly (see the module docstring).
 
@@ -147,7 +147,8 @@ def direction_probability(b, shapes, R: float, tol: float = DEFAULT_TOL, kmax: i
     P, bound = direction_probability_batch(b, shapes, R, tol, kmax)
     if not return_error and np.any(bound > tol):
         raise ExactProbabilityError(
-            f"exact probability: the error bound {bound.max():.2e} exceeds tol {tol:g} within {kmax} series terms")
+            f"exact probability: the error bound {bound.max():.2e} exceeds tol {tol:g} within {kmax} series terms"
+        )
     if one:
         return (float(P[0]), float(bound[0])) if return_error else float(P[0])
     return (P, bound) if return_error else P
@@ -183,8 +184,7 @@ def _frames(U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e1, np.cross(U, e1)
 
 
-def worst_direction(A, eps, shapes, R: float, tol: float = DEFAULT_TOL, start=None, grid: int = 400,
-                    local: int = 3):
+def worst_direction(A, eps, shapes, R: float, tol: float = DEFAULT_TOL, start=None, grid: int = 400, local: int = 3):
     """The unit direction u of smallest exact ``P(|u^T dr| <= R)`` (and that probability).
 
     Candidates: the principal directions, the bisectors of each pair, ``start`` (if given) and a

@@ -70,6 +70,7 @@ def check_matrix(M, eps, shapes, rows: int, field: str):
         raise OutOfRangeError(field, "a non-finite entry", "finite numbers")
     eps = _floats(eps, "eps", "tolerances")
     if eps.shape != (M.shape[1],) or not np.all(np.isfinite(eps)) or np.any(eps < 0):
-        raise OutOfRangeError("eps", f"shape {eps.shape} or a negative or non-finite value",
-                              f"{M.shape[1]} tolerances >= 0")
+        raise OutOfRangeError(
+            "eps", f"shape {eps.shape} or a negative or non-finite value", f"{M.shape[1]} tolerances >= 0"
+        )
     return M, eps, check_shapes(shapes, M.shape[1])

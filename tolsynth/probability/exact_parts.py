@@ -299,8 +299,19 @@ def _make(kind: str, beta: float = 0.0) -> Part:
         peak = 3.0 / _SQRT2PI
         # max |f'| of N(0, 1/9): 1 / (sigma^2 sqrt(2 pi e)); max |f''|: phi(0) / sigma^3
         slope = 9.0 / math.sqrt(2 * math.pi * math.e)
-        return Part("normal", 0.0, 1.0 / 9.0, peak, 2.0 * peak, slope, 1.0, 0, cost=1.0, slope_in=slope,
-                    curve_in=27.0 / _SQRT2PI)
+        return Part(
+            "normal",
+            0.0,
+            1.0 / 9.0,
+            peak,
+            2.0 * peak,
+            slope,
+            1.0,
+            0,
+            cost=1.0,
+            slope_in=slope,
+            curve_in=27.0 / _SQRT2PI,
+        )
     sh = shape(f"truncnormal({beta:g})")
     f0 = sh.peak
     f1 = f0 * math.exp(-0.5 * beta * beta)
@@ -310,12 +321,40 @@ def _make(kind: str, beta: float = 0.0) -> Part:
     # |f''| = f(0) beta^2 |beta^2 y^2 - 1| exp(-beta^2 y^2 / 2) <= f(0) beta^2 (|z^2 - 1| e^(-z^2/2) <= 1)
     curve = f0 * beta * beta
     if kind == "truncnormal":
-        return Part("truncnormal", beta, sh.variance, f0, 2.0 * f0, math.inf, 2.0 * f0, 1, w, V, cost=60.0,
-                    edges=(1.0,), slope_in=maxslope, curve_in=curve)
+        return Part(
+            "truncnormal",
+            beta,
+            sh.variance,
+            f0,
+            2.0 * f0,
+            math.inf,
+            2.0 * f0,
+            1,
+            w,
+            V,
+            cost=60.0,
+            edges=(1.0,),
+            slope_in=maxslope,
+            curve_in=curve,
+        )
     peak = (f0 - f1) / (1.0 - w)
     var = (sh.variance - w / 3.0) / (1.0 - w)
-    return Part("cap", beta, var, peak, 2.0 * peak, maxslope / (1.0 - w), V / (1.0 - w), 2, w, V / (1.0 - w),
-                cost=62.0, edges=(1.0,), slope_in=maxslope / (1.0 - w), curve_in=curve / (1.0 - w))
+    return Part(
+        "cap",
+        beta,
+        var,
+        peak,
+        2.0 * peak,
+        maxslope / (1.0 - w),
+        V / (1.0 - w),
+        2,
+        w,
+        V / (1.0 - w),
+        cost=62.0,
+        edges=(1.0,),
+        slope_in=maxslope / (1.0 - w),
+        curve_in=curve / (1.0 - w),
+    )
 
 
 @lru_cache(maxsize=None)

@@ -123,8 +123,10 @@ def vertex_float(a: np.ndarray, sm: Smooth, R: np.ndarray, kernel: bool = False)
     GR1, AR1 = _G(yR, sm, m - 1)
     _, AL1 = _G(yL, sm, m - 1)
     P = (GR - GL) @ sg / N
-    errP = _EPS / N * (np.sum((2 * m + 8) * (AR + AL), axis=1) + m * (m + 2) * reach * np.sum(AR1 + AL1, axis=1)) \
+    errP = (
+        _EPS / N * (np.sum((2 * m + 8) * (AR + AL), axis=1) + m * (m + 2) * reach * np.sum(AR1 + AL1, axis=1))
         + 4 * _EPS
+    )
     if not kernel:
         return P, errP, None, None
     Nd = N / m

@@ -115,15 +115,20 @@ class _Rest:
         S, sg = _signs(ms)
         c = S @ np.array(self.a)
         M = j + ms
-        yy = (y[0][:, None] + c[None, :])
+        yy = y[0][:, None] + c[None, :]
         G, A = _G(yy, self.sm, M)
         _, A1 = _G(yy, self.sm, M - 1)
         scale = math.factorial(j) / (math.factorial(M) * float(np.prod(2.0 * np.array(self.a))))
         val = (G @ sg) * scale
-        err = _EPS * scale * (np.sum((2 * M + 8) * A, axis=1)
-                              + M * (M + 2) * (np.abs(y[0]) + 2 * self.reach)[:, None].ravel() * np.sum(A1, axis=1))
+        err = (
+            _EPS
+            * scale
+            * (
+                np.sum((2 * M + 8) * A, axis=1)
+                + M * (M + 2) * (np.abs(y[0]) + 2 * self.reach)[:, None].ravel() * np.sum(A1, axis=1)
+            )
+        )
         return val, err
-
 
     def _series(self, y: np.ndarray, j: int, tol: float) -> tuple[np.ndarray, np.ndarray]:
         """S without a vertex formula of its own (two smooth parts): its density periodised with
@@ -145,8 +150,12 @@ class _Rest:
         if j == 0:
             val = 0.5 + y / (2 * L[0]) + np.sin(x) @ (T / (k * np.pi))
         else:
-            val = (L[0] / 4 + y / 2 + y * y / (4 * L[0])
-                   - L[0] / np.pi**2 * ((np.cos(x) - (-1.0) ** k[None, :]) @ (T / k**2)))
+            val = (
+                L[0] / 4
+                + y / 2
+                + y * y / (4 * L[0])
+                - L[0] / np.pi**2 * ((np.cos(x) - (-1.0) ** k[None, :]) @ (T / k**2))
+            )
         err = tail[0] * factor + 16 * _EPS * (1.0 + L[0]) * math.log2(Kr + 1)
         return val, np.full(y.shape, err)
 

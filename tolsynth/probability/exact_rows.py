@@ -116,8 +116,11 @@ def _local(b, parts, R, order, rest, bP, bD):
     bj = b[np.arange(M), first]
     bounded = np.array([p.bounded for p in parts])
     normal2 = (b[:, ~bounded] / 3.0) ** 2 if (~bounded).any() else np.zeros((M, 1))
-    reach = b[:, bounded].sum(axis=1) - np.where(bounded[first], bj, 0.0) \
+    reach = (
+        b[:, bounded].sum(axis=1)
+        - np.where(bounded[first], bj, 0.0)
         + 12.0 * np.sqrt(normal2.sum(axis=1) - np.where(~bounded[first], (bj / 3.0) ** 2, 0.0).clip(0.0))
+    )
     Rv = np.broadcast_to(np.asarray(R, dtype=float), (M,))
     for j in np.unique(first):
         sel = np.flatnonzero((first == j) & (bj > 0))
@@ -192,8 +195,14 @@ def evaluate(b: np.ndarray, parts: tuple, R, tol, kernel: bool = False, kmax: in
             z = np.where(sigma[r] > 0, gap[r] / np.where(sigma[r] > 0, sigma[r], 1.0), np.inf)
             tail = np.where(np.isinf(z), 0.0, _special("erfc", np.where(np.isinf(z), 0.0, z) / _SQRT2))
             if kernel:
-                tail = tail + np.where(np.isinf(z), 0.0, 2.0 * R[r] * np.exp(-0.5 * np.minimum(z, 1e3) ** 2)
-                                       / (math.sqrt(2 * math.pi) * np.where(sigma[r] > 0, sigma[r], 1.0)))
+                tail = tail + np.where(
+                    np.isinf(z),
+                    0.0,
+                    2.0
+                    * R[r]
+                    * np.exp(-0.5 * np.minimum(z, 1e3) ** 2)
+                    / (math.sqrt(2 * math.pi) * np.where(sigma[r] > 0, sigma[r], 1.0)),
+                )
         good = tail <= 0.5 * tol_left[r]
         rg = r[good]
         val[rg], err[rg], method[rg] = 1.0, err[rg] + tail[good], "inside"
@@ -250,8 +259,12 @@ def _hard(b, parts, R, tol, kernel, kmax, sigma, rows, val, err, method):
     slow = np.finfo(float).eps * amp > 0.5 * tol[rows]
     smooth = key != -1
     exact_ok = (key == -1) | (key == -2)
-    cost_vertex = (2.0 ** np.minimum(m, 60)) * (m + 4) * np.where(smooth, 12.0, 2.0) \
+    cost_vertex = (
+        (2.0 ** np.minimum(m, 60))
+        * (m + 4)
+        * np.where(smooth, 12.0, 2.0)
         * np.where(slow, np.where(exact_ok, np.where(smooth, 3000.0, 300.0), np.inf), 1.0)
+    )
     cost_vertex = np.where(poly_ok, cost_vertex, np.inf)
     tn = np.array([k == "truncnormal" for k in kinds], dtype=bool)
     has_tn = np.any(live[:, tn], axis=1) if tn.any() else np.zeros(rows.size, dtype=bool)
@@ -264,8 +277,7 @@ def _hard(b, parts, R, tol, kernel, kmax, sigma, rows, val, err, method):
         use_series = ~done & np.isfinite(cost_first) & (~vertex_first if stage == 0 else vertex_first)
         idx = np.flatnonzero(use_vertex)
         if idx.size:
-            v, e, meth = _vertex(bb[idx], parts, Rr[idx], tol[rows[idx]], kernel, sr[idx], m[idx],
-                                 key[idx], slow[idx])
+            v, e, meth = _vertex(bb[idx], parts, Rr[idx], tol[rows[idx]], kernel, sr[idx], m[idx], key[idx], slow[idx])
             ok = e <= tol[rows[idx]]
             r = rows[idx[ok]]
             val[r], err[r], method[r] = v[ok], err[r] + e[ok], meth[ok]
@@ -300,7 +312,9 @@ def _hard(b, parts, R, tol, kernel, kmax, sigma, rows, val, err, method):
         miss = Kl == 0
         if miss.any():  # out of reach: the fewest terms within twice the bound at LONG_TERMS
             cap = min(kmax, LONG_TERMS)
-            _, tc = terms_needed(bb[long[miss]], parts, Rr[long[miss]], L[long[miss]], np.zeros(miss.sum()), kernel, cap)
+            _, tc = terms_needed(
+                bb[long[miss]], parts, Rr[long[miss]], L[long[miss]], np.zeros(miss.sum()), kernel, cap
+            )
             Km, tm = terms_needed(bb[long[miss]], parts, Rr[long[miss]], L[long[miss]], 2.0 * tc, kernel, cap)
             Kl[miss], tl[miss] = Km, tm
         _series_rows(bb, parts, Rr, L, Kl, tl, kernel, rows, long, val, err, method, "series-long", local=True)
@@ -335,8 +349,9 @@ def _vertex(bb, parts, R, tol, kernel, sigma, m, key, slow):
                 sm = Smooth("tn" if p.kind == "truncnormal" else "cap", bb[sel, c], p.beta, p.w)
             fl = ~slow[sel]
             if fl.any():
-                P, eP, Q, eQ = vertex_float(a[fl], sm.rows(np.flatnonzero(fl)) if sm.scale is not None else sm,
-                                            R[sel[fl]], kernel)
+                P, eP, Q, eQ = vertex_float(
+                    a[fl], sm.rows(np.flatnonzero(fl)) if sm.scale is not None else sm, R[sel[fl]], kernel
+                )
                 val[sel[fl]], err[sel[fl]] = (Q, eQ) if kernel else (P, eP)
                 meth[sel[fl]] = "vertex"
             if kg >= 0:  # no exact arithmetic with a truncated normal
@@ -359,8 +374,8 @@ def _split(bb, parts, R, tol, kernel, kmax, rows, split, val, err, method):
         sel = split[col == c]
         r = rows[sel]
         w = parts[c].w
-        pu = parts[:c] + (UNIFORM,) + parts[c + 1:]
-        pc = parts[:c] + (cap_of(parts[c].beta),) + parts[c + 1:]
+        pu = parts[:c] + (UNIFORM,) + parts[c + 1 :]
+        pc = parts[:c] + (cap_of(parts[c].beta),) + parts[c + 1 :]
         vu, eu, _ = evaluate(bb[sel], pu, R[r], tol[r], kernel, kmax)
         vc, ec, _ = evaluate(bb[sel], pc, R[r], tol[r], kernel, kmax)
         val[r] = w * vu + (1.0 - w) * vc

@@ -95,8 +95,9 @@ def _envelope(b, parts, t) -> np.ndarray:
     return out
 
 
-def terms_needed(b: np.ndarray, parts, R, L: np.ndarray, tol: np.ndarray, kernel: bool = False,
-                 kmax: int = KMAX) -> tuple[np.ndarray, np.ndarray]:
+def terms_needed(
+    b: np.ndarray, parts, R, L: np.ndarray, tol: np.ndarray, kernel: bool = False, kmax: int = KMAX
+) -> tuple[np.ndarray, np.ndarray]:
     """Per row: the least ladder K (<= ``kmax``) whose tail bound is at most ``tol``, and that bound
     (``K = 0`` and the bound at ``kmax`` where none is).  ``kernel``: the sphere kernel's weight
     ``(2 / (k pi)) (1 + k pi R / L)`` instead of ``2 / (k pi)``."""
@@ -220,8 +221,9 @@ def series_sum(b: np.ndarray, parts, R, L: np.ndarray, K: np.ndarray, kernel: bo
             if kernel:
                 c = w * (np.sin(x) - x * np.cos(x))
                 val[r] = np.sum(c * T, axis=1)
-                rnd[r] = _EPS * ((8 * n + 10) * np.sum(np.abs(c) * absT, axis=1)
-                                 + 6 * np.pi * np.sum(k[None, :] * absT, axis=1))
+                rnd[r] = _EPS * (
+                    (8 * n + 10) * np.sum(np.abs(c) * absT, axis=1) + 6 * np.pi * np.sum(k[None, :] * absT, axis=1)
+                )
                 cw = np.abs(c)
             else:
                 c = w * np.sin(x)
@@ -230,4 +232,3 @@ def series_sum(b: np.ndarray, parts, R, L: np.ndarray, K: np.ndarray, kernel: bo
                 cw = w
             rnd[r] += np.sum(cw * D, axis=1)  # the truncated normals' tabulated factors
     return val, rnd
-

@@ -53,7 +53,9 @@ def _hemisphere(nodes: int) -> tuple[np.ndarray, np.ndarray]:
     z, wz = 0.5 * (x + 1.0), 0.5 * w
     phi = 2 * math.pi * np.arange(2 * nodes) / (2 * nodes)
     s = np.sqrt(1.0 - z**2)
-    dirs = np.stack([np.outer(s, np.cos(phi)).ravel(), np.outer(s, np.sin(phi)).ravel(), np.repeat(z, 2 * nodes)], axis=1)
+    dirs = np.stack(
+        [np.outer(s, np.cos(phi)).ravel(), np.outer(s, np.sin(phi)).ravel(), np.repeat(z, 2 * nodes)], axis=1
+    )
     return dirs, np.repeat(wz, 2 * nodes) / (2 * nodes)
 
 
@@ -144,8 +146,9 @@ def _planar_density_bound(C, parts) -> float:
     return best
 
 
-def ball_probability(A, eps, shapes, R: float, tol: float = 1e-7, max_nodes: int = 128,
-                     kmax: int = KMAX, return_error: bool = False):
+def ball_probability(
+    A, eps, shapes, R: float, tol: float = 1e-7, max_nodes: int = 128, kmax: int = KMAX, return_error: bool = False
+):
     """Exact ``P(|dr| <= R)`` for ``dr = A diag(eps) Y`` in 3-D (``A`` 3 x n, mm per tolerance unit):
     Eq. 5 without the Gaussian approximation (see the module docstring).
 
@@ -187,8 +190,7 @@ def _result(P, err, tol, return_error, what):
     return (P, err) if return_error else P
 
 
-def cone_probability(C, eps, shapes, Phi: float, tol: float = 1e-7, max_nodes: int = 256,
-                     return_error: bool = False):
+def cone_probability(C, eps, shapes, Phi: float, tol: float = 1e-7, max_nodes: int = 256, return_error: bool = False):
     """Exact ``P(|t| <= Phi)`` for the 2-D vector ``t = C diag(eps) Y`` (``C`` 2 x n, rad per
     tolerance unit: the rotation components perpendicular to the hand axis): Eq. 8 without the
     Gaussian approximation, by the planar rule of the module docstring (up to ``max_nodes``

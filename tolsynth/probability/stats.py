@@ -128,9 +128,11 @@ def principal(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _det3(A):
     """3x3 determinant by cofactors (CasADi's MX ``det`` factorises and fails on singular input)."""
-    return (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
-            - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
-            + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
+    return (
+        A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
+        - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+        + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0])
+    )
 
 
 def principal_variances_cubic(V) -> ca.SX:
@@ -373,8 +375,16 @@ def _ball_quadrature(lam: np.ndarray, R: float, nodes: int, pt: int) -> np.ndarr
     return np.sum(wt * _ball3_kernel(a, 0.5 * x * x, q_minus / q, l3 / q), axis=1)
 
 
-def _ball_rows(lam: np.ndarray, R: float, tol: float, max_nodes: int, out: np.ndarray, err: np.ndarray,
-               rows: np.ndarray, budget: int = 4_000_000) -> None:
+def _ball_rows(
+    lam: np.ndarray,
+    R: float,
+    tol: float,
+    max_nodes: int,
+    out: np.ndarray,
+    err: np.ndarray,
+    rows: np.ndarray,
+    budget: int = 4_000_000,
+) -> None:
     """Converge the rows ``rows`` of ``lam`` (all of one dimension), grouped by panel counts and
     chunked so that no quadrature grid exceeds ``budget`` points."""
     pt = _n_panels(_scales(lam[rows], R))
@@ -383,9 +393,9 @@ def _ball_rows(lam: np.ndarray, R: float, tol: float, max_nodes: int, out: np.nd
         prev, nodes = None, 8
         while group.size:
             chunk = max(1, budget // (key * nodes))
-            val = np.concatenate([
-                _ball_quadrature(lam[group[a : a + chunk]], R, nodes, key) for a in range(0, group.size, chunk)
-            ])
+            val = np.concatenate(
+                [_ball_quadrature(lam[group[a : a + chunk]], R, nodes, key) for a in range(0, group.size, chunk)]
+            )
             if prev is not None:
                 delta = np.abs(val - prev)
                 done = delta <= tol

@@ -91,8 +91,14 @@ def _large_CS(v: np.ndarray, x: float) -> np.ndarray:
     Evv = E * (sg * sg / 2.0 + sg**4 * v * v / 4.0)
     a = x * sg
     c, s = np.cos(a * v), np.sin(a * v)
-    rows = (E * c, E * s, Ev * c - E * a * s, Ev * s + E * a * c,
-            Evv * c - 2.0 * Ev * a * s - E * a * a * c, Evv * s + 2.0 * Ev * a * c - E * a * a * s)
+    rows = (
+        E * c,
+        E * s,
+        Ev * c - E * a * s,
+        Ev * s + E * a * c,
+        Evv * c - 2.0 * Ev * a * s - E * a * a * c,
+        Evv * s + 2.0 * Ev * a * c - E * a * a * s,
+    )
     return np.array([np.sum(w * r, axis=1) for r in rows])
 
 
@@ -114,8 +120,9 @@ def _tables(beta: float):
     small = _fit(lambda y: _small_I(y, x)[None, :], 0.0, _SPLIT, 80, 10, np.ones(1))
     scale = np.maximum(np.max(np.abs(_large_CS(np.linspace(0.0, 1.0 / _SPLIT, 64), x)), axis=1), 1e-300)
     # C, S; their first and their second derivatives apart: a value needs only the first pair
-    large = tuple(_fit(lambda v, k=k: _large_CS(v, x)[k : k + 2], 0.0, 1.0 / _SPLIT, 16, 10, scale[k : k + 2])
-                  for k in (0, 2, 4))
+    large = tuple(
+        _fit(lambda v, k=k: _large_CS(v, x)[k : k + 2], 0.0, 1.0 / _SPLIT, 16, 10, scale[k : k + 2]) for k in (0, 2, 4)
+    )
     c = 2.0 * math.exp(-x * x) / (math.sqrt(math.pi) * math.erf(x))
     return x, c, small, large
 

@@ -147,8 +147,11 @@ class ToleranceNLP:
         self.p_sphere = np.array([b.p for b in spec.sphere_blocks]) if spec.sphere_blocks else np.zeros(0)
         # scaled rows of every block, (m, 3, n): block b's constraint is lambda_max(As V As^T) <= 1
         self.scales = np.array([b.scale for b in spec.blocks])
-        self.As = (self.scales[:, None, None] * np.array([b.A for b in spec.blocks]).reshape(-1, 3, spec.n)
-                   if spec.blocks else np.zeros((0, 3, spec.n)))
+        self.As = (
+            self.scales[:, None, None] * np.array([b.A for b in spec.blocks]).reshape(-1, 3, spec.n)
+            if spec.blocks
+            else np.zeros((0, 3, spec.n))
+        )
         self._graphs = None
         self._values_memo = None  # (eps bytes, block_values at eps): the last point asked
 
@@ -278,7 +281,9 @@ class ToleranceNLP:
                 f"lower bound: largest principal sigma*{what} = {value:.6g} > 1.  Lower the bounds, "
                 f"or relax R/Phi or p.",
             )
-        for block, (vals, _, P) in zip(spec.sphere_blocks, self.sphere_values(spec.lower) if spec.sphere_blocks else ()):
+        for block, (vals, _, P) in zip(
+            spec.sphere_blocks, self.sphere_values(spec.lower) if spec.sphere_blocks else ()
+        ):
             if vals[0] > 1.0:
                 raise InfeasibleSpecificationError(
                     block.label,

@@ -140,8 +140,11 @@ class SynthesisResult(Tabular):
             f"probabilities: {self.probability_kind}",
         ]
         spec = self.spec
-        fixed = {n for n, a, b in zip(getattr(spec, "names", ()), getattr(spec, "lower", ()), getattr(spec, "upper", ()))
-                 if a == b}  # locked (tolsynth.model.locks) or a fixed joint error
+        fixed = {
+            n
+            for n, a, b in zip(getattr(spec, "names", ()), getattr(spec, "lower", ()), getattr(spec, "upper", ()))
+            if a == b
+        }  # locked (tolsynth.model.locks) or a fixed joint error
         for name, value in self.tolerances.items():
             flag = f"  [{self.bounds_active[name]} bound]" if name in self.bounds_active else ""
             flag = "  [fixed]" if name in fixed else flag
@@ -150,8 +153,11 @@ class SynthesisResult(Tabular):
             vals = ", ".join(f"{v:.6f}" for v in b.values)
             mult = ", ".join(f"{m:.4g}" for m in b.multipliers)
             if b.kind.endswith("(exact)"):  # tolsynth.solvers.exact: exact P, worst direction first
-                what = ("exact (1-P)/(1-p) in the sphere" if b.kind.startswith("sphere")
-                        else "exact (1-P)/(1-p) along the worst direction, then the principal axes")
+                what = (
+                    "exact (1-P)/(1-p) in the sphere"
+                    if b.kind.startswith("sphere")
+                    else "exact (1-P)/(1-p) along the worst direction, then the principal axes"
+                )
                 lines.append(f"  {b.label}: {what} = ({vals})")
                 continue
             what = "(1-P)/(1-p)" if b.kind == "sphere" else "sigma z/limit"
@@ -167,11 +173,15 @@ class SynthesisResult(Tabular):
         import html
 
         head = f"<b>{html.escape(self.solver)}: {html.escape(str(self.status))}</b> (success: {self.success})"
-        rows = "".join(f"<tr><td>{html.escape(n)}</td><td>{v:.6g}</td><td>{html.escape(self.units[n])}</td></tr>"
-                       for n, v in self.tolerances.items())
-        return (f"<div>{head}<br>cost {self.cost:.8g}, dual bound {self.lower_bound:.8g}, gap {self.gap:.2e}"
-                f"<table><tr><th>parameter</th><th>tolerance</th><th>unit</th></tr>{rows}</table>"
-                f"<pre>{html.escape(self.summary())}</pre></div>")
+        rows = "".join(
+            f"<tr><td>{html.escape(n)}</td><td>{v:.6g}</td><td>{html.escape(self.units[n])}</td></tr>"
+            for n, v in self.tolerances.items()
+        )
+        return (
+            f"<div>{head}<br>cost {self.cost:.8g}, dual bound {self.lower_bound:.8g}, gap {self.gap:.2e}"
+            f"<table><tr><th>parameter</th><th>tolerance</th><th>unit</th></tr>{rows}</table>"
+            f"<pre>{html.escape(self.summary())}</pre></div>"
+        )
 
     def to_dict(self) -> dict:
         """Plain dict for JSON (tolerances, units, cost, bound, gap, constraints, bounds, counts, time)."""

@@ -199,7 +199,11 @@ def make_specification(
     names = mechanism.error_parameters
     alpha_v = _per_parameter(alpha, names, mechanism.index, "alpha")
     for i in _outside(alpha_v, TINY, ALPHA_MAX):
-        raise OutOfRangeError(f"alpha[{names[i]}]", f"got {alpha_v[i]}", f"{TINY:g} <= alpha <= {ALPHA_MAX:g} (the paper: alpha <= 1, typically 0.7)")
+        raise OutOfRangeError(
+            f"alpha[{names[i]}]",
+            f"got {alpha_v[i]}",
+            f"{TINY:g} <= alpha <= {ALPHA_MAX:g} (the paper: alpha <= 1, typically 0.7)",
+        )
     k_v = _per_parameter(k, names, mechanism.index, "k", default=mechanism.k)
     for i in _outside(k_v, TINY, HUGE):
         raise OutOfRangeError(f"k[{names[i]}]", f"got {k_v[i]}", f"{TINY:g} <= k <= {HUGE:g} (the paper: k >= 1)")
@@ -218,14 +222,22 @@ def make_specification(
         try:
             lo, hi = (np.asarray(b, dtype=float) * np.ones(len(names)) for b in bounds)
         except (TypeError, ValueError, OverflowError):
-            raise InputError("bounds", f"got {bounds!r}", "(lower, upper), each a number or one per parameter, or a dict name -> (lower, upper)") from None
+            raise InputError(
+                "bounds",
+                f"got {bounds!r}",
+                "(lower, upper), each a number or one per parameter, or a dict name -> (lower, upper)",
+            ) from None
     units = tuple(mechanism.units)
     if len(_outside(lo, TINY, HUGE)) or len(_outside(hi, lo, HUGE)):  # name the first offender
         for nm, a, b, u in zip(names, lo, hi, units):
             if not (math.isfinite(a) and TINY <= a <= HUGE):
-                raise OutOfRangeError(f"bounds[{nm}].lower", f"got {a} {u}", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})")
+                raise OutOfRangeError(
+                    f"bounds[{nm}].lower", f"got {a} {u}", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})"
+                )
             if not (math.isfinite(b) and a <= b <= HUGE):
-                raise OutOfRangeError(f"bounds[{nm}]", f"lower {a}, upper {b} ({u})", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})")
+                raise OutOfRangeError(
+                    f"bounds[{nm}]", f"lower {a}, upper {b} ({u})", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})"
+                )
     costs = cost_set(cost, names, mechanism.index, k=k_v, alpha=alpha_v)
     costs.check_ranges(names, lo, hi)
     z = _z_of_p(p)
@@ -237,7 +249,9 @@ def make_specification(
         raise InputError("p_orientation", "given without Phi", "give Phi (rad) with it")
 
     # a list may mix configuration names and joint vectors (np.ndim of such a list raises)
-    if poses is not None and not (isinstance(poses, (list, tuple)) or (isinstance(poses, np.ndarray) and poses.ndim >= 1)):
+    if poses is not None and not (
+        isinstance(poses, (list, tuple)) or (isinstance(poses, np.ndarray) and poses.ndim >= 1)
+    ):
         raise InputError("poses", f"got {poses!r}", "a list of configuration names or joint vectors (rad)")
     pose_list = list(poses) if poses is not None else [pose]
     if not pose_list:
@@ -281,8 +295,14 @@ def _plain_pairs(bounds: Mapping, mechanism, lo: np.ndarray, hi: np.ndarray) -> 
     at once; the others are returned for the checks of the caller, which name the field."""
     rest = []
     for key, pair in bounds.items():
-        if type(pair) is tuple and len(pair) == 2 and type(pair[0]) is float and type(pair[1]) is float \
-                and -HUGE <= pair[0] <= HUGE and -HUGE <= pair[1] <= HUGE:
+        if (
+            type(pair) is tuple
+            and len(pair) == 2
+            and type(pair[0]) is float
+            and type(pair[1]) is float
+            and -HUGE <= pair[0] <= HUGE
+            and -HUGE <= pair[1] <= HUGE
+        ):
             i = mechanism.index(key)
             lo[i], hi[i] = pair
         else:
@@ -304,8 +324,10 @@ def _pose_rows(mechanism, pose_list: list, col_scale) -> list[tuple]:
     key = None
     if len(pose_list) >= POSE_CACHE_MIN:
         try:
-            key = (tuple(ps if isinstance(ps, str) else np.asarray(ps, dtype=float).tobytes() for ps in pose_list),
-                   col_scale.tobytes() if isinstance(col_scale, np.ndarray) else col_scale)
+            key = (
+                tuple(ps if isinstance(ps, str) else np.asarray(ps, dtype=float).tobytes() for ps in pose_list),
+                col_scale.tobytes() if isinstance(col_scale, np.ndarray) else col_scale,
+            )
         except (TypeError, ValueError):  # not numbers: Mechanism.joints names the problem below
             key = None
         cache = mechanism.__dict__.setdefault("_pose_rows_cache", {})

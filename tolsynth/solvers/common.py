@@ -64,8 +64,15 @@ def assemble(
     mults = 2.0 * (dirs * (Zs @ dirs)).sum(axis=1)  # 2 d_j^T Z d_j for every block and j
     active = vals >= 1.0 - ACTIVE_TOL
     blocks = [
-        ConstraintBlock(label=block.label, pose=block.pose, kind=block.kind, values=vals[b],
-                        directions=dirs[b], active=active[b], multipliers=mults[b])
+        ConstraintBlock(
+            label=block.label,
+            pose=block.pose,
+            kind=block.kind,
+            values=vals[b],
+            directions=dirs[b],
+            active=active[b],
+            multipliers=mults[b],
+        )
         for b, block in enumerate(spec.blocks)
     ]
     if spec.sphere_blocks:
@@ -105,9 +112,11 @@ def assemble(
         # weak duality still holds (the dual bound's 1-D minima are global), so a closed gap still
         # certifies; an open one may be a local optimum, and _verified has withheld "optimal"
         bad = [nm for nm, ok in zip(spec.names, spec.costs.convex(spec.lower, spec.upper)) if not ok]
-        message = (f"{message}; the cost of {bad} is not convex in eps^2 on its range: "
-                   + ("certified only because the dual gap closed" if status is Status.OPTIMAL
-                      else "no certificate, possibly a local optimum (the lower bound is valid)"))
+        message = f"{message}; the cost of {bad} is not convex in eps^2 on its range: " + (
+            "certified only because the dual gap closed"
+            if status is Status.OPTIMAL
+            else "no certificate, possibly a local optimum (the lower bound is valid)"
+        )
     return SynthesisResult(
         solver=solver,
         status=status,
@@ -136,10 +145,13 @@ def _verified(status: Status, message: str, blocks, cost: float, lower: float, c
         return status, message
     worst = max((float(b.values[0]) for b in blocks), default=0.0)
     if not math.isfinite(cost) or not worst <= 1.0 + FEAS_TOL:
-        return Status.NUMERICAL_ERROR, (f"{message}; rejected: the point violates the specification "
-                                        f"(largest constraint value {worst:.6g} > 1 + {FEAS_TOL:g})")
+        return Status.NUMERICAL_ERROR, (
+            f"{message}; rejected: the point violates the specification "
+            f"(largest constraint value {worst:.6g} > 1 + {FEAS_TOL:g})"
+        )
     gap = cost - lower
     if certified and not gap <= GAP_TOL * abs(cost):
-        return Status.OPTIMAL_INACCURATE, (f"{message}; not certified: dual gap {gap:.3g} "
-                                           f"({gap / abs(cost):.2e} of the cost) > {GAP_TOL:g}")
+        return Status.OPTIMAL_INACCURATE, (
+            f"{message}; not certified: dual gap {gap:.3g} ({gap / abs(cost):.2e} of the cost) > {GAP_TOL:g}"
+        )
     return status, message

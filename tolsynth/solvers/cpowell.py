@@ -294,8 +294,20 @@ class CompiledPowell:
         dp = ctypes.POINTER(ctypes.c_double)
         self._fn = lib.tolsynth_powell
         self._fn.restype = ctypes.c_int
-        self._fn.argtypes = [ctypes.c_void_p, dp, dp, ctypes.c_int, ctypes.c_double, ctypes.c_double,
-                             ctypes.c_double, ctypes.c_long, ctypes.c_long, dp, dp, ctypes.c_long]
+        self._fn.argtypes = [
+            ctypes.c_void_p,
+            dp,
+            dp,
+            ctypes.c_int,
+            ctypes.c_double,
+            ctypes.c_double,
+            ctypes.c_double,
+            ctypes.c_long,
+            ctypes.c_long,
+            dp,
+            dp,
+            ctypes.c_long,
+        ]
         self._eval = lib.tolsynth_eval
         self._eval.restype = ctypes.c_int
         self._eval.argtypes = [ctypes.c_void_p, dp, dp]
@@ -319,8 +331,9 @@ class CompiledPowell:
             return math.nan, math.nan
         return float(out[0]), float(out[1])
 
-    def minimize(self, params, x0, *, directions=None, step=0.1, ftol=1e-13, line_rtol=1e-9,
-                 maxiter=5000, maxfev=2_000_000):
+    def minimize(
+        self, params, x0, *, directions=None, step=0.1, ftol=1e-13, line_rtol=1e-9, maxiter=5000, maxfev=2_000_000
+    ):
         from tolsynth.solvers.powell import PowellResult
 
         x = np.array(x0, dtype=float)  # a fresh contiguous copy: the C code writes into it
@@ -330,8 +343,20 @@ class CompiledPowell:
         info = np.zeros(4)
         history = np.zeros(min(int(maxiter), HISTORY_MAX) + 1)  # maxiter may be huge
         dp = ctypes.POINTER(ctypes.c_double)
-        self._fn(ptrs, x.ctypes.data_as(dp), D.ctypes.data_as(dp), n, float(step), float(ftol),
-                 float(line_rtol), int(maxiter), int(maxfev), info.ctypes.data_as(dp), history.ctypes.data_as(dp), history.size)
+        self._fn(
+            ptrs,
+            x.ctypes.data_as(dp),
+            D.ctypes.data_as(dp),
+            n,
+            float(step),
+            float(ftol),
+            float(line_rtol),
+            int(maxiter),
+            int(maxfev),
+            info.ctypes.data_as(dp),
+            history.ctypes.data_as(dp),
+            history.size,
+        )
         fx, nit, nfev, status = float(info[0]), int(info[1]), int(info[2]), int(info[3])
         message = _MESSAGES[status].format(nfev=nfev, nit=nit)
         hist = history[: min(nit, history.size - 1) + 1].tolist() if status != 3 else [fx]
@@ -344,5 +369,11 @@ def compile_powell(F: ca.Function) -> CompiledPowell | None:
     return _LIBS.get(F, lambda lib, path: CompiledPowell(lib, F.n_in(), path))
 
 
-_LIBS = GraphLibraries("powell", C_SOURCE, ("tolsynth_powell", "tolsynth_eval"), "python", MAX_INSTRUCTIONS,
-                       lambda F: {"TS_N_IN": F.n_in()})
+_LIBS = GraphLibraries(
+    "powell",
+    C_SOURCE,
+    ("tolsynth_powell", "tolsynth_eval"),
+    "python",
+    MAX_INSTRUCTIONS,
+    lambda F: {"TS_N_IN": F.n_in()},
+)

@@ -108,8 +108,9 @@ def certifiable(shapes, spec) -> tuple[bool, str]:
         return False, f"the error shape(s) {bad} are not symmetric log-concave: no certificate exists"
     costs = spec.costs
     if costs.power_law() is None:
-        nonconvex = [nm for nm, m, a, b in zip(spec.names, costs.models, spec.lower, spec.upper)
-                     if not m.convex_in_u(a, b)]
+        nonconvex = [
+            nm for nm, m, a, b in zip(spec.names, costs.models, spec.lower, spec.upper) if not m.convex_in_u(a, b)
+        ]
         if nonconvex:
             return False, f"the cost of {nonconvex} is not convex in ln eps on its range"
     return True, ""
@@ -171,13 +172,17 @@ def _feasible_start(cuts: Cuts, u: np.ndarray, lu: np.ndarray, uu: np.ndarray, b
     j = int(np.argmin((Pl - pc) / (1 - pc)))
     blk = blocks[cuts.block[bad[j]]]
     raise InfeasibleSpecificationError(
-        blk.label, float(Pl[j]), f"infeasible specification: the {blk.label} fails even with every tolerance "
+        blk.label,
+        float(Pl[j]),
+        f"infeasible specification: the {blk.label} fails even with every tolerance "
         f"at its lower bound: exact P = {Pl[j]:.6g} < p = {blk.p:g} along a direction.  Lower the bounds, "
-        "or relax R/Phi or p.")
+        "or relax R/Phi or p.",
+    )
 
 
-def solve_exact(nlp: ToleranceNLP, shapes: tuple, solver: str = "ipopt", eps0=None, options=None,
-                verbose: bool = False) -> SynthesisResult:
+def solve_exact(
+    nlp: ToleranceNLP, shapes: tuple, solver: str = "ipopt", eps0=None, options=None, verbose: bool = False
+) -> SynthesisResult:
     """The exact problem of this module's docstring; ``solver`` solves the Gaussian problem whose
     optimum starts the search (or the whole problem, when every error is normal)."""
     t0 = time.perf_counter()
@@ -240,9 +245,13 @@ def _gaussian_route(nlp, solver, eps0, t0):
     else:
         from tolsynth.solvers.ipopt import solve_ipopt as run
     res = run(nlp, eps0)
-    return replace(res, message="exact probabilities: every error is normal, so P(|w . dr| <= R) = "
-                   "erf(R / (sqrt(2) sigma_w)) along every direction and the exact problem is the Gaussian "
-                   f"one, solved on its path; {res.message}", wall_time=time.perf_counter() - t0)
+    return replace(
+        res,
+        message="exact probabilities: every error is normal, so P(|w . dr| <= R) = "
+        "erf(R / (sqrt(2) sigma_w)) along every direction and the exact problem is the Gaussian "
+        f"one, solved on its path; {res.message}",
+        wall_time=time.perf_counter() - t0,
+    )
 
 
 def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
@@ -254,7 +263,7 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
     vals, dirs = nlp.block_values(eps_g)
     for i, blk in enumerate(blocks):
         if vals[i, 0] >= START_CUTS:  # all three axes (a free axis would let its errors grow far) and
-            for j in range(3):        # the exact worst directions at the Gaussian design, which track
+            for j in range(3):  # the exact worst directions at the Gaussian design, which track
                 cuts.add(i, blk.A, blk.R, blk.p, dirs[i][:, j], moving=True)  # the worst directions from then on
             for w in _local_minima(blk.A, np.log(eps_g), shapes, blk.R):
                 cuts.add(i, blk.A, blk.R, blk.p, w, moving=True, slides=True)
@@ -270,8 +279,12 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
         _deadline("the exact solve")
         u_start = _feasible_start(cuts, u, lu, uu, blocks)
         lam0 = None if lam is None else np.concatenate([lam, np.zeros(len(cuts) - lam.size)])
-        res = Barrier(cost_fn, cuts, lu, uu).solve(u_start, lam0, max_iter=int(opts["max_iter"]),
-                                                   tau0=None if rnd == 0 else WARM_TAU * cost_fn(u_start)[0] / (len(cuts) + spec.n))
+        res = Barrier(cost_fn, cuts, lu, uu).solve(
+            u_start,
+            lam0,
+            max_iter=int(opts["max_iter"]),
+            tau0=None if rnd == 0 else WARM_TAU * cost_fn(u_start)[0] / (len(cuts) + spec.n),
+        )
         iters += res.iterations
         u, lam, zb, ok, message = res.u, res.lam, res.z, res.ok, res.message
         eps = np.exp(u)
@@ -285,20 +298,33 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
         added = 0
         if starts:  # the violations' local minima, all in one batch, become tracking cuts
             idx = [i for i, _ in starts]
-            W, _ = minimise_directions(np.array([blocks[i].A for i in idx]), np.array([w for _, w in starts]), u,
-                                       shapes, np.array([blocks[i].R for i in idx]), steps=START_STEPS)
+            W, _ = minimise_directions(
+                np.array([blocks[i].A for i in idx]),
+                np.array([w for _, w in starts]),
+                u,
+                shapes,
+                np.array([blocks[i].R for i in idx]),
+                steps=START_STEPS,
+            )
             for i, w in zip(idx, W):
                 added += cuts.add(i, blocks[i].A, blocks[i].R, blocks[i].p, w, moving=True, slides=True)
-        history.append({"round": rnd, "cuts": len(cuts), "newton": res.iterations, "added": added,
-                        "cost": nlp.cost(eps), "inner": message,
-                        "proven": min((c.proven for c in covers), default=1.0)})
+        history.append(
+            {
+                "round": rnd,
+                "cuts": len(cuts),
+                "newton": res.iterations,
+                "added": added,
+                "cost": nlp.cost(eps),
+                "inner": message,
+                "proven": min((c.proven for c in covers), default=1.0),
+            }
+        )
         if verbose:
             print(history[-1])
         if not ok or added == 0:
             break
     eps = np.minimum(np.maximum(np.exp(u), spec.lower), spec.upper)
-    return _assemble(nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, message, covers, history, iters,
-                     evals, t0)
+    return _assemble(nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, message, covers, history, iters, evals, t0)
 
 
 def _assemble(nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, inner, covers, history, iters, evals, t0):
@@ -307,8 +333,9 @@ def _assemble(nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, inner, covers
     cost = nlp.cost(eps)
     C, Rc, pc = (x[: lam.size] for x in cuts.arrays())  # cuts added after the last solve carry no multiplier
     active = lam > 1e-6 * max(float(lam.max(initial=0.0)), 1e-300)  # the others add nothing to the bound
-    lower, _ = half_space_bound(spec.costs, nlp.lu, nlp.uu, u, C[active], Rc[active], pc[active], shapes,
-                                lam[active] / (1 - pc[active]))
+    lower, _ = half_space_bound(
+        spec.costs, nlp.lu, nlp.uu, u, C[active], Rc[active], pc[active], shapes, lam[active] / (1 - pc[active])
+    )
     Pcut, _ = probability(C * eps[None, :], shapes, Rc, 1e-12)
     cblocks = []
     for i, blk in enumerate(blocks):
@@ -325,16 +352,30 @@ def _assemble(nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, inner, covers
             k = int(np.argmin(PE))
             w, Pw, mult = E[:, k], float(PE[k]), 0.0
         v = np.concatenate([[(1 - Pw) / (1 - blk.p)], (1 - PE) / (1 - blk.p)])
-        cblocks.append(ConstraintBlock(blk.label, blk.pose, blk.kind + " (exact)", v, np.column_stack([w, E]),
-                                       v >= 1 - 1e-6, np.concatenate([[mult], np.zeros(3)])))
+        cblocks.append(
+            ConstraintBlock(
+                blk.label,
+                blk.pose,
+                blk.kind + " (exact)",
+                v,
+                np.column_stack([w, E]),
+                v >= 1 - 1e-6,
+                np.concatenate([[mult], np.zeros(3)]),
+            )
+        )
     gap = cost - lower
     proven = all(c.certified for c in covers) and len(covers) == len(blocks)
     can, why = certifiable(shapes, spec)
-    detail = (f"{len(cuts)} direction cuts, {len(history)} rounds; every direction of every pose "
-              + (f"proven P >= p - {EXACT_TOL:g} by the branch and bound ({sum(c.patches for c in covers)} patches)"
-                 if proven else "NOT proven")
-              + f"; lower bound from the active cuts' half-spaces, gap {gap:.2e} ({gap / abs(cost):.1e} of the cost); "
-              + inner)
+    detail = (
+        f"{len(cuts)} direction cuts, {len(history)} rounds; every direction of every pose "
+        + (
+            f"proven P >= p - {EXACT_TOL:g} by the branch and bound ({sum(c.patches for c in covers)} patches)"
+            if proven
+            else "NOT proven"
+        )
+        + f"; lower bound from the active cuts' half-spaces, gap {gap:.2e} ({gap / abs(cost):.1e} of the cost); "
+        + inner
+    )
     if not ok:
         status = Status.NUMERICAL_ERROR
         message = f"exact probabilities: the interior-point solve failed: {detail}"
@@ -360,11 +401,24 @@ def _assemble(nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, inner, covers
         if name in bounds_active:
             bound_mult[name] = float(zb[i] / eps[i])
     return SynthesisResult(
-        solver=solver, status=status, success=status is Status.OPTIMAL, message=message,
-        tolerances=dict(zip(spec.names, map(float, eps))), units=dict(zip(spec.names, spec.units)),
-        cost=cost, constraints=tuple(cblocks), bounds_active=bounds_active, bound_multipliers=bound_mult,
-        lower_bound=lower, gap=gap, iterations=iters, function_evaluations=evals,
-        wall_time=time.perf_counter() - t0, spec=spec, history=history)
+        solver=solver,
+        status=status,
+        success=status is Status.OPTIMAL,
+        message=message,
+        tolerances=dict(zip(spec.names, map(float, eps))),
+        units=dict(zip(spec.names, spec.units)),
+        cost=cost,
+        constraints=tuple(cblocks),
+        bounds_active=bounds_active,
+        bound_multipliers=bound_mult,
+        lower_bound=lower,
+        gap=gap,
+        iterations=iters,
+        function_evaluations=evals,
+        wall_time=time.perf_counter() - t0,
+        spec=spec,
+        history=history,
+    )
 
 
 def exact_margin(mechanism, q, eps, distribution, R: float, p: float, criterion: str = "components") -> float:

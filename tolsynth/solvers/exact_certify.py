@@ -93,7 +93,7 @@ def _lower(rows: np.ndarray, shapes: tuple, R: float, q: float, first: int = 0) 
     out = P - e
     last = tols[first]
     second = 1.0 if first else 0.0
-    for tol in tols[first + 1:]:
+    for tol in tols[first + 1 :]:
         near = np.flatnonzero(np.abs(out - q) < 2 * last)
         if not near.size:
             break
@@ -105,8 +105,16 @@ def _lower(rows: np.ndarray, shapes: tuple, R: float, q: float, first: int = 0) 
     return out, second
 
 
-def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, cut_tol: float = 1e-8,
-          max_patches: int = 200_000, gauge: bool = True) -> Cover:
+def cover(
+    M: np.ndarray,
+    shapes: tuple,
+    R: float,
+    p: float,
+    tol: float = 1e-7,
+    cut_tol: float = 1e-8,
+    max_patches: int = 200_000,
+    gauge: bool = True,
+) -> Cover:
     """Branch and bound over direction patches (see the module docstring): is ``P(|w . dr| <= R)
     >= p - tol`` proven for every unit w, with ``dr = M Y`` (M 3 x n)?
 
@@ -157,8 +165,11 @@ def cover(M: np.ndarray, shapes: tuple, R: float, p: float, tol: float = 1e-7, c
         fail = bound < q
         if gauge and fail.any():
             idx = np.flatnonzero(fail)
-            keys = (face[idx, None] << 60) | (np.rint((np.stack(cs, 1)[idx] + 1.0) * 2.0**_GRID_BITS).astype(np.int64) << 30) \
-                | np.rint((np.stack(ct, 1)[idx] + 1.0) * 2.0**_GRID_BITS).astype(np.int64)  # (m, 4)
+            keys = (
+                (face[idx, None] << 60)
+                | (np.rint((np.stack(cs, 1)[idx] + 1.0) * 2.0**_GRID_BITS).astype(np.int64) << 30)
+                | np.rint((np.stack(ct, 1)[idx] + 1.0) * 2.0**_GRID_BITS).astype(np.int64)
+            )  # (m, 4)
             dj = np.repeat(d[idx, None], 4, axis=1)
             pos = np.minimum(np.searchsorted(kk, keys), max(kk.size - 1, 0))
             found = (kk[pos] == keys) if kk.size else np.zeros(keys.shape, dtype=bool)
@@ -245,7 +256,9 @@ def _sphere_derivatives(M: np.ndarray, shapes: tuple, R: float, w: np.ndarray):
     return float(P[0]), grad, hess
 
 
-def refine_direction(M: np.ndarray, shapes: tuple, R: float, w: np.ndarray, steps: int = 30) -> tuple[np.ndarray, float]:
+def refine_direction(
+    M: np.ndarray, shapes: tuple, R: float, w: np.ndarray, steps: int = 30
+) -> tuple[np.ndarray, float]:
     """A local minimum of P over unit directions near ``w``: Newton's method on the sphere (the
     Riemannian Hessian ``E^T hess E - (w . grad) I`` in a tangent basis E; a gradient step where
     it is not positive definite), steps at most 0.2 rad, halved until P falls."""
@@ -357,8 +370,9 @@ def half_space_bound(costs, lu, uu, u_star, c_rows, R_rows, p_rows, shapes, lam0
         Ps, es_ = probability(c_rows * np.exp(u_star + s[:, None]), shapes, R_rows, 1e-11)
     # the gradient to GRAD_TOL only: its error bound widens the half-spaces by about lam * n * 1e-9,
     # far inside the certificate's gap, and a tighter one needs up to 2^18 series terms a row
-    _, G, _, _, eG = derivatives(c_rows * np.exp(s)[:, None], u_star, shapes, R_rows, tol=GRAD_TOL, hessian=False,
-                                 rigorous=True)
+    _, G, _, _, eG = derivatives(
+        c_rows * np.exp(s)[:, None], u_star, shapes, R_rows, tol=GRAD_TOL, hessian=False, rigorous=True
+    )
     P, eP = Ps, es_
     hs = np.maximum(-G, 0.0)  # the true gradient is <= 0: clipping only moves the estimate closer
     reach = np.maximum(np.abs(lu - u_star - s[:, None]), np.abs(uu - u_star - s[:, None]))

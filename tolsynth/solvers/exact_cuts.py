@@ -68,8 +68,9 @@ def _positive(Hr: np.ndarray) -> np.ndarray:
     return ev[:, 0] > 1e-12 * np.maximum(np.abs(ev[:, 1]), 1e-300)
 
 
-def minimise_directions(A3: np.ndarray, W0: np.ndarray, u: np.ndarray, shapes: tuple, R, steps: int = 20,
-                        tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
+def minimise_directions(
+    A3: np.ndarray, W0: np.ndarray, u: np.ndarray, shapes: tuple, R, steps: int = 20, tol: float = 1e-10
+) -> tuple[np.ndarray, np.ndarray]:
     """Local minima of P over unit directions from each row of W0 (A3 (m, 3, n) the rows' blocks,
     R one per row or a number), all rows at once: Newton's method on the sphere (a short gradient
     step where the Riemannian Hessian is not positive definite), steps at most :data:`MAX_TURN`,
@@ -138,8 +139,16 @@ class Cuts:
     def __len__(self) -> int:
         return len(self.w)
 
-    def add(self, blk_index: int, A: np.ndarray, R: float, p: float, w: np.ndarray, moving: bool = False,
-            slides: bool = False) -> bool:
+    def add(
+        self,
+        blk_index: int,
+        A: np.ndarray,
+        R: float,
+        p: float,
+        w: np.ndarray,
+        moving: bool = False,
+        slides: bool = False,
+    ) -> bool:
         """Add the cut unless its pose has one within ``same_cut`` rad (up to sign) or one with the
         same row ``|w . a_i|`` (a mirror direction of a symmetric pose); True if added.  A moving
         cut tracks a local minimum of P where P is convex in w; one that ``slides`` also descends

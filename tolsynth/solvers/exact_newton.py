@@ -52,8 +52,9 @@ class Barrier:
         self.lu, self.uu = np.asarray(lu, dtype=float), np.asarray(uu, dtype=float)
         self.free = self.uu - self.lu > 1e-12
 
-    def solve(self, u0: np.ndarray, lam0: np.ndarray | None = None, max_iter: int = 200,
-              tau0: float | None = None) -> BarrierResult:
+    def solve(
+        self, u0: np.ndarray, lam0: np.ndarray | None = None, max_iter: int = 200, tau0: float | None = None
+    ) -> BarrierResult:
         free, lu, uu = self.free, self.lu, self.uu
         u = np.array(u0, dtype=float)
         u[~free] = lu[~free]
@@ -82,14 +83,20 @@ class Barrier:
             W = np.diag(d2f) - np.einsum("j,jab->ab", lam, H) if g.size else np.diag(d2f)
             W = W + (J.T * (lam / g)) @ J if g.size else W
             W = W + np.diag(np.where(free, zl / np.maximum(sl, 1e-300) + zu / np.maximum(su, 1e-300), 0.0))
-            rhs = -df + (J.T @ (tau / g) if g.size else 0.0) + np.where(free, tau / np.maximum(sl, 1e-300)
-                                                                         - tau / np.maximum(su, 1e-300), 0.0)
+            rhs = (
+                -df
+                + (J.T @ (tau / g) if g.size else 0.0)
+                + np.where(free, tau / np.maximum(sl, 1e-300) - tau / np.maximum(su, 1e-300), 0.0)
+            )
             Wf = W[np.ix_(free, free)]
             du = np.zeros_like(u)
             du[free] = _solve_pd(Wf, rhs[free])
             Jdu = J @ du if g.size else np.zeros(0)
-            slope = float(df @ du - tau * (Jdu / g).sum() - tau * np.sum(np.where(free, du / np.maximum(sl, 1e-300)
-                                                                                     - du / np.maximum(su, 1e-300), 0.0)))
+            slope = float(
+                df @ du
+                - tau * (Jdu / g).sum()
+                - tau * np.sum(np.where(free, du / np.maximum(sl, 1e-300) - du / np.maximum(su, 1e-300), 0.0))
+            )
             # cuts whose directions follow the worst one turn along the step: g's derivative along
             # the path gains their term (the joint Newton step; where that would take more than half
             # of the step's decrease, its part towards the minimum damped, or no turn at all)
@@ -99,6 +106,7 @@ class Barrier:
 
                 def cost(t):
                     return -tau * float((t / g).sum())
+
                 c1 = cost(turn)
                 if slope + c1 > 0.5 * slope:
                     c0 = cost(plan(u, du, damp=0.0))
@@ -169,8 +177,14 @@ class Barrier:
             if not accepted:
                 if at is not None:
                     at(0.0)
-                return BarrierResult(u, lam, zu - zl, it, tau <= 1e3 * tau_end,
-                                     f"line search failed at tau {tau:.1e} (Newton decrement {-slope / tau:.1e})")
+                return BarrierResult(
+                    u,
+                    lam,
+                    zu - zl,
+                    it,
+                    tau <= 1e3 * tau_end,
+                    f"line search failed at tau {tau:.1e} (Newton decrement {-slope / tau:.1e})",
+                )
             u, f, df, d2f, sl, su = un, fn, dfn, d2fn, sln, sun
             g, J, H = full
             commit()
@@ -219,9 +233,10 @@ def cost_function(nlp):
         def f(u):
             e = k * np.exp(-a * u)
             return math.fsum(e.tolist()), -a * e, a * a * e
+
         return f
 
     def f(u):
-        return (nlp.cost(np.exp(u), u), costs.du(u),
-                np.array([float(m.d2u(x)) for m, x in zip(costs.models, u)]))
+        return (nlp.cost(np.exp(u), u), costs.du(u), np.array([float(m.d2u(x)) for m, x in zip(costs.models, u)]))
+
     return f

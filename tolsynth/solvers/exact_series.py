@@ -126,8 +126,9 @@ class Rows:
             B = B + NORMAL_REACH * np.sqrt(np.sum((b[:, self.normal] / 3.0) ** 2, axis=1))
         return R + 0.5 * B * L_MARGIN
 
-    def tail(self, b: np.ndarray, L: np.ndarray, K: np.ndarray, drop: int | None = None,
-             candidates: bool = False) -> np.ndarray:
+    def tail(
+        self, b: np.ndarray, L: np.ndarray, K: np.ndarray, drop: int | None = None, candidates: bool = False
+    ) -> np.ndarray:
         """Rigorous bound on ``sum_{k>K} (2/(k pi)) prod_i env_i(k pi b_i / L)`` per row: K one per
         row (-> (M,)), or with ``candidates`` the same T values for every row (-> (M, T));
         ``drop``: without the factors of that column (the gradient's tail)."""
@@ -153,8 +154,9 @@ class Rows:
         else:
             a = np.zeros((b.shape[0], 1))
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            power = np.where(q > 0, (2.0 / np.pi) * np.exp(logC - q * np.log(Kc) - a * Kc**2) / np.maximum(q, 1),
-                             np.inf)
+            power = np.where(
+                q > 0, (2.0 / np.pi) * np.exp(logC - q * np.log(Kc) - a * Kc**2) / np.maximum(q, 1), np.inf
+            )
             # no power factor below K: the normal part alone, int_K (2/(pi x)) e^{-a x^2} <= e^{-a K^2} / (pi a K^2)
             gauss = np.where(a > 0, np.exp(-a * Kc**2) / (np.pi * a * Kc**2), np.inf)
         out = np.minimum(power, gauss)
@@ -338,8 +340,9 @@ def _series_block(b, R, L, K: int, rw: "Rows", hessian: bool, ball: bool):
     return P, G, H
 
 
-def derivatives(c, u, shapes: tuple, R, tol: float = 1e-12, hessian: bool = True, rigorous: bool = False,
-                ball: bool = False):
+def derivatives(
+    c, u, shapes: tuple, R, tol: float = 1e-12, hessian: bool = True, rigorous: bool = False, ball: bool = False
+):
     """P, its gradient in ``u`` and (``hessian``) its Hessian for rows ``b = c e^u`` (c (M, n)).
 
     Returns ``(P, G (M, n), H (M, n, n) or None, errP (M,), errG (M, n) or None)``; ``errG`` (with

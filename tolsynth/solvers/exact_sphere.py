@@ -63,8 +63,9 @@ class _Sphere:
         return g, np.array(J) * s[:, None], np.array(H) * s[:, None, None]
 
 
-def solve_sphere(nlp: ToleranceNLP, shapes: tuple, solver: str, comp: SynthesisResult, eps_start,
-                 opts: dict, t0: float) -> SynthesisResult:
+def solve_sphere(
+    nlp: ToleranceNLP, shapes: tuple, solver: str, comp: SynthesisResult, eps_start, opts: dict, t0: float
+) -> SynthesisResult:
     """The sphere problem from ``eps_start`` (shrunk until it meets the sphere); ``comp`` is the
     certified per-component result at the same p, whose lower bound is this one's."""
     from tolsynth.probability.exact import ball_probability
@@ -90,32 +91,66 @@ def solve_sphere(nlp: ToleranceNLP, shapes: tuple, solver: str, comp: SynthesisR
         iters += res.iterations
         u, ok, message = res.u, res.ok, res.message
         eps = np.exp(u)
-        P_exact = np.array([ball_probability(A, eps, shapes, R, tol=1e-7, max_nodes=128, return_error=True)[0] for A, R, _ in blocks])
+        P_exact = np.array(
+            [ball_probability(A, eps, shapes, R, tol=1e-7, max_nodes=128, return_error=True)[0] for A, R, _ in blocks]
+        )
         short = sph.p - P_exact
-        history.append({"round": rnd, "newton": res.iterations, "cost": nlp.cost(eps), "P": P_exact.tolist(),
-                        "target": sph.target.tolist()})
+        history.append(
+            {
+                "round": rnd,
+                "newton": res.iterations,
+                "cost": nlp.cost(eps),
+                "P": P_exact.tolist(),
+                "target": sph.target.tolist(),
+            }
+        )
         if not ok or np.all(short <= 0.5 * SPHERE_TOL):
             break
         sph.target = np.minimum(sph.target + np.maximum(short, 0.0) + 0.1 * SPHERE_TOL, 1 - 1e-12)
     eps = np.minimum(np.maximum(np.exp(u), spec.lower), spec.upper)
     cost = nlp.cost(eps)
     lower = comp.lower_bound
-    cblocks = tuple(ConstraintBlock(b.label, b.pose, "sphere (exact)", np.array([(1 - P) / (1 - b.p)]),
-                                    np.zeros((3, 1)), np.array([(1 - P) / (1 - b.p) >= 1 - 1e-6]), np.zeros(1))
-                    for b, P in zip(spec.sphere_blocks, P_exact))
+    cblocks = tuple(
+        ConstraintBlock(
+            b.label,
+            b.pose,
+            "sphere (exact)",
+            np.array([(1 - P) / (1 - b.p)]),
+            np.zeros((3, 1)),
+            np.array([(1 - P) / (1 - b.p) >= 1 - 1e-6]),
+            np.zeros(1),
+        )
+        for b, P in zip(spec.sphere_blocks, P_exact)
+    )
     met = bool(np.all(P_exact >= sph.p - SPHERE_TOL))
-    detail = (f"sphere probability by a {NODES} x {2 * NODES} hemisphere rule, checked by the error-controlled "
-              f"quadrature (P = {', '.join(f'{P:.7f}' for P in P_exact)}); lower bound: the certified optimum of the "
-              f"per-component problem at the same p ({comp.cost:.8g}, {comp.status}); the sphere problem is not known "
-              f"to be convex, so the gap {cost - lower:.4g} is not a certificate; {message}")
+    detail = (
+        f"sphere probability by a {NODES} x {2 * NODES} hemisphere rule, checked by the error-controlled "
+        f"quadrature (P = {', '.join(f'{P:.7f}' for P in P_exact)}); lower bound: the certified optimum of the "
+        f"per-component problem at the same p ({comp.cost:.8g}, {comp.status}); the sphere problem is not known "
+        f"to be convex, so the gap {cost - lower:.4g} is not a certificate; {message}"
+    )
     if ok and met and comp.success:
         status, text = Status.OPTIMAL, "exact probabilities, sphere criterion met (local optimum): " + detail
     else:
         status = Status.NUMERICAL_ERROR
         text = "exact probabilities, sphere criterion: " + ("not met: " if not met else "not converged: ") + detail
     return SynthesisResult(
-        solver=solver, status=status, success=status is Status.OPTIMAL, message=text,
-        tolerances=dict(zip(spec.names, map(float, eps))), units=dict(zip(spec.names, spec.units)), cost=cost,
-        constraints=cblocks, bounds_active={}, bound_multipliers={}, lower_bound=lower, gap=cost - lower,
-        iterations=iters, function_evaluations=0, wall_time=time.perf_counter() - t0, spec=spec, history=history)
+        solver=solver,
+        status=status,
+        success=status is Status.OPTIMAL,
+        message=text,
+        tolerances=dict(zip(spec.names, map(float, eps))),
+        units=dict(zip(spec.names, spec.units)),
+        cost=cost,
+        constraints=cblocks,
+        bounds_active={},
+        bound_multipliers={},
+        lower_bound=lower,
+        gap=cost - lower,
+        iterations=iters,
+        function_evaluations=0,
+        wall_time=time.perf_counter() - t0,
+        spec=spec,
+        history=history,
+    )
     return res

@@ -150,8 +150,19 @@ def solve_fast(nlp: ToleranceNLP, compiled=None, **options):
         vals = nlp.block_values(lo)[0][:, 0]
         if not float(vals.max()) <= 1.0 + feas_tol:
             return None, "every tolerance is locked and the locks break the specification"
-        return assemble("ipm", nlp, lo, np.zeros((m, 3, 3)), np.zeros(n), Status.OPTIMAL,
-                        "every tolerance locked: nothing to optimise", 0, 0, time.perf_counter() - t_start, []), None
+        return assemble(
+            "ipm",
+            nlp,
+            lo,
+            np.zeros((m, 3, 3)),
+            np.zeros(n),
+            Status.OPTIMAL,
+            "every tolerance locked: nothing to optimise",
+            0,
+            0,
+            time.perf_counter() - t_start,
+            [],
+        ), None
     # the cost in y = eps^2, divided by what it can fall by from the middle of the bounds to the
     # upper bounds (a locked parameter, or one held near its upper bound, adds a constant that may
     # be most of the cost and says nothing of the multipliers' size; the method's iterates do not
@@ -199,15 +210,23 @@ def solve_fast(nlp: ToleranceNLP, compiled=None, **options):
             iterations += int(info[6])
             # one entry per run of the method: its best iterate's primal residual and complementarity
             # relative to the cost (the objective: the returned point's cost, filled in below)
-            history.append({"round": rounds, "mode": ("warm " if start is not None else "")
-                            + ("iterate" if primal else "minimiser"), "iteration": int(info[0]),
-                            "objective": math.nan, "inf_pr": float(info[4]),
-                            "inf_du": float(info[3]) / max(float(info[2]), 1e-300)})
+            history.append(
+                {
+                    "round": rounds,
+                    "mode": ("warm " if start is not None else "") + ("iterate" if primal else "minimiser"),
+                    "iteration": int(info[0]),
+                    "objective": math.nan,
+                    "inf_pr": float(info[4]),
+                    "inf_du": float(info[3]) / max(float(info[2]), 1e-300),
+                }
+            )
             if status < 2 and info[1] <= max(ACCEPT, tol):
                 break
         else:
-            return None, (f"the interior-point method stopped at error {info[1]:.1e} > {max(ACCEPT, tol):g} "
-                          f"(status {status}, round {rounds})")
+            return None, (
+                f"the interior-point method stopped at error {info[1]:.1e} > {max(ACCEPT, tol):g} "
+                f"(status {status}, round {rounds})"
+            )
         Z, _, y = unpack(state, A.shape[0], n)
         eps = np.minimum(np.maximum(np.sqrt(y), lo), hi)  # as assemble clips it (the same memo)
         vals = nlp.block_values(eps)[0][:, 0]
@@ -231,13 +250,16 @@ def solve_fast(nlp: ToleranceNLP, compiled=None, **options):
         keep = tr > ACTIVE_Z * max(float(tr.max()), 1e-300)
         # the active blocks and the state restricted to them (dropping inactive blocks from an
         # optimum leaves an optimum)
-        sub = np.concatenate([Z[keep].ravel(), _S_of(state, len(J))[keep].ravel(), state[18 * len(J):]])
+        sub = np.concatenate([Z[keep].ravel(), _S_of(state, len(J))[keep].ravel(), state[18 * len(J) :]])
         _remember(key, (J[keep], sub, f_ref, L, U, k, alpha, scales))
     lam_u = (2.0 * f_ref) * y * zb  # the bounds' multipliers in u = ln eps (d/du = 2 y d/dy)
-    message = (f"interior point: {iterations} iterations, {rounds} round(s), {m if J is None else len(J)} of "
-               f"{m} block(s); primal residual {info[4]:.1e}")
-    result = assemble("ipm", nlp, eps, Zs, lam_u, Status.OPTIMAL, message, iterations, iterations + rounds, wall,
-                      history)
+    message = (
+        f"interior point: {iterations} iterations, {rounds} round(s), {m if J is None else len(J)} of "
+        f"{m} block(s); primal residual {info[4]:.1e}"
+    )
+    result = assemble(
+        "ipm", nlp, eps, Zs, lam_u, Status.OPTIMAL, message, iterations, iterations + rounds, wall, history
+    )
     history[-1]["objective"] = result.cost
     return result, None
 

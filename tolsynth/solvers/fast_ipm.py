@@ -475,13 +475,34 @@ class IPMKernel:
         fn = lib.ts_ipm_solve
         vp = ctypes.c_void_p
         fn.restype = ctypes.c_int
-        fn.argtypes = [ctypes.c_int, ctypes.c_int, vp, vp, vp, vp, ctypes.c_int, ctypes.c_double, ctypes.c_int,
-                       ctypes.c_double, ctypes.c_double, ctypes.c_int, vp]
+        fn.argtypes = [
+            ctypes.c_int,
+            ctypes.c_int,
+            vp,
+            vp,
+            vp,
+            vp,
+            ctypes.c_int,
+            ctypes.c_double,
+            ctypes.c_int,
+            ctypes.c_double,
+            ctypes.c_double,
+            ctypes.c_int,
+            vp,
+        ]
         self._fn = fn
 
-    def solve(self, A: np.ndarray, par: np.ndarray, state: np.ndarray | None = None, tol: float = 1e-10,
-              maxit: int = 100, tau: float = 0.99, sigma_min: float = 0.0,
-              primal: bool = False) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    def solve(
+        self,
+        A: np.ndarray,
+        par: np.ndarray,
+        state: np.ndarray | None = None,
+        tol: float = 1e-10,
+        maxit: int = 100,
+        tau: float = 0.99,
+        sigma_min: float = 0.0,
+        primal: bool = False,
+    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
         """Run the method on ``A`` ((m, 3, n) float64, C order) with ``par`` = ``(ks, alpha, L, U)``
         stacked (float64, 4 n: the cost ``ks y^(-alpha/2)``, the bounds ``L <= y <= U``, ``L = U``
         locked), from the cold start, or from ``state`` (one this method returned; overwritten).
@@ -496,8 +517,21 @@ class IPMKernel:
             state = np.zeros(18 * m + 3 * n + 1)
         zb = np.empty(n)
         info = np.zeros(7)
-        status = self._fn(m, n, A.ctypes.data, par.ctypes.data, state.ctypes.data, zb.ctypes.data, cold,
-                          tol, maxit, tau, sigma_min, int(primal), info.ctypes.data)
+        status = self._fn(
+            m,
+            n,
+            A.ctypes.data,
+            par.ctypes.data,
+            state.ctypes.data,
+            zb.ctypes.data,
+            cold,
+            tol,
+            maxit,
+            tau,
+            sigma_min,
+            int(primal),
+            info.ctypes.data,
+        )
         return status, state, zb, info
 
 

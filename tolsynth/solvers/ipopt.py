@@ -67,8 +67,14 @@ IPOPT_STATUS = {
 #: IPOPT's own tolerances, its iteration limit per cut NLP, the exchange method's limits, and
 #: whether a solve may start from what an earlier solve of the same blocks left (its active cuts
 #: and its optimum rescaled; False: from scratch, as :func:`tolsynth.compare` runs IPOPT)
-DEFAULT_OPTIONS = {"tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500, "feas_tol": None, "max_rounds": 60,
-                   "warm_start": True}
+DEFAULT_OPTIONS = {
+    "tol": 1e-10,
+    "constr_viol_tol": 1e-12,
+    "max_iter": 500,
+    "feas_tol": None,
+    "max_rounds": 60,
+    "warm_start": True,
+}
 
 #: tried in turn on a cut NLP until one ends in Solve_Succeeded
 ATTEMPTS = ("adaptive", "monotone")
@@ -157,9 +163,18 @@ class _CallNLP(CutNLP):
 
 
 @lru_cache(maxsize=64)
-def _solver(n: int, K: int, tol: float, constr_viol_tol: float, max_iter: int, mu_strategy: str,
-            m_sphere: int = 0, sphere_nodes: int = 0, cost_signature: tuple | None = None,
-            max_wall_time: float = 1e20) -> CutNLP:
+def _solver(
+    n: int,
+    K: int,
+    tol: float,
+    constr_viol_tol: float,
+    max_iter: int,
+    mu_strategy: str,
+    m_sphere: int = 0,
+    sphere_nodes: int = 0,
+    cost_signature: tuple | None = None,
+    max_wall_time: float = 1e20,
+) -> CutNLP:
     """The cut NLP for n parameters and K cut slots: ``min f(u)/f0  s.t.  C exp(2u) <= 1``."""
     n_ps = 1 + m_sphere + 3 * n * m_sphere if m_sphere else 0
     cost = cost_graph(n, cost_signature)
@@ -204,10 +219,17 @@ def _solver(n: int, K: int, tol: float, constr_viol_tol: float, max_iter: int, m
     warm = {"warm": (1e-6, 1e-12), "rewarm": (REWARM_MU, REWARM_PUSH)}.get(mu_strategy)
     if warm is not None:
         mu_init, push = warm
-        opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": mu_init,
-                     "ipopt.warm_start_bound_push": push, "ipopt.warm_start_mult_bound_push": push,
-                     "ipopt.warm_start_bound_frac": push, "ipopt.warm_start_slack_bound_push": push,
-                     "ipopt.warm_start_slack_bound_frac": push})
+        opts.update(
+            {
+                "ipopt.warm_start_init_point": "yes",
+                "ipopt.mu_init": mu_init,
+                "ipopt.warm_start_bound_push": push,
+                "ipopt.warm_start_mult_bound_push": push,
+                "ipopt.warm_start_bound_frac": push,
+                "ipopt.warm_start_slack_bound_push": push,
+                "ipopt.warm_start_slack_bound_frac": push,
+            }
+        )
     if mu_strategy == "warm":
         # from a rescaled optimum every cut is <= 1 (gradient <= 2) and the objective is divided
         # by f0 (for the power law each gradient is at most alpha_i <= 10), so IPOPT's
@@ -228,8 +250,15 @@ _CUT_CACHE_SIZE = 256
 
 def _cache_key(nlp: ToleranceNLP) -> tuple:
     spec = nlp.spec
-    return (spec.n, len(spec.blocks), b"".join(np.ascontiguousarray(b.A).tobytes() for b in spec.blocks),
-            nlp.costs.signature, nlp.theta.tobytes(), spec.lower.tobytes(), spec.upper.tobytes())
+    return (
+        spec.n,
+        len(spec.blocks),
+        b"".join(np.ascontiguousarray(b.A).tobytes() for b in spec.blocks),
+        nlp.costs.signature,
+        nlp.theta.tobytes(),
+        spec.lower.tobytes(),
+        spec.upper.tobytes(),
+    )
 
 
 def _remember(key: tuple, cut_b: np.ndarray, cut_w: np.ndarray, raw: np.ndarray, warm: tuple | None = None) -> None:

@@ -70,8 +70,9 @@ DEFAULT_OPTIONS = {
 
 
 @lru_cache(maxsize=None)
-def penalty_graph(n: int, m: int, m_sphere: int = 0, sphere_nodes: int = 0,
-                  cost_signature: tuple | None = None) -> ca.Function:
+def penalty_graph(
+    n: int, m: int, m_sphere: int = 0, sphere_nodes: int = 0, cost_signature: tuple | None = None
+) -> ca.Function:
     """``penalty(u, P, theta, lu, uu, r, w_acc, w_bnd, Ps, ps) -> (penalty, f)`` for n
     parameters, m LMI blocks and m_sphere sphere blocks (``-ln(P_b - p_b)`` each)."""
     g = nlp_graphs(n, m, cost_signature)
@@ -154,8 +155,17 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
 
     # the penalty graph's numbers for this problem (r, the barrier parameter, changes in place)
     r_box = np.zeros(1)
-    values = [nlp.P, nlp.theta, lu, uu, r_box, np.array([o["w_acc"]]), np.array([o["w_bnd"]]),
-              nlp.Ps if ms else np.zeros(0), nlp.p_sphere]
+    values = [
+        nlp.P,
+        nlp.theta,
+        lu,
+        uu,
+        r_box,
+        np.array([o["w_acc"]]),
+        np.array([o["w_bnd"]]),
+        nlp.Ps if ms else np.zeros(0),
+        nlp.p_sphere,
+    ]
     # the whole Powell minimisation in C on the code-generated graph (one call per outer
     # iteration), or, without a C compiler, the Python Powell on the graph with the numbers fixed
     compiled = compile_powell(F)
@@ -198,20 +208,34 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         f = compiled.evaluate(values, u)[1] if compiled is not None else nlp.cost(np.exp(u))  # same graph
         gmax = max(float(v[0]) for v in nlp.all_values(np.exp(u)))
         history.append(
-            {"outer": outer, "r": r, "penalty": res.fun, "cost": f, "max_constraint": gmax,
-             "inner_iterations": res.nit, "inner_evaluations": res.nfev, "inner_history": res.history,
-             "inner_converged": res.converged}
+            {
+                "outer": outer,
+                "r": r,
+                "penalty": res.fun,
+                "cost": f,
+                "max_constraint": gmax,
+                "inner_iterations": res.nit,
+                "inner_evaluations": res.nfev,
+                "inner_history": res.history,
+                "inner_converged": res.converged,
+            }
         )
         if not res.converged:
             status, message = Status.ITERATION_LIMIT, f"Powell, outer iteration {outer}: {res.message}"
             break
         if r * nu <= o["gap_tol"] * abs(f):
-            status, message = Status.OPTIMAL, (
-                f"converged: barrier gap bound r*nu = {r * nu:.2e} <= {o['gap_tol']:g} * cost after {outer} outer iterations"
+            status, message = (
+                Status.OPTIMAL,
+                (
+                    f"converged: barrier gap bound r*nu = {r * nu:.2e} <= {o['gap_tol']:g} * cost after {outer} outer iterations"
+                ),
             )
             break
         if remaining() <= 0:  # the run's time limit (tolsynth.progress.time_limit)
-            status, message = Status.TIME_LIMIT, f"time limit of {limit_seconds():g} s reached after {outer} outer iterations"
+            status, message = (
+                Status.TIME_LIMIT,
+                f"time limit of {limit_seconds():g} s reached after {outer} outer iterations",
+            )
             break
         r *= o["reduction"]
     wall = time.perf_counter() - t0
@@ -230,5 +254,18 @@ def solve_sumt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
             pull += 2 * eps**2 * block.scale**2 * np.einsum("ji,jk,ki->i", a, Zb, a) / spec.c
         bound_mult = np.where(fixed, -(nlp.costs.du(u) + pull), bound_mult)
     mu_sphere = r * o["w_acc"] / (nlp.sphere_quadrature(eps) - nlp.p_sphere) if ms else None
-    return assemble("sumt", nlp, eps, Z, bound_mult, status, message, nit, nfev, wall, history,
-                    mu_sphere=mu_sphere, relaxation_bound=relaxation_bound)
+    return assemble(
+        "sumt",
+        nlp,
+        eps,
+        Z,
+        bound_mult,
+        status,
+        message,
+        nit,
+        nfev,
+        wall,
+        history,
+        mu_sphere=mu_sphere,
+        relaxation_bound=relaxation_bound,
+    )

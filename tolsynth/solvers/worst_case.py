@@ -57,8 +57,14 @@ __all__ = ["DEFAULT_OPTIONS", "WorstCaseResult", "lagrangian_weights", "solve_wo
 #: violated block and round (its largest violated patterns); seconds the whole solve may take
 #: (IPOPT's wall-time limit per cut NLP, and checked before each round: a solve that runs out is
 #: reported as stopped by a limit, never as an optimum)
-DEFAULT_OPTIONS = {"tol": 1e-11, "constr_viol_tol": 1e-12, "max_iter": 1000, "max_rounds": 60, "cuts_per_round": 3,
-                   "time_limit": 600.0}
+DEFAULT_OPTIONS = {
+    "tol": 1e-11,
+    "constr_viol_tol": 1e-12,
+    "max_iter": 1000,
+    "max_rounds": 60,
+    "cuts_per_round": 3,
+    "time_limit": 600.0,
+}
 #: a pattern is cut when its |dr| / R exceeds 1 by more than this
 CUT_TOL = 1e-10
 #: cut slots come in these sizes (unused slots are free constraints): one compiled NLP per size
@@ -89,18 +95,23 @@ class WorstCaseResult(SynthesisResult):
     def summary(self) -> str:
         """Status, cost with bound and gap, the comparison with the statistical design, the
         tolerances and the worst-case value of every pose."""
-        lines = [f"{self.solver} (worst case: every error anywhere in its band): {self.status} ({self.message})",
-                 f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})"]
+        lines = [
+            f"{self.solver} (worst case: every error anywhere in its band): {self.status} ({self.message})",
+            f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})",
+        ]
         st = self.statistical
         if st:
             if st.get("cost") is not None and math.isfinite(st["cost"]):
-                lines.append(f"statistical design ({st['probability']} probability, p = {st['p']:g}) at the same R: "
-                             f"cost {st['cost']:.8g}; the worst case costs {100 * (self.cost_ratio - 1):+.1f} %"
-                             + ("" if st.get("success") else " (the statistical solve is not certified)"))
+                lines.append(
+                    f"statistical design ({st['probability']} probability, p = {st['p']:g}) at the same R: "
+                    f"cost {st['cost']:.8g}; the worst case costs {100 * (self.cost_ratio - 1):+.1f} %"
+                    + ("" if st.get("success") else " (the statistical solve is not certified)")
+                )
             else:
                 lines.append(f"statistical design at p = {st['p']:g}: {st.get('message', 'none')}")
-        lines.append(f"iterations {self.iterations}, evaluations {self.function_evaluations}, "
-                     f"{self.wall_time * 1e3:.1f} ms")
+        lines.append(
+            f"iterations {self.iterations}, evaluations {self.function_evaluations}, {self.wall_time * 1e3:.1f} ms"
+        )
         for name, value in self.tolerances.items():
             flag = f"  [{self.bounds_active[name]} bound]" if name in self.bounds_active else ""
             lines.append(f"  {name:>8} = {value:.6g} {self.units[name]}{flag}")
@@ -133,7 +144,9 @@ def _blocks(spec) -> list[_Block]:
     for b in spec.blocks:
         R = spec.R if b.kind == "position" else spec.Phi
         A = np.asarray(b.A) / spec.col_scale
-        out.append(_Block(f"{b.kind} at pose {b.pose!r}", b.pose, b.kind, A, float(R), candidate_patterns(A, unique=True)))
+        out.append(
+            _Block(f"{b.kind} at pose {b.pose!r}", b.pose, b.kind, A, float(R), candidate_patterns(A, unique=True))
+        )
     return out
 
 
@@ -147,8 +160,15 @@ def worst_case_values(blocks, eps) -> list[tuple[float, np.ndarray, np.ndarray]]
 
 
 @lru_cache(maxsize=32)
-def _cut_solver(n: int, K: int, signature: tuple, tol: float, constr_viol_tol: float, max_iter: int,
-                max_wall_time: float = DEFAULT_OPTIONS["time_limit"]):
+def _cut_solver(
+    n: int,
+    K: int,
+    signature: tuple,
+    tol: float,
+    constr_viol_tol: float,
+    max_iter: int,
+    max_wall_time: float = DEFAULT_OPTIONS["time_limit"],
+):
     """``min c(ln(ref x)) / f0  s.t.  |M_k x|^2 <= 1`` for K cut slots (x = eps / ref)."""
     cost = cost_graph(n, signature)
     nt = cost.size1_in(1)
@@ -161,10 +181,19 @@ def _cut_solver(n: int, K: int, signature: tuple, tol: float, constr_viol_tol: f
     r = ca.reshape(ca.mtimes(M, x), 3, K)
     g = ca.sum1(r * r).T
     nlp = {"x": x, "p": p, "f": cost(ca.log(ref * x), theta) / f0, "g": g}
-    opts = {"print_time": False, "show_eval_warnings": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
-            "ipopt.tol": tol, "ipopt.constr_viol_tol": constr_viol_tol, "ipopt.max_iter": max_iter,
-            "ipopt.acceptable_iter": 0, "ipopt.hessian_approximation": "exact", "ipopt.mu_strategy": "adaptive",
-            "ipopt.max_wall_time": max_wall_time}
+    opts = {
+        "print_time": False,
+        "show_eval_warnings": False,
+        "ipopt.print_level": 0,
+        "ipopt.sb": "yes",
+        "ipopt.tol": tol,
+        "ipopt.constr_viol_tol": constr_viol_tol,
+        "ipopt.max_iter": max_iter,
+        "ipopt.acceptable_iter": 0,
+        "ipopt.hessian_approximation": "exact",
+        "ipopt.mu_strategy": "adaptive",
+        "ipopt.max_wall_time": max_wall_time,
+    }
     return ca.nlpsol("worst_case_cuts", "ipopt", nlp, opts)
 
 
@@ -238,8 +267,9 @@ def lagrangian_weights(spec, eps) -> tuple[np.ndarray, float]:
     at ``eps``, multipliers from stationarity there): a separable lower bound for discrete choices."""
     blocks = _blocks(spec)
     lower, upper = np.asarray(spec.lower, dtype=float), np.asarray(spec.upper, dtype=float)
-    rows = [np.abs(b.A.T @ d) / b.R for b, (v, _, d) in zip(blocks, worst_case_values(blocks, eps))
-            if v >= 1.0 - ACTIVE_TOL]
+    rows = [
+        np.abs(b.A.T @ d) / b.R for b, (v, _, d) in zip(blocks, worst_case_values(blocks, eps)) if v >= 1.0 - ACTIVE_TOL
+    ]
     if not rows:
         return np.zeros(spec.n), 0.0
     B = np.array(rows)
@@ -254,9 +284,12 @@ def check_feasible(blocks, lower) -> None:
         if v > 1.0:
             limit = "R" if b.kind == "position" else "Phi"
             raise InfeasibleSpecificationError(
-                b.label, v, f"infeasible specification: the worst case of the {b.label} exceeds {limit} even with "
-                            f"every tolerance at its lower bound (max |error| / {limit} = {v:.6g} > 1).  Lower the "
-                            f"bounds, or relax {limit}.")
+                b.label,
+                v,
+                f"infeasible specification: the worst case of the {b.label} exceeds {limit} even with "
+                f"every tolerance at its lower bound (max |error| / {limit} = {v:.6g} > 1).  Lower the "
+                f"bounds, or relax {limit}.",
+            )
 
 
 def _checked_options(opts: dict) -> dict:
@@ -311,8 +344,9 @@ def solve_worst_case(spec, eps0=None, options=None) -> WorstCaseResult:
         M = np.zeros((3 * K, n))
         for k, (bi, s) in enumerate(cuts):
             M[3 * k : 3 * k + 3] = blocks[bi].A * (s * ref) / blocks[bi].R
-        solver = _cut_solver(n, K, costs.signature, float(opts["tol"]), float(opts["constr_viol_tol"]),
-                             int(opts["max_iter"]), limit)
+        solver = _cut_solver(
+            n, K, costs.signature, float(opts["tol"]), float(opts["constr_viol_tol"]), int(opts["max_iter"]), limit
+        )
         p = np.concatenate([M.ravel(order="F"), ref, costs.theta, [f0]])
         ubg = np.full(K, np.inf)
         ubg[: len(cuts)] = 1.0
@@ -335,8 +369,16 @@ def solve_worst_case(spec, eps0=None, options=None) -> WorstCaseResult:
                 if v / b.R > 1.0 + CUT_TOL and (bi, s.tobytes()) not in keys:
                     add(bi, s)
                     added += 1
-        history.append({"round": rnd, "cuts": len(cuts), "iterations": int(st.get("iter_count", 0)),
-                        "status": raw, "cost": costs.cost(eps), "worst": worst_all})
+        history.append(
+            {
+                "round": rnd,
+                "cuts": len(cuts),
+                "iterations": int(st.get("iter_count", 0)),
+                "status": raw,
+                "cost": costs.cost(eps),
+                "worst": worst_all,
+            }
+        )
         if status is not Status.OPTIMAL:
             ok = False
             if status is getattr(Status, "TIME_LIMIT", None):  # IPOPT's own clock is the same limit
@@ -349,8 +391,9 @@ def solve_worst_case(spec, eps0=None, options=None) -> WorstCaseResult:
         ok = False
         message += f"; still violated after {opts['max_rounds']} exchange rounds"
         status = Status.ITERATION_LIMIT
-    return _assemble(spec, blocks, costs, eps, cuts, lam_g, status, message, ok, iters, evals,
-                     time.perf_counter() - t0, history)
+    return _assemble(
+        spec, blocks, costs, eps, cuts, lam_g, status, message, ok, iters, evals, time.perf_counter() - t0, history
+    )
 
 
 def _assemble(spec, blocks, costs, eps, cuts, lam_g, status, message, ok, iters, evals, wall, history):
@@ -392,20 +435,31 @@ def _assemble(spec, blocks, costs, eps, cuts, lam_g, status, message, ok, iters,
             status, message = Status.NUMERICAL_ERROR, f"{message}; rejected: max |error| / limit {worst:.9g} > 1"
         elif not gap <= GAP_TOL * abs(cost):
             status = Status.OPTIMAL_INACCURATE
-            message = (f"{message}; not certified: gap {gap:.3g} ({gap / abs(cost):.2e} of the cost) > {GAP_TOL:g}"
-                       + ("" if convex else "; a cost is not convex in eps: possibly a local optimum"))
+            message = f"{message}; not certified: gap {gap:.3g} ({gap / abs(cost):.2e} of the cost) > {GAP_TOL:g}" + (
+                "" if convex else "; a cost is not convex in eps: possibly a local optimum"
+            )
         else:
-            message = (f"{message}; {len(cuts)} pattern cuts, every pose's exact worst case within the limit "
-                       f"(largest {worst:.9f}), gap {gap / abs(cost):.1e} of the cost")
+            message = (
+                f"{message}; {len(cuts)} pattern cuts, every pose's exact worst case within the limit "
+                f"(largest {worst:.9f}), gap {gap / abs(cost):.1e} of the cost"
+            )
     # the cut multipliers per block: the multiplier of |dr| / R <= 1 (chain rule of |v|^2 <= 1)
     mult = np.zeros(len(blocks))
     for k, (bi, _) in enumerate(cuts):
         if k < len(lam_g):
             mult[bi] += 2.0 * lam_g[k]
     cblocks = tuple(
-        ConstraintBlock(label=b.label, pose=b.pose, kind=f"{b.kind} (worst case)", values=np.array([v]),
-                        directions=d[:, None], active=np.array([v >= 1.0 - ACTIVE_TOL]), multipliers=np.array([mult[i]]))
-        for i, (b, (v, _, d)) in enumerate(zip(blocks, vals)))
+        ConstraintBlock(
+            label=b.label,
+            pose=b.pose,
+            kind=f"{b.kind} (worst case)",
+            values=np.array([v]),
+            directions=d[:, None],
+            active=np.array([v >= 1.0 - ACTIVE_TOL]),
+            multipliers=np.array([mult[i]]),
+        )
+        for i, (b, (v, _, d)) in enumerate(zip(blocks, vals))
+    )
     bounds_active = {}
     for i, name in enumerate(spec.names):
         if eps[i] <= lower[i] * (1 + ACTIVE_TOL):
@@ -413,8 +467,21 @@ def _assemble(spec, blocks, costs, eps, cuts, lam_g, status, message, ok, iters,
         elif eps[i] >= upper[i] * (1 - ACTIVE_TOL):
             bounds_active[name] = "upper"
     return WorstCaseResult(
-        solver="ipopt", status=status, success=status is Status.OPTIMAL, message=message,
-        tolerances=dict(zip(spec.names, map(float, eps))), units=dict(zip(spec.names, spec.units)),
-        cost=cost, constraints=cblocks, bounds_active=bounds_active, bound_multipliers={},
-        lower_bound=lower_bound, gap=gap, iterations=iters, function_evaluations=evals, wall_time=wall,
-        spec=spec, history=history)
+        solver="ipopt",
+        status=status,
+        success=status is Status.OPTIMAL,
+        message=message,
+        tolerances=dict(zip(spec.names, map(float, eps))),
+        units=dict(zip(spec.names, spec.units)),
+        cost=cost,
+        constraints=cblocks,
+        bounds_active=bounds_active,
+        bound_multipliers={},
+        lower_bound=lower_bound,
+        gap=gap,
+        iterations=iters,
+        function_evaluations=evals,
+        wall_time=wall,
+        spec=spec,
+        history=history,
+    )

@@ -143,8 +143,9 @@ def _distinct(U: np.ndarray) -> np.ndarray:
     return np.concatenate(rows)
 
 
-def zonotope_patterns(C: np.ndarray, top: int | None = None, patterns: np.ndarray | None = None
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def zonotope_patterns(
+    C: np.ndarray, top: int | None = None, patterns: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """``(values, patterns)``: the candidate patterns (``patterns`` if given, else
     :func:`candidate_patterns`) with ``|C s|``, distinct, largest first; the ``top`` largest."""
     C = np.asarray(C, dtype=float)

@@ -57,9 +57,17 @@ class BudgetResult:
     log: list = field(default_factory=list, repr=False)
 
 
-def best_accuracy(mechanism, budget: float, *, p: float | None = None, R: float | None = None,
-                  distribution=None, rtol: float = 1e-4, max_solves: int = 80,
-                  **kwargs) -> BudgetResult:
+def best_accuracy(
+    mechanism,
+    budget: float,
+    *,
+    p: float | None = None,
+    R: float | None = None,
+    distribution=None,
+    rtol: float = 1e-4,
+    max_solves: int = 80,
+    **kwargs,
+) -> BudgetResult:
     """The smallest R at a given p (give ``p``), or the largest p at a given R (give ``R``), that
     tolerances costing at most ``budget`` achieve.
 
@@ -142,8 +150,11 @@ def best_accuracy(mechanism, budget: float, *, p: float | None = None, R: float 
         if not x_range[0] <= x <= x_range[1]:
             break
     if good is None:
-        raise InfeasibleSpecificationError("budget", budget, f"the budget {budget:g} buys no accuracy in the "
-                                           f"searched range (its lowest cost exceeds it)")
+        raise InfeasibleSpecificationError(
+            "budget",
+            budget,
+            f"the budget {budget:g} buys no accuracy in the searched range (its lowest cost exceeds it)",
+        )
     if bad is None:  # everything tried is affordable: report the best end tried, bracket open
         certified = False
         bad = good - 1 if good_is_high else good + 1
@@ -159,7 +170,13 @@ def best_accuracy(mechanism, budget: float, *, p: float | None = None, R: float 
             bad = mid
     ends = sorted([from_x(good), from_x(bad)])
     return BudgetResult(
-        quantity="R" if p is not None else "p", value=from_x(good), bracket=tuple(ends), result=good_res,
-        budget=budget, certified=certified and abs(good - bad) <= rtol, solves=solves,
-        wall_time=time.perf_counter() - t0, log=log,
+        quantity="R" if p is not None else "p",
+        value=from_x(good),
+        bracket=tuple(ends),
+        result=good_res,
+        budget=budget,
+        certified=certified and abs(good - bad) <= rtol,
+        solves=solves,
+        wall_time=time.perf_counter() - t0,
+        log=log,
     )

@@ -83,6 +83,7 @@ def merge_groups(given: dict, spec, solver_options) -> dict:
             if _same(out[f.name], f.default) or _same(out[f.name], value):
                 out[f.name] = value
             else:
-                raise InputError(f.name, f"given as a keyword ({out[f.name]!r}) and in {argname} ({value!r})",
-                                 "one of the two")
+                raise InputError(
+                    f.name, f"given as a keyword ({out[f.name]!r}) and in {argname} ({value!r})", "one of the two"
+                )
     return out

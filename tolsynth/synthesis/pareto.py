@@ -61,8 +61,9 @@ class ParetoFront:
         ax.plot(x, y, "-o", ms=3, drawstyle="default", label="optimum" + (" (process choice)" if staircase else ""))
         for ref in self.reference:
             ax.plot(ref[self.axis], ref["cost"], "r*", ms=10)
-            ax.annotate(ref["table"], (ref[self.axis], ref["cost"]), fontsize="small", xytext=(4, 4),
-                        textcoords="offset points")
+            ax.annotate(
+                ref["table"], (ref[self.axis], ref["cost"]), fontsize="small", xytext=(4, 4), textcoords="offset points"
+            )
         if self.reference:
             ax.plot([], [], "r*", label="paper's printed tolerances")
         ax.set_xlabel("R, mm" if self.axis == "R" else "p")
@@ -71,8 +72,7 @@ class ParetoFront:
         return ax
 
 
-def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, processes=None,
-                 **kwargs) -> ParetoFront:
+def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, processes=None, **kwargs) -> ParetoFront:
     """Sweep one of R (mm) or p (give a sequence) with the other fixed (a number).
 
     ``processes`` (as :func:`tolsynth.synthesize_processes`) makes each point a process choice.
@@ -92,8 +92,9 @@ def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, pro
     mechanism = as_mechanism(mechanism)
     R_seq, p_seq = np.ndim(R) == 1, np.ndim(p) == 1
     if R_seq == p_seq or R is None or p is None:
-        raise InputError("R/p", "give one as a sequence (the sweep) and the other as a number",
-                         "e.g. R=[0.25, 0.5, 1.0], p=0.99")
+        raise InputError(
+            "R/p", "give one as a sequence (the sweep) and the other as a number", "e.g. R=[0.25, 0.5, 1.0], p=0.99"
+        )
     axis = "R" if R_seq else "p"
     values = sorted(float(v) for v in (R if R_seq else p))
     if not values:
@@ -108,24 +109,43 @@ def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, pro
                 from tolsynth.synthesis.processes import synthesize_processes
 
                 pc = synthesize_processes(mechanism, Rv, pv, processes, distribution, alpha=alpha, **kwargs)
-                rows.append({"R": Rv, "p": pv, "cost": pc.cost, "lower_bound": pc.lower_bound,
-                             "success": pc.proven, "processes": pc.processes})
+                rows.append(
+                    {
+                        "R": Rv,
+                        "p": pv,
+                        "cost": pc.cost,
+                        "lower_bound": pc.lower_bound,
+                        "success": pc.proven,
+                        "processes": pc.processes,
+                    }
+                )
             else:
                 res = synthesize(mechanism, Rv, pv, distribution, alpha, x0=x0, **kwargs)
                 x0 = res.x if res.success else None
-                rows.append({"R": Rv, "p": pv, "cost": res.cost, "lower_bound": res.lower_bound,
-                             "success": res.success})
+                rows.append(
+                    {"R": Rv, "p": pv, "cost": res.cost, "lower_bound": res.lower_bound, "success": res.success}
+                )
         except InfeasibleSpecificationError:
             rows.append({"R": Rv, "p": pv, "cost": float("inf"), "lower_bound": float("inf"), "success": False})
     reference = []
     for ref in getattr(mechanism.spec, "reference_results", ()) or ():
         from tolsynth.probability.distributions import resolve
 
-        same = ref.distribution == resolve(distribution, mechanism) and np.isscalar(alpha) and abs(ref.alpha - float(alpha)) < 1e-12
+        same = (
+            ref.distribution == resolve(distribution, mechanism)
+            and np.isscalar(alpha)
+            and abs(ref.alpha - float(alpha)) < 1e-12
+        )
         fixed_ok = abs(ref.p - p) < 1e-12 if R_seq else abs(ref.R - R) < 1e-12
         swept = ref.R if R_seq else ref.p
         if same and fixed_ok and values[0] <= swept <= values[-1] and processes is None and not kwargs:
             spec = make_specification(mechanism, ref.R, ref.p, ref.distribution, ref.alpha)
-            reference.append({"table": ref.table, "R": ref.R, "p": ref.p,
-                              "cost": ToleranceNLP(spec).cost(np.asarray(ref.tolerances, dtype=float))})
+            reference.append(
+                {
+                    "table": ref.table,
+                    "R": ref.R,
+                    "p": ref.p,
+                    "cost": ToleranceNLP(spec).cost(np.asarray(ref.tolerances, dtype=float)),
+                }
+            )
     return ParetoFront(axis, rows, reference, time.perf_counter() - t0)

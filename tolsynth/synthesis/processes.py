@@ -95,9 +95,11 @@ class ProcessChoice:
 
     def summary(self) -> str:
         """Readable summary: cost, bound, whether proven, and the process and tolerance per parameter."""
-        lines = [f"process choice: cost {self.cost:.8g} (lower bound {self.lower_bound:.8g}, "
-                 f"{'proven' if self.proven else 'NOT proven'}); {self.nodes} solves for "
-                 f"{self.combinations} combinations"]
+        lines = [
+            f"process choice: cost {self.cost:.8g} (lower bound {self.lower_bound:.8g}, "
+            f"{'proven' if self.proven else 'NOT proven'}); {self.nodes} solves for "
+            f"{self.combinations} combinations"
+        ]
         if self.rounded:
             lines.append(f"rounding the continuous relaxation instead: cost {self.rounded['cost']:.8g}")
         for nm, proc in self.processes.items():
@@ -106,17 +108,29 @@ class ProcessChoice:
 
     def to_dict(self) -> dict:
         """Plain dict for JSON (processes, cost, bound, gap, proof, search size, tolerances, time)."""
-        return {"processes": self.processes, "cost": self.cost, "lower_bound": self.lower_bound,
-                "gap": self.gap, "proven": self.proven, "nodes": self.nodes,
-                "combinations": self.combinations, "rounded": self.rounded,
-                "tolerances": self.result.tolerances, "wall_time": self.wall_time}
+        return {
+            "processes": self.processes,
+            "cost": self.cost,
+            "lower_bound": self.lower_bound,
+            "gap": self.gap,
+            "proven": self.proven,
+            "nodes": self.nodes,
+            "combinations": self.combinations,
+            "rounded": self.rounded,
+            "tolerances": self.result.tolerances,
+            "wall_time": self.wall_time,
+        }
 
 
 def _hull_model(procs: list[Process]) -> tuple[Tabulated, float, float]:
     """Lower convex hull in (eps^2, cost) of the processes' costs over their ranges, as a table."""
     ys, cs = [], []
     for pr in procs:
-        e = np.exp(np.linspace(math.log(pr.lower), math.log(pr.upper), 33)) if pr.upper > pr.lower else np.array([pr.lower])
+        e = (
+            np.exp(np.linspace(math.log(pr.lower), math.log(pr.upper), 33))
+            if pr.upper > pr.lower
+            else np.array([pr.lower])
+        )
         ys.append(e**2)
         cs.append(pr.cost.cost(e))
     y, c = np.concatenate(ys), np.concatenate(cs)
@@ -172,9 +186,14 @@ class _Search:
         self.names = list(procs)
         self.kwargs = dict(kwargs)
         self.user_cost = self.kwargs.pop("cost", None) or dict(mechanism.cost_models)
-        if isinstance(self.user_cost, (CostModel, list, tuple)) or (isinstance(self.user_cost, Mapping) and "model" in self.user_cost):
-            raise InputError("cost", "with processes, give per-parameter costs as a dict name -> model",
-                             "a dict for the parameters without processes")
+        if isinstance(self.user_cost, (CostModel, list, tuple)) or (
+            isinstance(self.user_cost, Mapping) and "model" in self.user_cost
+        ):
+            raise InputError(
+                "cost",
+                "with processes, give per-parameter costs as a dict name -> model",
+                "a dict for the parameters without processes",
+            )
         self.user_bounds = self.kwargs.pop("bounds", None)
         from tolsynth.synthesis.single import DEFAULT_PROBABILITY
 
@@ -229,10 +248,14 @@ class _Search:
         total = 0.0
         for i, nm in enumerate(spec.names):
             if nm in open_set:
-                total += min(float(pr.cost.dual_min(zero, math.log(pr.lower), math.log(pr.upper))[0][0])
-                             for pr in (self.procs[nm][j] for j in open_set[nm]))
+                total += min(
+                    float(pr.cost.dual_min(zero, math.log(pr.lower), math.log(pr.upper))[0][0])
+                    for pr in (self.procs[nm][j] for j in open_set[nm])
+                )
             else:
-                total += float(spec.costs.models[i].dual_min(zero, math.log(spec.lower[i]), math.log(spec.upper[i]))[0][0])
+                total += float(
+                    spec.costs.models[i].dual_min(zero, math.log(spec.lower[i]), math.log(spec.upper[i]))[0][0]
+                )
         return total
 
     def leaf_bound(self, choice: tuple, res) -> float:
@@ -259,9 +282,12 @@ class _Search:
             open_set = {nm: S for nm, S in zip(self.names, node)}
             for i, nm in enumerate(res.spec.names):
                 if nm in open_set:
-                    vals = [self.procs[nm][j].cost.dual_min(np.array([w[i]]), math.log(self.procs[nm][j].lower),
-                                                             math.log(self.procs[nm][j].upper))[0][0]
-                            for j in open_set[nm]]
+                    vals = [
+                        self.procs[nm][j].cost.dual_min(
+                            np.array([w[i]]), math.log(self.procs[nm][j].lower), math.log(self.procs[nm][j].upper)
+                        )[0][0]
+                        for j in open_set[nm]
+                    ]
                     total += min(vals)
                 else:
                     total += res.spec.costs.models[i].dual_min(np.array([w[i]]), nlp.lu[i], nlp.uu[i])[0][0]
@@ -283,8 +309,17 @@ class _Search:
         return tuple(choice)
 
 
-def synthesize_processes(mechanism, R: float, p: float | None, processes=None, distribution=None, *,
-                         rel_gap: float = 1e-6, max_nodes: int = 10_000, **kwargs) -> ProcessChoice:
+def synthesize_processes(
+    mechanism,
+    R: float,
+    p: float | None,
+    processes=None,
+    distribution=None,
+    *,
+    rel_gap: float = 1e-6,
+    max_nodes: int = 10_000,
+    **kwargs,
+) -> ProcessChoice:
     """Cheapest process per parameter and tolerances within it, with a proven optimum.
 
     Parameters
@@ -350,8 +385,10 @@ def synthesize_processes(mechanism, R: float, p: float | None, processes=None, d
     if eps is not None:
         rc = search.round(root, eps)
         rres = consider(rc)
-        rounded = {"processes": {nm: procs[nm][j].name for nm, j in zip(names, rc)},
-                   "cost": rres.cost if rres is not None and rres.success else math.inf}
+        rounded = {
+            "processes": {nm: procs[nm][j].name for nm, j in zip(names, rc)},
+            "cost": rres.cost if rres is not None and rres.success else math.inf,
+        }
     heap = [(bound, 0, root, eps)]
     counter = itertools.count(1)
     while heap:
@@ -377,10 +414,15 @@ def synthesize_processes(mechanism, R: float, p: float | None, processes=None, d
                 gaps.append(-math.inf)
                 continue
             e = eps[mechanism.index(nm)]
-            inside = [float(procs[nm][j].cost.cost(e)) for j in S
-                      if procs[nm][j].lower * (1 - 1e-9) <= e <= procs[nm][j].upper * (1 + 1e-9)]
+            inside = [
+                float(procs[nm][j].cost.cost(e))
+                for j in S
+                if procs[nm][j].lower * (1 - 1e-9) <= e <= procs[nm][j].upper * (1 + 1e-9)
+            ]
             hull, _, _ = _hull_model([procs[nm][j] for j in S])
-            gaps.append((min(inside) if inside else math.inf) - float(hull.cost(min(max(e, hull.eps[0]), hull.eps[-1]))))
+            gaps.append(
+                (min(inside) if inside else math.inf) - float(hull.cost(min(max(e, hull.eps[0]), hull.eps[-1])))
+            )
         k = int(np.argmax(gaps))
         for j in node[k]:
             child = node[:k] + ((j,),) + node[k + 1 :]
@@ -398,8 +440,9 @@ def synthesize_processes(mechanism, R: float, p: float | None, processes=None, d
             log.append({"node": [len(S) for S in child], "bound": cb})
             heapq.heappush(heap, (cb, next(counter), child, ce))
     if incumbent is None:
-        raise InfeasibleSpecificationError("processes", math.inf,
-                                           "infeasible specification: no process combination meets it")
+        raise InfeasibleSpecificationError(
+            "processes", math.inf, "infeasible specification: no process combination meets it"
+        )
     open_bounds = [b for b, *_ in heap]
     lower = min(closed_bounds + open_bounds + [search.leaf_bound(inc_choice, incumbent)])
     lower = min(lower, incumbent.cost)
@@ -407,10 +450,15 @@ def synthesize_processes(mechanism, R: float, p: float | None, processes=None, d
     return ProcessChoice(
         result=incumbent,
         processes={nm: procs[nm][j].name for nm, j in zip(names, inc_choice)},
-        cost=incumbent.cost, lower_bound=lower, gap=gap,
+        cost=incumbent.cost,
+        lower_bound=lower,
+        gap=gap,
         proven=not heap and gap <= rel_gap * abs(incumbent.cost) + 1e-12,
-        nodes=search.solves, combinations=combinations, rounded=rounded,
-        wall_time=time.perf_counter() - t0, log=log,
+        nodes=search.solves,
+        combinations=combinations,
+        rounded=rounded,
+        wall_time=time.perf_counter() - t0,
+        log=log,
     )
 
 

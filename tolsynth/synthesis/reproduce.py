@@ -65,14 +65,19 @@ class ColumnReport:
             return {}
         return {
             "cost_rel_diff": abs(r.sumt.cost - r.ipopt.cost) / r.ipopt.cost,
-            "max_tolerance_rel_diff": max(
-                abs(r.sumt.tolerances[k] - v) / v for k, v in r.ipopt.tolerances.items()
-            ),
+            "max_tolerance_rel_diff": max(abs(r.sumt.tolerances[k] - v) / v for k, v in r.ipopt.tolerances.items()),
         }
 
     def to_dict(self) -> dict:
-        out = {"table": self.table, "R": self.R, "p": self.p, "alpha": self.alpha,
-               "distribution": self.distribution, "agreement": self.agreement(), "readings": {}}
+        out = {
+            "table": self.table,
+            "R": self.R,
+            "p": self.p,
+            "alpha": self.alpha,
+            "distribution": self.distribution,
+            "agreement": self.agreement(),
+            "readings": {},
+        }
         for key, r in self.readings.items():
             out["readings"][key] = {
                 "angle_unit": r.angle_unit,
@@ -92,8 +97,9 @@ def _printed_eval(mech: Mechanism, ref, printed: np.ndarray):
     return nlp.cost(printed), float(nlp.constraint_values(printed)[0][0][0])
 
 
-def reproduce(model: str | Mechanism = "xu_zhang_1988", sumt: bool = True, progress: bool = False,
-              degree_reading: bool = True) -> list[ColumnReport]:
+def reproduce(
+    model: str | Mechanism = "xu_zhang_1988", sumt: bool = True, progress: bool = False, degree_reading: bool = True
+) -> list[ColumnReport]:
     """Solve every published column of the model (its ``reference_results``).
 
     Parameters
@@ -126,7 +132,11 @@ def reproduce(model: str | Mechanism = "xu_zhang_1988", sumt: bool = True, progr
             printed = np.array(ref.tolerances, dtype=float)
             cost, gmax = _printed_eval(m, ref, printed)
             ip = synthesize(m, ref.R, ref.p, ref.distribution, ref.alpha, solver="ipopt")
-            su = synthesize(m, ref.R, ref.p, ref.distribution, ref.alpha, solver="sumt") if (sumt and key == "printed") else None
+            su = (
+                synthesize(m, ref.R, ref.p, ref.distribution, ref.alpha, solver="sumt")
+                if (sumt and key == "printed")
+                else None
+            )
             unit = m.units[m.index(angle_params[0])] if angle_params else "-"
             col[key] = Reading(unit, dict(zip(m.error_parameters, printed.tolist())), cost, gmax, ip, su)
         reports.append(ColumnReport(ref.table, ref.R, ref.p, ref.alpha, ref.distribution, col))
@@ -150,25 +160,35 @@ def format_report(reports: list[ColumnReport], mech: Mechanism | None = None) ->
             head += f"   | deg reading: {'IPOPT':>9} {'IP/pr':>6}"
         lines.append(head)
         for name, value in pr.printed.items():
-            row = (f"  {name:>7} {pr.ipopt.units[name]:>9} {value:>9.4g} {pr.ipopt.tolerances[name]:>9.4g} "
-                   f"{(pr.sumt.tolerances[name] if pr.sumt else float('nan')):>9.4g} {pr.ratio[name]:>6.2f}")
+            row = (
+                f"  {name:>7} {pr.ipopt.units[name]:>9} {value:>9.4g} {pr.ipopt.tolerances[name]:>9.4g} "
+                f"{(pr.sumt.tolerances[name] if pr.sumt else float('nan')):>9.4g} {pr.ratio[name]:>6.2f}"
+            )
             if deg is not None:
                 row += f"   | {deg.ipopt.units[name]:>12} {deg.ipopt.tolerances[name]:>9.4g} {deg.ratio[name]:>6.2f}"
             lines.append(row)
-        row = (f"  {'cost':>7} {'':>9} {pr.printed_cost:>9.4g} {pr.ipopt.cost:>9.4g} "
-               f"{(pr.sumt.cost if pr.sumt else float('nan')):>9.4g} {pr.ipopt.cost / pr.printed_cost:>6.2f}")
+        row = (
+            f"  {'cost':>7} {'':>9} {pr.printed_cost:>9.4g} {pr.ipopt.cost:>9.4g} "
+            f"{(pr.sumt.cost if pr.sumt else float('nan')):>9.4g} {pr.ipopt.cost / pr.printed_cost:>6.2f}"
+        )
         if deg is not None:
             row += f"   | {'':>12} {deg.ipopt.cost:>9.4g} {deg.ipopt.cost / deg.printed_cost:>6.2f}"
         lines.append(row)
-        row = (f"  {'max sz/R':>7} {'':>9} {pr.printed_max_constraint:>9.4f} {pr.ipopt.max_constraint:>9.4f} "
-               f"{(pr.sumt.max_constraint if pr.sumt else float('nan')):>9.4f}")
+        row = (
+            f"  {'max sz/R':>7} {'':>9} {pr.printed_max_constraint:>9.4f} {pr.ipopt.max_constraint:>9.4f} "
+            f"{(pr.sumt.max_constraint if pr.sumt else float('nan')):>9.4f}"
+        )
         if deg is not None:
             row += f"   | printed as deg: max sz/R {deg.printed_max_constraint:.4f}"
         lines.append(row)
     lines.append("")
-    lines.append("Summary (cost in the paper's units; 'max sz/R' of the printed tolerances in this model, <= 1 meets the spec)")
-    lines.append(f"  {'column':<52} {'printed':>8} {'IPOPT':>8} {'SUMT':>8} {'cost diff':>9} {'tol diff':>9} "
-                 f"{'pr sz/R':>8} {'deg sz/R':>8} {'IPOPT ms':>8} {'SUMT ms':>8}")
+    lines.append(
+        "Summary (cost in the paper's units; 'max sz/R' of the printed tolerances in this model, <= 1 meets the spec)"
+    )
+    lines.append(
+        f"  {'column':<52} {'printed':>8} {'IPOPT':>8} {'SUMT':>8} {'cost diff':>9} {'tol diff':>9} "
+        f"{'pr sz/R':>8} {'deg sz/R':>8} {'IPOPT ms':>8} {'SUMT ms':>8}"
+    )
     for rep in reports:
         pr, deg, ag = rep.printed_unit, rep.readings.get("deg"), rep.agreement()
         lines.append(
@@ -178,6 +198,8 @@ def format_report(reports: list[ColumnReport], mech: Mechanism | None = None) ->
             f"{(deg.printed_max_constraint if deg else float('nan')):>8.3f} {pr.ipopt.wall_time * 1e3:>8.1f} "
             f"{(pr.sumt.wall_time * 1e3 if pr.sumt else float('nan')):>8.0f}"
         )
-    ok = all(r.printed_unit.ipopt.success and (r.printed_unit.sumt is None or r.printed_unit.sumt.success) for r in reports)
+    ok = all(
+        r.printed_unit.ipopt.success and (r.printed_unit.sumt is None or r.printed_unit.sumt.success) for r in reports
+    )
     lines.append(f"  all solves converged: {ok}")
     return "\n".join(lines)

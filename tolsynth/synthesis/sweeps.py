@@ -120,9 +120,11 @@ def _check_kwargs(kwargs: dict) -> None:
     allowed = [k for k in inspect.signature(synthesize).parameters if k not in _NOT_PASSED]
     for key in kwargs:
         if key not in allowed:
-            raise InputError(key, "not an argument a sweep passes to synthesize",
-                             "the grid axes R, p, alpha, distribution, criterion, solver, or one of "
-                             + ", ".join(allowed))
+            raise InputError(
+                key,
+                "not an argument a sweep passes to synthesize",
+                "the grid axes R, p, alpha, distribution, criterion, solver, or one of " + ", ".join(allowed),
+            )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -221,8 +223,11 @@ class _Dask:
             try:
                 client = distributed.Client(client, timeout="10s")
             except (OSError, TimeoutError, ValueError) as exc:
-                raise InputError("client", f"cannot reach the Dask scheduler {client!r}: {exc}",
-                                 "a running scheduler's address, e.g. tcp://host:8786") from None
+                raise InputError(
+                    "client",
+                    f"cannot reach the Dask scheduler {client!r}: {exc}",
+                    "a running scheduler's address, e.g. tcp://host:8786",
+                ) from None
             self._own = client
         self.client = client
         self.workers = max(1, len(client.scheduler_info().get("workers", {})))
@@ -251,21 +256,40 @@ def _engine(client, workers, n_rows: int):
         return _Processes(max(1, min(n, n_rows)))
     if isinstance(client, str):
         if "://" not in client and ":" not in client:
-            raise InputError("client", f"unknown engine {client!r}",
-                             "None, 'serial', 'processes', a dask.distributed.Client or a scheduler "
-                             "address such as 'tcp://host:8786'")
+            raise InputError(
+                "client",
+                f"unknown engine {client!r}",
+                "None, 'serial', 'processes', a dask.distributed.Client or a scheduler "
+                "address such as 'tcp://host:8786'",
+            )
         return _Dask(client)
     if type(client).__name__ == "Client" and hasattr(client, "submit") and hasattr(client, "scatter"):
         return _Dask(client)
-    raise InputError("client", f"got {type(client).__name__}",
-                     "None, 'serial', 'processes', a dask.distributed.Client or a scheduler address")
+    raise InputError(
+        "client",
+        f"got {type(client).__name__}",
+        "None, 'serial', 'processes', a dask.distributed.Client or a scheduler address",
+    )
 
 
 # ---------------------------------------------------------------------------------------------
 # the front door
 # ---------------------------------------------------------------------------------------------
-def sweep(mechanism, R, p, alpha=0.7, distribution="uniform", *, criterion="components", solver="auto",
-          client=None, workers: int | None = None, chunk: int | None = None, progress=None, **kwargs):
+def sweep(
+    mechanism,
+    R,
+    p,
+    alpha=0.7,
+    distribution="uniform",
+    *,
+    criterion="components",
+    solver="auto",
+    client=None,
+    workers: int | None = None,
+    chunk: int | None = None,
+    progress=None,
+    **kwargs,
+):
     """Solve :func:`tolsynth.synthesize` over a grid; one DataFrame row per solve.
 
     Parameters
@@ -321,9 +345,21 @@ def sweep(mechanism, R, p, alpha=0.7, distribution="uniform", *, criterion="comp
         chunk = check_count(chunk, "chunk", lower=1, upper=MAX_ROWS)
     # the common arguments checked once, here, on the first grid point (typed errors before work)
     first = points[0]
-    make_specification(mechanism, first["R"], first["p"], first["distribution"], first["alpha"],
-                       kwargs.get("k"), kwargs.get("bounds"), kwargs.get("pose", "worst"), kwargs.get("poses"),
-                       kwargs.get("Phi"), kwargs.get("p_orientation"), first["criterion"], kwargs.get("cost"))
+    make_specification(
+        mechanism,
+        first["R"],
+        first["p"],
+        first["distribution"],
+        first["alpha"],
+        kwargs.get("k"),
+        kwargs.get("bounds"),
+        kwargs.get("pose", "worst"),
+        kwargs.get("poses"),
+        kwargs.get("Phi"),
+        kwargs.get("p_orientation"),
+        first["criterion"],
+        kwargs.get("cost"),
+    )
     for a in {id(pt["alpha"]): pt["alpha"] for pt in points if isinstance(pt["alpha"], dict)}.values():
         make_specification(mechanism, first["R"], first["p"], first["distribution"], a)
 
@@ -342,11 +378,14 @@ def sweep(mechanism, R, p, alpha=0.7, distribution="uniform", *, criterion="comp
             rows = _solve_chunk(token, mechanism, probe, kwargs)
             bar.update(len(rows), len(rows))
             per_row = (time.perf_counter() - t0) / len(probe)
-            rest = indexed[len(probe):]
+            rest = indexed[len(probe) :]
             big = per_row * len(rest) > AUTO_PROCESSES_S and (os.cpu_count() or 1) > 1
             client = "processes" if big else "serial"
-            label = (f"auto ({len(probe)} solves here, {per_row * 1e3:.1f} ms each), then " if rest
-                     else f"auto (all {len(probe)} solves in this process)")
+            label = (
+                f"auto ({len(probe)} solves here, {per_row * 1e3:.1f} ms each), then "
+                if rest
+                else f"auto (all {len(probe)} solves in this process)"
+            )
         if rest:
             engine = _engine(client, workers, len(rest))
             label += engine.name
@@ -370,7 +409,7 @@ def _run(engine, token, mechanism, indexed, kwargs, chunk, bar, done) -> list[di
     model = engine.model(mechanism)
     futures = {}
     for i in range(0, n, size):
-        c = indexed[i:i + size]
+        c = indexed[i : i + size]
         futures[engine.submit(_solve_chunk, token, model, c, kwargs)] = c
     rows = []
     for f in engine.as_completed(list(futures)):
@@ -388,8 +427,20 @@ def _run(engine, token, mechanism, indexed, kwargs, chunk, bar, done) -> list[di
 def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dict):
     by_index = {r["row"]: r for r in rows}
     eps_cols = ["eps_" + n for n in mechanism.error_parameters]
-    result_cols = ["status", "success", "cost", "lower_bound", "gap", "max_constraint", "iterations",
-                   "function_evaluations", "wall_time_s", "time_s", "message", "error"]
+    result_cols = [
+        "status",
+        "success",
+        "cost",
+        "lower_bound",
+        "gap",
+        "max_constraint",
+        "iterations",
+        "function_evaluations",
+        "wall_time_s",
+        "time_s",
+        "message",
+        "error",
+    ]
     # a per-parameter alpha (dict) anywhere: the whole column as JSON text, one type per column
     as_text = {a for a in AXES if any(isinstance(pt[a], dict) for pt in points)}
     records = []
@@ -412,16 +463,35 @@ def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dic
         frame[c] = pd.to_numeric(frame[c], errors="coerce").astype("Int64")
     frame["success"] = frame["success"].astype(bool)
     path = getattr(mechanism.spec, "path", None)
-    inputs = {"model": {"name": mechanism.name, "title": mechanism.title, "file": str(path) if path else None},
-              "grid": {a: sorted({json_text(pt[a]) if isinstance(pt[a], dict) else pt[a] for pt in points},
-                                 key=lambda v: (str(type(v)), v)) for a in AXES},
-              "common": kwargs, "error_parameters": list(mechanism.error_parameters),
-              "tolerance_units": dict(zip(mechanism.error_parameters, mechanism.units))}
+    inputs = {
+        "model": {"name": mechanism.name, "title": mechanism.title, "file": str(path) if path else None},
+        "grid": {
+            a: sorted(
+                {json_text(pt[a]) if isinstance(pt[a], dict) else pt[a] for pt in points},
+                key=lambda v: (str(type(v)), v),
+            )
+            for a in AXES
+        },
+        "common": kwargs,
+        "error_parameters": list(mechanism.error_parameters),
+        "tolerance_units": dict(zip(mechanism.error_parameters, mechanism.units)),
+    }
     n_ok = int(frame["success"].sum())
-    summary = {"rows": len(frame), "succeeded": n_ok, "failed": len(frame) - n_ok, "engine": engine,
-               "elapsed_s": elapsed, "rows_per_s": len(frame) / elapsed if elapsed > 0 else None}
-    units = {"R": "mm", "cost": "the paper's cost units", "wall_time_s": "s", "time_s": "s",
-             **{"eps_" + n: u for n, u in zip(mechanism.error_parameters, mechanism.units)}}
+    summary = {
+        "rows": len(frame),
+        "succeeded": n_ok,
+        "failed": len(frame) - n_ok,
+        "engine": engine,
+        "elapsed_s": elapsed,
+        "rows_per_s": len(frame) / elapsed if elapsed > 0 else None,
+    }
+    units = {
+        "R": "mm",
+        "cost": "the paper's cost units",
+        "wall_time_s": "s",
+        "time_s": "s",
+        **{"eps_" + n: u for n, u in zip(mechanism.error_parameters, mechanism.units)},
+    }
     out = make_frame(frame, "Sweep", inputs, summary, units)
     return out
 

@@ -117,16 +117,23 @@ class WorkspaceSynthesis(Tabular):
     def summary(self) -> str:
         """Readable summary: the exchange's rounds, the certificate, the largest value found after
         the last solve, and the last solve's own summary."""
-        lines = [f"workspace exchange: {'converged' if self.converged else 'NOT converged'} after "
-                 f"{len(self.rounds)} round(s), {len(self.poses)} pose(s) imposed"]
+        lines = [
+            f"workspace exchange: {'converged' if self.converged else 'NOT converged'} after "
+            f"{len(self.rounds)} round(s), {len(self.poses)} pose(s) imposed"
+        ]
         for k, r in enumerate(self.rounds):
             pos = ", ".join(f"{v:.1f}" for v in np.asarray(r["worst_position"], dtype=float))
-            lines.append(f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.8g}, worst over the "
-                         f"workspace {r['worst_value']:.6f} at hand ({pos}) mm")
-        lines.append(f"certificate: cost {self.result.cost:.8g}, lower bound {self.lower_bound:.8g} "
-                     f"(valid at every pose), gap {self.gap:.2e}")
-        lines.append(f"afterwards: largest value found anywhere {self.worst_value:.6f} "
-                     f"(violation {self.max_violation:.2e})")
+            lines.append(
+                f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.8g}, worst over the "
+                f"workspace {r['worst_value']:.6f} at hand ({pos}) mm"
+            )
+        lines.append(
+            f"certificate: cost {self.result.cost:.8g}, lower bound {self.lower_bound:.8g} "
+            f"(valid at every pose), gap {self.gap:.2e}"
+        )
+        lines.append(
+            f"afterwards: largest value found anywhere {self.worst_value:.6f} (violation {self.max_violation:.2e})"
+        )
         if self.certified is not None:
             lines.append(self.certificate_line())
         lines.append(self.result.summary())
@@ -134,9 +141,20 @@ class WorkspaceSynthesis(Tabular):
 
 
 def synthesize_workspace(
-    mechanism, R: float, p: float, distribution=None, alpha=0.7, *, pose="worst",
-    tol: float = 1e-3, max_rounds: int = 12, search: dict | None = None, certify: bool = False,
-    certify_options: dict | None = None, progress=None, **kwargs
+    mechanism,
+    R: float,
+    p: float,
+    distribution=None,
+    alpha=0.7,
+    *,
+    pose="worst",
+    tol: float = 1e-3,
+    max_rounds: int = 12,
+    search: dict | None = None,
+    certify: bool = False,
+    certify_options: dict | None = None,
+    progress=None,
+    **kwargs,
 ) -> WorkspaceSynthesis:
     """Optimal tolerances with Eq. 20 imposed at *every* reachable pose, not one.
 
@@ -192,8 +210,9 @@ def synthesize_workspace(
     exact = kwargs.get("probability", "gaussian") == "exact"
     if pose is None:  # no starting pose: the worst pose found at tolerances in the middle of the bounds
         lo, hi = mechanism.bounds
-        pose = worst_pose(mechanism, np.sqrt(lo * hi), criterion="sigma", distribution=distribution,
-                          reference=None, **(search or {})).q
+        pose = worst_pose(
+            mechanism, np.sqrt(lo * hi), criterion="sigma", distribution=distribution, reference=None, **(search or {})
+        ).q
     poses = [mechanism.joints(pose)]
     rounds = []
     converged = False
@@ -218,8 +237,22 @@ def synthesize_workspace(
     full = dict(search or {})
     coarse = full if "step_tol" in full else {**full, "step_tol": COARSE_STEP_TOL}
     if certify:
-        return _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max_rounds, certify_options,
-                                   progress, sphere, kwargs, lambda eps: search_at(eps, coarse))
+        return _certified_exchange(
+            mechanism,
+            R,
+            p,
+            z,
+            distribution,
+            alpha,
+            poses,
+            tol,
+            max_rounds,
+            certify_options,
+            progress,
+            sphere,
+            kwargs,
+            lambda eps: search_at(eps, coarse),
+        )
     from tolsynth.progress import Progress
 
     reason = f"round limit ({max_rounds}) reached"
@@ -233,8 +266,15 @@ def synthesize_workspace(
             w, g = search_at(res.x, coarse)
             if g <= 1 + tol and coarse is not full:
                 w, g = search_at(res.x, full)
-            rounds.append({"n_poses": len(poses), "cost": res.cost, "worst_value": g, "worst_q": w.q,
-                           "worst_position": w.position})
+            rounds.append(
+                {
+                    "n_poses": len(poses),
+                    "cost": res.cost,
+                    "worst_value": g,
+                    "worst_q": w.q,
+                    "worst_position": w.position,
+                }
+            )
             bar.update(k + 1, 1)
             if g <= 1 + tol:
                 converged, reason = True, ""
@@ -251,8 +291,9 @@ def synthesize_workspace(
 EXACT_SLACK = 1e-6
 
 
-def _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max_rounds, options, progress, sphere,
-                        kwargs, sampled) -> WorkspaceSynthesis:
+def _certified_exchange(
+    mechanism, R, p, z, distribution, alpha, poses, tol, max_rounds, options, progress, sphere, kwargs, sampled
+) -> WorkspaceSynthesis:
     """The exchange of :func:`synthesize_workspace` with the certified search deciding (its docstring).
 
     A round whose sampled search (``sampled(eps) -> (WorstPose, value)``, cheap) finds the
@@ -263,8 +304,11 @@ def _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max
     from tolsynth.synthesis.single import DEFAULT_PROBABILITY
 
     if sphere:
-        raise InputError("certify", "the sphere criterion has no certified search",
-                         "criterion 'components' (the default) with certify=True")
+        raise InputError(
+            "certify",
+            "the sphere criterion has no certified search",
+            "criterion 'components' (the default) with certify=True",
+        )
     options = check_mapping(options, "certify_options", "keyword arguments of the certified search") or {}
     for key in options:
         if key not in ("rtol", "tol", "max_boxes", "time_limit"):
@@ -281,17 +325,36 @@ def _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max
             break
         w, g = sampled(res.x)
         if g > 1 + tol and k < max_rounds - 1:  # missed at a sampled pose: no proof needed to go on
-            rounds.append({"n_poses": len(poses), "cost": res.cost, "worst_value": g, "worst_q": w.q,
-                           "worst_position": w.position, "upper_bound": None, "probability_lower_bound": None,
-                           "certified": None, "boxes": 0})
+            rounds.append(
+                {
+                    "n_poses": len(poses),
+                    "cost": res.cost,
+                    "worst_value": g,
+                    "worst_q": w.q,
+                    "worst_position": w.position,
+                    "upper_bound": None,
+                    "probability_lower_bound": None,
+                    "certified": None,
+                    "boxes": 0,
+                }
+            )
             poses = poses + [w.q]
             continue
         # a decision, not the tightest bound: prove the specification met to tol, or find the worst
         # pose (to the search's tolerance), which joins the imposed poses
         goal = p - EXACT_SLACK if exact else (1.0 + tol) * R / z
-        cert = certify_worst_pose(mechanism, res.x, distribution, "components" if exact else "sigma", R,
-                                  "exact" if exact else "gaussian", x0=np.array(poses + [w.q]), progress=progress,
-                                  target=goal, **options)
+        cert = certify_worst_pose(
+            mechanism,
+            res.x,
+            distribution,
+            "components" if exact else "sigma",
+            R,
+            "exact" if exact else "gaussian",
+            x0=np.array(poses + [w.q]),
+            progress=progress,
+            target=goal,
+            **options,
+        )
         q = cert.q
         if exact:
             p_lb = cert.probability_lower_bound
@@ -302,10 +365,19 @@ def _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max
             p_lb = cert.probability_lower_bound
             worst = cert.best_value * z / R
             meets, violated = ub_ratio <= 1 + tol, worst > 1 + tol / 2
-        rounds.append({"n_poses": len(poses), "cost": res.cost, "worst_value": worst, "worst_q": q,
-                       "worst_position": np.asarray(mechanism.fk(q, check_limits=False))[:3, 3],
-                       "upper_bound": ub_ratio, "probability_lower_bound": p_lb, "certified": cert.certified,
-                       "boxes": cert.boxes})
+        rounds.append(
+            {
+                "n_poses": len(poses),
+                "cost": res.cost,
+                "worst_value": worst,
+                "worst_q": q,
+                "worst_position": np.asarray(mechanism.fk(q, check_limits=False))[:3, 3],
+                "upper_bound": ub_ratio,
+                "probability_lower_bound": p_lb,
+                "certified": cert.certified,
+                "boxes": cert.boxes,
+            }
+        )
         if meets:
             converged, reason = True, ""
             break
@@ -313,5 +385,14 @@ def _certified_exchange(mechanism, R, p, z, distribution, alpha, poses, tol, max
             reason = f"the certified search did not close its gap ({cert.reason or 'bound above the specification'})"
             break
         poses = poses + [q]
-    return WorkspaceSynthesis(res, poses, rounds, converged, certified=converged, upper_bound=ub_ratio,
-                              probability_lower_bound=p_lb, certificate=cert, reason=reason)
+    return WorkspaceSynthesis(
+        res,
+        poses,
+        rounds,
+        converged,
+        certified=converged,
+        upper_bound=ub_ratio,
+        probability_lower_bound=p_lb,
+        certificate=cert,
+        reason=reason,
+    )

@@ -34,9 +34,24 @@ __all__ = ["synthesize_worst_case"]
 _NO_P = 0.5
 
 
-def synthesize_worst_case(mechanism, R, *, p=None, alpha=0.7, solver="ipopt", k=None, bounds=None, pose="worst",
-                          poses=None, Phi=None, cost=None, x0=None, options=None, inputs=None,
-                          statistical=None) -> WorstCaseResult:
+def synthesize_worst_case(
+    mechanism,
+    R,
+    *,
+    p=None,
+    alpha=0.7,
+    solver="ipopt",
+    k=None,
+    bounds=None,
+    pose="worst",
+    poses=None,
+    Phi=None,
+    cost=None,
+    x0=None,
+    options=None,
+    inputs=None,
+    statistical=None,
+) -> WorstCaseResult:
     """Cheapest tolerances whose worst case (every error at any point of its band) meets R (and Phi).
 
     ``mechanism`` is a loaded :class:`~tolsynth.kinematics.mechanism.Mechanism`; ``bounds`` and
@@ -45,29 +60,49 @@ def synthesize_worst_case(mechanism, R, *, p=None, alpha=0.7, solver="ipopt", k=
     statistical design at the same R and p; its cost goes into the result's ``statistical``.
     """
     if solver != "ipopt":
-        raise InputError("solver", f"{solver!r} with probability='worst_case'",
-                         "'ipopt' (the worst case is solved by its own exchange over sign patterns with IPOPT)")
+        raise InputError(
+            "solver",
+            f"{solver!r} with probability='worst_case'",
+            "'ipopt' (the worst case is solved by its own exchange over sign patterns with IPOPT)",
+        )
     if options is not None:
         from tolsynth.checks import check_options
 
         options = check_options(options, DEFAULT_OPTIONS)
-    spec = make_specification(mechanism, R, _NO_P, "uniform", alpha, k, bounds, pose, poses, Phi, None,
-                              "components", cost)
+    spec = make_specification(
+        mechanism, R, _NO_P, "uniform", alpha, k, bounds, pose, poses, Phi, None, "components", cost
+    )
     # no probability: z and the blocks' z / R scales are NaN, so that no Gaussian reading of this
     # specification (a multiplier, a bound) can pass for a number
-    spec = replace(spec, p=None, z=math.nan, distribution="any (worst case)", p_orientation=None,
-                   blocks=tuple(replace(b, scale=math.nan) for b in spec.blocks))
+    spec = replace(
+        spec,
+        p=None,
+        z=math.nan,
+        distribution="any (worst case)",
+        p_orientation=None,
+        blocks=tuple(replace(b, scale=math.nan) for b in spec.blocks),
+    )
     eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0), "x0", lower=TINY)
     result = solve_worst_case(spec, eps0, options)
     stat = None
     if statistical is not None and p is not None:
         try:
             other = statistical()
-            stat = {"probability": (other.inputs or {}).get("probability"), "p": float(p), "cost": float(other.cost),
-                    "success": bool(other.success), "tolerances": dict(other.tolerances)}
+            stat = {
+                "probability": (other.inputs or {}).get("probability"),
+                "p": float(p),
+                "cost": float(other.cost),
+                "success": bool(other.success),
+                "tolerances": dict(other.tolerances),
+            }
         except TolsynthError as exc:  # the statistical design is a comparison, not the answer
-            stat = {"probability": None, "p": float(p), "cost": None, "success": False,
-                    "message": f"no statistical design: {exc}"}
+            stat = {
+                "probability": None,
+                "p": float(p),
+                "cost": None,
+                "success": False,
+                "message": f"no statistical design: {exc}",
+            }
     rec = dict(inputs or {})
     rec.update(probability="worst_case", p_compared=None if p is None else float(p))
     object.__setattr__(result, "inputs", rec)
