@@ -24,6 +24,14 @@ import time
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _sigint_default() -> None:
+    """In the child: Ctrl-C's default disposition, as at a terminal (a shell's background job, or a
+    CI runner, may start the test run with SIGINT ignored, which every child would inherit)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 DELAYS = [0.02, 0.05, 0.1, 0.2, 0.4, 0.8]
 #: from this delay on the interpreter has long finished its own start-up (it takes 20-80 ms on a
 #: loaded machine): the package must have answered
@@ -40,7 +48,14 @@ def _script() -> str:
 
 
 def _interrupt(command: list[str], after: float) -> tuple[int, str]:
-    proc = subprocess.Popen(command + ARGV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    proc = subprocess.Popen(
+        command + ARGV,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+        preexec_fn=_sigint_default,
+    )
     try:
         time.sleep(after)
         proc.send_signal(signal.SIGINT)
@@ -134,7 +149,7 @@ def test_progress_reaches_a_terminal_through_the_interrupt_filter():
     argv = [_script(), "solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--everywhere"]
     master, slave = pty.openpty()
     try:
-        proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=slave, cwd=ROOT)
+        proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=slave, cwd=ROOT, preexec_fn=_sigint_default)
         os.close(slave)
         chunks = []
         while True:

@@ -18,6 +18,12 @@ from tolsynth.cli import main
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+def _sigint_default() -> None:
+    """In the child: Ctrl-C's default disposition, as at a terminal (a shell's background job, or a
+    CI runner, may start the test run with SIGINT ignored, which every child would inherit)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(argv: list[str]) -> subprocess.Popen:
     """``tolsynth ARGV`` in a child that says 'ready' on stderr once the package is imported, so
     that the signal lands in the command's work, not in the interpreter's start-up."""
@@ -27,7 +33,12 @@ def _start(argv: list[str]) -> subprocess.Popen:
         f"sys.exit(tolsynth.cli.main({argv!r}))\n"
     )
     return subprocess.Popen(
-        [sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT
+        [sys.executable, "-c", code],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+        preexec_fn=_sigint_default,
     )
 
 
@@ -135,7 +146,12 @@ def _command_interrupted(argv: list[str], after: float) -> tuple[int | None, str
     """``python -m tolsynth ARGV`` as a user starts it, SIGINT after ``after`` s (maybe while the
     package is still being imported); (exit status, stderr), or (None, ...) if it ended first."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "tolsynth", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT
+        [sys.executable, "-m", "tolsynth", *argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+        preexec_fn=_sigint_default,
     )
     try:
         time.sleep(after)
