@@ -207,6 +207,7 @@ def test_ball_all_normal_equals_the_gaussian_formula(rng):
     assert abs(P - stats.p_ball(lam, 1.0)) <= 1e-7
 
 
+@pytest.mark.slow  # about 4 s: the default run stays under 4 minutes
 def test_ball_and_cone_uniform_against_monte_carlo(rng):
     A = rng.normal(size=(3, 8))
     eps = rng.uniform(0.5, 1.0, 8)

@@ -224,6 +224,7 @@ def test_lagrangian_bound_holds_at_every_feasible_point(probability):
     assert float(np.sum(res.spec.k * res.x**-res.spec.alpha + w * res.x**q) - T) == pytest.approx(res.cost, rel=1e-6)
 
 
+@pytest.mark.slow  # about 4 s: the default run stays under 4 minutes
 def test_exact_feasibility_is_the_certified_cover():
     # the exact reading's leaf check: every direction proven to reach p - 1e-7; its value, P along
     # the worst direction, against a Monte Carlo of the linear model along 180 in-plane directions

@@ -58,6 +58,7 @@ def test_sweep_serial_matches_synthesize(xz, tmp_path):
     assert tolsynth.read_table(path).attrs["inputs"]["model"]["name"] == "xu_zhang_1988"
 
 
+@pytest.mark.slow  # about 4 s: the default run stays under 4 minutes
 def test_sweep_local_processes(xz):
     df = tolsynth.sweep(xz, R=[0.4, 1e-7], p=0.99, criterion=["components", "sphere"], client="processes", workers=2)
     assert df.attrs["summary"]["engine"].startswith("processes")
