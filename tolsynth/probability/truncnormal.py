@@ -32,14 +32,15 @@ from functools import lru_cache
 
 import numpy as np
 
+from tolsynth.probability.distributions import _GL48, _TN_SIGMA, _TN_SPLIT
+
 __all__ = ["cf3", "FIT_TOL"]
 
 #: largest difference allowed between an interpolant and the 48-node rule it replaces (checked
 #: at build time on points between the interpolation nodes)
 FIT_TOL = 2e-14
-_SPLIT = 5.0  # the rule's own switch between its two forms (distributions._TN_SPLIT)
-_SIGMA = 50.0  # the boundary-layer integral's cut (distributions._TN_SIGMA)
-_GL = np.polynomial.legendre.leggauss(48)
+# the rule's own switch between its two forms, its boundary-layer cut and its nodes: one copy
+_SPLIT, _SIGMA, _GL = _TN_SPLIT, _TN_SIGMA, _GL48
 
 
 class _Piecewise:
