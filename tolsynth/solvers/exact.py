@@ -220,19 +220,22 @@ def _checked(options) -> dict:
 
 
 def _gaussian_start(nlp, solver, eps0):
+    # A user's start (another R's design in a sweep) only warm-starts the Gaussian solve: the cuts
+    # are placed at this problem's Gaussian design, which is near the exact one; cuts placed at a
+    # far start took 30 times longer to move.
     if eps0 is not None:
-        return np.clip(np.asarray(eps0, dtype=float), nlp.spec.lower, nlp.spec.upper)
+        eps0 = np.clip(np.asarray(eps0, dtype=float), nlp.spec.lower, nlp.spec.upper)
     if solver == "sumt":
         from tolsynth.solvers.sumt import solve_sumt
 
-        return solve_sumt(nlp).x
+        return solve_sumt(nlp, eps0).x
     if solver == "auto":  # the compiled method where it applies: the start costs a millisecond
         from tolsynth.solvers.fast import solve_auto
 
-        return solve_auto(nlp).x
+        return solve_auto(nlp, eps0).x
     from tolsynth.solvers.ipopt import solve_ipopt
 
-    return solve_ipopt(nlp).x
+    return solve_ipopt(nlp, eps0).x
 
 
 def _gaussian_route(nlp, solver, eps0, t0):
