@@ -1,7 +1,7 @@
 """Parallel robots (hexapod, Delta, planar 3-RRR): the kinematics against independent NumPy code.
 
-The geometry is typed in here from the sources the model files cite (LinuxCNC's genhexkins default
-hexapod in inches, Williams' table of the ABB FlexPicker IRB 360, the tolsynth 3-RRR); the inverse
+The geometry is typed in here from the sources the model files cite (Nategh & Agheli's hexapod
+machine tool, Williams' table of the ABB FlexPicker IRB 360, the tolsynth 3-RRR); the inverse
 kinematics below is written from the anchors alone (a strut's length; a revolute leg's angle by the
 tangent half-angle substitution, not the package's atan2/acos form).  Nothing is read back from
 the model files to build a reference.
@@ -17,30 +17,31 @@ import pytest
 import tolsynth
 from tolsynth.errors import LoopClosureError, OutOfRangeError
 
-INCH = 25.4
 S3 = math.sqrt(3.0) / 2.0
 
-# LinuxCNC src/emc/kinematics/genhexkins.h, DEFAULT_BASE_i / DEFAULT_PLATFORM_i (inch);
-# configs/sim/axis/vismach/hexapod-sim/hexapod.ini: HOME = 0 0 20 0 0 0 (inch, deg), struts 29.7466 in
-HEX_BASE = (
-    np.array(
-        [[-22.95, 13.25, 0], [22.95, 13.25, 0], [22.95, 13.25, 0], [0, -26.5, 0], [0, -26.5, 0], [-22.95, 13.25, 0]]
-    )
-    * INCH
+# Nategh & Agheli, Int. J. Machine Tools and Manufacture 49 (2009), Table 1 (mm): base joints u_i,
+# platform joints s_i, nominal strut length 604.8652 (as typed in T. Viso's hexapod-parallel-manipulator)
+HEX_BASE = np.array(
+    [
+        [305.4001, 111.1565, 0],
+        [-56.4357, 320.0625, 0],
+        [-248.9644, 208.906, 0],
+        [-248.9644, -208.906, 0],
+        [-56.4357, -320.0625, 0],
+        [305.4001, -111.1565, 0],
+    ]
 )
-HEX_PLATFORM = (
-    np.array(
-        [
-            [-1.0, 11.5, 0],
-            [1.0, 11.5, 0],
-            [10.459, -4.884, 0],
-            [9.459, -6.616, 0],
-            [-9.459, -6.616, 0],
-            [-10.459, -4.884, 0],
-        ]
-    )
-    * INCH
+HEX_PLATFORM = np.array(
+    [
+        [92.1597, 84.4488, 0],
+        [27.055, 122.037, 0],
+        [-119.2146, 37.58822, 0],
+        [-119.2146, -37.5882, 0],
+        [27.055, -122.037, 0],
+        [92.1597, -84.4488, 0],
+    ]
 )
+HEX_LO = 604.8652
 # Williams, "The Delta Parallel Robot: Kinematics Solutions" (2016), ABB FlexPicker IRB 360-1/1600 (mm):
 # sB = 567, sP = 76, L = 524, l = 1244, and the source's formulas wB = sB sqrt(3)/6, uP = sP sqrt(3)/3,
 # wP = sP sqrt(3)/6 (p. 6)
@@ -96,7 +97,7 @@ def numpy_ik(name, pose, near):
 
 #: platform poses sampled around each model's home pose: centre and half-ranges (mm, rad)
 POSES = {
-    "stewart_gough": ([0, 0, 508.0, 0, 0, 0], [60, 60, 40, 0.06, 0.06, 0.08]),
+    "stewart_gough": ([0, 0, 690.0, 0, 0, 0], [60, 60, 60, 0.06, 0.06, 0.08]),
     "delta": ([0, 0, -900.0, 0, 0, 0], [300, 300, 150, 0, 0, 0]),
     "planar_3rrr": ([0, 0, 0.0, 0, 0, 0], [10, 10, 0, 0, 0, 0.05]),
 }
@@ -138,12 +139,14 @@ def test_fk_inverts_an_independent_ik(models, name):
 
 
 def test_home_poses_are_the_sources():
-    """LinuxCNC's hexapod home: platform level 20 in above the base, struts 29.7466 in (the ini's
-    rounding); Williams' Delta example pose (0, 0, -900) mm; the 3-RRR centred."""
+    """Nategh & Agheli's hexapod: every strut at the table's 604.8652 mm, the platform level at
+    565.40 mm (NumPy: the six struts of that pose are 604.8652 to 5e-5 mm); Williams' Delta example
+    pose (0, 0, -900) mm; the 3-RRR centred."""
     hexapod = tolsynth.load_model("stewart_gough")
-    assert np.abs(hexapod.configurations["home"] / INCH - 29.7466).max() < 5e-4
+    assert np.all(hexapod.configurations["home"] == HEX_LO)
+    assert np.abs(numpy_ik("stewart_gough", [0, 0, 565.40, 0, 0, 0], None) - HEX_LO).max() <= 5e-5
     T = hexapod.fk("home")
-    assert np.allclose(T[:3, 3], [0, 0, 20 * INCH], atol=1e-8) and np.allclose(T[:3, :3], np.eye(3), atol=1e-10)
+    assert np.allclose(T[:3, 3], [0, 0, 565.40], atol=1e-3) and np.allclose(T[:3, :3], np.eye(3), atol=1e-6)
     delta = tolsynth.load_model("delta")
     assert np.allclose(delta.fk("home")[:3, 3], [0, 0, -900], atol=1e-8)  # file's angles to 1e-10 deg
     q_w = numpy_ik("delta", [0, 0, -900, 0, 0, 0], [-0.3, -0.3, -0.3])

@@ -23,7 +23,7 @@ from tolsynth.probability.stats import z_of_p
 def _far_strut(d):
     """One strut far longer than the others can follow: a configuration that does not assemble."""
     for leg in d["leg"]:
-        leg["limits"] = [700.0, 2000.0]
+        leg["limits"] = [600.0, 2000.0]
     d["configurations"]["far"] = {"q1": 1990.0, "q2": 700.0, "q3": 700.0, "q4": 700.0, "q5": 700.0, "q6": 700.0}
 
 
@@ -85,7 +85,7 @@ def _sigma(m, q, eps, c=3.0):
 def test_synthesis_meets_the_specification(name):
     """Components: every principal sigma z / R <= 1 at the optimum (NumPy eigenvalues), certified."""
     m = tolsynth.load_model(name)
-    res = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home")
+    res = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home", probability="gaussian")
     assert res.success and res.gap <= 1e-6 * res.cost
     assert _sigma(m, "home", res.x) * z_of_p(0.99) / 0.1 <= 1 + 1e-6
 
@@ -94,12 +94,12 @@ def test_orientation_constraint_binds_on_the_hexapod():
     """A tight Phi makes the platform's rotation the active constraint and raises the cost; the
     rotation's principal sigma then meets Phi (NumPy, rows 3-5 of the sensitivity)."""
     m = tolsynth.load_model("stewart_gough")
-    free = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home")
-    tight = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home", Phi=2e-5)
+    free = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home", probability="gaussian")
+    tight = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home", Phi=3e-4, probability="gaussian")
     assert tight.success and tight.cost > 1.01 * free.cost
     So = m.sensitivity("home")[3:]
     sig_o = np.sqrt(np.linalg.eigvalsh(So @ np.diag(tight.x**2 / 3) @ So.T).max())
-    assert sig_o * z_of_p(0.99) / 2e-5 <= 1 + 1e-6
+    assert sig_o * z_of_p(0.99) / 3e-4 <= 1 + 1e-6
 
 
 def test_servo_errors_of_revolute_actuators_and_what_is_refused():
@@ -135,7 +135,7 @@ def test_workspace_design_holds_over_the_actuator_box():
     """synthesize_workspace on the Delta: at its tolerances, sigma z / R <= 1 + tol at every point
     of a brute-force grid over the actuator box (NumPy eigenvalues per pose)."""
     m = tolsynth.load_model("delta")
-    ws = tolsynth.synthesize_workspace(m, R=0.1, p=0.99, pose="home", tol=1e-3)
+    ws = tolsynth.synthesize_workspace(m, R=0.1, p=0.99, pose="home", tol=1e-3, probability="gaussian")
     assert ws.success
     lo, hi = (np.array([getattr(j, k) for j in m.spec.joints]) for k in ("lower", "upper"))
     g = np.linspace(0, 1, 7)
@@ -150,7 +150,7 @@ def test_contributions_of_anchors_and_leg_offsets():
     eps_i^2 |a_i|^2 / 3 over the sum (NumPy from the sensitivity matrix); anchors and leg offsets
     together make all of it."""
     m = tolsynth.load_model("stewart_gough")
-    res = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home")
+    res = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home", probability="gaussian")
     c = tolsynth.contributions(res)
     A = m.sensitivity("home")[:3]
     terms = res.x**2 * (A**2).sum(axis=0) / 3
@@ -169,3 +169,31 @@ def test_exact_probability_design_on_the_delta():
     assert res.success and res.gap <= 1e-5 * res.cost
     mc = tolsynth.monte_carlo(m, "home", res.x, R=0.3, n=200_000, seed=5, progress=False)
     assert np.all(mc.p_components_ci[:, 1] >= 0.99), mc.p_components_ci
+
+
+@pytest.mark.parametrize("name", ["stewart_gough", "delta", "planar_3rrr"])
+def test_exact_probability_designs_are_certified(name):
+    """probability="exact" (uniform errors) on each parallel robot: a certified optimum, and plain
+    NumPy Monte Carlo of the linear model at its tolerances finds P(|v . dr| <= R) >= p along each
+    principal direction v (within 4 standard errors of 200 000 samples).  The hexapod's 42-error
+    solve runs on IPOPT: the compiled interior-point method stops at its iteration limit there."""
+    m = tolsynth.load_model(name)
+    extra = {"solver": "ipopt"} if name == "stewart_gough" else {}
+    res = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home", probability="exact", **extra)
+    assert res.success and res.gap <= 1e-5 * res.cost, res.message
+    A = m.sensitivity("home")[:3]
+    rng = np.random.default_rng(11)
+    n = 200_000
+    w = rng.uniform(-1.0, 1.0, (n, m.n)) * res.x @ A.T
+    _, V = np.linalg.eigh(A @ np.diag(res.x**2 / 3) @ A.T)
+    for v in V.T:
+        if np.linalg.norm(A.T @ v) > 1e-12:  # a direction the errors move (the 3-RRR's z does not)
+            P = np.mean(np.abs(w @ v) <= 0.1)
+            assert P >= 0.99 - 4 * np.sqrt(0.99 * 0.01 / n), (name, P)
+
+
+@pytest.mark.xfail(reason="the compiled interior-point exact solve reaches its iteration limit on the 42-error hexapod")
+def test_exact_probability_design_on_the_hexapod_with_the_default_solver():
+    m = tolsynth.load_model("stewart_gough")
+    res = tolsynth.synthesize(m, R=0.1, p=0.99, pose="home", probability="exact")
+    assert res.success

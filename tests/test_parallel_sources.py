@@ -2,7 +2,7 @@
 
 The sources' numbers are typed in here with the citation next to them; nothing is read back from
 a model file to build a reference.  Where a source prints a computed value (a pose from actuator
-values, actuator values of a pose, strut lengths at home), the package's kinematics must give it
+values, actuator values of a pose, the nominal strut length), the package's kinematics must give it
 to the digits printed.  Also here: the certified interval search refuses a parallel robot with a
 typed error naming why (its sensitivities come from Newton's method, which intervals cannot bound).
 """
@@ -16,8 +16,6 @@ import pytest
 
 import tolsynth
 from tolsynth.errors import InputError
-
-INCH = 25.4  # mm
 
 # ---------------------------------------------------------------------------------------------
 # R. L. Williams II, "The Delta Parallel Robot: Kinematics Solutions", Internet Publication, Ohio
@@ -43,28 +41,48 @@ WILLIAMS_IPK = [((0.0, 0.0, -900.0), (-20.5, -20.5, -20.5)), ((300.0, 500.0, -11
 WILLIAMS_FPK = [((0.0, 0.0, 0.0), (0.0, 0.0, -1065.0)), ((10.0, 20.0, 30.0), (108.0, -180.0, -1244.0))]
 
 # ---------------------------------------------------------------------------------------------
-# LinuxCNC, src/emc/kinematics/genhexkins.h (generalised hexapod, derived from R. Brian Register's
-# work; the "mini tetra" configuration of EMC2's genhexkins.h), DEFAULT_BASE_i_{X,Y,Z} and
-# DEFAULT_PLATFORM_i_{X,Y,Z}, struts 0..5 (inch); and
-# configs/sim/axis/vismach/hexapod-sim/hexapod.ini: HOME = 0 0 20 0 0 0 (inch, deg), strut
-# lengths there 29.7466 in (rounded).
-LINUXCNC_BASE = [
-    (-22.950, 13.250, 0.0),
-    (22.950, 13.250, 0.0),
-    (22.950, 13.250, 0.0),
-    (0.000, -26.500, 0.0),
-    (0.000, -26.500, 0.0),
-    (-22.950, 13.250, 0.0),
+# M. J. Nategh, M. M. Agheli, "A total solution to kinematic calibration of hexapod machine tools
+# with a minimum number of measurement configurations and superior accuracies", Int. J. Machine
+# Tools and Manufacture 49 (2009): a hexapod machine tool whose "top and base platforms have
+# diameters of 250 and 650 mm".  Table 1, nominal kinematic parameters (mm): base joints u_i,
+# platform joints s_i (z = 0), nominal strut length lo_i; Table 2, the simulated "real" machine's.
+# As typed in T. Viso's hexapod-parallel-manipulator (calibration.m: u_nom, s_nom, lo_nom, u_real,
+# s_real, lo_real), columns i = 1..6; the source's strut length is l_i = lo_i + dl_i.
+NATEGH_U = [
+    (305.4001, 111.1565, 0.0),
+    (-56.4357, 320.0625, 0.0),
+    (-248.9644, 208.9060, 0.0),
+    (-248.9644, -208.9060, 0.0),
+    (-56.4357, -320.0625, 0.0),
+    (305.4001, -111.1565, 0.0),
 ]
-LINUXCNC_PLATFORM = [
-    (-1.000, 11.500, 0.0),
-    (1.000, 11.500, 0.0),
-    (10.459, -4.884, 0.0),
-    (9.459, -6.616, 0.0),
-    (-9.459, -6.616, 0.0),
-    (-10.459, -4.884, 0.0),
+NATEGH_S = [
+    (92.1597, 84.4488, 0.0),
+    (27.055, 122.037, 0.0),
+    (-119.2146, 37.58822, 0.0),
+    (-119.2146, -37.5882, 0.0),
+    (27.055, -122.037, 0.0),
+    (92.1597, -84.4488, 0.0),
 ]
-LINUXCNC_HOME_Z, LINUXCNC_HOME_STRUT = 20.0, 29.7466  # inch
+NATEGH_LO = 604.8652
+NATEGH_DIAMETERS = {"base": 650.0, "platform": 250.0}
+NATEGH_U_REAL = [
+    (305.2599, 115.0695, 2.6210),
+    (-55.2814, 322.9819, 4.2181),
+    (-244.7954, 208.0087, 3.9365),
+    (-252.5755, -211.8783, -3.0128),
+    (-53.9678, -320.6115, 4.3181),
+    (302.4266, -109.4351, 3.3812),
+]
+NATEGH_S_REAL = [
+    (96.6610, 81.7602, 1.0684),
+    (22.2476, 125.2511, -0.5530),
+    (-122.4519, 36.6453, 4.3547),
+    (-120.6859, -34.4565, -4.9014),
+    (24.7769, -125.0489, -4.8473),
+    (91.3462, -80.9866, 0.2515),
+]
+NATEGH_LO_REAL = [604.4299, 607.2473, 600.4441, 605.9031, 604.5251, 600.0616]
 
 
 def _leg_points(m):
@@ -121,18 +139,49 @@ def test_delta_forward_kinematics_reproduces_williams_examples(delta):
     assert np.abs(delta.fk("home")[:3, 3] - [0.0, 0.0, -900.0]).max() <= 1e-6
 
 
-def test_hexapod_numbers_are_linuxcnc_defaults():
-    """Leg i of the model is the source's strut i - 1, every coordinate times 25.4 (to 1e-9 mm);
-    the home pose is the ini's HOME and its strut lengths round to the ini's 29.7466 in."""
+def test_hexapod_numbers_are_nategh_and_aghelis_table():
+    """Leg i of the model is the table's column i (to 1e-9 mm); the table's joints lie on the
+    source's 650 and 250 mm circles to its 4 printed decimals (1e-4 mm)."""
     m = tolsynth.load_model("stewart_gough")
     B, C = _leg_points(m)
-    assert np.abs(B - np.array(LINUXCNC_BASE) * INCH).max() <= 1e-9
-    assert np.abs(C - np.array(LINUXCNC_PLATFORM) * INCH).max() <= 1e-9
+    assert np.abs(B - np.array(NATEGH_U)).max() <= 1e-9
+    assert np.abs(C - np.array(NATEGH_S)).max() <= 1e-9
+    for pts, d in ((NATEGH_U, "base"), (NATEGH_S, "platform")):
+        radii = np.linalg.norm(np.array(pts), axis=1)
+        assert np.abs(radii - NATEGH_DIAMETERS[d] / 2).max() <= 1e-4, (d, radii)
+    assert np.all(m.joints("home") == NATEGH_LO)
+
+
+def test_hexapod_home_is_the_tables_nominal_length():
+    """Every strut at the table's lo = 604.8652 mm puts the platform level (rotation within 1e-6 of
+    the identity, from the six struts alone, by Newton) at z = 565.40 mm; back from the anchors, the
+    six struts at that level pose all round to the printed 604.8652 (within 5e-5 mm): one length for
+    six struts, which the table's coordinates give only if they are the symmetric design it states."""
+    m = tolsynth.load_model("stewart_gough")
     T = m.fk("home")
-    assert np.abs(T[:3, 3] - [0.0, 0.0, LINUXCNC_HOME_Z * INCH]).max() <= 1e-8
-    lengths = np.linalg.norm(T[:3, 3] + C @ T[:3, :3].T - B, axis=1) / INCH
-    assert np.abs(lengths - LINUXCNC_HOME_STRUT).max() <= 5e-4
-    assert np.abs(m.joints("home") / INCH - LINUXCNC_HOME_STRUT).max() <= 5e-4
+    assert np.abs(T[:3, :3] - np.eye(3)).max() <= 1e-6
+    assert np.abs(T[:2, 3]).max() <= 1e-3 and abs(T[2, 3] - 565.40) <= 1e-3, T[:3, 3]
+    lengths = np.linalg.norm(np.array([0.0, 0.0, 565.40]) + np.array(NATEGH_S) - np.array(NATEGH_U), axis=1)
+    assert np.abs(lengths - NATEGH_LO).max() <= 5e-5, lengths
+
+
+def test_hexapod_error_parameters_read_the_sources_real_machine():
+    """The source's Table 2 machine as an error vector (real minus nominal: anchors and lo): the
+    forward kinematics at the nominal lengths (dl = 0) gives a pose at which the real anchors are
+    the real lengths lo_i apart (NumPy, to 1e-8 mm): offsets and anchors mean what the source's
+    parameters mean."""
+    m = tolsynth.load_model("stewart_gough")
+    d = np.zeros(m.n)
+    for i in range(6):
+        leg = f"L{i + 1}"
+        for k, f in enumerate("xyz"):
+            d[m.index(f"{leg}.b{f}")] = NATEGH_U_REAL[i][k] - NATEGH_U[i][k]
+            d[m.index(f"{leg}.p{f}")] = NATEGH_S_REAL[i][k] - NATEGH_S[i][k]
+        d[m.index(f"{leg}.offset")] = NATEGH_LO_REAL[i] - NATEGH_LO
+    T = m.fk("home", d)
+    legs = np.linalg.norm(T[:3, 3] + np.array(NATEGH_S_REAL) @ T[:3, :3].T - np.array(NATEGH_U_REAL), axis=1)
+    assert np.abs(legs - NATEGH_LO_REAL).max() <= 1e-8, legs
+    assert np.abs(T[:3, 3] - m.fk("home")[:3, 3]).max() > 1.0  # millimetre-sized errors move it
 
 
 def test_planar_3rrr_is_the_files_own_definition():
