@@ -380,3 +380,61 @@ def test_the_evaluations_of_the_slow_solves_are_fast(model, dist, p):
         out = f()
         assert time.perf_counter() - t0 < 8.0
         assert out is not None
+
+
+# ------------------------------------------------------------------ the solver's compiled series
+def _series_rows(rng):
+    """Rows of the four shapes (two truncated normals) with zero coefficients and a row of three
+    terms (thousands of series terms), and R per row with P inside (0.6, 0.999)."""
+    sh = tuple(shape(k) for k in ["normal", "uniform", "triangular", "truncnormal", "uniform", "truncnormal(0.5)"])
+    c = rng.uniform(0.05, 0.2, (12, len(sh)))
+    c[:, 1:][rng.random((12, len(sh) - 1)) < 0.3] = 0.0
+    c[0] = [0.0, 0.4, 0.0, 0.3, 0.25, 0.0]
+    return c, sh, np.sqrt(np.sum(c * c, axis=1))
+
+
+def test_the_compiled_series_against_the_reference_and_central_differences(rng, monkeypatch):
+    """The solver's series (compiled where a compiler is found) against the reference evaluator for
+    P, central differences of P for the gradient and of the gradient for the Hessian, and the
+    NumPy path (TOLSYNTH_NO_COMPILE) to rounding."""
+    from tolsynth.solvers import exact_kernel
+    from tolsynth.solvers.exact_series import derivatives, probability
+
+    c, sh, R = _series_rows(rng)
+    u = rng.normal(size=c.shape[1]) * 0.1
+    b = c * np.exp(u)
+    P, err = probability(b, sh, R, 1e-11)
+    ref = direction_probability_batch(b, sh, R, tol=1e-12)[0]
+    assert np.all((P > 0.6) & (P < 0.999)) and np.all(np.abs(P - ref) <= err + 1e-12)
+    P2, G, H, _, _ = derivatives(c, u, sh, R, tol=1e-12)
+    assert np.max(np.abs(P2 - ref)) < 1e-11
+    h = 1e-5
+    for i in range(c.shape[1]):
+        e = np.zeros(c.shape[1])
+        e[i] = h
+        Pp, Gp, _, _, _ = derivatives(c, u + e, sh, R, tol=1e-12)
+        Pm, Gm, _, _, _ = derivatives(c, u - e, sh, R, tol=1e-12)
+        assert np.allclose(G[:, i], (Pp - Pm) / (2 * h), atol=1e-8)
+        assert np.allclose(H[:, :, i], (Gp - Gm) / (2 * h), atol=1e-7)
+    assert np.array_equal(H, H.transpose(0, 2, 1))
+    if not exact_kernel.available():
+        pytest.skip("no C compiler: the NumPy path ran above")
+    _, _, _, _, eg = derivatives(c, u, sh, R, tol=1e-9, hessian=False, rigorous=True)
+    Pb, Gb, Hb, _, _ = derivatives(c, u, sh, 2 * R, tol=1e-10, ball=True)
+    monkeypatch.setenv("TOLSYNTH_NO_COMPILE", "1")
+    assert not exact_kernel.available()
+    Pn, en = probability(b, sh, R, 1e-11)
+    P2n, Gn, Hn, _, _ = derivatives(c, u, sh, R, tol=1e-12)
+    _, _, _, _, egn = derivatives(c, u, sh, R, tol=1e-9, hessian=False, rigorous=True)
+    Pbn, Gbn, Hbn, _, _ = derivatives(c, u, sh, 2 * R, tol=1e-10, ball=True)
+    for x, y in (
+        (P, Pn),
+        (P2, P2n),
+        (G, Gn),
+        (H, Hn),
+        (Pb, Pbn),
+        (Gb, Gbn),
+        (Hb / np.abs(Hbn).max(), Hbn / np.abs(Hbn).max()),
+    ):
+        assert np.max(np.abs(x - y)) < 1e-13
+    assert np.allclose(err, en, rtol=1e-12, atol=0) and np.allclose(eg, egn, rtol=1e-12, atol=0)

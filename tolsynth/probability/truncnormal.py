@@ -179,3 +179,22 @@ def cf3(s, beta: float, order: int = 0):
     if order == 1:
         return phi, D1, None
     return phi, D1, (4.0 * y2 * y2 - 4.0 * y2) * g + c * LLI
+
+
+@lru_cache(maxsize=None)
+def packed(beta: float) -> np.ndarray:
+    """The interpolants of :func:`cf3` at ``beta`` as one flat array, for a compiled evaluator of
+    the same formulas: ``[beta, x, c, split, offset of each of the 4 interpolants]`` and then each
+    interpolant as ``[a, h, pieces, degree, functions, coefficients (degree + 1, functions,
+    pieces) in C order]`` (the small-argument ``I``, then ``C, S`` and their first and second
+    derivatives)."""
+    x, c, small, large = _tables(float(beta))
+    blocks, offsets, at = [], [], 8
+    for fit in (small,) + tuple(large):
+        blk = np.concatenate([[fit.a, fit.h, fit.pieces, fit.degree, fit.coef.shape[1]], fit.coef.ravel()])
+        offsets.append(at)
+        blocks.append(blk)
+        at += blk.size
+    out = np.concatenate([[beta, x, c, _SPLIT], offsets, *blocks])
+    out.setflags(write=False)
+    return out

@@ -31,6 +31,7 @@ import numpy as np
 
 from tolsynth.probability.distributions import Shape
 from tolsynth.probability.truncnormal import cf3 as truncnormal_cf3
+from tolsynth.solvers import exact_kernel
 
 __all__ = ["Rows", "probability", "derivatives", "NORMAL_REACH"]
 
@@ -133,6 +134,10 @@ class Rows:
         row (-> (M,)), or with ``candidates`` the same T values for every row (-> (M, T));
         ``drop``: without the factors of that column (the gradient's tail)."""
         K = np.asarray(K, dtype=float)
+        if not candidates:
+            out = exact_kernel.tail(self, b, L, np.broadcast_to(K, (b.shape[0],)), drop)
+            if out is not None:
+                return out
         Kc = K[None, :] if candidates else K[:, None]  # (1, T) or (M, 1)
         if self.f_idx.size:
             bf = b[:, self.f_idx]
@@ -165,6 +170,9 @@ class Rows:
     def terms(self, b: np.ndarray, L: np.ndarray, tol: float, kmax: float = 2.0**16) -> np.ndarray:
         """The K of each row: the least power of two whose tail bound is below ``tol`` (at most kmax)."""
         Ks = _KS[_KS <= kmax]
+        K = exact_kernel.terms(self, b, L, Ks, tol)
+        if K is not None:
+            return K
         ok = self.tail(b, L, Ks, candidates=True) <= tol
         j = np.where(ok.any(axis=1), ok.argmax(axis=1), len(Ks) - 1)
         return Ks[j].astype(int)
@@ -282,7 +290,13 @@ def probability(b, shapes: tuple, R, tol: float = 1e-10):
         if closed:
             K = K.copy()
             K[list(closed)] = 0
-    for Kg in np.unique(K[K > 0]):
+    done = False
+    if K.any():  # every row in one call of the compiled kernel, where it can be had
+        r = np.flatnonzero(K > 0)
+        out = exact_kernel.series(b[r], Rv[r], L[r], K[r], rw, 0)
+        if out is not None:
+            P[r], done = out[0], True
+    for Kg in np.unique(K[K > 0]) if not done else ():
         rows = np.flatnonzero(K == Kg)
         k = np.arange(1, Kg + 1, dtype=float)
         step = max(1, 1_000_000 // (Kg * b.shape[1]))
@@ -385,7 +399,15 @@ def derivatives(
             H[r] = Hr
     series = np.ones(M, dtype=bool)
     series[list(closed)] = False
-    for Kg in np.unique(K[series]):
+    done = False
+    if series.any():  # every row in one call of the compiled kernel, where it can be had
+        r = np.flatnonzero(series)
+        out = exact_kernel.series(b[r], Rv[r], L[r], K[r], rw, 2 if hessian else 1, ball)
+        if out is not None:
+            P[r], G[r], done = out[0], out[1], True
+            if hessian:
+                H[r] = out[2]
+    for Kg in np.unique(K[series]) if not done else ():
         rows = np.flatnonzero(series & (K == Kg))
         step = max(1, 400_000 // (int(Kg) * n))  # rows per batch: a few MB of work arrays
         for a in range(0, rows.size, step):
