@@ -35,7 +35,10 @@ def _check_against_synthesize(df, mech):
             criterion=row["criterion"],
             solver=row["solver"],
         )
-        assert row["status"] == str(ref.status) == "optimal" and row["success"] and row["error"] == ""
+        # the sphere's design is met but not proven optimal (its problem is not known to be convex)
+        proven = row["criterion"] == "components"
+        assert row["status"] == str(ref.status) == ("optimal" if proven else "feasible") and row["error"] == ""
+        assert bool(row["success"]) is proven
         assert row["cost"] == pytest.approx(ref.cost, rel=1e-8)
         if row["criterion"] == "components":  # certified; the sphere's bound is its relaxation's
             assert row["gap"] <= 1e-6 * row["cost"]

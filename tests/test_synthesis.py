@@ -381,22 +381,24 @@ def sphere_probability(mech, eps, R, dist, pose="worst"):
 
 def test_sphere_criterion_meets_p_exactly_and_costs_more(xz):
     R, p = 0.5, 0.99
-    sph = synthesize(xz, R, p, "uniform", 0.7, criterion="sphere")
-    comp = synthesize(xz, R, p, "uniform", 0.7)
-    assert sph.success, sph.message
+    sph = synthesize(xz, R, p, "uniform", 0.7, criterion="sphere", probability="gaussian")
+    comp = synthesize(xz, R, p, "uniform", 0.7, probability="gaussian")
+    # met, but not proven optimal (the sphere problem is not known to be convex)
+    assert sph.status is Status.FEASIBLE and sph.feasible and not sph.success, sph.message
     assert sphere_probability(xz, sph.x, R, "uniform") == pytest.approx(p, abs=1e-8)
     # the components optimum does not meet the sphere demand; the sphere optimum costs more
     assert sphere_probability(xz, comp.x, R, "uniform") < p - 0.01
     assert comp.cost < sph.cost
-    # the lower bound is the components optimum (which contains the sphere problem)
-    assert sph.lower_bound == pytest.approx(comp.cost, rel=1e-8)
+    # the lower bound is at least the components optimum (which contains the sphere problem)
+    assert comp.cost * (1 - 1e-8) <= sph.lower_bound < sph.cost
     assert sph.constraints[0].kind == "sphere" and sph.constraints[0].active.all()
 
 
 def test_sphere_criterion_scaling_laws(xz):
-    base = synthesize(xz, 0.5, 0.95, "uniform", 0.7, criterion="sphere", options=TIGHT)
-    scaled = synthesize(xz, 0.8, 0.95, "uniform", 0.7, criterion="sphere", options=TIGHT)
-    normal = synthesize(xz, 0.5, 0.95, "normal", 0.7, criterion="sphere", options=TIGHT)
+    kw = dict(criterion="sphere", options=TIGHT, probability="gaussian")
+    base = synthesize(xz, 0.5, 0.95, "uniform", 0.7, **kw)
+    scaled = synthesize(xz, 0.8, 0.95, "uniform", 0.7, **kw)
+    normal = synthesize(xz, 0.5, 0.95, "normal", 0.7, **kw)
     np.testing.assert_allclose(scaled.x, base.x * 0.8 / 0.5, rtol=1e-6)
     np.testing.assert_allclose(normal.x, base.x * math.sqrt(3.0), rtol=1e-6)
 
@@ -404,7 +406,7 @@ def test_sphere_criterion_scaling_laws(xz):
 def test_sphere_criterion_ipopt_and_sumt_agree():
     mech = tolsynth.load_model("planar_2r")
     c = tolsynth.compare(mech, 0.2, 0.9, "uniform", 0.7, pose="elbow90", criterion="sphere")
-    assert c.ipopt.success and c.sumt.success
+    assert c.ipopt.status is c.sumt.status is Status.FEASIBLE  # met; the sphere has no optimality proof
     assert c.cost_rel_diff < 1e-6
     assert max(c.tolerance_rel_diff.values()) < 1e-3
     assert sphere_probability(mech, c.ipopt.x, 0.2, "uniform", "elbow90") == pytest.approx(0.9, abs=1e-8)

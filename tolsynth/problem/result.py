@@ -2,7 +2,10 @@
 
 Each solver module owns the table from its own return codes to :class:`Status`; only
 ``Status.OPTIMAL`` counts as ``success``.  A result whose ``success`` is False carries the solver's
-last iterate for inspection, but is never to be read as an optimum.
+last iterate for inspection, but is never to be read as an optimum.  ``Status.FEASIBLE`` is the one
+non-success whose design is usable: it meets the specification by an independent check, but no
+certificate proves it optimal (the sphere criterion, a problem not known to be convex);
+:attr:`SynthesisResult.feasible` is True for it and for ``OPTIMAL``.
 """
 
 from __future__ import annotations
@@ -23,6 +26,9 @@ class Status(str, enum.Enum):
 
     OPTIMAL = "optimal"  # converged to the requested tolerances
     OPTIMAL_INACCURATE = "optimal_inaccurate"  # stopped at a looser, "acceptable" level
+    #: meets the specification (checked independently), optimality not proven: the problem is not
+    #: known to be convex, and its lower bound (reported with its gap) need not be tight
+    FEASIBLE = "feasible"
     INFEASIBLE = "infeasible"  # the solver concluded that no feasible point exists
     ITERATION_LIMIT = "iteration_limit"  # stopped by an iteration / evaluation limit
     NUMERICAL_ERROR = "numerical_error"  # stopped by a numerical difficulty
@@ -65,6 +71,8 @@ class SynthesisResult(Tabular):
         ``sum k_i eps_i**-alpha_i`` in the paper's cost units.
     success, status, message
         ``success`` is True only for ``Status.OPTIMAL``; ``message`` is the solver's own reason.
+        ``Status.FEASIBLE`` (``success`` False, :attr:`feasible` True): the design meets the
+        specification, but its optimality is not proven (the gap says by how much it may miss).
     constraints : tuple of ConstraintBlock
         ``sigma_j z / R`` per pose and kind, with activity and multipliers.
     bounds_active : dict
@@ -74,8 +82,8 @@ class SynthesisResult(Tabular):
     lower_bound, gap : float
         Lagrangian (dual) lower bound on the optimal cost from the constraint multipliers, and
         ``cost - lower_bound``; the problem is convex, so a small gap certifies global optimality.
-        (Sphere criterion: the certified optimum of the per-component relaxation, a valid but
-        not tight bound.)
+        (Sphere criterion: the optimum of a relaxation whose feasible set contains the sphere's,
+        a valid bound but not a tight one; the status is then ``FEASIBLE``, not ``OPTIMAL``.)
     iterations, function_evaluations : int
         For IPOPT: iterations and NLP function evaluations; for SUMT: Powell iterations summed
         over the outer loop, and penalty-function evaluations.
@@ -118,6 +126,12 @@ class SynthesisResult(Tabular):
     def x(self) -> np.ndarray:
         """Tolerances as a vector in the model's parameter order."""
         return np.array(list(self.tolerances.values()))
+
+    @property
+    def feasible(self) -> bool:
+        """True if the design meets the specification by an independent check: ``OPTIMAL`` (and
+        proven optimal) or ``FEASIBLE`` (optimality not proven)."""
+        return self.status in (Status.OPTIMAL, Status.FEASIBLE)
 
     @property
     def probability_kind(self) -> str:
@@ -184,9 +198,10 @@ class SynthesisResult(Tabular):
         )
 
     def to_dict(self) -> dict:
-        """Plain dict for JSON (tolerances, units, cost, bound, gap, constraints, bounds, counts, time)."""
+        """Plain dict for JSON (probability kind, tolerances, units, cost, bound, gap, constraints, bounds, counts, time)."""
         return {
             "solver": self.solver,
+            "probability": self.probability_kind,
             "status": str(self.status),
             "success": self.success,
             "message": self.message,

@@ -495,10 +495,12 @@ def _costs_and_locks(mechanism, cost, locks, bounds):
 
 def _refine_sphere(nlp, spec, result, solver, options):
     """The NLP's sphere probability is a fixed quadrature: checked at the optimum against the
-    error-controlled one, and the solve repeated with twice the nodes until they agree."""
+    error-controlled one, and the solve repeated with twice the nodes until they agree.  A design
+    that meets the sphere has status ``FEASIBLE`` (its optimality is not proven; its lower bound and
+    gap come from relaxations, :func:`tolsynth.solvers.common.assemble`)."""
     from dataclasses import replace
 
-    while result.success:
+    while result.feasible:
         exact = np.array([P for _, _, P in nlp.sphere_values(result.x)])
         off = np.max(np.abs(nlp.sphere_quadrature(result.x) - exact))
         if off <= SPHERE_QUADRATURE_TOL:
