@@ -139,6 +139,35 @@ def test_delta_forward_kinematics_reproduces_williams_examples(delta):
     assert np.abs(delta.fk("home")[:3, 3] - [0.0, 0.0, -900.0]).max() <= 1e-6
 
 
+def test_delta_arm_range_covers_the_examples_and_stays_clear_of_singularities(delta):
+    """The file's arm range (-30 to 60 deg, its assumption) holds every arm angle of the source's
+    worked examples, and over a 9^3 grid of it (NumPy: arm ends from the source's geometry, the
+    links' unit directions as the rows of df/dx at the forward kinematics' platform position) every
+    link closes to 1e-8 mm, df/dx has condition number <= 4.4 and the platform stays 740 to 1640 mm
+    below the base: no pose of the box is near a singularity."""
+    lo, hi = (np.degrees([getattr(j, k) for j in delta.spec.joints]) for k in ("lower", "upper"))
+    assert np.allclose(lo, -30.0) and np.allclose(hi, 60.0)
+    examples = np.array([a for _, a in WILLIAMS_IPK] + [a for a, _ in WILLIAMS_FPK])
+    assert lo[0] <= examples.min() and examples.max() <= hi[0]
+    w = WILLIAMS
+    s3 = math.sqrt(3.0)
+    wB, uP, wP = s3 / 6 * w["sB"], s3 / 3 * w["sP"], s3 / 6 * w["sP"]
+    base = np.array([[0, -wB, 0], [s3 / 2 * wB, wB / 2, 0], [-s3 / 2 * wB, wB / 2, 0]])
+    plat = np.array([[0, -uP, 0], [w["sP"] / 2, wP, 0], [-w["sP"] / 2, wP, 0]])
+    out = base / np.linalg.norm(base, axis=1)[:, None]  # radially outward; theta > 0 turns it down
+    down = np.array([0.0, 0.0, -1.0])
+    g = np.radians(np.linspace(-30.0, 60.0, 9))
+    conds, heights = [], []
+    for th in np.array(np.meshgrid(g, g, g)).reshape(3, -1).T:
+        p = delta.fk(th)[:3, 3]
+        A = base + w["L"] * (np.cos(th)[:, None] * out + np.sin(th)[:, None] * down)
+        d = p + plat - A
+        assert np.abs(np.linalg.norm(d, axis=1) - w["l"]).max() <= 1e-8
+        conds.append(np.linalg.cond(d / w["l"]))
+        heights.append(p[2])
+    assert max(conds) <= 4.4 and -1640.0 <= min(heights) and max(heights) <= -740.0, (max(conds), heights)
+
+
 def test_hexapod_numbers_are_nategh_and_aghelis_table():
     """Leg i of the model is the table's column i (to 1e-9 mm); the table's joints lie on the
     source's 650 and 250 mm circles to its 4 printed decimals (1e-4 mm)."""
