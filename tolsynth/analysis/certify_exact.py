@@ -45,6 +45,8 @@ EVAL_TOL = 1e-9
 EXACT_TOL = 2e-7
 #: the Hessian's graph is used when it has at most this many times the Jacobian's operations
 HESSIAN_FACTOR = 4.0
+#: the same with the compiled interval interpreter (evaluations cheaper than the boxes they save)
+HESSIAN_FACTOR_COMPILED = 16.0
 
 
 class ComponentBounds:
@@ -86,7 +88,8 @@ class ComponentBounds:
         self.centre = IntervalFunction(ca.Function("yJ", [x], [y, J]))
         H = ca.densify(ca.vertcat(*[ca.vec(ca.hessian(y[i], x)[0]) for i in range(self.m)]))
         hess = IntervalFunction(ca.Function("yH", [x], [y, H]))
-        self.use_hessian = hess.n_operations <= HESSIAN_FACTOR * self.centre.n_operations
+        factor = HESSIAN_FACTOR_COMPILED if hess.compiled else HESSIAN_FACTOR
+        self.use_hessian = hess.n_operations <= factor * self.centre.n_operations
         self.box = hess if self.use_hessian else self.centre
         self.corners = np.array(list(itertools.product([-1.0, 1.0], repeat=self.d)))
         self.threshold = np.inf  # boxes whose cheap bound is above this need no corners (kept current)

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from tolsynth.analysis.interval_c import compiled_program, evaluate_compiled, library
 from tolsynth.analysis.interval_ops import BINARY, MULC_NEG, MULC_POS, OP_NAMES, SUPPORTED_OPERATIONS, UNARY, Context
 from tolsynth.analysis.interval_ops import round_down as _dn
 from tolsynth.analysis.interval_ops import round_up as _up
@@ -152,6 +153,7 @@ class IntervalFunction:
             return i if t == "x" else n_x + i if t == "c" else int(new[i])
 
         self._program = []
+        groups = []  # (operation, start, end, arguments, constants): the compiled interpreter's input
         start = 0
         while start < len(order):
             end = start
@@ -163,6 +165,7 @@ class IntervalFunction:
             fn = UNARY.get(key[1]) or BINARY[key[1]]
             k = np.array([extra[m] for m in members])[:, None] if extra[members[0]] is not None else None
             self._program.append((fn, n_x + n_c + start, n_x + n_c + end, arg_idx, k))
+            groups.append((key[1], n_x + n_c + start, n_x + n_c + end, arg_idx, k))
             start = end
         self.n_nodes = n_x + n_c + len(ops)
         # outputs: node of every dense entry (column-major), structural zeros read the constant 0
@@ -178,10 +181,16 @@ class IntervalFunction:
             out_idx.append(dense)
         self._out_split = np.cumsum([len(d) for d in out_idx])[:-1]
         self._out_idx = np.concatenate(out_idx) if out_idx else np.zeros(0, dtype=int)
+        self._compiled = compiled_program(groups, n_x, self._consts, self._out_idx)
 
     @property
     def n_operations(self) -> int:
         return self.n_nodes - self.n_x - len(self._consts)
+
+    @property
+    def compiled(self) -> bool:
+        """Whether :meth:`evaluate` runs the compiled interpreter (:mod:`tolsynth.analysis.interval_c`)."""
+        return self._compiled is not None and library() is not None
 
     @property
     def n_groups(self) -> int:
@@ -231,6 +240,14 @@ class IntervalFunction:
     def evaluate(self, XL: np.ndarray, XH: np.ndarray):
         """Unchecked core: ``XL, XH`` of shape (n_boxes, n_x) -> output lower and upper bounds of
         shape (n_boxes, n_out_dense) (outputs concatenated, column-major) and ``regular``."""
+        fn = library() if self._compiled is not None else None
+        if fn is not None:
+            return evaluate_compiled(fn, self._compiled, self.n_x, self.n_nodes, XL, XH)
+        return self.evaluate_numpy(XL, XH)
+
+    def evaluate_numpy(self, XL: np.ndarray, XH: np.ndarray):
+        """:meth:`evaluate` by the NumPy extensions, a group of operations over a chunk of boxes at
+        a time (the path without a compiler, and the reference of the compiled one)."""
         n = XL.shape[0]
         OL = np.empty((n, len(self._out_idx)))
         OH = np.empty_like(OL)
