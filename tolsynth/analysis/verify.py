@@ -144,7 +144,7 @@ def closed_loop(
                 "success": result.success,
             }
         )
-        if ci[0] >= p or not result.success:
+        if ci[0] >= p or not result.feasible:  # (FEASIBLE: met, optimality not proven, as the sphere's)
             break
         if rnd == max_rounds - 1:
             break

@@ -72,7 +72,13 @@ def _cmd_report(args) -> int:
         for name, why in rep.skipped.items():
             print(f"left out     {name}: {why}")
         print(f"time         {rep.elapsed_s:.2f} s")
-    if not res.success:
+    if res.feasible and not res.success:  # a design that meets the specification, its optimality not proven
+        print(
+            f"tolsynth report: status {res.status}: the design meets the specification (checked), but its "
+            f"optimality is not proven (gap {res.gap / res.cost:.1%} of the cost)",
+            file=sys.stderr,
+        )
+    elif not res.success:
         print(
             "tolsynth report: the solver did not converge; the report says so and shows its last iterate",
             file=sys.stderr,

@@ -79,7 +79,7 @@ def _layout(rep) -> list[tuple]:
             "unless stated; each tolerance in its parameter's own unit; cost in the model's cost units.",
         )
     )
-    if not res.success:
+    if not res.feasible:  # (a FEASIBLE design meets the specification; section 3 says what is not proven)
         B.append(
             (
                 "note",
@@ -244,8 +244,9 @@ def _layout(rep) -> list[tuple]:
         B.append(
             (
                 "p",
-                "The sphere criterion is not known to be convex: the bound is the optimum of the per-component "
-                "relaxation, valid but not tight.",
+                "The sphere criterion is not known to be convex: the design meets it (checked), but its optimality "
+                "is not proven; the bound is the better of two relaxations (the per-component problem at the same "
+                "p, and the box of the independent principal components), valid but not tight.",
             )
         )
     elif not spec.convex:

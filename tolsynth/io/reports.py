@@ -316,7 +316,7 @@ def report(
     validations = []
     if mc_samples == 0:
         skipped["montecarlo"] = "switched off (mc_samples = 0)"
-    elif not result.success:
+    elif not result.feasible:
         skipped["montecarlo"] = "the solver did not converge; nothing to validate"
     else:
         from tolsynth.analysis.validation import validate

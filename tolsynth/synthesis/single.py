@@ -301,7 +301,7 @@ def synthesize(
     )
     if chosen is not None:
         result.inputs["default_pose"] = chosen
-    if result.success:
+    if result.feasible:
         from tolsynth.analysis.validation import WorkspaceCheck
 
         # computed only when read (summary, reports, the command line): a sweep pays nothing

@@ -260,7 +260,7 @@ def synthesize_workspace(
     try:
         for k in range(max_rounds):
             res = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
-            if not res.success:
+            if not res.feasible:  # (the sphere's designs are FEASIBLE: met, optimality not proven)
                 reason = f"the solve at {len(poses)} pose(s) did not succeed: {res.message}"
                 break
             w, g = search_at(res.x, coarse)
