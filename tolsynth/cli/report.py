@@ -48,6 +48,7 @@ def _cmd_report(args) -> int:
             map_plane=args.plane,
             map_hand_axis=_hand_axis(args.hand_axis),
             worst_grid=args.worst_grid,
+            certify=args.certify,
             **kw,
         )
     files = rep.write(args.out, fmt)
@@ -142,6 +143,12 @@ def register(sub) -> None:
         default=None,
         help="grid points per joint of the worst-pose search (0: no search); "
         "default: the search's own (a grid under 20000 points)",
+    )
+    p.add_argument(
+        "--certify",
+        action="store_true",
+        help="also prove a bound of the largest principal sigma over the whole joint space (branch and "
+        "bound), shown in the report's certificate section",
     )
     p.add_argument(
         "--out",

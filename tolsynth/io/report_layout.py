@@ -8,6 +8,8 @@ import math
 
 import numpy as np
 
+from tolsynth.io.report_certificate import certificate_blocks
+
 PLOT_INSTALL = 'pip install "tolsynth[plot]"'
 
 
@@ -555,6 +557,7 @@ def _layout(rep) -> list[tuple]:
             )
     else:
         B.append(("note", "Worst pose: " + rep.skipped.get("worst", "not searched")))
+    B += certificate_blocks(rep)
 
     # inputs
     from tolsynth.tabular import _synthesis_inputs, jsonable

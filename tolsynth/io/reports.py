@@ -5,7 +5,9 @@ reviewer needs beside the tolerances, each from the module that owns it:
 
 - the specification and the model, with the model file's source and assumptions;
 - the optimal tolerance table (units, bounds, active bounds, cost model or process; :mod:`tolsynth.io.tables`);
-- the certificate: dual lower bound and gap (:class:`~tolsynth.SynthesisResult`);
+- the certificate: dual lower bound and gap (:class:`~tolsynth.SynthesisResult`), and over the whole
+  joint space the certified exchange's or worst-pose search's proven bound when there is one
+  (:mod:`tolsynth.io.report_certificate`);
 - each parameter's share of the error (:func:`tolsynth.contributions`);
 - a Monte Carlo check through the nonlinear kinematics with its confidence intervals
   (:func:`tolsynth.validate`);
@@ -67,6 +69,8 @@ class DesignReport:
         Monte Carlo samples, seed, confidence, map resolution and plane, worst-pose grid.
     elapsed_s : float
         Seconds spent gathering (solve included when :func:`report` solved).
+    workspace : WorkspaceSynthesis or None
+        The workspace design the report was made of (its certified exchange shown), if one was given.
     """
 
     mechanism: Any
@@ -80,6 +84,7 @@ class DesignReport:
     elapsed_s: float
     processes: dict | None = None
     process_choice: Any = None
+    workspace: Any = None
     created: str = field(default_factory=lambda: _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"))
 
     # ------------------------------------------------------------------ layout
@@ -188,6 +193,7 @@ def report(
     map_plane: str = "xz",
     map_hand_axis=(0.0, 0.0, 1.0),
     worst_grid: int | None = None,
+    certify: bool = False,
     path=None,
     format: str | None = None,
     **kwargs,
@@ -196,11 +202,13 @@ def report(
 
     Parameters
     ----------
-    source : Mechanism, str, SynthesisResult or ProcessChoice
+    source : Mechanism, str, SynthesisResult, WorkspaceSynthesis or ProcessChoice
         A model (loaded, a bundled name or a file path), solved here with ``R``, ``p``,
         ``distribution``, ``alpha`` and ``kwargs`` as :func:`tolsynth.synthesize`; or a result
         already solved (then ``mechanism`` is the model it was solved on; default: the model
-        recorded in the result, loaded again by its file or name).
+        recorded in the result, loaded again by its file or name).  A workspace design
+        (:func:`tolsynth.synthesize_workspace`) is reported by its last solve, with its certified
+        exchange's bound when it has one.
     R, p, distribution, alpha
         As :func:`tolsynth.synthesize` (mm; probability per principal component).
     mechanism : Mechanism, optional
@@ -219,6 +227,9 @@ def report(
         As ``plane`` and ``hand_axis`` of :func:`tolsynth.probability_map`.
     worst_grid : int or None
         Grid points per joint of the worst-pose search (0: no search; None: its default).
+    certify : bool
+        Also prove a bound of the largest principal sigma over the whole continuous joint space
+        (:func:`tolsynth.worst_pose` with ``certify=True``), shown in the certificate section.
     path : str or path, optional
         Write the report there (see :meth:`DesignReport.write`).
     format : {"html", "md"}, optional
@@ -249,8 +260,12 @@ def report(
     from tolsynth.kinematics.mechanism import as_mechanism
     from tolsynth.problem.result import SynthesisResult
     from tolsynth.synthesis.processes import ProcessChoice
+    from tolsynth.synthesis.workspace import WorkspaceSynthesis
 
     t0 = time.perf_counter()
+    workspace = None
+    if isinstance(source, WorkspaceSynthesis):
+        workspace, source = source, source.result
     if path is not None:
         check_report_path(path, format)
     mc_samples = check_count(mc_samples, "mc_samples", 0)
@@ -370,7 +385,14 @@ def report(
 
         try:
             worst = worst_pose(
-                mech, result.tolerances, criterion="sigma", R=spec.R, distribution=spec.distribution, grid=worst_grid
+                mech,
+                result.tolerances,
+                criterion="sigma",
+                R=spec.R,
+                distribution=spec.distribution,
+                grid=worst_grid,
+                certify=bool(certify),
+                progress=False,
             )
         except TolsynthError as exc:
             skipped["worst"] = f"not searched: {exc}"
@@ -387,6 +409,7 @@ def report(
         elapsed_s=time.perf_counter() - t0,
         processes=procs,
         process_choice=choice,
+        workspace=workspace,
     )
     if path is not None:
         rep.write(path, format)
