@@ -97,7 +97,7 @@ def numpy_ik(name, pose, near):
 
 #: platform poses sampled around each model's home pose: centre and half-ranges (mm, rad)
 POSES = {
-    "stewart_gough": ([0, 0, 690.0, 0, 0, 0], [60, 60, 60, 0.06, 0.06, 0.08]),
+    "stewart_gough": ([0, 0, 600.0, 0, 0, 0], [20, 20, 25, 0.03, 0.03, 0.04]),
     "delta": ([0, 0, -900.0, 0, 0, 0], [300, 300, 150, 0, 0, 0]),
     "planar_3rrr": ([0, 0, 0.0, 0, 0, 0], [10, 10, 0, 0, 0, 0.05]),
 }

@@ -194,6 +194,32 @@ def test_hexapod_home_is_the_tables_nominal_length():
     assert np.abs(lengths - NATEGH_LO).max() <= 5e-5, lengths
 
 
+def test_hexapod_strut_box_is_well_conditioned():
+    """The file's strut box (600 to 640 mm, its assumption): at the 2^6 corners and 200 random strut
+    vectors of it the platform assembles, its struts close to 1e-8 mm (NumPy, from the table's
+    anchors), and df/dx (rows: the struts' unit directions u and (R s) x u / 125 mm) has condition
+    number <= 12.1, with 6.744 at home (the rotation columns here are small rotations about the
+    base axes, the package's are its rx, ry, rz: the two agree at the level home pose)."""
+    m = tolsynth.load_model("stewart_gough")
+    U, S = np.array(NATEGH_U), np.array(NATEGH_S)
+
+    def cond(q):
+        T = m.fk(q)
+        c = S @ T[:3, :3].T
+        d = T[:3, 3] + c - U
+        assert np.abs(np.linalg.norm(d, axis=1) - q).max() <= 1e-8
+        u = d / np.linalg.norm(d, axis=1)[:, None]
+        return np.linalg.cond(np.c_[u, np.cross(c, u) / 125.0])
+
+    assert abs(cond(m.joints("home")) - 6.744) <= 1e-3
+    lo, hi = (np.array([getattr(j, k) for j in m.spec.joints]) for k in ("lower", "upper"))
+    assert np.all(lo == 600.0) and np.all(hi == 640.0)
+    corners = np.array(np.meshgrid(*[[600.0, 640.0]] * 6)).reshape(6, -1).T
+    Q = np.r_[corners, lo + (hi - lo) * np.random.default_rng(5).uniform(0, 1, (200, 6))]
+    conds = [cond(q) for q in Q]
+    assert max(conds) <= 12.1, max(conds)
+
+
 def test_hexapod_error_parameters_read_the_sources_real_machine():
     """The source's Table 2 machine as an error vector (real minus nominal: anchors and lo): the
     forward kinematics at the nominal lengths (dl = 0) gives a pose at which the real anchors are
