@@ -157,7 +157,9 @@ def cmd_sweep(args) -> int:
             print(f"row {row['row']}: {row['error']}")
         s = df.attrs["summary"]
         print(
-            f"{s['rows']} solves, {s['succeeded']} succeeded, {s['failed']} failed; {s['engine']}; "
+            f"{s['rows']} solves, {s['succeeded']} succeeded, "
+            + (f"{s['feasible']} met but not proven optimal, " if s.get("feasible") else "")
+            + f"{s['failed']} failed; {s['engine']}; "
             f"{s['elapsed_s']:.2f} s ({s['rows_per_s']:.1f} rows/s)" + (f"; written to {args.out}" if args.out else "")
         )
     failed = int(df.attrs["summary"]["failed"])

@@ -106,7 +106,7 @@ def best_accuracy(
         except InfeasibleSpecificationError:
             log.append({"R": spec_R, "p": spec_p, "verdict": "infeasible"})
             return "cannot", None
-        if res.success and res.cost <= budget:
+        if res.feasible and res.cost <= budget:  # (a met design buys it, proven optimal or not)
             x0 = res.x
             out = "buys"
         elif res.lower_bound > budget:

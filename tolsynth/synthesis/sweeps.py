@@ -477,10 +477,12 @@ def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dic
         "tolerance_units": dict(zip(mechanism.error_parameters, mechanism.units)),
     }
     n_ok = int(frame["success"].sum())
+    n_met = int((frame["status"] == "feasible").sum())  # met, optimality not proven (the sphere's)
     summary = {
         "rows": len(frame),
         "succeeded": n_ok,
-        "failed": len(frame) - n_ok,
+        "feasible": n_met,
+        "failed": len(frame) - n_ok - n_met,
         "engine": engine,
         "elapsed_s": elapsed,
         "rows_per_s": len(frame) / elapsed if elapsed > 0 else None,
