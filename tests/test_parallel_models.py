@@ -211,3 +211,22 @@ def test_exact_workspace_design_on_the_delta():
     w = np.random.default_rng(12).uniform(-1.0, 1.0, (200_000, m.n)) * ws.result.x @ A.T
     for v in np.linalg.eigh(A @ np.diag(ws.result.x**2 / 3) @ A.T)[1].T:
         assert np.mean(np.abs(w @ v) <= 0.1) >= 0.99 - 4 * np.sqrt(0.99 * 0.01 / 200_000)
+
+
+def test_hexapod_map_keeps_a_home_pose_level_to_its_anchors_rounding():
+    """The hexapod's home pose is level only to ~3e-8 rad (its anchors are printed to 0.1 um): the
+    map's default vertical hand axis is accepted, each reachable point's struts give the grid point
+    back through the forward kinematics (1e-8 mm) with the platform level to 1e-6, and an axis
+    tilted by 1e-3 is refused with the reference axis named."""
+    m = tolsynth.load_model("stewart_gough")
+    tilt = np.abs(m.fk("home")[:3, 2] - [0.0, 0.0, 1.0]).max()
+    assert 1e-9 < tilt < 1e-6
+    pm = tolsynth.probability_map(m, "coarse", R=0.5, n=9, plane="xz", progress=False)
+    idx = np.argwhere(np.isfinite(pm.P))
+    assert idx.shape[0] >= 5
+    for a, b in idx:
+        T = m.fk(pm.Q[:, a, b])
+        assert np.allclose(T[:3, 3], [pm.u[b], 0.0, pm.v[a]], atol=1e-8)
+        assert np.abs(T[:3, 2] - [0.0, 0.0, 1.0]).max() <= 1e-6
+    with pytest.raises(InputError, match="reference pose's platform orientation"):
+        tolsynth.probability_map(m, "coarse", R=0.5, n=9, plane="xz", hand_axis=(0.0, 1e-3, 1.0), progress=False)
