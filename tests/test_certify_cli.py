@@ -86,12 +86,30 @@ def test_worst_pose_certify_components_gives_a_probability_bound():
             ],
             "components",
         ),
+        (["worst-pose", "--model", "planar_2r", "--certify-time-limit", "3"], "--certify"),
+        (["worst-pose", "--model", "planar_2r", "--certify", "--certify-time-limit", "0"], "seconds > 0"),
     ],
-    ids=["sphere-probability", "certify-alone", "max-rounds-alone", "sphere-everywhere"],
+    ids=["sphere-probability", "certify-alone", "max-rounds-alone", "sphere-everywhere", "time-alone", "time-zero"],
 )
 def test_certify_usage_errors_exit_2_naming_the_choice(argv, says):
     rc, _, err = _run(*argv)
     assert rc == 2 and says in err and "Traceback" not in err
+
+
+@pytest.mark.slow  # 4-12 s: a child process, 1.5 s of search, 2000 poses
+def test_time_limit_is_not_proven_with_the_bound_so_far():
+    """The Puma 560 is not certified in 1.5 s: exit status 1, the reason, and a bound that holds
+    (above sigma_1 at the reported pose, evaluated here, and at 2000 random poses)."""
+    rc, out, err = _run("worst-pose", "--model", "puma560", "--certify", "--certify-time-limit", "1.5", "--json")
+    assert rc == 1 and "not certified (time limit reached)" in err
+    assert out["certified"] is False and out["certificate"]["reason"] == "time limit reached"
+    m = tolsynth.load_model("puma560")
+    eps = np.array(list(out["tolerances"].values()))
+    assert m.distribution == "uniform"  # variance eps^2 / 3, as _sigma takes it
+    assert _sigma(m, np.array(out["q"]), eps)[0] == pytest.approx(out["value"], rel=1e-9)
+    lo, hi = _limits(m)
+    Q = lo + (hi - lo) * np.random.default_rng(3).random((2000, len(lo)))
+    assert _sigma(m, Q, eps).max() <= out["upper_bound"] and out["value"] < out["upper_bound"]
 
 
 @pytest.mark.slow

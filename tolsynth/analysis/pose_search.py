@@ -221,6 +221,7 @@ def worst_pose(
     rtol: float | None = None,
     max_boxes: int | None = None,
     progress=None,
+    time_limit: float | None = None,
 ) -> WorstPose:
     """Search the joint space for the pose of worst accuracy at given tolerances.
 
@@ -273,8 +274,9 @@ def worst_pose(
         certified.
     probability : {"gaussian", "exact"}
         Reading of the per-component probability (``criterion="components"``).
-    rtol, max_boxes, progress
-        Of the certified search (relative gap, box limit, progress bar).
+    rtol, max_boxes, progress, time_limit
+        Of the certified search (relative gap, box limit, progress bar, seconds): a limit reached
+        leaves ``certified`` False with the bound reached, which holds, only looser.
 
     Returns
     -------
@@ -442,6 +444,7 @@ def worst_pose(
             x0=[q],
             base_q=base_q,
             progress=progress,
+            time_limit=time_limit,
         )
         better = (
             cert.best_value > _value_at(mechanism, q, eps, distribution, R, criterion, probability)

@@ -155,6 +155,8 @@ def _cmd_worst(args) -> int:
     mech = load_model(args.model)
     if hasattr(args, "dist"):
         args.dist = dist_for(args, mech)
+    if args.certify_time_limit is not None and not args.certify:
+        raise InputError("--certify-time-limit", "only used with --certify", "--certify --certify-time-limit SECONDS")
     eps, label = _tolerances(mech, args.tolerances)
     what = "the grid and pattern search" + (", then the certified branch and bound" if args.certify else "")
     with Working(f"tolsynth worst-pose: {what}"):
@@ -168,6 +170,7 @@ def _cmd_worst(args) -> int:
             reference=parse_reference(mech, args.reference),
             certify=args.certify,
             probability=args.probability,
+            time_limit=args.certify_time_limit,
         )
     record = dict(
         tolerances=w.tolerances, distribution=args.dist, R_mm=args.R, criterion=args.criterion, reference=w.reference
@@ -264,6 +267,14 @@ def register(sub) -> None:
         action="store_true",
         help="also prove a bound over the whole continuous joint space (branch and bound; sigma or "
         "components); not proven: exit status 1",
+    )
+    p.add_argument(
+        "--certify-time-limit",
+        dest="certify_time_limit",
+        type=number("--certify-time-limit", "a number of seconds > 0", lambda v: v > 0),
+        default=None,
+        help="with --certify: seconds for the branch and bound; reached: not proven (exit status 1), "
+        "the bound reached reported (it holds, only looser); default: none (the box limit)",
     )
     p.add_argument(
         "--probability",
