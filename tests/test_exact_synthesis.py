@@ -289,6 +289,40 @@ def test_gaussian_sphere_is_met_not_proven_and_its_bound_is_the_box_relaxation(x
     assert r.gap == pytest.approx(r.cost - r.lower_bound, rel=1e-12) and r.gap > 0.05 * r.cost
 
 
+def test_box_relaxation_envelope_and_the_sphere_is_not_convex():
+    """The box relaxation's pieces against independent numbers: h(v) = ln erf(R / sqrt(2 v)) (SciPy)
+    turns from concave to convex once, where P = erf(...) is about 0.894; at p = 0.7 the envelope
+    is h up to its tangent point, above h and concave on [0, v_p] (second differences), and equal to
+    h at v_p.  And why no bound of this kind closes the sphere's gap: with Gaussian errors at p = 0.7
+    two one-axis designs meet the sphere (P = p) while their midpoint, two equal variances, misses
+    it (stats.p_ball against the closed form 1 - exp(-R^2 / (2 lam)))."""
+    from scipy.special import erf, erfc
+
+    from tolsynth.probability.stats import p_ball, z_of_p
+    from tolsynth.solvers.sphere_bound import _hh, envelope_point
+
+    r = 0.5
+    v = np.linspace(0.01, 2.0, 200_001) * r * r
+    h = np.log1p(-erfc(r / np.sqrt(2 * v)))  # (log1p: no rounding noise where P is near 1)
+    d2 = np.diff(h, 2)
+    turn = np.flatnonzero(np.diff(np.sign(d2)) != 0)
+    assert len(turn) == 1 and erf(r / np.sqrt(2 * v[turn[0] + 1])) == pytest.approx(0.894, abs=1e-3)
+    vp = (r / z_of_p(0.7)) ** 2
+    tT = envelope_point(r, 0.7)
+    assert 0 < tT < vp
+    x = np.linspace(0, vp, 20_001)
+    hh, _ = _hh(x, r, tT)
+    hx = np.log1p(-erfc(r / np.sqrt(2 * np.maximum(x, 1e-300))))
+    assert np.all(hh >= hx - 1e-12) and np.max(np.diff(hh, 2)) <= 1e-12
+    assert hh[-1] == pytest.approx(hx[-1], abs=1e-9) and envelope_point(r, 0.95) == pytest.approx(
+        (r / z_of_p(0.95)) ** 2
+    )
+    one = p_ball(np.array([vp, 0.0, 0.0]), r)
+    mid = p_ball(np.array([vp / 2, vp / 2, 0.0]), r)
+    assert one == pytest.approx(0.7, abs=1e-9)
+    assert mid == pytest.approx(1 - np.exp(-(r**2) / vp), abs=1e-9) and mid < 0.66
+
+
 @pytest.mark.slow
 def test_exact_at_several_poses(xz):
     qs = [xz.joints("worst"), xz.joints("home")]
