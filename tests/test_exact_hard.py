@@ -384,12 +384,14 @@ def test_the_evaluations_of_the_slow_solves_are_fast(model, dist, p):
 
 # ------------------------------------------------------------------ the solver's compiled series
 def _series_rows(rng):
-    """Rows of the four shapes (two truncated normals) with zero coefficients and a row of three
-    terms (thousands of series terms), and R per row with P inside (0.6, 0.999)."""
+    """Rows of the four shapes (two truncated normals) with zero coefficients, a row of three
+    terms (thousands of series terms) and one of uniform and triangular terms only (a closed
+    form), and R per row with P inside (0.6, 0.999)."""
     sh = tuple(shape(k) for k in ["normal", "uniform", "triangular", "truncnormal", "uniform", "truncnormal(0.5)"])
     c = rng.uniform(0.05, 0.2, (12, len(sh)))
     c[:, 1:][rng.random((12, len(sh) - 1)) < 0.3] = 0.0
     c[0] = [0.0, 0.4, 0.0, 0.3, 0.25, 0.0]
+    c[1] = [0.0, 0.4, 0.3, 0.0, 0.25, 0.0]
     return c, sh, np.sqrt(np.sum(c * c, axis=1))
 
 
@@ -398,7 +400,8 @@ def test_the_compiled_series_against_the_reference_and_central_differences(rng, 
     P, central differences of P for the gradient and of the gradient for the Hessian, and the
     NumPy path (TOLSYNTH_NO_COMPILE) to rounding."""
     from tolsynth.solvers import exact_kernel
-    from tolsynth.solvers.exact_series import derivatives, probability
+    from tolsynth.solvers.exact_closed import closed_rows
+    from tolsynth.solvers.exact_series import _split, derivatives, probability, rows_of
 
     c, sh, R = _series_rows(rng)
     u = rng.normal(size=c.shape[1]) * 0.1
@@ -421,6 +424,9 @@ def test_the_compiled_series_against_the_reference_and_central_differences(rng, 
         pytest.skip("no C compiler: the NumPy path ran above")
     _, _, _, _, eg = derivatives(c, u, sh, R, tol=1e-9, hessian=False, rigorous=True)
     Pb, Gb, Hb, _, _ = derivatives(c, u, sh, 2 * R, tol=1e-10, ball=True)
+    cut = _split(b, rows_of(sh), 0.1)  # a budget that drops terms
+    closed = closed_rows(b, sh, R, 2, 1e-11)
+    assert 1 in closed and np.count_nonzero(cut[0] == 0) > np.count_nonzero(b == 0)
     monkeypatch.setenv("TOLSYNTH_NO_COMPILE", "1")
     assert not exact_kernel.available()
     Pn, en = probability(b, sh, R, 1e-11)
@@ -438,3 +444,8 @@ def test_the_compiled_series_against_the_reference_and_central_differences(rng, 
     ):
         assert np.max(np.abs(x - y)) < 1e-13
     assert np.allclose(err, en, rtol=1e-12, atol=0) and np.allclose(eg, egn, rtol=1e-12, atol=0)
+    assert all(np.array_equal(x, y) for x, y in zip(cut, _split(b, rows_of(sh), 0.1)))
+    closed_n = closed_rows(b, sh, R, 2, 1e-11)
+    assert closed.keys() == closed_n.keys()
+    for r in closed:
+        assert all(np.max(np.abs(np.asarray(x) - y)) < 1e-13 for x, y in zip(closed[r], closed_n[r]))

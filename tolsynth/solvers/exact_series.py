@@ -198,6 +198,9 @@ def split_small(b: np.ndarray, rw: "Rows", budget: float) -> tuple[np.ndarray, n
 
 
 def _split(b, rw, budget):
+    out = exact_kernel.split(rw, b, budget)
+    if out is not None:
+        return out
     M, n = b.shape
     var = np.array([s.variance for s in rw.shapes])
     peak = np.array([s.peak for s in rw.shapes])

@@ -1,0 +1,339 @@
+"""The C source of :mod:`.exact_kernel`: the exact series, its truncation bounds, the dropping of
+small terms and the closed forms of a few uniform terms, each a function over rows (the NumPy
+code each ports is named in its comment)."""
+
+__all__ = ["C_SOURCE"]
+
+C_SOURCE = r"""
+#define TS_PI 3.14159265358979323846
+#define TS_MAXN 64 /* columns at most (MAX_COLUMNS) */
+#define TS_SYNC 16
+#define TS_ROTATE 512 /* rows of more terms take every sine afresh: D2 = -t sin t - D1 multiplies
+                         the sine's rounding by t, which grows with k */
+
+/* phi(t), and for order >= 1 D1 = t phi'(t), D2 = t dD1/dt, of the uniform (0), normal (1,
+   3 sigma = 1) and triangular (2) shapes: the closed forms of the NumPy path.  sn, cs: sin and cos
+   of t (uniform) or of t/2 (triangular), from the caller's rotation; unused for the normal. */
+static void ts_cf(int kind, double t, double sn, double cs, int order, double *phi, double *d1, double *d2) {
+  if (kind == 0) {
+    if (fabs(t) < 1e-4) {
+      *phi = 1.0 - t*t/6.0;
+      if (order) { *d1 = -t*t/3.0; *d2 = -2.0*t*t/3.0; }
+    } else {
+      *phi = sn/t;
+      if (order) { *d1 = cs - *phi; *d2 = -t*sn - *d1; }
+    }
+  } else if (kind == 1) {
+    double a = t*t/9.0;
+    *phi = exp(-t*t/18.0);
+    if (order) { *d1 = -a * *phi; *d2 = (a*a - 2.0*a) * *phi; }
+  } else {
+    double h = 0.5*t, s, e, he;
+    if (fabs(h) < 1e-4) { s = 1.0 - h*h/6.0; e = -h*h/3.0; he = -2.0*h*h/3.0; }
+    else { s = sn/h; e = cs - s; he = -h*sn - e; }
+    *phi = s*s;
+    if (order) { *d1 = 2.0*s*e; *d2 = 2.0*e*e + 2.0*s*he; }
+  }
+}
+
+/* One interpolant of a packed truncated normal (see truncnormal.packed): function f at z. */
+static double ts_clenshaw(const double *blk, int f, double z) {
+  double a = blk[0], h = blk[1], u = (z - a)/h, t, b1 = 0.0, b2 = 0.0, tmp;
+  int pieces = (int)blk[2], deg = (int)blk[3], nf = (int)blk[4], k;
+  long j;
+  const double *c = blk + 5;
+  double fl = floor(u);
+  j = fl < 0 ? 0 : (fl > pieces - 1 ? pieces - 1 : (long)fl);
+  t = 2.0*(u - (double)j) - 1.0;
+  for (k = deg; k > 0; k--) {
+    tmp = c[((long)k*nf + f)*pieces + j] + 2.0*t*b1 - b2;
+    b2 = b1;
+    b1 = tmp;
+  }
+  return c[(long)f*pieces + j] + t*b1 - b2;
+}
+
+/* phi, D1, D2 of the truncated normal from its packed interpolants: truncnormal.cf3's formulas */
+static void ts_tn(const double *tb, double s, int order, double *phi, double *d1, double *d2) {
+  double beta = tb[0], x = tb[1], cc = tb[2], split = tb[3];
+  double y = fabs(s)/(beta*sqrt(2.0)), g = exp(-y*y), I, LI = 0.0, LLI = 0.0, y2 = y*y;
+  if (y <= split) {
+    double Is = ts_clenshaw(tb + (long)tb[4], 0, y);
+    I = Is;
+    if (order >= 1) {
+      double th = 2.0*x*y, I1 = sin(th) - 2.0*y*Is;
+      LI = y*I1;
+      if (order >= 2) {
+        double I2 = 2.0*x*cos(th) - 2.0*Is - 2.0*y*I1;
+        LLI = y*I1 + y*y*I2;
+      }
+    }
+  } else {
+    const double *l0 = tb + (long)tb[5];
+    double v = 1.0/y, C = ts_clenshaw(l0, 0, v), S = ts_clenshaw(l0, 1, v), th = 2.0*x*y;
+    double sn = sin(th), cs = cos(th), P = sn*C - cs*S;
+    I = 0.5*v*P;
+    if (order >= 1) {
+      const double *l1 = tb + (long)tb[6];
+      double C1 = ts_clenshaw(l1, 0, v), S1 = ts_clenshaw(l1, 1, v);
+      double Pt = cs*C + sn*S, Pv = sn*C1 - cs*S1, Q = -P + th*Pt - v*Pv;
+      LI = 0.5*v*Q;
+      if (order >= 2) {
+        const double *l2 = tb + (long)tb[7];
+        double C2 = ts_clenshaw(l2, 0, v), S2 = ts_clenshaw(l2, 1, v);
+        double Ptv = cs*C1 + sn*S1, Pvv = sn*C2 - cs*S2;
+        double LQ = 2.0*v*Pv - th*th*P - 2.0*th*v*Ptv + v*v*Pvv;
+        LLI = 0.5*v*(-Q + LQ);
+      }
+    }
+  }
+  *phi = g + cc*I;
+  if (order >= 1) *d1 = -2.0*y2*g + cc*LI;
+  if (order >= 2) *d2 = (4.0*y2*y2 - 4.0*y2)*g + cc*LLI;
+}
+
+/* The series of every row r (b: m x n, row-major, coefficients >= 0): P[r], and for order >= 1
+   G[r, :] (d/du), order 2 H[r, :, :].  K[r] terms; a truncated normal column j (kind 3) has its
+   packed interpolants at tnt + tno[j].  ball: the sphere's kernel. */
+int ts_series(int m, int n, const double *b, const double *R, const double *L, const long *K,
+              const int *kind, const double *tnt, const long *tno, int order, int ball,
+              double *P, double *G, double *H) {
+  int r;
+  if (n > TS_MAXN) return 1;
+  for (r = 0; r < m; r++) {
+    const double *br = b + (long)r*n;
+    int nz = 0, col[TS_MAXN], a, c, j;
+    double phi[TS_MAXN], d1[TS_MAXN], d2[TS_MAXN], pre[TS_MAXN + 1], suf[TS_MAXN + 1];
+    double sumP = 0.0, g[TS_MAXN], h[TS_MAXN*TS_MAXN];
+    double ang[TS_MAXN], rc[TS_MAXN], rs[TS_MAXN], sk[TS_MAXN], ck[TS_MAXN], xr, xc, xs, ks = 0.0, kc = 1.0;
+    long k, Kr = K[r];
+    for (j = 0; j < n; j++)
+      if (br[j] > 0) col[nz++] = j;
+    for (a = 0; a < nz; a++) g[a] = 0.0;
+    if (order > 1) for (a = 0; a < nz*nz; a++) h[a] = 0.0;
+    for (a = 0; a < nz; a++) {  /* the angle of k = 1: the whole argument, or half of it */
+      j = col[a];
+      ang[a] = (kind[j] == 2 ? 0.5 : 1.0)*TS_PI*br[j]/L[r];
+      rc[a] = cos(ang[a]);
+      rs[a] = sin(ang[a]);
+    }
+    xr = TS_PI*(R[r]/L[r]);
+    xc = cos(xr);
+    xs = sin(xr);
+    for (k = 1; k <= Kr; k++) {
+      double tau = TS_PI*(double)k/L[r], x = TS_PI*(double)k*(R[r]/L[r]), s;
+      /* sin and cos of k times each angle by rotation, taken afresh every TS_SYNC terms: the
+         rotation's rounding (about one ulp a step) never builds up past TS_SYNC ulp */
+      if ((k - 1) % TS_SYNC == 0 || Kr > TS_ROTATE) {
+        for (a = 0; a < nz; a++) {  /* the argument as ts_cf forms it */
+          double t = tau*br[col[a]]*(kind[col[a]] == 2 ? 0.5 : 1.0);
+          sk[a] = sin(t);
+          ck[a] = cos(t);
+        }
+        ks = sin(x);
+        kc = cos(x);
+      } else {
+        double t0;
+        for (a = 0; a < nz; a++) {
+          t0 = ck[a]*rc[a] - sk[a]*rs[a];
+          sk[a] = sk[a]*rc[a] + ck[a]*rs[a];
+          ck[a] = t0;
+        }
+        t0 = kc*xc - ks*xs;
+        ks = ks*xc + kc*xs;
+        kc = t0;
+      }
+      s = ball ? 2.0/((double)k*TS_PI)*(ks - x*kc) : 2.0/((double)k*TS_PI)*ks;
+      for (a = 0; a < nz; a++) {
+        j = col[a];
+        if (kind[j] == 3) ts_tn(tnt + tno[j], tau*br[j], order, &phi[a], &d1[a], &d2[a]);
+        else ts_cf(kind[j], tau*br[j], sk[a], ck[a], order, &phi[a], &d1[a], &d2[a]);
+      }
+      pre[0] = 1.0;
+      for (a = 0; a < nz; a++) pre[a + 1] = pre[a]*phi[a];
+      sumP += s*pre[nz];
+      if (!order) continue;
+      suf[nz] = 1.0;
+      for (a = nz - 1; a >= 0; a--) suf[a] = suf[a + 1]*phi[a];
+      for (a = 0; a < nz; a++) {
+        double oth = pre[a]*suf[a + 1];
+        g[a] += s*d1[a]*oth;
+        if (order > 1) {
+          double mid = 1.0, sa = s*d1[a]*pre[a];
+          h[a*nz + a] += s*d2[a]*oth;
+          for (c = a + 1; c < nz; c++) {
+            h[a*nz + c] += sa*mid*suf[c + 1]*d1[c];
+            mid *= phi[c];
+          }
+        }
+      }
+    }
+    P[r] = (ball ? 0.0 : R[r]/L[r]) + sumP;
+    if (order) {
+      double *Gr = G + (long)r*n;
+      for (j = 0; j < n; j++) Gr[j] = 0.0;
+      for (a = 0; a < nz; a++) Gr[col[a]] = g[a];
+    }
+    if (order > 1) {
+      double *Hr = H + (long)r*n*n;
+      for (j = 0; j < n*n; j++) Hr[j] = 0.0;
+      for (a = 0; a < nz; a++)
+        for (c = a; c < nz; c++) {
+          Hr[col[a]*n + col[c]] = h[a*nz + c];
+          Hr[col[c]*n + col[a]] = h[a*nz + c];
+        }
+    }
+  }
+  return 0;
+}
+
+/* Rows.split's dropping of the smallest terms (see exact_series._split): out, the bound on P's
+   change per row, and the gradient's bound per entry.  var, peak: per column. */
+void ts_split(int m, int n, const double *b, const double *var, const double *peak, double budget,
+              double *out, double *dropped, double *gerr) {
+  int r, i, j, ord[TS_MAXN];
+  for (r = 0; r < m; r++) {
+    const double *br = b + (long)r*n;
+    double *orow = out + (long)r*n, *grow = gerr + (long)r*n;
+    double S, S3, cv, var_e = 0.0, b1, b2, b3;
+    int count = 0;
+    for (i = 0; i < n; i++) {  /* ascending, stable */
+      int x = i;
+      for (j = i; j > 0 && br[ord[j - 1]] > br[x]; j--) ord[j] = ord[j - 1];
+      ord[j] = x;
+    }
+    b1 = br[ord[n - 1]];
+    b2 = br[ord[n - 2]];
+    b3 = br[ord[n - 3]];
+    S = 2.0*peak[ord[n - 1]]*peak[ord[n - 2]]/(b1*b2 > 1e-300 ? b1*b2 : 1e-300);
+    S3 = 4.0*peak[ord[n - 1]]*peak[ord[n - 2]]*peak[ord[n - 3]]/(b1*b2*b3 > 1e-300 ? b1*b2*b3 : 1e-300);
+    cv = 0.0;
+    for (i = 0; i < n - 2; i++) {  /* the cumulative variance is increasing: the dropped are a prefix */
+      double next = cv + br[ord[i]]*br[ord[i]]*var[ord[i]];
+      if (!(next*S <= budget)) break;
+      cv = next;
+      count = i + 1;
+    }
+    var_e = count > 0 ? cv : 0.0;
+    for (i = 0; i < n; i++) orow[i] = br[i];
+    for (i = 0; i < count; i++) orow[ord[i]] = 0.0;
+    dropped[r] = var_e*S;
+    for (i = 0; i < n; i++)
+      grow[i] = orow[i] == 0.0 ? (br[i] > 0 ? 2.0*br[i]*br[i]*var[i]*S : 0.0) : 2.0*br[i]*(var_e*S3);
+  }
+}
+
+/* exact_closed._spline: F(x) of a sum of mp uniforms of half-widths beta, its gradient g and
+   Hessian h in ln beta (order 1, 2), and the rounding bound (returned). */
+static double ts_spline(int mp, const double *beta, double x, int order, double *F, double *g, double *h) {
+  int q, i, j, nq = 1 << mp;
+  double D = 1.0, Fs = 0.0, big = 0.0, sb[5], G[5], Q[25];
+  for (i = 0; i < mp; i++) D *= (double)(i + 1)*2.0*beta[i];
+  for (i = 0; i < mp; i++) { G[i] = 0.0; for (j = 0; j < mp; j++) Q[i*mp + j] = 0.0; }
+  for (q = 0; q < nq; q++) {
+    double sigma = 1.0, dot = 0.0, A, Am, w1, w2;
+    for (i = 0; i < mp; i++) {  /* itertools.product's order: the first sign varies slowest */
+      double sg = (q >> (mp - 1 - i)) & 1 ? 1.0 : -1.0;
+      sigma *= sg;
+      sb[i] = sg*beta[i];
+      dot += sb[i];
+    }
+    A = x + dot > 0.0 ? x + dot : 0.0;
+    Am = pow(A, mp);
+    Fs += sigma*Am/D;
+    if (fabs(Am)/D > big) big = fabs(Am)/D;
+    if (!order) continue;
+    w1 = sigma*mp*pow(A, mp - 1)/D;
+    for (i = 0; i < mp; i++) G[i] += w1*sb[i];
+    if (order < 2) continue;
+    w2 = sigma*mp*(mp - 1)*(A > 0.0 ? pow(A, mp - 2) : 0.0)/D;
+    for (i = 0; i < mp; i++)
+      for (j = 0; j < mp; j++) Q[i*mp + j] += sb[i]*w2*sb[j];
+  }
+  *F = Fs;
+  if (order >= 1) for (i = 0; i < mp; i++) g[i] = G[i] - Fs;
+  if (order >= 2)
+    for (i = 0; i < mp; i++)
+      for (j = 0; j < mp; j++) h[i*mp + j] = Q[i*mp + j] + (i == j ? G[i] : 0.0) - G[i] - G[j] + Fs;
+  return 4.0*mp*nq*DBL_EPSILON*big*(order >= 1 ? mp : 1)*(order >= 2 ? mp : 1);
+}
+
+/* exact_closed.closed_rows: ok[r] = 1 where a row of at most five uniform pieces (a triangular
+   term is two) has its closed form within tol, with P, G, H (order) and err of that row. */
+void ts_closed(int m, int n, const double *b, const double *R, const int *kind, int order, double tol, int *ok,
+               double *P, double *G, double *H, double *err) {
+  int r, i, j;
+  for (r = 0; r < m; r++) {
+    const double *br = b + (long)r*n;
+    double beta[6], Fa, Fc, ga[5], gc[5], ha[25], hc[25], e;
+    int owner[6], mp = 0, good = 1;
+    ok[r] = 0;
+    for (j = 0; j < n && good; j++) {
+      if (br[j] == 0.0) continue;
+      if (kind[j] == 0) { beta[mp] = br[j]; owner[mp++] = j; }
+      else if (kind[j] == 2) { beta[mp] = 0.5*br[j]; owner[mp++] = j; beta[mp] = 0.5*br[j]; owner[mp++] = j; }
+      else good = 0;
+      if (mp > 5) good = 0;
+    }
+    if (!good || mp < 2) continue;
+    e = ts_spline(mp, beta, R[r], order, &Fa, ga, ha) + ts_spline(mp, beta, -R[r], order, &Fc, gc, hc);
+    if (e > tol) continue;
+    ok[r] = 1;
+    P[r] = Fa - Fc;
+    err[r] = e;
+    if (order >= 1) {
+      double *Gr = G + (long)r*n;
+      for (j = 0; j < n; j++) Gr[j] = 0.0;
+      for (i = 0; i < mp; i++) Gr[owner[i]] += ga[i] - gc[i];
+    }
+    if (order >= 2) {
+      double *Hr = H + (long)r*n*n;
+      for (j = 0; j < n*n; j++) Hr[j] = 0.0;
+      for (i = 0; i < mp; i++)
+        for (j = 0; j < mp; j++) Hr[owner[i]*n + owner[j]] += ha[i*mp + j] - hc[i*mp + j];
+    }
+  }
+}
+
+/* The truncation bound of Rows.tail for one row at K (see its docstring): power factors
+   (fidx, fmult; nf of them), normal columns (normal[j] != 0), column drop left out (-1: none). */
+static double ts_tail1(int n, const double *br, double L, double K, int nf, const long *fidx,
+                       const double *fmult, const int *normal, int drop) {
+  int f, j, q = 0;
+  double logC = 0.0, a = 0.0, power = INFINITY, gauss = INFINITY;
+  for (f = 0; f < nf; f++) {
+    double bf = br[fidx[f]], c;
+    if (fidx[f] == drop || !(bf > 0)) continue;
+    c = fmult[f]*L/(TS_PI*(bf > 1e-300 ? bf : 1e-300));
+    if (c < K) { q++; logC += log(c); }
+  }
+  for (j = 0; j < n; j++)
+    if (normal[j] && j != drop) a += br[j]*br[j];
+  a *= (TS_PI/L)*(TS_PI/L)/18.0;
+  if (q > 0) power = (2.0/TS_PI)*exp(logC - q*log(K) - a*K*K)/q;
+  if (a > 0) gauss = exp(-a*K*K)/(TS_PI*a*K*K);
+  return power < gauss ? power : gauss;
+}
+
+/* out[r] = the tail bound of row r at K[r] (drop: a column left out, -1 none). */
+void ts_tail(int m, int n, const double *b, const double *L, const double *K, int nf, const long *fidx,
+             const double *fmult, const int *normal, int drop, double *out) {
+  int r;
+  for (r = 0; r < m; r++)
+    out[r] = ts_tail1(n, b + (long)r*n, L[r], K[r], nf, fidx, fmult, normal, drop);
+}
+
+/* K[r] = the least of Ks (ascending, nk of them) whose tail bound is <= tol, else the last. */
+void ts_terms(int m, int n, const double *b, const double *L, const double *Ks, int nk, double tol, int nf,
+              const long *fidx, const double *fmult, const int *normal, long *K) {
+  int r, i;
+  for (r = 0; r < m; r++) {
+    K[r] = (long)Ks[nk - 1];
+    for (i = 0; i < nk; i++)
+      if (ts_tail1(n, b + (long)r*n, L[r], Ks[i], nf, fidx, fmult, normal, -1) <= tol) {
+        K[r] = (long)Ks[i];
+        break;
+      }
+  }
+}
+"""
