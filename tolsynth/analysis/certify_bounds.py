@@ -30,6 +30,7 @@ import itertools
 import casadi as ca
 import numpy as np
 
+from tolsynth.analysis.certify_kernels import contract
 from tolsynth.analysis.interval_ops import round_up as _up
 from tolsynth.analysis.intervals import IntervalFunction
 
@@ -84,8 +85,11 @@ def _char_poly(G):
     """Coefficients of ``det(l I - G) = l^3 - c1 l^2 + c2 l - c3`` of symmetric 3 x 3 matrices,
     each moved by a bound on its rounding in the direction that raises the largest root (it grows
     with ``c1`` and ``c3`` and falls with ``c2``)."""
-    g00, g11, g22 = G[..., 0, 0], G[..., 1, 1], G[..., 2, 2]
-    g01, g02, g12 = G[..., 0, 1], G[..., 0, 2], G[..., 1, 2]
+    return _char_poly_entries(G[..., 0, 0], G[..., 1, 1], G[..., 2, 2], G[..., 0, 1], G[..., 0, 2], G[..., 1, 2])
+
+
+def _char_poly_entries(g00, g11, g22, g01, g02, g12):
+    """:func:`_char_poly` from the six distinct entries (arrays of one shape)."""
     c1 = (g00 + g11 + g22) * (1.0 + 8.0 * _U)
     p2 = [g00 * g11, g01 * g01, g00 * g22, g02 * g02, g11 * g22, g12 * g12]
     c2 = p2[0] - p2[1] + p2[2] - p2[3] + p2[4] - p2[5]
@@ -380,16 +384,17 @@ def _sym_matrix(g: np.ndarray) -> np.ndarray:
 def _eig_estimate(G: np.ndarray) -> np.ndarray:
     """The largest eigenvalue of symmetric 3 x 3 matrices by the closed form (Smith 1961), a
     candidate only: the bound proves or raises it."""
-    q = (G[..., 0, 0] + G[..., 1, 1] + G[..., 2, 2]) / 3.0
-    off = G[..., 0, 1] ** 2 + G[..., 0, 2] ** 2 + G[..., 1, 2] ** 2
-    d0, d1, d2 = G[..., 0, 0] - q, G[..., 1, 1] - q, G[..., 2, 2] - q
+    return _eig_estimate_entries(G[..., 0, 0], G[..., 1, 1], G[..., 2, 2], G[..., 0, 1], G[..., 0, 2], G[..., 1, 2])
+
+
+def _eig_estimate_entries(g00, g11, g22, g01, g02, g12):
+    """:func:`_eig_estimate` from the six distinct entries."""
+    q = (g00 + g11 + g22) / 3.0
+    off = g01**2 + g02**2 + g12**2
+    d0, d1, d2 = g00 - q, g11 - q, g22 - q
     p = np.sqrt(np.maximum((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0, 0.0))
     with np.errstate(all="ignore"):
-        det = (
-            d0 * (d1 * d2 - G[..., 1, 2] ** 2)
-            - G[..., 0, 1] * (G[..., 0, 1] * d2 - G[..., 1, 2] * G[..., 0, 2])
-            + G[..., 0, 2] * (G[..., 0, 1] * G[..., 1, 2] - d1 * G[..., 0, 2])
-        )
+        det = d0 * (d1 * d2 - g12**2) - g01 * (g01 * d2 - g12 * g02) + g02 * (g01 * g12 - d1 * g02)
         r = np.where(p > 0, det / (2.0 * p**3), 0.0)
     phi = np.arccos(np.clip(r, -1.0, 1.0)) / 3.0
     lam = q + 2.0 * p * np.cos(phi)
@@ -402,8 +407,14 @@ def lambda_max_bound(G: np.ndarray, err: np.ndarray, reduce_last: bool = False) 
     characteristic polynomial with its coefficients' rounding (:func:`_char_poly`), plus the
     Frobenius norm of the error (Weyl).  With ``reduce_last``, one bound for the whole last batch
     axis (the largest candidate is checked against every matrix)."""
-    c1, c2, c3 = _char_poly(G)
-    lam = _eig_estimate(G)
+    return lambda_max_bound_entries(tuple(G[..., r, c] for r, c in _SYM), err, reduce_last)
+
+
+def lambda_max_bound_entries(e: tuple, err: np.ndarray, reduce_last: bool = False) -> np.ndarray:
+    """:func:`lambda_max_bound` from the six distinct entries ``e`` (in the order of ``_SYM``, arrays
+    of one shape ``S``), with ``err`` of shape ``S + (6,)`` or broadcastable to it."""
+    c1, c2, c3 = _char_poly_entries(*e)
+    lam = _eig_estimate_entries(*e)
     if reduce_last:
         lam = np.broadcast_to(lam.max(axis=-1, keepdims=True), lam.shape)
     s = np.where(np.abs(c1) > 1e-100, np.abs(c1), 1.0)
@@ -474,10 +485,14 @@ class PolygonSigmaBounds:
 
     def _contract(self, g, V):
         """``g`` (6, 6^k) contracted per joint with ``V[j]`` (n, p_j, 6): shape (n, 6, prod p_j), the
-        tuples of points in the order (p_k, ..., p_1).  The last joint first, so that the index
-        summed (six terms each time, as a plain sum) is always the last axis: one batched matrix
-        product per joint."""
+        tuples of points in a fixed order (only their largest bound is used): compiled
+        (:mod:`tolsynth.analysis.certify_kernels`), the first joint's point most significant;
+        else by NumPy, (p_k, ..., p_1): the last joint first, so that the index summed (six terms
+        each time, as a plain sum) is always the last axis, one batched matrix product per joint."""
         n, k = V[0].shape[0], self.k
+        out = contract(g, V)  # compiled: box after box in cache (None without a compiler)
+        if out is not None:
+            return out
         X = np.matmul(g.reshape(1, 6**k, 6), np.swapaxes(V[k - 1], 1, 2))  # (n, 6 * 6^(k-1), p_k)
         done = V[k - 1].shape[1]
         for j in range(k - 2, -1, -1):
@@ -521,10 +536,13 @@ class PolygonSigmaBounds:
             g = self._contract(self.gamma, V)  # (nb, 6, 4^k)
             # error: Gamma's own, the points' (64 u relative per coordinate, two per monomial),
             # and the contraction's (two roundings per joint)
-            err = self._contract(self.gamma_err + self.gamma_abs * ((130.0 + 4.0) * (k + 1) * _U), Vabs)
-            g = np.moveaxis(g, 1, 2)
-            err = np.moveaxis(err, 1, 2)
-            lam = lambda_max_bound(_sym_matrix(g), err, reduce_last=True)
+            # (one bound for every tuple of a box, from each joint's largest monomials: the terms
+            # are products of nonnegative numbers, so the largest factors bound each tuple's sum)
+            Vmax = [v.max(axis=1, keepdims=True) for v in Vabs]
+            err = self._contract(self.gamma_err + self.gamma_abs * ((130.0 + 4.0) * (k + 1) * _U), Vmax)
+            lam = lambda_max_bound_entries(
+                tuple(g[:, i, :] for i in range(6)), np.moveaxis(err, 1, 2), reduce_last=True
+            )
             ub = _up(np.sqrt(np.maximum(lam, 0.0)))
             # where to halve: each joint's derivative of V at the centre times the scaling it allows
             c = 0.5 * (a + b)
