@@ -55,7 +55,7 @@ def main():
             times, best = [], None
             for _ in range(a.repeat):
                 t0 = time.perf_counter()
-                best = synthesize_processes(model, R, 0.99, procs)
+                best = synthesize_processes(model, R, 0.99, procs, probability="gaussian")
                 times.append(time.perf_counter() - t0)
             tb = statistics.median(times)
             tbf = float("nan")

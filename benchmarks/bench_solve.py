@@ -162,7 +162,7 @@ def cold_single(reps: int, rng) -> Row:
         return tolsynth.load_model(name), tolsynth.load_model(name), k0 * rng.uniform(0.8, 1.25, len(k0))
 
     def ts(m_ts, m_lean, k):
-        return tolsynth.synthesize(m_ts, R, P, DIST, ALPHA, k=k)
+        return tolsynth.synthesize(m_ts, R, P, DIST, ALPHA, k=k, probability="gaussian")
 
     def lean(m_ts, m_lean, k):
         return LeanModel(m_lean, ["worst"], DIST, ALPHA).solve(R, P, k=k)
@@ -175,7 +175,7 @@ def cold_single(reps: int, rng) -> Row:
 def sweeps(reps: int) -> list[Row]:
     m = tolsynth.load_model("xu_zhang_1988")
     lm = LeanModel(tolsynth.load_model("xu_zhang_1988"), ["worst"], DIST, ALPHA)
-    base = tolsynth.synthesize(m, R, P, DIST, ALPHA)
+    base = tolsynth.synthesize(m, R, P, DIST, ALPHA, probability="gaussian")
     lm.solve(R, P)
     names, eps = m.error_parameters, base.x
     lo, _ = m.bounds
@@ -236,7 +236,7 @@ def many_poses(name: str, sizes, reps: dict, rng) -> list[Row]:
         def setup(i, N=N):
             return (random_poses(m_ts, N, rng),)
 
-        ts = lambda poses: tolsynth.synthesize(m_ts, R, P, DIST, ALPHA, poses=poses)
+        ts = lambda poses: tolsynth.synthesize(m_ts, R, P, DIST, ALPHA, poses=poses, probability="gaussian")
         lean = lambda poses: LeanModel(m_lean, poses, DIST, ALPHA).solve(R, P)
         warm = setup(-1)
         ts(*warm), lean(*warm)  # one-off set-up of this size (tolsynth's NLP graphs per cut count)
@@ -248,7 +248,10 @@ def warm_1000(name: str, reps: int, rng, k_step: bool) -> list[Row]:
     m = tolsynth.load_model(name)
     poses = random_poses(m, 1000, rng)
     lm = LeanModel(tolsynth.load_model(name), poses, DIST, ALPHA)
-    tolsynth.synthesize(m, R, P, DIST, ALPHA, poses=poses), lm.solve(R, P)  # built, canonicalised: untimed
+    (
+        tolsynth.synthesize(m, R, P, DIST, ALPHA, poses=poses, probability="gaussian"),
+        lm.solve(R, P),
+    )  # built, canonicalised: untimed
     rows = []
     rs = lambda i: R * (1 + 0.002 * (i + 1))
     rows.append(
@@ -256,7 +259,7 @@ def warm_1000(name: str, reps: int, rng, k_step: bool) -> list[Row]:
             Row(f"{name}, 1000 random poses, warm: R step (+0.2 %)", "< 0.1 s and >= 3x"),
             reps,
             lambda i: (rs(i),),
-            lambda r: tolsynth.synthesize(m, r, P, DIST, ALPHA, poses=poses),
+            lambda r: tolsynth.synthesize(m, r, P, DIST, ALPHA, poses=poses, probability="gaussian"),
             lambda r: lm.solve(r, P),
         )
     )
@@ -272,7 +275,7 @@ def warm_1000(name: str, reps: int, rng, k_step: bool) -> list[Row]:
                 Row(f"{name}, 1000 random poses, warm: k step (+1 %)", "< 0.1 s and >= 3x"),
                 reps,
                 ks,
-                lambda k: tolsynth.synthesize(m, R, P, DIST, ALPHA, poses=poses, k=k),
+                lambda k: tolsynth.synthesize(m, R, P, DIST, ALPHA, poses=poses, k=k, probability="gaussian"),
                 lambda k: lm.solve(R, P, k=k),
             )
         )

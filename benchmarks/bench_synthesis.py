@@ -191,18 +191,25 @@ def main():
     m = tolsynth.load_model("xu_zhang_1988")
 
     # == 1. one warm solve =====================================================================
-    first = tolsynth.synthesize(m, R, P, DIST, ALPHA)
+    first = tolsynth.synthesize(m, R, P, DIST, ALPHA, probability="gaussian")
     ref = first.cost
     assert first.success and first.gap <= 1e-9 * ref, "reference optimum not certified"
     for _ in range(5):
-        tolsynth.synthesize(m, R, P, DIST, ALPHA)
+        tolsynth.synthesize(m, R, P, DIST, ALPHA, probability="gaussian")
     spec = make_specification(m, R, P, DIST, ALPHA)
     lean = LeanModel(tolsynth.load_model("xu_zhang_1988"), ["worst"], DIST, ALPHA)
     lean.solve(R, P)  # first solve: canonicalisation (cached from here on)
-    wb = WarmBatches(lambda: tolsynth.synthesize(m, R, P, DIST, ALPHA), lambda: lean.solve(R, P), rep_warm, rep_alt)
+    wb = WarmBatches(
+        lambda: tolsynth.synthesize(m, R, P, DIST, ALPHA, probability="gaussian"),
+        lambda: lean.solve(R, P),
+        rep_warm,
+        rep_alt,
+    )
     res = wb.batch("start")
     t_e2e = wb.t_warm
-    inside = statistics.median(tolsynth.synthesize(m, R, P, DIST, ALPHA).wall_time for _ in range(rep_alt))
+    inside = statistics.median(
+        tolsynth.synthesize(m, R, P, DIST, ALPHA, probability="gaussian").wall_time for _ in range(rep_alt)
+    )
     # the compiled kernel alone (one ctypes call: the whole interior-point solve), timed around
     # each of its calls
     from tolsynth.solvers.fast_ipm import IPMKernel
@@ -219,7 +226,7 @@ def main():
     IPMKernel.solve = timed_call
     try:
         for _ in range(rep_alt):
-            tolsynth.synthesize(m, R, P, DIST, ALPHA)
+            tolsynth.synthesize(m, R, P, DIST, ALPHA, probability="gaussian")
     finally:
         IPMKernel.solve = call
     t_call = statistics.median(kernel_calls)
@@ -227,8 +234,10 @@ def main():
     t_cl, lres = wb.t_cl, lean.solve(R, P)
     cl_inside = lres.solve_time
     cl_err = abs(lres.cost - ref) / ref
-    tolsynth.synthesize(m, R, P, DIST, ALPHA, solver="ipopt")
-    t_ip, r_ip = median_time(lambda: tolsynth.synthesize(m, R, P, DIST, ALPHA, solver="ipopt"), rep_alt)
+    tolsynth.synthesize(m, R, P, DIST, ALPHA, solver="ipopt", probability="gaussian")
+    t_ip, r_ip = median_time(
+        lambda: tolsynth.synthesize(m, R, P, DIST, ALPHA, solver="ipopt", probability="gaussian"), rep_alt
+    )
     sl = SLSQPExact(spec)
     for ftol in (1e-6, 1e-8, 1e-10, 1e-12, 1e-14):
         r_sl = sl.solve(ftol)
@@ -238,7 +247,9 @@ def main():
     sl_err = abs(r_sl.fun - ref) / ref
     lam = np.linalg.eigvalsh(np.einsum("bin,n,bjn->bij", sl.As, np.exp(2 * r_sl.x) / sl.c, sl.As))
     sl_viol = float(np.sqrt(lam.max()) - 1)
-    t_su, r_su = median_time(lambda: tolsynth.synthesize(m, R, P, DIST, ALPHA, solver="sumt"), max(5, rep_alt // 4))
+    t_su, r_su = median_time(
+        lambda: tolsynth.synthesize(m, R, P, DIST, ALPHA, solver="sumt", probability="gaussian"), max(5, rep_alt // 4)
+    )
     print(
         f"\n1. one warm solve, paper's column (R {R} mm, p {P}, {DIST}, alpha {ALPHA}); optimum {ref:.10g}, "
         f"gap {first.gap:.1e}"
@@ -275,7 +286,7 @@ def main():
 
     def neighbour_ts():
         step["k"] += 1
-        return tolsynth.synthesize(m, Rs[step["k"] % 10], P, DIST, ALPHA)
+        return tolsynth.synthesize(m, Rs[step["k"] % 10], P, DIST, ALPHA, probability="gaussian")
 
     def neighbour_cl():
         step["k"] += 1
@@ -334,7 +345,7 @@ def main():
     # untimed: the first solves of a size (the kernel's first use, cvxpy's imports)
     for N in (30, 300):
         ps = random_poses(m, N, np.random.default_rng(N))
-        tolsynth.synthesize(m, R, P, DIST, ALPHA, poses=ps)
+        tolsynth.synthesize(m, R, P, DIST, ALPHA, poses=ps, probability="gaussian")
         LeanModel(m, ps, DIST, ALPHA).solve(R, P)
     t_of = {}
     for N in sizes:
@@ -343,7 +354,7 @@ def main():
         for _ in range(reps):
             poses = random_poses(m, N, rng)
             t0 = time.perf_counter()
-            r = tolsynth.synthesize(m, R, P, DIST, ALPHA, poses=poses)
+            r = tolsynth.synthesize(m, R, P, DIST, ALPHA, poses=poses, probability="gaussian")
             times.append(time.perf_counter() - t0)
             assert r.success, r.message
             msg = r.message

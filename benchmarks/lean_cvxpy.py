@@ -237,14 +237,20 @@ def main() -> int:
     m = tolsynth.load_model("xu_zhang_1988")
     lm = LeanModel(m, ["worst"], "uniform", ALPHA)
     print("xu_zhang_1988, pose 'worst', R 0.5 mm, p 0.99, uniform, alpha 0.7 (the paper's column):")
-    ts = tolsynth.synthesize(m, R, P, "uniform", ALPHA)
+    ts = tolsynth.synthesize(m, R, P, "uniform", ALPHA, probability="gaussian")
     ok &= _compare("paper's column", lm.solve(R, P), ts)
     eps = ts.x
     k2 = m.k * np.linspace(0.8, 1.3, m.n)
-    ok &= _compare("k varied per parameter", lm.solve(R, P, k=k2), tolsynth.synthesize(m, R, P, "uniform", ALPHA, k=k2))
+    ok &= _compare(
+        "k varied per parameter",
+        lm.solve(R, P, k=k2),
+        tolsynth.synthesize(m, R, P, "uniform", ALPHA, k=k2, probability="gaussian"),
+    )
     a2 = np.linspace(0.5, 0.9, m.n)
     ok &= _compare(
-        "alpha per parameter (rebuilt)", lm.solve(R, P, alpha=a2), tolsynth.synthesize(m, R, P, "uniform", a2)
+        "alpha per parameter (rebuilt)",
+        lm.solve(R, P, alpha=a2),
+        tolsynth.synthesize(m, R, P, "uniform", a2, probability="gaussian"),
     )
     lm.solve(R, P, alpha=ALPHA)
     names = m.error_parameters
@@ -253,39 +259,45 @@ def main() -> int:
     ok &= _compare(
         f"upper bound of {names[i]} at 0.8 x its optimum",
         lm.solve(R, P, upper=hi),
-        tolsynth.synthesize(m, R, P, "uniform", ALPHA, bounds={names[i]: (m.bounds[0][i], hi[names[i]])}),
+        tolsynth.synthesize(
+            m, R, P, "uniform", ALPHA, bounds={names[i]: (m.bounds[0][i], hi[names[i]])}, probability="gaussian"
+        ),
     )
     lock = {names[0]: 0.9 * eps[0]}
     ok &= _compare(
         f"{names[0]} locked at 0.9 x its optimum",
         lm.solve(R, P, locks=lock),
-        tolsynth.synthesize(m, R, P, "uniform", ALPHA, locks=lock),
+        tolsynth.synthesize(m, R, P, "uniform", ALPHA, locks=lock, probability="gaussian"),
     )
-    ok &= _compare("R 0.3 mm", lm.solve(0.3, P), tolsynth.synthesize(m, 0.3, P, "uniform", ALPHA))
-    ok &= _compare("p 0.95", lm.solve(R, 0.95), tolsynth.synthesize(m, R, 0.95, "uniform", ALPHA))
+    ok &= _compare(
+        "R 0.3 mm", lm.solve(0.3, P), tolsynth.synthesize(m, 0.3, P, "uniform", ALPHA, probability="gaussian")
+    )
+    ok &= _compare(
+        "p 0.95", lm.solve(R, 0.95), tolsynth.synthesize(m, R, 0.95, "uniform", ALPHA, probability="gaussian")
+    )
     ok &= _compare(
         "normal (3 sigma = eps)",
         LeanModel(m, ["worst"], "normal").solve(R, P),
-        tolsynth.synthesize(m, R, P, "normal", ALPHA),
+        tolsynth.synthesize(m, R, P, "normal", ALPHA, probability="gaussian"),
     )
     mixed = {"*": "uniform", names[0]: "normal", names[-1]: "triangular", names[3]: "truncnormal(2.5)"}
     ok &= _compare(
         "mixed shapes (uniform, normal, triangular, truncnormal)",
         LeanModel(m, ["worst"], mixed).solve(R, P),
-        tolsynth.synthesize(m, R, P, mixed, ALPHA),
+        tolsynth.synthesize(m, R, P, mixed, ALPHA, probability="gaussian"),
     )
 
     for name in ("puma560", "panda"):
         mech = tolsynth.load_model(name)
         poses = random_poses(mech, 10, np.random.default_rng(22))
         print(f"{name}, 10 random poses (seed 22), R 0.5 mm, p 0.99, uniform, alpha 0.7:")
-        ts = tolsynth.synthesize(mech, R, P, "uniform", ALPHA, poses=poses)
+        ts = tolsynth.synthesize(mech, R, P, "uniform", ALPHA, poses=poses, probability="gaussian")
         lm = LeanModel(mech, poses, "uniform", ALPHA)
         ok &= _compare("10 poses", lm.solve(R, P), ts)
         ok &= _compare(
             "R 0.2 mm, p 0.999",
             lm.solve(0.2, 0.999),
-            tolsynth.synthesize(mech, 0.2, 0.999, "uniform", ALPHA, poses=poses),
+            tolsynth.synthesize(mech, 0.2, 0.999, "uniform", ALPHA, poses=poses, probability="gaussian"),
         )
     print(f"all agree to 1e-6: {bool(ok)} ({time.perf_counter() - t0:.1f} s)")
     return 0 if ok else 1

@@ -72,7 +72,7 @@ def warm_resolve(reps: int, alt_reps: int) -> tuple[bs.Row, str]:
     the line of the other methods' times on it (IPOPT warm, SLSQP with exact gradients, SUMT)."""
     m = tolsynth.load_model("xu_zhang_1988")
     lm = LeanModel(tolsynth.load_model("xu_zhang_1988"), ["worst"], bs.DIST, bs.ALPHA)
-    solve = lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA)
+    solve = lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, probability="gaussian")
     ref = solve().cost
     lm.solve(bs.R, bs.P)  # canonicalised once: untimed
     row = bs.paired(
@@ -82,15 +82,18 @@ def warm_resolve(reps: int, alt_reps: int) -> tuple[bs.Row, str]:
         solve,
         lambda: lm.solve(bs.R, bs.P),
     )
-    tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt")
-    t_ip, _ = median_time(lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt"), alt_reps)
+    tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt", probability="gaussian")
+    t_ip, _ = median_time(
+        lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt", probability="gaussian"), alt_reps
+    )
     sl = SLSQPExact(make_specification(m, bs.R, bs.P, bs.DIST, bs.ALPHA))
     for ftol in (1e-6, 1e-8, 1e-10, 1e-12, 1e-14):  # the loosest ftol that reaches the optimum to 1e-6
         if abs(sl.solve(ftol).fun - ref) <= bs.RTOL * ref:
             break
     t_sl, r_sl = median_time(lambda: sl.solve(ftol), alt_reps)
     t_su, r_su = median_time(
-        lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="sumt"), max(5, alt_reps // 4)
+        lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="sumt", probability="gaussian"),
+        max(5, alt_reps // 4),
     )
     t = row.t_ts
     line = (
@@ -136,7 +139,9 @@ def grid_sweep(repeat: int, size: int = 6) -> PlainRow:
     m = tolsynth.load_model("xu_zhang_1988")
     grid = grid_of(size)
     n = int(np.prod([len(v) for v in grid.values()]))
-    df = tolsynth.sweep(m, **grid, client="serial", progress=False)  # first use of each graph: untimed
+    df = tolsynth.sweep(
+        m, **grid, client="serial", progress=False, probability="gaussian"
+    )  # first use of each graph: untimed
     lean_cost = {}
 
     def lean_grid():
@@ -151,7 +156,7 @@ def grid_sweep(repeat: int, size: int = 6) -> PlainRow:
     for i in range(repeat):
         for side in ("ts", "lean") if i % 2 == 0 else ("lean", "ts"):
             if side == "ts":
-                rate, t, failed = throughput(m, grid, "serial", 1)
+                rate, t, failed = throughput(m, grid, "serial", 1, probability="gaussian")
                 ts.append(t)
                 failures += [f"{failed} rows failed"] if failed else []
             else:
@@ -173,7 +178,7 @@ def exact_path(reps: int, rng, exact_cvxpy) -> PlainRow:
     """The exact-probability design against one cold lean solve of the Gaussian problem (a
     different problem: no same-optimum check; the result must be certified)."""
     m = tolsynth.load_model("xu_zhang_1988")
-    tolsynth.synthesize(m, R=0.5, p=0.9)  # graphs built once, outside the timings
+    tolsynth.synthesize(m, R=0.5, p=0.9, probability="gaussian")  # graphs built once, outside the timings
     ts, lean, failures = [], [], []
     for i in range(reps):
         R = 0.5 * (1 + 0.02 * rng.random())  # a new R: no solve repeats another

@@ -13,22 +13,22 @@ def mech():
 
 
 def test_smallest_R_for_a_budget_round_trip(mech):
-    ref = tolsynth.synthesize(mech, 0.5, 0.99)
-    out = best_accuracy(mech, ref.cost * (1 + 1e-9), p=0.99, rtol=1e-5)
+    ref = tolsynth.synthesize(mech, 0.5, 0.99, probability="gaussian")
+    out = best_accuracy(mech, ref.cost * (1 + 1e-9), p=0.99, rtol=1e-5, probability="gaussian")
     assert out.certified and out.quantity == "R"
     lo, hi = out.bracket
     assert lo <= 0.5 <= hi * (1 + 1e-9) and hi / lo - 1 <= 2e-5
     assert out.result.cost <= ref.cost * (1 + 1e-9) and out.result.success
     # a budget 20% larger buys a smaller R; the cost at the bracket's lower end exceeds it
-    more = best_accuracy(mech, 1.2 * ref.cost, p=0.99, rtol=1e-4)
+    more = best_accuracy(mech, 1.2 * ref.cost, p=0.99, rtol=1e-4, probability="gaussian")
     assert more.value < 0.5
-    below = tolsynth.synthesize(mech, more.bracket[0] * 0.999, 0.99)
+    below = tolsynth.synthesize(mech, more.bracket[0] * 0.999, 0.99, probability="gaussian")
     assert below.cost > 1.2 * ref.cost
 
 
 def test_largest_p_for_a_budget_round_trip(mech):
-    ref = tolsynth.synthesize(mech, 0.5, 0.95)
-    out = best_accuracy(mech, ref.cost * (1 + 1e-9), R=0.5, rtol=1e-6)
+    ref = tolsynth.synthesize(mech, 0.5, 0.95, probability="gaussian")
+    out = best_accuracy(mech, ref.cost * (1 + 1e-9), R=0.5, rtol=1e-6, probability="gaussian")
     assert out.certified and out.quantity == "p"
     assert out.bracket[0] <= 0.95 <= out.bracket[1] + 1e-9
     assert out.value == pytest.approx(0.95, abs=1e-5)
@@ -36,8 +36,8 @@ def test_largest_p_for_a_budget_round_trip(mech):
 
 def test_budget_errors(mech):
     with pytest.raises(tolsynth.InputError, match="exactly one"):
-        best_accuracy(mech, 100.0)
+        best_accuracy(mech, 100.0, probability="gaussian")
     with pytest.raises(tolsynth.OutOfRangeError, match="budget"):
-        best_accuracy(mech, -1.0, p=0.99)
+        best_accuracy(mech, -1.0, p=0.99, probability="gaussian")
     with pytest.raises(tolsynth.InfeasibleSpecificationError, match="budget"):
-        best_accuracy(mech, 1e-3, p=0.99)
+        best_accuracy(mech, 1e-3, p=0.99, probability="gaussian")

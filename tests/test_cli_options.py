@@ -92,6 +92,7 @@ def test_solve_reaches_alpha_k_bounds_poses_and_p_orientation(capsys):
         poses=["stretched", "elbow90"],
         Phi=0.005,
         p_orientation=0.95,
+        probability="gaussian",
     )
     assert api.success and api.bounds_active == {"l1": "upper"}
     argv = [
@@ -116,6 +117,8 @@ def test_solve_reaches_alpha_k_bounds_poses_and_p_orientation(capsys):
         "5mrad",
         "--p-orientation",
         "0.95",
+        "--probability",
+        "gaussian",
     ]
     out = _json(capsys, argv + ["--json"])
     assert out["cost"] == pytest.approx(api.cost, rel=1e-9)
@@ -159,7 +162,8 @@ def test_solver_defaults_to_auto_with_ipopt_and_sumt_on_request(capsys):
         assert action.default == "auto" and {"auto", "ipopt", "sumt"} <= set(action.choices), name
     sweep_help = next(a for a in sub.choices["sweep"]._actions if "--solver" in a.option_strings).help
     assert "default: auto" in sweep_help
-    base = ["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--json"]
+    # the paper's criterion, where the compiled interior-point method applies
+    base = ["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--json", "--probability", "gaussian"]
     runs = {s: _json(capsys, base + ([] if s == "auto" else ["--solver", s])) for s in ("auto", "ipopt", "sumt")}
     assert runs["auto"]["inputs"]["solver"] == "auto"
     assert runs["auto"]["solver"] == ("ipm" if kernel_status()["backend"] == "compiled" else "ipopt")

@@ -30,7 +30,7 @@ def _json(capsys, argv):
 def test_lock_takes_a_unit_suffix(capsys):
     out = _json(capsys, BASE + ["--lock", "l1=50um", "--json"])
     assert out["tolerances"]["l1"] == pytest.approx(0.05, rel=1e-12)
-    api = tolsynth.synthesize("planar_2r", 0.5, 0.99, pose="elbow90", locks={"l1": "50um"})
+    api = tolsynth.synthesize("planar_2r", 0.5, 0.99, pose="elbow90", locks={"l1": "50um"})  # both exact
     assert out["cost"] == pytest.approx(api.cost, rel=1e-8) and api.tolerances["l1"] == pytest.approx(0.05, rel=1e-12)
 
 
@@ -102,13 +102,13 @@ def test_default_pose_for_a_model_without_worst():
     """pose="worst" (the default) on a robot with no such configuration: the worst-pose search's
     pose, said in the result; the design meets the specification there (sigma z/R <= 1 by NumPy)."""
     m = _no_worst()
-    res = tolsynth.synthesize(m, 0.5, 0.99)
+    res = tolsynth.synthesize(m, 0.5, 0.99, probability="gaussian")
     assert res.success and "worst-pose search" in res.inputs["default_pose"] and "pose:" in res.summary()
     q = np.array(list(res.spec.poses.values())[0])
     S = m.sensitivity(q)[:3]
     lam = np.linalg.eigvalsh(S @ np.diag(res.x**2 / 3.0) @ S.T)
     assert math.sqrt(lam.max()) * tolsynth.z_of_p(0.99) / 0.5 == pytest.approx(1.0, abs=1e-6)
-    again = tolsynth.synthesize(m, 0.5, 0.99)  # the same pose again (deterministic, remembered)
+    again = tolsynth.synthesize(m, 0.5, 0.99, probability="gaussian")  # the same pose again (deterministic, remembered)
     assert np.array_equal(np.array(list(again.spec.poses.values())[0]), q)
 
 
@@ -134,7 +134,9 @@ def test_map_and_worst_pose_default_tolerances_for_every_model(capsys, command):
 def test_validate_checks_every_pose():
     """Two poses: both are run (per_pose), and the one reported is the one with the lowest
     P(|w_j| <= R), whose analytic value is the erf of its sigma (closed form)."""
-    res = tolsynth.synthesize("planar_2r", 0.5, 0.99, poses=["elbow90", "worst"], validate=20_000, seed=1)
+    res = tolsynth.synthesize(
+        "planar_2r", 0.5, 0.99, poses=["elbow90", "worst"], validate=20_000, seed=1, probability="gaussian"
+    )
     v = res.validation
     assert len(v.per_pose) == 2 and {p.pose for p in v.per_pose} == {"elbow90", "worst"}
     assert min(float(np.min(p.p_components)) for p in v.per_pose) == float(np.min(v.p_components))
@@ -149,7 +151,7 @@ def test_workspace_check_of_a_single_pose_design():
     says by how much and where, warns pointing to synthesize_workspace, and its number at that
     pose is sigma_1 z / R from Mechanism.analyze (NumPy's eigensolver)."""
     m = tolsynth.load_model("xu_zhang_1988")
-    res = tolsynth.synthesize(m, 0.5, 0.99)
+    res = tolsynth.synthesize(m, 0.5, 0.99, probability="gaussian")
     with pytest.warns(WorkspaceWarning, match="synthesize_workspace"):
         line = res.workspace.line()
     ws = res.workspace
@@ -163,7 +165,7 @@ def test_workspace_check_of_a_single_pose_design():
 
 
 def test_workspace_check_of_an_everywhere_design_finds_nothing():
-    w = tolsynth.synthesize_workspace("planar_2r", 0.5, 0.99)
+    w = tolsynth.synthesize_workspace("planar_2r", 0.5, 0.99, probability="gaussian")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert w.result.workspace.worst <= 1 + 1e-3
@@ -171,7 +173,7 @@ def test_workspace_check_of_an_everywhere_design_finds_nothing():
 
 
 def test_results_show_as_html_in_notebooks():
-    res = tolsynth.synthesize("planar_2r", 0.5, 0.99, pose="elbow90")
+    res = tolsynth.synthesize("planar_2r", 0.5, 0.99, pose="elbow90", probability="gaussian")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         html = res._repr_html_()

@@ -23,7 +23,7 @@ def test_solve_out_matches_api(tmp_path, capsys):
         main(["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.9", "--dist", "normal", "--out", str(path)]) == 0
     )
     frame = pd.read_json(path, orient="table", precise_float=True)
-    ref = tolsynth.synthesize("planar_2r", 0.5, 0.9, "normal")
+    ref = tolsynth.synthesize("planar_2r", 0.5, 0.9, "normal", probability="gaussian")
     np.testing.assert_allclose(frame["tolerance"].to_numpy(), ref.x, rtol=1e-9)
     meta = json.loads(path.read_text())["tolsynth"]
     assert meta["inputs"]["R_mm"] == 0.5 and meta["inputs"]["distribution"] == "normal"
@@ -130,7 +130,7 @@ def test_sweep_cli_from_toml_and_arguments(tmp_path, capsys):
     frame = pd.read_parquet(out)
     assert len(frame) == 4 and sorted(set(frame["R"])) == [0.3, 0.5] and set(frame["p"]) == {0.95}
     for _, row in frame.iterrows():
-        ref = tolsynth.synthesize("planar_2r", row["R"], row["p"], row["distribution"])
+        ref = tolsynth.synthesize("planar_2r", row["R"], row["p"], row["distribution"])  # both exact
         assert row["cost"] == pytest.approx(ref.cost, rel=1e-8)
     assert frame.attrs["inputs"]["command_line"]["grid"]["p"] == [0.95]
     capsys.readouterr()

@@ -18,7 +18,7 @@ def mech():
 
 @pytest.fixture(scope="module")
 def optimum(mech):
-    return tolsynth.synthesize(mech, R=0.5, p=0.99, distribution="uniform", alpha=0.7)
+    return tolsynth.synthesize(mech, R=0.5, p=0.99, distribution="uniform", alpha=0.7, probability="gaussian")
 
 
 def _fd_position_sensitivity(mech, q, h=1e-6):

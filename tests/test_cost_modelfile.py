@@ -29,8 +29,8 @@ def test_model_file_cost_processes_and_lock(tmp_path):
     m = tolsynth.load_model(path)
     assert m.cost_models == {"l1": Chase(1.0, 0.4, 1.0)}
     assert [p.name for p in m.processes["l1"]] == ["turning", "lapping"]
-    api = tolsynth.synthesize("planar_2r", 0.5, 0.99, cost={"l1": Chase(1.0, 0.4, 1.0)})
-    fromfile = tolsynth.synthesize(m, 0.5, 0.99)
+    api = tolsynth.synthesize("planar_2r", 0.5, 0.99, cost={"l1": Chase(1.0, 0.4, 1.0)}, probability="gaussian")
+    fromfile = tolsynth.synthesize(m, 0.5, 0.99, probability="gaussian")
     assert fromfile.cost == pytest.approx(api.cost, rel=1e-9)
     procs = {
         "l1": [
@@ -38,12 +38,12 @@ def test_model_file_cost_processes_and_lock(tmp_path):
             Process("lapping", Exponential(12.0, 20.0), 0.002, 0.015),
         ]
     }
-    a = tolsynth.synthesize_processes("planar_2r", 0.2, 0.99, procs)
-    b = tolsynth.synthesize_processes(m, 0.2, 0.99)
+    a = tolsynth.synthesize_processes("planar_2r", 0.2, 0.99, procs, probability="gaussian")
+    b = tolsynth.synthesize_processes(m, 0.2, 0.99, probability="gaussian")
     assert a.processes == b.processes and a.cost == pytest.approx(b.cost, rel=1e-9)
     locked = tolsynth.load_model(_with(tmp_path, "lock = 0.05\n", "l.toml"))
     assert locked.locks == {"l1": 0.05}
-    assert tolsynth.synthesize(locked, 0.5, 0.99).tolerances["l1"] == 0.05
+    assert tolsynth.synthesize(locked, 0.5, 0.99, probability="gaussian").tolerances["l1"] == 0.05
 
 
 @pytest.mark.parametrize(

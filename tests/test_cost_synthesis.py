@@ -79,7 +79,7 @@ def test_paper_robot_mixed_models_against_cvxpy():
     models = {}
     for i, nm in enumerate(names):
         models[nm] = [PowerLaw(1.0 + 0.1 * i, 0.7), Chase(2.0, 0.5 + 0.05 * i, 1.5), Exponential(8.0, 3.0 + i)][i % 3]
-    res = tolsynth.synthesize(mech, R=0.5, p=0.99, cost=models)
+    res = tolsynth.synthesize(mech, R=0.5, p=0.99, cost=models, probability="gaussian")
     assert res.success and res.gap <= 1e-6 * res.cost
     spec = res.spec
     y = cp.Variable(len(names))
@@ -109,35 +109,39 @@ def test_tabulated_cost_and_a_non_convex_one_claims_no_certificate():
     convex = Tabulated([0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5], [30.0, 16.0, 9.0, 4.5, 3.0, 2.2, 1.6])
     lengths = [nm for nm, u in zip(mech.error_parameters, mech.units) if u == "mm"]
     bounds = {nm: (0.005, 0.5) for nm in lengths}
-    res = tolsynth.synthesize(mech, R=0.5, p=0.99, cost={nm: convex for nm in lengths}, bounds=bounds)
+    res = tolsynth.synthesize(
+        mech, R=0.5, p=0.99, cost={nm: convex for nm in lengths}, bounds=bounds, probability="gaussian"
+    )
     assert res.success and res.gap <= 1e-6 * res.cost and "no certificate" not in res.message
     kinked = Tabulated([0.005, 0.02, 0.03, 0.1, 0.5], [30.0, 10.0, 9.9, 3.0, 2.0])
     assert not kinked.convex_in_y(0.005, 0.5)
-    res = tolsynth.synthesize(mech, R=0.5, p=0.99, cost={lengths[0]: kinked}, bounds=bounds)
+    res = tolsynth.synthesize(mech, R=0.5, p=0.99, cost={lengths[0]: kinked}, bounds=bounds, probability="gaussian")
     assert "no certificate" in res.message and lengths[0] in res.message
     assert res.lower_bound <= res.cost + 1e-9  # still a valid bound
     with pytest.raises(tolsynth.OutOfRangeError, match="leaves the table"):
-        tolsynth.synthesize(mech, R=0.5, p=0.99, cost={lengths[0]: kinked}, bounds={lengths[0]: (0.001, 0.5)})
+        tolsynth.synthesize(
+            mech, R=0.5, p=0.99, cost={lengths[0]: kinked}, bounds={lengths[0]: (0.001, 0.5)}, probability="gaussian"
+        )
 
 
 def test_locks():
     mech = tolsynth.load_model("xu_zhang_1988")
-    free = tolsynth.synthesize(mech, R=0.5, p=0.99)
+    free = tolsynth.synthesize(mech, R=0.5, p=0.99, probability="gaussian")
     # locking a parameter at its optimal value changes nothing
     nm = "h3"
-    same = tolsynth.synthesize(mech, R=0.5, p=0.99, locks={nm: free.tolerances[nm]})
+    same = tolsynth.synthesize(mech, R=0.5, p=0.99, locks={nm: free.tolerances[nm]}, probability="gaussian")
     assert same.success and same.cost == pytest.approx(free.cost, rel=1e-7)
     np.testing.assert_allclose(same.x, free.x, rtol=1e-4)
     # a tighter lock: the others are re-optimised, the total costs more, the lock holds exactly
-    tight = tolsynth.synthesize(mech, R=0.5, p=0.99, locks={nm: 0.5 * free.tolerances[nm]})
+    tight = tolsynth.synthesize(mech, R=0.5, p=0.99, locks={nm: 0.5 * free.tolerances[nm]}, probability="gaussian")
     assert tight.success and tight.tolerances[nm] == 0.5 * free.tolerances[nm]
     assert tight.cost > free.cost and tight.gap <= 1e-6 * tight.cost
     assert tight.max_constraint <= 1 + 1e-7
     # locks that alone break the specification: a clear error naming them
     with pytest.raises(tolsynth.InfeasibleSpecificationError, match="locked tolerances") as info:
-        tolsynth.synthesize(mech, R=0.5, p=0.99, locks={"h3": 0.2, "alpha1": 5.0})
+        tolsynth.synthesize(mech, R=0.5, p=0.99, locks={"h3": 0.2, "alpha1": 5.0}, probability="gaussian")
     assert "'h3'" in str(info.value) and "'alpha1'" in str(info.value)
     with pytest.raises(tolsynth.UnknownNameError):
-        tolsynth.synthesize(mech, R=0.5, p=0.99, locks={"zz": 0.1})
+        tolsynth.synthesize(mech, R=0.5, p=0.99, locks={"zz": 0.1}, probability="gaussian")
     with pytest.raises(tolsynth.OutOfRangeError, match="locks"):
-        tolsynth.synthesize(mech, R=0.5, p=0.99, locks={"h3": -0.1})
+        tolsynth.synthesize(mech, R=0.5, p=0.99, locks={"h3": -0.1}, probability="gaussian")

@@ -34,15 +34,15 @@ def test_mixed_covariance_is_the_sum_of_each_parameters_own_variance(xz):
 def test_mixed_optimum_is_checked_by_monte_carlo(xz):
     """The optimum with mixed shapes meets z sigma_1 = R, and a 200k-sample nonlinear Monte Carlo
     drawing each error from its own shape gives the analytic principal spreads within 1 %."""
-    r = tolsynth.synthesize(xz, R=0.5, p=0.99, distribution=MIXED)
+    r = tolsynth.synthesize(xz, R=0.5, p=0.99, distribution=MIXED, probability="gaussian")
     assert r.success
     a = xz.analyze("worst", r.x, MIXED, R=0.5)
     assert a.principal_std[0] * 2.5758293 == pytest.approx(0.5, rel=1e-6)
     mc = tolsynth.monte_carlo(xz, "worst", r.x, MIXED, R=0.5, n=200_000, seed=3)
     np.testing.assert_allclose(mc.principal_std, a.principal_std, rtol=0.01)
     # and it differs from both all-uniform and all-normal designs
-    cu = tolsynth.synthesize(xz, R=0.5, p=0.99, distribution="uniform").cost
-    cn = tolsynth.synthesize(xz, R=0.5, p=0.99, distribution="normal").cost
+    cu = tolsynth.synthesize(xz, R=0.5, p=0.99, distribution="uniform", probability="gaussian").cost
+    cn = tolsynth.synthesize(xz, R=0.5, p=0.99, distribution="normal", probability="gaussian").cost
     assert cn < r.cost < cu
 
 
@@ -55,12 +55,16 @@ def test_model_file_declares_shapes_and_the_default_uses_them(tmp_path):
     f.write_text(text)
     m = tolsynth.load_model(str(f))
     assert m.distribution["h3"] == "normal" and m.distribution["h2"] == "uniform"
-    r_file = tolsynth.synthesize(m, R=0.5, p=0.99)  # distribution=None: the file's shapes
-    r_api = tolsynth.synthesize(tolsynth.load_model("xu_zhang_1988"), R=0.5, p=0.99, distribution={"h3": "normal"})
+    r_file = tolsynth.synthesize(m, R=0.5, p=0.99, probability="gaussian")  # distribution=None: the file's shapes
+    r_api = tolsynth.synthesize(
+        tolsynth.load_model("xu_zhang_1988"), R=0.5, p=0.99, distribution={"h3": "normal"}, probability="gaussian"
+    )
     assert r_file.cost == pytest.approx(r_api.cost, rel=1e-7)  # the solver tolerance
     # distribution= as a string still sets every parameter at once
-    r_all = tolsynth.synthesize(m, R=0.5, p=0.99, distribution="uniform")
-    assert r_all.cost == pytest.approx(tolsynth.synthesize("xu_zhang_1988", R=0.5, p=0.99).cost, rel=1e-9)
+    r_all = tolsynth.synthesize(m, R=0.5, p=0.99, distribution="uniform", probability="gaussian")
+    assert r_all.cost == pytest.approx(
+        tolsynth.synthesize("xu_zhang_1988", R=0.5, p=0.99, probability="gaussian").cost, rel=1e-9
+    )
     bad = text.replace('distribution = "normal"', 'distribution = "cauchy"')
     f.write_text(bad)
     with pytest.raises(ModelFileError, match=r"error_parameters\[1\]\.distribution"):
@@ -69,11 +73,11 @@ def test_model_file_declares_shapes_and_the_default_uses_them(tmp_path):
 
 def test_bad_per_parameter_input_is_typed(xz):
     with pytest.raises(Exception, match="nope"):
-        tolsynth.synthesize(xz, R=0.5, p=0.99, distribution={"nope": "normal"})
+        tolsynth.synthesize(xz, R=0.5, p=0.99, distribution={"nope": "normal"}, probability="gaussian")
     with pytest.raises(OutOfRangeError, match=r"distribution\[h2\]"):
-        tolsynth.synthesize(xz, R=0.5, p=0.99, distribution={"h2": "gamma"})
+        tolsynth.synthesize(xz, R=0.5, p=0.99, distribution={"h2": "gamma"}, probability="gaussian")
     with pytest.raises(InputError, match="distribution"):
-        tolsynth.synthesize(xz, R=0.5, p=0.99, distribution={})
+        tolsynth.synthesize(xz, R=0.5, p=0.99, distribution={}, probability="gaussian")
 
 
 def test_command_line_takes_per_parameter_shapes():

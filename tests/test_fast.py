@@ -73,16 +73,20 @@ def check(mech, res, ref_ipopt=None, rtol=1e-6):
 def test_random_pose_sets_agree_with_clarabel_and_ipopt(model, N, distribution):
     mech = tolsynth.load_model(model)
     poses = random_poses(mech, N, seed=100 * N + len(model))
-    res = tolsynth.synthesize(mech, R, P, distribution, ALPHA, poses=poses)
-    check(mech, res, tolsynth.synthesize(mech, R, P, distribution, ALPHA, poses=poses, solver="ipopt"))
+    res = tolsynth.synthesize(mech, R, P, distribution, ALPHA, poses=poses, probability="gaussian")
+    check(
+        mech,
+        res,
+        tolsynth.synthesize(mech, R, P, distribution, ALPHA, poses=poses, solver="ipopt", probability="gaussian"),
+    )
 
 
 def test_paper_column_and_every_kind_of_change():
     """The paper's column, then a change of each sweep parameter: k of one parameter, alpha (one
     per parameter), an active upper bound, a lock, R, p, the distribution and mixed shapes."""
     m = tolsynth.load_model("xu_zhang_1988")
-    base = tolsynth.synthesize(m, R, P, "uniform", ALPHA)
-    check(m, base, tolsynth.synthesize(m, R, P, "uniform", ALPHA, solver="ipopt"))
+    base = tolsynth.synthesize(m, R, P, "uniform", ALPHA, probability="gaussian")
+    check(m, base, tolsynth.synthesize(m, R, P, "uniform", ALPHA, solver="ipopt", probability="gaussian"))
     names, eps = m.error_parameters, base.x
     j = int(np.argmax(eps))
     lo, _ = m.bounds
@@ -97,7 +101,7 @@ def test_paper_column_and_every_kind_of_change():
         dict(distribution={"*": "uniform", names[0]: "normal", names[-1]: "triangular"}),
     ]
     for kw in cases:
-        args = dict(R=R, p=P, distribution="uniform", alpha=ALPHA)
+        args = dict(R=R, p=P, distribution="uniform", alpha=ALPHA, probability="gaussian")
         args.update(kw)
         res = tolsynth.synthesize(m, **args)
         check(m, res, tolsynth.synthesize(m, **args, solver="ipopt"))
@@ -113,7 +117,9 @@ def test_orientation_blocks_and_the_second_mode():
     minimiser) stalls and the second (y an iterate of its own) solves it; both kernel modes, run
     directly, agree where both converge."""
     m = tolsynth.load_model("panda")
-    res = tolsynth.synthesize(m, 0.3641602761279353, 0.99, "uniform", 3.0, pose="ready", Phi=0.0061938619557347745)
+    res = tolsynth.synthesize(
+        m, 0.3641602761279353, 0.99, "uniform", 3.0, pose="ready", Phi=0.0061938619557347745, probability="gaussian"
+    )
     check(m, res)
     spec = make_specification(m, 0.5, 0.99, "uniform", 0.7, pose="ready", Phi=0.01)
     out = []
@@ -135,15 +141,23 @@ def test_extreme_scales_and_upper_bounds_active():
     """k = 1e-3, R = 1000 mm, alpha 3, bounds 1e-12..1e6 (cost scales far from 1); and R so large
     that every tolerance sits at its upper bound (no block active: the multipliers are 0)."""
     mech = tolsynth.load_model("planar_2r")
-    res = tolsynth.synthesize(mech, R=1000, p=0.5, alpha=3, k=0.001, bounds=(1e-12, 1e6), pose="worst")
+    res = tolsynth.synthesize(
+        mech, R=1000, p=0.5, alpha=3, k=0.001, bounds=(1e-12, 1e6), pose="worst", probability="gaussian"
+    )
     check(mech, res)
-    top = tolsynth.synthesize(mech, R=1e4, p=0.5, alpha=0.7, pose="worst")
+    top = tolsynth.synthesize(mech, R=1e4, p=0.5, alpha=0.7, pose="worst", probability="gaussian")
     assert top.solver == "ipm" and top.success
     np.testing.assert_array_equal(top.x, mech.bounds[1])
     assert set(top.bounds_active.values()) == {"upper"}
     # every tolerance locked: nothing to choose; the cost is k eps^-alpha at the locks
     locked = tolsynth.synthesize(
-        mech, R=5.0, p=0.9, alpha=0.7, pose="worst", locks={n: 0.01 for n in mech.error_parameters}
+        mech,
+        R=5.0,
+        p=0.9,
+        alpha=0.7,
+        pose="worst",
+        locks={n: 0.01 for n in mech.error_parameters},
+        probability="gaussian",
     )
     assert locked.solver == "ipm" and locked.success and locked.gap == pytest.approx(0.0, abs=1e-12)
     assert locked.cost == pytest.approx(float(np.sum(mech.k * 0.01**-0.7)), rel=1e-12)
@@ -160,15 +174,19 @@ def test_many_blocks_working_set_cold_and_warm_agree(all_blocks, N, monkeypatch)
         monkeypatch.setattr(fast, "ALL_BLOCKS", all_blocks)
     mech = tolsynth.load_model("puma560")
     poses = random_poses(mech, N, seed=5)
-    cold = tolsynth.synthesize(mech, R, P, "uniform", ALPHA, poses=poses, options={"warm_start": False})
+    cold = tolsynth.synthesize(
+        mech, R, P, "uniform", ALPHA, poses=poses, options={"warm_start": False}, probability="gaussian"
+    )
     assert cold.solver == "ipm" and cold.success and cold.gap <= 1e-9 * cold.cost, cold.message
     assert_feasible(mech, cold)
-    warm = tolsynth.synthesize(mech, R, P, "uniform", ALPHA, poses=poses)
+    warm = tolsynth.synthesize(mech, R, P, "uniform", ALPHA, poses=poses, probability="gaussian")
     assert warm.success and "1 round(s)" in warm.message, warm.message
     assert warm.cost == pytest.approx(cold.cost, rel=1e-9)
     np.testing.assert_allclose(warm.x, cold.x, rtol=1e-5)
-    tolsynth.synthesize(mech, 0.7, 0.9, "normal", 1.0, poses=poses[: N // 2])
-    again = tolsynth.synthesize(mech, R, P, "uniform", ALPHA, poses=poses, options={"warm_start": False})
+    tolsynth.synthesize(mech, 0.7, 0.9, "normal", 1.0, poses=poses[: N // 2], probability="gaussian")
+    again = tolsynth.synthesize(
+        mech, R, P, "uniform", ALPHA, poses=poses, options={"warm_start": False}, probability="gaussian"
+    )
     assert again.cost == cold.cost
     ref = clarabel(cold.spec)
     if ref is not None:
@@ -183,11 +201,13 @@ def test_falls_back_to_ipopt_where_it_does_not_apply(monkeypatch):
     assert fast.applies(ToleranceNLP(sphere)) == "the sphere criterion"
     chase = make_specification(m, R, P, "uniform", ALPHA, cost={"h2": Chase(A=1.0, B=2.0, k=1.5)})
     assert fast.applies(ToleranceNLP(chase)) == "a cost model other than the power law"
-    res = tolsynth.synthesize(m, R, P, "uniform", ALPHA, cost={"h2": Chase(A=1.0, B=2.0, k=1.5)})
+    res = tolsynth.synthesize(
+        m, R, P, "uniform", ALPHA, cost={"h2": Chase(A=1.0, B=2.0, k=1.5)}, probability="gaussian"
+    )
     assert res.solver == "ipopt" and "power law" in res.message and res.success
-    fast_res = tolsynth.synthesize(m, R, P, "uniform", ALPHA)
+    fast_res = tolsynth.synthesize(m, R, P, "uniform", ALPHA, probability="gaussian")
     monkeypatch.setenv("TOLSYNTH_NO_COMPILE", "1")
-    res = tolsynth.synthesize(m, R, P, "uniform", ALPHA)
+    res = tolsynth.synthesize(m, R, P, "uniform", ALPHA, probability="gaussian")
     assert res.solver == "ipopt" and "TOLSYNTH_NO_COMPILE" in res.message and res.success
     assert fast_res.solver == "ipm" and fast_res.cost == pytest.approx(res.cost, rel=1e-6)
 
@@ -214,17 +234,19 @@ def test_other_probabilities_keep_their_solvers(monkeypatch):
 def test_options():
     m = tolsynth.load_model("xu_zhang_1988")
     with pytest.raises(InputError):
-        tolsynth.synthesize(m, R, P, "uniform", ALPHA, options={"no_such_option": 1})
+        tolsynth.synthesize(m, R, P, "uniform", ALPHA, options={"no_such_option": 1}, probability="gaussian")
     # too few iterations for the method: IPOPT answers, certified
-    res = tolsynth.synthesize(m, R, P, "uniform", ALPHA, options={"max_iter": 3, "warm_start": False})
+    res = tolsynth.synthesize(
+        m, R, P, "uniform", ALPHA, options={"max_iter": 3, "warm_start": False}, probability="gaussian"
+    )
     assert res.solver == "ipopt" and "interior-point method" in res.message
-    tight = tolsynth.synthesize(m, R, P, "uniform", ALPHA, options={"tol": 1e-12})
+    tight = tolsynth.synthesize(m, R, P, "uniform", ALPHA, options={"tol": 1e-12}, probability="gaussian")
     assert tight.solver == "ipm" and tight.gap <= 1e-10 * tight.cost
 
 
 def test_history_and_counts():
     m = tolsynth.load_model("xu_zhang_1988")
-    res = tolsynth.synthesize(m, R, P, "uniform", ALPHA, options={"warm_start": False})
+    res = tolsynth.synthesize(m, R, P, "uniform", ALPHA, options={"warm_start": False}, probability="gaussian")
     assert 5 <= res.iterations <= 60 and res.function_evaluations >= res.iterations
     assert res.history and res.history[-1]["inf_pr"] <= 1e-9
     assert res.history[-1]["objective"] == res.cost
@@ -258,7 +280,7 @@ def test_sweep_steps_start_warm_and_reach_the_cold_optimum():
     from the last solve of the same blocks: fewer iterations than from the cold start, the same
     certified optimum (1e-9) as the cold start and as IPOPT (1e-6)."""
     m = tolsynth.load_model("xu_zhang_1988")
-    base = tolsynth.synthesize(m, R, P, "uniform", ALPHA)
+    base = tolsynth.synthesize(m, R, P, "uniform", ALPHA, probability="gaussian")
     names, eps = m.error_parameters, base.x
     lo, _ = m.bounds
     j = int(np.argmax(eps))
@@ -271,7 +293,7 @@ def test_sweep_steps_start_warm_and_reach_the_cold_optimum():
         ({}, dict(p=P - 0.0002)),
     ]
     for before, kw in steps:
-        args = dict(R=R, p=P, distribution="uniform", alpha=ALPHA)
+        args = dict(R=R, p=P, distribution="uniform", alpha=ALPHA, probability="gaussian")
         tolsynth.synthesize(m, **args, **before)  # the sweep's previous step
         args.update(kw)
         warm = tolsynth.synthesize(m, **args)
@@ -283,7 +305,7 @@ def test_sweep_steps_start_warm_and_reach_the_cold_optimum():
         np.testing.assert_allclose(warm.x, cold.x, rtol=1e-5)
         assert warm.cost == pytest.approx(tolsynth.synthesize(m, **args, solver="ipopt").cost, rel=1e-6)
     # far from the remembered problem (alpha 0.7 -> 3): no warm start (it would cost iterations)
-    far = tolsynth.synthesize(m, R, P, "uniform", 3.0)
+    far = tolsynth.synthesize(m, R, P, "uniform", 3.0, probability="gaussian")
     assert far.history[0]["mode"] == "minimiser" and far.success
 
 
@@ -291,8 +313,8 @@ def test_the_same_problem_again_takes_no_iteration():
     """A re-solve of the very same specification starts at the remembered optimum unshifted: no
     iteration, the same certified answer; from the cold start the same optimum to 1e-9."""
     m = tolsynth.load_model("xu_zhang_1988")
-    first = tolsynth.synthesize(m, R, P, "uniform", ALPHA)
-    again = tolsynth.synthesize(m, R, P, "uniform", ALPHA)
-    cold = tolsynth.synthesize(m, R, P, "uniform", ALPHA, options={"warm_start": False})
+    first = tolsynth.synthesize(m, R, P, "uniform", ALPHA, probability="gaussian")
+    again = tolsynth.synthesize(m, R, P, "uniform", ALPHA, probability="gaussian")
+    cold = tolsynth.synthesize(m, R, P, "uniform", ALPHA, options={"warm_start": False}, probability="gaussian")
     assert again.iterations == 0 and again.success and again.cost == first.cost
     assert again.cost == pytest.approx(cold.cost, rel=1e-9)

@@ -168,7 +168,7 @@ def test_grade_choice_matches_brute_force(probability):
 def test_grades_with_sizes_and_default_probability():
     pytest.importorskip("pandas")
     m = tolsynth.load_model("planar_2r")
-    res = tolsynth.synthesize(m, R=0.5, p=0.95)
+    res = tolsynth.synthesize(m, R=0.5, p=0.95, probability="gaussian")
     g = round_to_grades(m, res, sizes={"l1": 120.0, "l2": 80.0}, table=ANGLES)
     assert g.proven and g.sizes == {"l1": 120.0, "l2": 80.0}
     assert g.grades["l1"].startswith("IT") and g.grades["o1"] in ANGLES["o*"]

@@ -28,12 +28,12 @@ def planar():
         (lambda m: tolsynth.worst_pose(m, "coarse", grid=10**7), "grid"),
         (lambda m: tolsynth.monte_carlo(m, "worst", "coarse", R=0.5, n=math.nan), "n"),
         (lambda m: tolsynth.monte_carlo(m, "worst", "coarse", R=0.5, n=math.inf), "n"),
-        (lambda m: tolsynth.synthesize(m, 0.5, 1 - 1.1e-16), "p"),
-        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, x0=[0.0, 0.1, 0.1, 0.1]), "x0[0]"),
-        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, options={"tol": -1}), "options['tol']"),
-        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, options={"tl": 1e-8}), "options"),
+        (lambda m: tolsynth.synthesize(m, 0.5, 1 - 1.1e-16, probability="gaussian"), "p"),
+        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, x0=[0.0, 0.1, 0.1, 0.1], probability="gaussian"), "x0[0]"),
+        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, options={"tol": -1}, probability="gaussian"), "options['tol']"),
+        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, options={"tl": 1e-8}, probability="gaussian"), "options"),
         (lambda m: m.analyze("worst", np.full(4, 1e155), R=0.5), "tolerances[l1]"),
-        (lambda m: tolsynth.synthesize_workspace(m, 0.5, 0.99, max_rounds=0), "max_rounds"),
+        (lambda m: tolsynth.synthesize_workspace(m, 0.5, 0.99, max_rounds=0, probability="gaussian"), "max_rounds"),
         (lambda m: tolsynth.compare(m, 0.5, 0.99, options="tol"), "options"),
         (lambda m: tolsynth.compare(m, 0.5, 0.99, options={"ipopt": "a"}), "options['ipopt']"),
         (lambda m: tolsynth.compare(m, 0.5, 0.99, options={"ipopt": {"warm_start": 1}}), "options['warm_start']"),
@@ -51,7 +51,7 @@ def test_typed_error_names_field(planar, call, field):
 
 def test_ipopt_options_dump_nothing(planar, capfd):
     with pytest.raises(OutOfRangeError):
-        tolsynth.synthesize(planar, 0.5, 0.99, options={"tol": -1})
+        tolsynth.synthesize(planar, 0.5, 0.99, options={"tol": -1}, probability="gaussian")
     assert capfd.readouterr().out == ""
 
 
@@ -86,31 +86,46 @@ def test_lengths_and_angles_take_unit_strings_everywhere(planar):
     """One rule for the API and the command line: ``R="500um"`` is 0.5 mm, ``Phi="2mrad"`` is
     0.002 rad (the same optimum as the numbers, to the solver's tolerance); an angle unit for R
     is a typed error quoting the length units."""
-    a = tolsynth.synthesize(planar, 0.5, 0.99, pose="elbow90")
-    b = tolsynth.synthesize(planar, "500um", 0.99, pose="elbow90")
+    a = tolsynth.synthesize(planar, 0.5, 0.99, pose="elbow90", probability="gaussian")
+    b = tolsynth.synthesize(planar, "500um", 0.99, pose="elbow90", probability="gaussian")
     assert b.cost == pytest.approx(a.cost, rel=1e-8)
     an = planar.analyze("elbow90", "coarse", R="0.05cm", Phi="0.1deg")
     ref = planar.analyze("elbow90", "coarse", R=0.5, Phi=math.radians(0.1))
     assert an.p_sphere == pytest.approx(ref.p_sphere, rel=1e-12) and an.p_cone == pytest.approx(ref.p_cone, rel=1e-12)
     with pytest.raises(InputError) as info:
-        tolsynth.synthesize(planar, "5deg", 0.99, pose="elbow90")
+        tolsynth.synthesize(planar, "5deg", 0.99, pose="elbow90", probability="gaussian")
     assert info.value.field == "R" and "um" in str(info.value) and "length unit" in str(info.value)
     with pytest.raises(InputError) as info:
-        tolsynth.synthesize(planar, "0.5 furlong", 0.99, pose="elbow90")
+        tolsynth.synthesize(planar, "0.5 furlong", 0.99, pose="elbow90", probability="gaussian")
     assert info.value.field == "R"
 
 
 @pytest.mark.parametrize(
     "call, field",
     [
-        (lambda m: tolsynth.best_accuracy(m, 20.0, p=0.99, rtol=math.nan, pose="elbow90"), "rtol"),
-        (lambda m: tolsynth.best_accuracy(m, 20.0, p=0.99, rtol=-1.0, pose="elbow90"), "rtol"),
-        (lambda m: tolsynth.best_accuracy(m, 20.0, p=0.99, max_solves=0, pose="elbow90"), "max_solves"),
-        (lambda m: tolsynth.best_accuracy(m, "20mm", p=0.99, pose="elbow90"), "budget"),
-        (lambda m: tolsynth.sweep(m, [0.5], 0.99, pose="elbow90", progress="x"), "progress"),
-        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", time_limit=0), "time_limit"),
-        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", time_limit=math.nan), "time_limit"),
-        (lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", time_limit="1"), "time_limit"),
+        (
+            lambda m: tolsynth.best_accuracy(m, 20.0, p=0.99, rtol=math.nan, pose="elbow90", probability="gaussian"),
+            "rtol",
+        ),
+        (lambda m: tolsynth.best_accuracy(m, 20.0, p=0.99, rtol=-1.0, pose="elbow90", probability="gaussian"), "rtol"),
+        (
+            lambda m: tolsynth.best_accuracy(m, 20.0, p=0.99, max_solves=0, pose="elbow90", probability="gaussian"),
+            "max_solves",
+        ),
+        (lambda m: tolsynth.best_accuracy(m, "20mm", p=0.99, pose="elbow90", probability="gaussian"), "budget"),
+        (lambda m: tolsynth.sweep(m, [0.5], 0.99, pose="elbow90", progress="x", probability="gaussian"), "progress"),
+        (
+            lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", time_limit=0, probability="gaussian"),
+            "time_limit",
+        ),
+        (
+            lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", time_limit=math.nan, probability="gaussian"),
+            "time_limit",
+        ),
+        (
+            lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", time_limit="1", probability="gaussian"),
+            "time_limit",
+        ),
         (
             lambda m: tolsynth.synthesize(m, 0.5, 0.99, pose="elbow90", probability="exact", options={"bogus": 1}),
             "options",
@@ -157,10 +172,14 @@ def test_process_search_proof_matches_brute_force():
     from tolsynth.synthesis.processes import enumerate_processes
 
     brute = min(
-        r.cost for _, r in enumerate_processes("xu_zhang_1988", 0.5, 0.99, _processes()) if r is not None and r.success
+        r.cost
+        for _, r in enumerate_processes("xu_zhang_1988", 0.5, 0.99, _processes(), probability="gaussian")
+        if r is not None and r.success
     )
     for limit in (2, 3, 10_000):
-        best = tolsynth.synthesize_processes("xu_zhang_1988", R=0.5, p=0.99, processes=_processes(), max_nodes=limit)
+        best = tolsynth.synthesize_processes(
+            "xu_zhang_1988", R=0.5, p=0.99, processes=_processes(), max_nodes=limit, probability="gaussian"
+        )
         assert best.lower_bound <= brute * (1 + 1e-9)
         if best.proven:
             assert best.cost == pytest.approx(brute, rel=1e-6)
@@ -181,11 +200,19 @@ def test_time_limit_ends_a_solve_honestly(planar):
             solver=solver,
             time_limit=1e-3,
             options={"max_outer": 60} if solver == "sumt" else None,
+            probability="gaussian",
         )
         assert res.status in (Status.TIME_LIMIT, Status.OPTIMAL)
         if solver == "sumt":  # its outer loop takes longer than 1 ms
             assert res.status is Status.TIME_LIMIT and not res.success and "time limit" in res.message
-    res = tolsynth.synthesize(planar, 0.5, 0.99, pose="elbow90", solver=tolsynth.SolverOptions("sumt", time_limit=1e-3))
+    res = tolsynth.synthesize(
+        planar,
+        0.5,
+        0.99,
+        pose="elbow90",
+        solver=tolsynth.SolverOptions("sumt", time_limit=1e-3),
+        probability="gaussian",
+    )
     assert res.status is Status.TIME_LIMIT
 
 
@@ -207,7 +234,9 @@ def test_time_limit_inside_an_evaluation(planar, monkeypatch):
     monkeypatch.setitem(single.SOLVERS, "ipopt", endless)
     t0 = time.perf_counter()
     x0 = [0.05, 0.05, 0.05, 0.05]
-    res = tolsynth.synthesize(planar, 0.5, 0.99, pose="elbow90", time_limit=0.5, x0=x0, solver="ipopt")
+    res = tolsynth.synthesize(
+        planar, 0.5, 0.99, pose="elbow90", time_limit=0.5, x0=x0, solver="ipopt", probability="gaussian"
+    )
     assert 0.5 <= time.perf_counter() - t0 < 5.0
     assert res.status is Status.TIME_LIMIT and not res.success and "start point, not a design" in res.message
     assert res.x == pytest.approx(x0)

@@ -236,8 +236,8 @@ def test_synthesis_with_fixed_joint_errors_is_checked_by_monte_carlo():
     errs = [JointError(j, "servo", value=0.1) for j in XU_JOINTS]
     errs.append(JointError("theta3", "clearance", value=0.005, unit="mm", length=60.0))
     m = base.with_joint_errors(errs)
-    r0 = tolsynth.synthesize(base, R=0.5, p=0.99)
-    r = tolsynth.synthesize(m, R=0.5, p=0.99, validate=60_000, seed=1)
+    r0 = tolsynth.synthesize(base, R=0.5, p=0.99, probability="gaussian")
+    r = tolsynth.synthesize(m, R=0.5, p=0.99, validate=60_000, seed=1, probability="gaussian")
     assert r.success and r.gap < 1e-5 * r.cost
     for n in m.joint_error_parameters:  # locked at their values
         assert r.tolerances[n] == pytest.approx(m.fixed_joint_errors[n], rel=1e-12)
@@ -264,10 +264,10 @@ def test_fixed_joint_errors_alone_break_the_specification():
     at p = 0.99 whatever the links: InfeasibleSpecificationError naming the fixed joint error."""
     m = tolsynth.load_model("xu_zhang_1988").with_joint_errors([JointError("theta1", "servo", value=1.0)])
     with pytest.raises(InfeasibleSpecificationError, match=r"fixed joint errors \['theta1.servo'\]"):
-        tolsynth.synthesize(m, R=0.5, p=0.99)
+        tolsynth.synthesize(m, R=0.5, p=0.99, probability="gaussian")
     # with a user lock as well, both are named and the joint error stays locked
     with pytest.raises(InfeasibleSpecificationError, match=r"theta1.servo.*fixed joint errors"):
-        tolsynth.synthesize(m, R=0.5, p=0.99, locks={"h3": 0.05})
+        tolsynth.synthesize(m, R=0.5, p=0.99, locks={"h3": 0.05}, probability="gaussian")
 
 
 def test_user_locks_and_costs_keep_the_fixed_joint_errors_fixed_and_free():
@@ -277,14 +277,14 @@ def test_user_locks_and_costs_keep_the_fixed_joint_errors_fixed_and_free():
 
     base = tolsynth.load_model("xu_zhang_1988")
     m = base.with_joint_errors([JointError("theta2", "servo", value=0.05)])
-    r = tolsynth.synthesize(m, R=0.5, p=0.99, locks={"h3": 0.1})
+    r = tolsynth.synthesize(m, R=0.5, p=0.99, locks={"h3": 0.1}, probability="gaussian")
     assert r.success
     assert r.tolerances["h3"] == pytest.approx(0.1, rel=1e-12)
     assert r.tolerances["theta2.servo"] == pytest.approx(0.05, rel=1e-12)
     eps = np.array([r.tolerances[n] for n in base.error_parameters])
     assert r.cost == pytest.approx(float(np.sum(base.k * eps**-0.7)), rel=1e-12)
     for cost in (Chase(1.0, 0.4, 1.0), [Chase(1.0, 0.4, 1.0)] * m.n, {"h3": Chase(1.0, 0.4, 1.0)}):
-        r = tolsynth.synthesize(m, R=0.5, p=0.99, cost=cost)
+        r = tolsynth.synthesize(m, R=0.5, p=0.99, cost=cost, probability="gaussian")
         eps = np.array([r.tolerances[n] for n in base.error_parameters])
         if isinstance(cost, dict):
             i = base.index("h3")
@@ -304,11 +304,11 @@ def test_designable_servo_is_a_design_variable():
     puma = tolsynth.load_model("puma560")
     o1 = puma.parameters[puma.index("o1")]
     m = puma.with_joint_errors([JointError("q1", "servo", bounds=(o1.lower, o1.upper), unit="mrad", k=o1.k)])
-    r = tolsynth.synthesize(m, R=0.5, p=0.95, pose="qn")
+    r = tolsynth.synthesize(m, R=0.5, p=0.95, pose="qn", probability="gaussian")
     assert r.success
     assert r.tolerances["q1.servo"] == pytest.approx(r.tolerances["o1"], rel=1e-5)
     cheap = puma.with_joint_errors([JointError("q1", "servo", bounds=(o1.lower, o1.upper), k=o1.k / 10)])
-    r2 = tolsynth.synthesize(cheap, R=0.5, p=0.95, pose="qn")
+    r2 = tolsynth.synthesize(cheap, R=0.5, p=0.95, pose="qn", probability="gaussian")
     ratio = r2.tolerances["q1.servo"] / r2.tolerances["o1"]
     assert ratio == pytest.approx(0.1 ** (1 / 2.7), rel=1e-4)
     # a cost model for the joint error (Chase: A + B eps^-k)
@@ -319,6 +319,7 @@ def test_designable_servo_is_a_design_variable():
         R=0.5,
         p=0.95,
         pose="qn",
+        probability="gaussian",
     )
     assert r3.success and r3.tolerances["q1.servo"] > 0
 
@@ -330,7 +331,7 @@ def test_designable_clearance_on_puma():
         [JointError("q3", "clearance", bounds=(0.001, 0.5), unit="mm", k=2.0)]
     )
     assert m.error_parameters[-2:] == ("q3.radial_x", "q3.radial_y")
-    r = tolsynth.synthesize(m, R=0.5, p=0.95, pose="qn", validate=40_000, seed=2)
+    r = tolsynth.synthesize(m, R=0.5, p=0.95, pose="qn", validate=40_000, seed=2, probability="gaussian")
     assert r.success and r.max_constraint <= 1 + 1e-6
     assert 0.001 < r.tolerances["q3.radial_x"] < 0.5
     assert np.all(r.validation.p_components_ci[:, 1] >= 0.94)
@@ -440,7 +441,7 @@ def test_model_file_joint_errors(tmp_path):
     assert m.spec.reference_results == ()  # the paper's optima are for the links alone
     assert m.tolerance_sets == {}  # a designable joint error has no value for the sets
     np.testing.assert_array_equal(m.sensitivity("worst"), api.sensitivity("worst"))
-    r = tolsynth.synthesize(m, R=0.5, p=0.99)
+    r = tolsynth.synthesize(m, R=0.5, p=0.99, probability="gaussian")
     assert r.success and r.tolerances["theta1.servo"] == pytest.approx(0.1)
     assert 0.001 < r.tolerances["theta2.servo"] < 5.0
 
@@ -511,7 +512,7 @@ def test_with_units_converts_the_fixed_values():
     mu = m.with_units({"theta1.servo": "urad"})
     assert mu.fixed_joint_errors == pytest.approx({"theta1.servo": 100.0})
     assert mu.bounds[0][-1] == pytest.approx(100.0) and mu.units[-1] == "urad"
-    r, ru = (tolsynth.synthesize(x, R=0.5, p=0.99) for x in (m, mu))
+    r, ru = (tolsynth.synthesize(x, R=0.5, p=0.99, probability="gaussian") for x in (m, mu))
     assert ru.tolerances["theta1.servo"] == pytest.approx(100.0)
     assert ru.tolerances["h3"] == pytest.approx(r.tolerances["h3"], rel=1e-6)
 
@@ -554,7 +555,7 @@ def test_sumt_solves_with_fixed_joint_errors_and_locks():
 
 def test_summary_marks_fixed_tolerances():
     m = tolsynth.load_model("xu_zhang_1988").with_joint_errors([JointError("theta1", "servo", value=0.1)])
-    text = tolsynth.synthesize(m, R=0.5, p=0.99, locks={"h3": 0.2}).summary()
+    text = tolsynth.synthesize(m, R=0.5, p=0.99, locks={"h3": 0.2}, probability="gaussian").summary()
     assert "theta1.servo = 0.1 mrad  [fixed]" in text and "h3 = 0.2 mm  [fixed]" in text
 
 
@@ -563,7 +564,7 @@ def test_result_tables_record_the_joint_errors(tmp_path):
     m = tolsynth.load_model("xu_zhang_1988").with_joint_errors(
         [JointError("theta1", "servo", value=0.1), JointError("theta2", "clearance", bounds=(0.001, 0.1))]
     )
-    r = tolsynth.synthesize(m, R=0.5, p=0.99)
+    r = tolsynth.synthesize(m, R=0.5, p=0.99, probability="gaussian")
     r.to_json(tmp_path / "r.json")
     inputs = tolsynth.read_table(tmp_path / "r.json").attrs["inputs"]
     assert inputs["joint_errors"]["theta1.servo"] == {"joint": "theta1", "transform": "q", "unit": "mrad", "fixed": 0.1}
@@ -573,11 +574,13 @@ def test_result_tables_record_the_joint_errors(tmp_path):
         "unit": "mm",
         "fixed": None,
     }
-    assert tolsynth.synthesize("xu_zhang_1988", R=0.5, p=0.99).inputs["joint_errors"] is None
+    assert tolsynth.synthesize("xu_zhang_1988", R=0.5, p=0.99, probability="gaussian").inputs["joint_errors"] is None
 
 
 def test_a_cost_for_a_fixed_joint_error_is_refused():
     m = tolsynth.load_model("xu_zhang_1988").with_joint_errors([JointError("theta1", "servo", value=0.1)])
     with pytest.raises(InputError) as info:
-        tolsynth.synthesize(m, R=0.5, p=0.99, cost={"theta1.servo": {"model": "power", "k": 1.0, "alpha": 0.7}})
+        tolsynth.synthesize(
+            m, R=0.5, p=0.99, cost={"theta1.servo": {"model": "power", "k": 1.0, "alpha": 0.7}}, probability="gaussian"
+        )
     assert info.value.field == "cost[theta1.servo]"

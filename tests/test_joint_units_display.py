@@ -32,7 +32,7 @@ def test_montecarlo_and_validation_reports_show_struts_in_mm():
     assert "mm" in line.split("hand")[0] and "deg" not in line
     assert len(shown) == 6 and all(abs(a - b) <= 1e-3 for a, b in zip(shown, q)), line
     # a validation over two poses names both, struts in mm
-    res = tolsynth.synthesize(mech, R=0.5, p=0.9, poses=["home", "tilted"])
+    res = tolsynth.synthesize(mech, R=0.5, p=0.9, poses=["home", "tilted"], probability="gaussian")
     val = tolsynth.validate(mech, res, R=0.5, p=0.9, pose=[_struts("home"), q], n=2000, seed=2)
     text = val.report()
     pose_lines = [ln for ln in text.splitlines() if ln.strip().startswith("pose (")]

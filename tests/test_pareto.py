@@ -13,10 +13,10 @@ def test_cost_against_R_and_p():
     import matplotlib
 
     matplotlib.use("Agg")
-    front = pareto_front("xu_zhang_1988", R=[0.25, 0.5, 1.0, 2.0], p=0.99)
+    front = pareto_front("xu_zhang_1988", R=[0.25, 0.5, 1.0, 2.0], p=0.99, probability="gaussian")
     costs = [r["cost"] for r in front.rows]
     assert all(r["success"] for r in front.rows) and np.all(np.diff(costs) < 0)
-    cold = tolsynth.synthesize("xu_zhang_1988", 1.0, 0.99)
+    cold = tolsynth.synthesize("xu_zhang_1988", 1.0, 0.99, probability="gaussian")
     assert costs[2] == pytest.approx(cold.cost, rel=1e-7)
     assert {r["table"] for r in front.reference} == {"Table 1"}
     for ref in front.reference:  # the paper's printed tolerances never beat the proven optimum
@@ -24,10 +24,10 @@ def test_cost_against_R_and_p():
         assert ref["cost"] >= opt * (1 - 1e-9)
     ax = front.plot()
     assert ax.get_xlabel() == "R, mm"
-    fp = pareto_front("xu_zhang_1988", R=0.5, p=[0.9, 0.99, 0.999])
+    fp = pareto_front("xu_zhang_1988", R=0.5, p=[0.9, 0.99, 0.999], probability="gaussian")
     assert np.all(np.diff([r["cost"] for r in fp.rows]) > 0)
     with pytest.raises(tolsynth.InputError, match="sequence"):
-        pareto_front("xu_zhang_1988", R=0.5, p=0.99)
+        pareto_front("xu_zhang_1988", R=0.5, p=0.99, probability="gaussian")
 
 
 def test_process_staircase_lies_above_the_continuous_front():
@@ -40,7 +40,7 @@ def test_process_staircase_lies_above_the_continuous_front():
     ]
     procs = {"l1": lengths, "l2": lengths}
     Rs = [0.15, 0.3, 0.6]
-    stairs = pareto_front("planar_2r", R=Rs, p=0.99, processes=procs)
+    stairs = pareto_front("planar_2r", R=Rs, p=0.99, processes=procs, probability="gaussian")
     assert all("processes" in r for r in stairs.rows)
     finite = [r["cost"] for r in stairs.rows if np.isfinite(r["cost"])]
     assert np.all(np.diff(finite) <= 1e-9)
@@ -50,6 +50,7 @@ def test_process_staircase_lies_above_the_continuous_front():
         p=0.99,
         cost={nm: Chase(1.0, 0.4, 1.0) for nm in procs},
         bounds={"l1": (0.02, 1.0), "l2": (0.02, 1.0)},
+        probability="gaussian",
     )
     for s, c in zip(stairs.rows, cont.rows):  # each process has costs >= turning's curve
         assert s["cost"] >= c["cost"] * (1 - 1e-9)

@@ -22,8 +22,12 @@ def _processes():
 @pytest.mark.parametrize("R", [0.5, 0.2, 0.1])
 def test_branch_and_bound_matches_brute_force(R):
     mech = tolsynth.load_model("planar_2r")
-    best = synthesize_processes(mech, R, 0.99, _processes())
-    brute = [(c, r) for c, r in enumerate_processes(mech, R, 0.99, _processes()) if r is not None and r.success]
+    best = synthesize_processes(mech, R, 0.99, _processes(), probability="gaussian")
+    brute = [
+        (c, r)
+        for c, r in enumerate_processes(mech, R, 0.99, _processes(), probability="gaussian")
+        if r is not None and r.success
+    ]
     assert len(brute) >= 1
     choice, ref = min(brute, key=lambda cr: cr[1].cost)
     assert best.proven and best.result.success
@@ -48,9 +52,9 @@ def test_process_errors():
     with pytest.raises(tolsynth.InputError, match="lower"):
         Process("x", PowerLaw(1, 1), 0.5, 0.1)
     with pytest.raises(tolsynth.InputError, match="non-empty"):
-        synthesize_processes(mech, 0.5, 0.99, {"l1": []})
+        synthesize_processes(mech, 0.5, 0.99, {"l1": []}, probability="gaussian")
     with pytest.raises(tolsynth.UnknownNameError):
-        synthesize_processes(mech, 0.5, 0.99, {"zz": [Process("x", PowerLaw(1, 1), 0.1, 1.0)]})
+        synthesize_processes(mech, 0.5, 0.99, {"zz": [Process("x", PowerLaw(1, 1), 0.1, 1.0)]}, probability="gaussian")
     p = Process.make({"name": "t", "cost": {"model": "power", "k": 1, "alpha": 0.7}, "lower": 0.1, "upper": 1})
     assert p.cost == PowerLaw(1, 0.7)
     only_coarse = {
@@ -58,8 +62,8 @@ def test_process_errors():
         "l2": [Process("turning", PowerLaw(1, 0.7), 3.0, 5.0)],
     }
     with pytest.raises(tolsynth.InfeasibleSpecificationError):
-        synthesize_processes(mech, 0.05, 0.99, only_coarse)
-    assert math.isfinite(synthesize_processes(mech, 0.5, 0.99, {"l1": _processes()["l1"]}).cost)
+        synthesize_processes(mech, 0.05, 0.99, only_coarse, probability="gaussian")
+    assert math.isfinite(synthesize_processes(mech, 0.5, 0.99, {"l1": _processes()["l1"]}, probability="gaussian").cost)
 
 
 @pytest.mark.slow

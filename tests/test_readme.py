@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from independent import fft_probabilities, fibonacci_directions
+
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 
@@ -43,22 +45,29 @@ def test_example_runs_and_its_comments_hold():
     (block,) = code_blocks("python")
     namespace: dict = {}
     exec(compile(block, "README.md", "exec"), namespace)
-    m, res, c = namespace["m"], namespace["res"], namespace["c"]
+    m, res, g, c = namespace["m"], namespace["res"], namespace["g"], namespace["c"]
     # the hand at the paper's printed worst-pose point
     np.testing.assert_allclose(m.fk("worst")[:3, 3], [925.0, 0.0, 1225.0], atol=0.01)
-    # the optimum against an independent conic solver on the same sensitivities, the paper's k
+    # the paper's criterion against an independent conic solver on the same sensitivities, the paper's k
     assert np.allclose(m.k, PAPER_K)
     ref_cost, ref_eps, z = clarabel_optimum(m.sensitivity("worst"), 0.5, 0.99, 0.7, PAPER_K)
-    assert res.success and res.cost == pytest.approx(ref_cost, rel=1e-6)
-    assert round(res.cost, 4) == 84.4189  # the comment
-    assert res.gap < 1e-6 and res.lower_bound <= ref_cost * (1 + 1e-7)
-    np.testing.assert_allclose(res.x, ref_eps, rtol=1e-3)
-    assert round(res.tolerances["h2"], 4) == 0.0413 and round(res.tolerances["alpha1"], 4) == 0.0250
-    # the specification holds at the optimum: principal sigma by NumPy's eigensolver, times z / R
+    assert g.success and g.cost == pytest.approx(ref_cost, rel=1e-6)
+    assert round(g.cost, 4) == 84.4189  # the comment
+    assert g.gap < 1e-6 and g.lower_bound <= ref_cost * (1 + 1e-7)
+    np.testing.assert_allclose(g.x, ref_eps, rtol=1e-3)
     A = m.sensitivity("worst")[:3]
-    V = (A * res.x**2) @ A.T / 3
-    worst = np.sqrt(np.linalg.eigvalsh(V).max()) * z / 0.5
-    assert worst == pytest.approx(1.0, abs=1e-7)
+    V = (A * g.x**2) @ A.T / 3  # principal sigma by NumPy's eigensolver, times z / R
+    assert np.sqrt(np.linalg.eigvalsh(V).max()) * z / 0.5 == pytest.approx(1.0, abs=1e-7)
+    # the default design: exact probabilities, certified
+    assert res.success and res.probability_kind == "exact" and g.probability_kind == "gaussian"
+    assert round(res.cost, 3) == 82.974 and res.cost < g.cost  # the comments
+    assert round(1 - res.cost / g.cost, 3) == 0.017
+    assert res.gap < 1e-6 * res.cost and res.lower_bound <= res.cost
+    assert round(res.tolerances["h2"], 4) == 0.0419 and round(res.tolerances["alpha1"], 4) == 0.0270
+    # every direction meets p, by FFT convolution of the uniform densities along 1000 directions,
+    # and some direction is close to p (the design is not over-built)
+    probs = fft_probabilities((fibonacci_directions(1000) @ A) * res.x, 0.5)
+    assert 0.99 - 5e-5 <= probs.min() <= 0.99 + 1e-3
     # SUMT + Powell, a different algorithm on the same graphs, agrees as the comment says
     assert c.cost_rel_diff < 1e-8
 

@@ -73,7 +73,9 @@ def _parse(text: str) -> _Checker:
 def xu_report(tmp_path_factory):
     m = tolsynth.load_model("xu_zhang_1988")
     path = tmp_path_factory.mktemp("rep") / "report.html"
-    rep = tolsynth.report(m, R=0.5, p=0.99, mc_samples=N_MC, seed=1, map_n=12, worst_grid=6, path=path)
+    rep = tolsynth.report(
+        m, R=0.5, p=0.99, mc_samples=N_MC, seed=1, map_n=12, worst_grid=6, path=path, probability="gaussian"
+    )
     return m, rep, path.read_text(encoding="utf-8")
 
 
@@ -152,7 +154,9 @@ def test_monte_carlo_interval_as_printed_and_by_closed_form(xu_report):
 
 def test_orientation_rows_with_phi():
     """With an orientation specification the Monte Carlo section has its rows (validate(Phi=...))."""
-    rep = tolsynth.report("xu_zhang_1988", R=0.5, p=0.99, Phi=0.002, mc_samples=2000, map_n=0, worst_grid=0)
+    rep = tolsynth.report(
+        "xu_zhang_1988", R=0.5, p=0.99, Phi=0.002, mc_samples=2000, map_n=0, worst_grid=0, probability="gaussian"
+    )
     ((_, v),) = rep.validations
     mc = v.montecarlo
     assert mc.Phi == 0.002 and mc.p_orientation_components.shape == (3,)
@@ -183,7 +187,7 @@ def test_text_is_escaped_and_markdown_writes_figures(tmp_path):
     model.write_text(text, encoding="utf-8")
     m = load_model(model)
     assert m.title == evil, m.title
-    rep = tolsynth.report(m, R=0.5, p=0.99, mc_samples=500, map_n=0, worst_grid=0)
+    rep = tolsynth.report(m, R=0.5, p=0.99, mc_samples=500, map_n=0, worst_grid=0, probability="gaussian")
     html_text = rep.to_html()
     _parse(html_text)
     assert "<script>" not in html_text and "<b>2R" not in html_text
@@ -198,14 +202,14 @@ def test_text_is_escaped_and_markdown_writes_figures(tmp_path):
 
 def test_report_api_rejects_bad_input():
     with pytest.raises(tolsynth.InputError, match="map_n"):
-        tolsynth.report("planar_2r", R=0.5, p=0.99, map_n=3)
+        tolsynth.report("planar_2r", R=0.5, p=0.99, map_n=3, probability="gaussian")
     with pytest.raises(tolsynth.InputError, match="mc_samples"):
-        tolsynth.report("planar_2r", R=0.5, p=0.99, mc_samples=-1)
+        tolsynth.report("planar_2r", R=0.5, p=0.99, mc_samples=-1, probability="gaussian")
     with pytest.raises(tolsynth.InputError, match="R"):
-        tolsynth.report("planar_2r", p=0.99)
-    res = tolsynth.synthesize("planar_2r", 0.5, 0.99)
+        tolsynth.report("planar_2r", p=0.99, probability="gaussian")
+    res = tolsynth.synthesize("planar_2r", 0.5, 0.99, probability="gaussian")
     with pytest.raises(tolsynth.InputError, match="source"):
-        tolsynth.report(res, R=0.5, p=0.99)
+        tolsynth.report(res, R=0.5, p=0.99, probability="gaussian")
     rep = tolsynth.report(res, mc_samples=0, map_n=0, worst_grid=0)  # the model recorded in the result
     assert rep.result is res and rep.mechanism.name == "planar_2r"
 
@@ -233,7 +237,7 @@ def test_cli_writes_the_report(tmp_path, capsys):
     )
     cap = capsys.readouterr()
     assert rc == 0, cap.err
-    res = tolsynth.synthesize("planar_2r", 0.5, 0.99)  # the same solve, through the API
+    res = tolsynth.synthesize("planar_2r", 0.5, 0.99)  # the same solve, through the API (both exact)
     text = out.read_text(encoding="utf-8")
     _parse(text)
     assert f"{res.cost:.8g}" in text and f"{res.cost:.8g}" in cap.out

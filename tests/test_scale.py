@@ -59,7 +59,9 @@ def _sweep(model, N, seeds, solver):
         rng = np.random.default_rng(1000 * N + seed)
         poses = random_poses(mech, N, rng)
         for dist in ("uniform", "normal"):
-            res = tolsynth.synthesize(mech, R=0.5, p=0.99, distribution=dist, alpha=0.7, poses=poses, solver=solver)
+            res = tolsynth.synthesize(
+                mech, R=0.5, p=0.99, distribution=dist, alpha=0.7, poses=poses, solver=solver, probability="gaussian"
+            )
             assert res.success, (model, N, seed, dist, res.status, res.message)
             assert res.gap <= 1e-6 * res.cost
             assert_meets_spec(mech, res, 0.5, 0.99, dist, poses)
@@ -89,7 +91,9 @@ def _grid(models, Rs, ps, alphas, solver):
         pose = reference_pose(mech)
         for R, p, a, d in itertools.product(Rs, ps, alphas, ("uniform", "normal")):
             try:
-                res = tolsynth.synthesize(mech, R=R, p=p, distribution=d, alpha=a, pose=pose, solver=solver)
+                res = tolsynth.synthesize(
+                    mech, R=R, p=p, distribution=d, alpha=a, pose=pose, solver=solver, probability="gaussian"
+                )
             except tolsynth.InfeasibleSpecificationError:
                 # infeasible only if even the lower bounds fail (checked independently)
                 spec = make_specification(mech, R, p, d, a, pose=pose)
@@ -120,7 +124,9 @@ def test_default_bounds_grid_full(solver):
 def test_upper_bound_active_case_from_the_issue(solver):
     """planar_2r, R = 5 mm, p = 0.5, alpha 0.7 ended at the iteration limit with the factor form."""
     mech = tolsynth.load_model("planar_2r")
-    res = tolsynth.synthesize(mech, R=5, p=0.5, alpha=0.7, pose=reference_pose(mech), solver=solver)
+    res = tolsynth.synthesize(
+        mech, R=5, p=0.5, alpha=0.7, pose=reference_pose(mech), solver=solver, probability="gaussian"
+    )
     assert res.success and res.bounds_active
     ref = clarabel_cost(mech, 5, 0.5, "uniform", 0.7, [reference_pose(mech)])
     assert res.cost == pytest.approx(ref, rel=1e-6)
@@ -131,7 +137,9 @@ def test_extreme_scales_are_solved_not_misreported(solver):
     """k = 1e-3, R = 1000 mm, alpha 3, bounds 1e-12..1e6: reported optimal with gap/cost 1.0 before."""
     mech = tolsynth.load_model("planar_2r")
     pose = reference_pose(mech)
-    res = tolsynth.synthesize(mech, R=1000, p=0.5, alpha=3, k=0.001, bounds=(1e-12, 1e6), pose=pose, solver=solver)
+    res = tolsynth.synthesize(
+        mech, R=1000, p=0.5, alpha=3, k=0.001, bounds=(1e-12, 1e6), pose=pose, solver=solver, probability="gaussian"
+    )
     assert res.success and res.gap <= 1e-6 * res.cost
     assert res.max_constraint == pytest.approx(1.0, abs=1e-6)  # no bound active: the constraint binds
     from scipy.optimize import minimize
@@ -160,7 +168,9 @@ def test_extreme_scales_are_solved_not_misreported(solver):
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_loose_options_never_report_a_false_optimum(solver):
     """tol = 1 and constr_viol_tol = 1 used to give success with sigma z / R = 1.31."""
-    res = tolsynth.synthesize("xu_zhang_1988", R=0.5, p=0.99, options={"tol": 1, "constr_viol_tol": 1}, solver=solver)
+    res = tolsynth.synthesize(
+        "xu_zhang_1988", R=0.5, p=0.99, options={"tol": 1, "constr_viol_tol": 1}, solver=solver, probability="gaussian"
+    )
     if res.success:
         assert res.max_constraint <= 1 + 1e-6 and res.gap <= 1e-6 * res.cost
     else:
@@ -169,7 +179,7 @@ def test_loose_options_never_report_a_false_optimum(solver):
 
 def test_infeasible_specification_still_raises():
     with pytest.raises(tolsynth.InfeasibleSpecificationError):
-        tolsynth.synthesize("xu_zhang_1988", R=1e-4, p=0.99)
+        tolsynth.synthesize("xu_zhang_1988", R=1e-4, p=0.99, probability="gaussian")
 
 
 def test_sumt_accepts_specifications_close_to_their_limit():
@@ -181,7 +191,7 @@ def test_sumt_accepts_specifications_close_to_their_limit():
     V = A @ np.diag(spec.lower**2 / spec.c) @ A.T
     R0 = math.sqrt(np.linalg.eigvalsh(V).max()) * spec.z  # the smallest feasible R
     R = 1.2 * R0
-    ipopt = tolsynth.synthesize(mech, R=R, p=0.99, pose=pose, solver="ipopt")
-    sumt = tolsynth.synthesize(mech, R=R, p=0.99, pose=pose, solver="sumt")
+    ipopt = tolsynth.synthesize(mech, R=R, p=0.99, pose=pose, solver="ipopt", probability="gaussian")
+    sumt = tolsynth.synthesize(mech, R=R, p=0.99, pose=pose, solver="sumt", probability="gaussian")
     assert ipopt.success
     assert sumt.cost == pytest.approx(ipopt.cost, rel=1e-5)

@@ -28,8 +28,8 @@ def test_python_fallback_agrees_with_ipopt(monkeypatch, env):
     for k, v in env.items():
         monkeypatch.setenv(k, v)
     mech = tolsynth.load_model("planar_2r")
-    ip = synthesize(mech, 0.1, 0.9, solver="ipopt")
-    su = synthesize(mech, 0.1, 0.9, solver="sumt")
+    ip = synthesize(mech, 0.1, 0.9, solver="ipopt", probability="gaussian")
+    su = synthesize(mech, 0.1, 0.9, solver="sumt", probability="gaussian")
     assert cpowell.backend_status()["backend"] == "python"
     assert cpowell.backend_status()["reason"]
     assert su.success and ip.success
@@ -79,16 +79,16 @@ def test_library_is_cached_on_disk(tmp_path, monkeypatch):
     monkeypatch.setattr(cbuild, "_loaded", {})
     monkeypatch.setattr(cpowell._LIBS, "_by_function", {})
     mech = tolsynth.load_model("planar_2r")
-    first = synthesize(mech, 0.1, 0.9, solver="sumt")
+    first = synthesize(mech, 0.1, 0.9, solver="sumt", probability="gaussian")
     assert cpowell.backend_status()["backend"] == "compiled"
-    ipopt = synthesize(mech, 0.1, 0.9, solver="ipopt")
+    ipopt = synthesize(mech, 0.1, 0.9, solver="ipopt", probability="gaussian")
     assert abs(first.cost - ipopt.cost) <= 1e-6 * ipopt.cost
     files = list(tmp_path.iterdir())
     assert len(files) == 1 and files[0].suffix == ".so"  # no temporaries left
     stamp = files[0].stat().st_mtime_ns
     monkeypatch.setattr(cbuild, "_loaded", {})
     monkeypatch.setattr(cpowell._LIBS, "_by_function", {})
-    again = synthesize(mech, 0.1, 0.9, solver="sumt")
+    again = synthesize(mech, 0.1, 0.9, solver="sumt", probability="gaussian")
     assert list(tmp_path.iterdir()) == files and files[0].stat().st_mtime_ns == stamp
     assert again.cost == first.cost
     # a damaged file in the cache is built again (in a new process: this one has the library
@@ -97,7 +97,7 @@ def test_library_is_cached_on_disk(tmp_path, monkeypatch):
     (tmp_path / "damaged").replace(files[0])  # a new file: the loaded one stays mapped
     code = (
         "import tolsynth; from tolsynth.solvers import cpowell; "
-        "r = tolsynth.synthesize('planar_2r', 0.1, 0.9, solver='sumt'); "
+        "r = tolsynth.synthesize('planar_2r', 0.1, 0.9, solver='sumt', probability='gaussian'); "
         "print(cpowell.backend_status()['backend'], repr(r.cost))"
     )
     out = subprocess.run(
@@ -114,7 +114,7 @@ def test_library_is_cached_on_disk(tmp_path, monkeypatch):
 def test_huge_iteration_limit_is_accepted():
     """maxiter may be as large as the options allow (1e9): the history buffer is bounded."""
     mech = tolsynth.load_model("planar_2r")
-    ref = synthesize(mech, 0.1, 0.9, solver="ipopt")
-    su = synthesize(mech, 0.1, 0.9, solver="sumt", options={"maxiter": 10**9, "maxfev": 10**9})
+    ref = synthesize(mech, 0.1, 0.9, solver="ipopt", probability="gaussian")
+    su = synthesize(mech, 0.1, 0.9, solver="sumt", options={"maxiter": 10**9, "maxfev": 10**9}, probability="gaussian")
     assert su.success and abs(su.cost - ref.cost) <= 1e-6 * ref.cost
     assert all(len(h["inner_history"]) == h["inner_iterations"] + 1 for h in su.history)

@@ -34,6 +34,7 @@ def _check_against_synthesize(df, mech):
             alpha=row["alpha"],
             criterion=row["criterion"],
             solver=row["solver"],
+            probability=row["probability"],  # the kind the sweep used, in its own column
         )
         # the sphere's design is met but not proven optimal (its problem is not known to be convex)
         proven = row["criterion"] == "components"
@@ -49,7 +50,7 @@ def _check_against_synthesize(df, mech):
 
 
 def test_sweep_serial_matches_synthesize(xz, tmp_path):
-    df = tolsynth.sweep(xz, **GRID, client="serial")
+    df = tolsynth.sweep(xz, **GRID, client="serial", probability="gaussian")
     assert len(df) == 12 and df["success"].sum() == 8
     _check_against_synthesize(df, xz)
     assert df.attrs["inputs"]["grid"]["R"] == [1e-7, 0.3, 0.5]
@@ -63,18 +64,26 @@ def test_sweep_serial_matches_synthesize(xz, tmp_path):
 
 @pytest.mark.slow  # about 4 s: the default run stays under 4 minutes
 def test_sweep_local_processes(xz):
-    df = tolsynth.sweep(xz, R=[0.4, 1e-7], p=0.99, criterion=["components", "sphere"], client="processes", workers=2)
+    df = tolsynth.sweep(
+        xz,
+        R=[0.4, 1e-7],
+        p=0.99,
+        criterion=["components", "sphere"],
+        client="processes",
+        workers=2,
+        probability="gaussian",
+    )
     assert df.attrs["summary"]["engine"].startswith("processes")
     _check_against_synthesize(df, xz)
 
 
 def test_sweep_auto_engine(xz, monkeypatch):
     """client=None: a small grid stays in this process; one that would take long goes to processes."""
-    df = tolsynth.sweep(xz, R=[0.4, 0.5], p=[0.9, 0.99, 0.995])
+    df = tolsynth.sweep(xz, R=[0.4, 0.5], p=[0.9, 0.99, 0.995], probability="gaussian")
     assert df.attrs["summary"]["engine"].startswith("auto (4 solves here") and len(df) == 6
     assert df.attrs["summary"]["engine"].endswith("then serial (this process)")
     monkeypatch.setattr(sweeps, "AUTO_PROCESSES_S", 0.0)
-    df = tolsynth.sweep(xz, R=[0.4, 0.5, 1e-7], p=[0.9, 0.99], workers=2)
+    df = tolsynth.sweep(xz, R=[0.4, 0.5, 1e-7], p=[0.9, 0.99], workers=2, probability="gaussian")
     assert "then processes (2 on this machine)" in df.attrs["summary"]["engine"]
     _check_against_synthesize(df, xz)
 
@@ -85,11 +94,11 @@ def test_sweep_on_dask_local_cluster(xz):
         distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster,
         distributed.Client(cluster) as client,
     ):
-        df = tolsynth.sweep(xz, **GRID, client=client)
+        df = tolsynth.sweep(xz, **GRID, client=client, probability="gaussian")
         assert df.attrs["summary"]["engine"].startswith("dask")
         _check_against_synthesize(df, xz)
         # the scheduler's address works the same (the client is opened and closed by sweep)
-        df2 = tolsynth.sweep(xz, R=0.5, p=[0.9, 0.99], client=cluster.scheduler_address)
+        df2 = tolsynth.sweep(xz, R=0.5, p=[0.9, 0.99], client=cluster.scheduler_address, probability="gaussian")
         _check_against_synthesize(df2, xz)
 
 
@@ -100,7 +109,9 @@ def test_sweep_on_dask_worker_processes(xz):
         distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
         distributed.Client(cluster) as client,
     ):
-        df = tolsynth.sweep(xz, R=[0.5, 1e-7], p=[0.9, 0.99], solver=["ipopt", "sumt"], client=client)
+        df = tolsynth.sweep(
+            xz, R=[0.5, 1e-7], p=[0.9, 0.99], solver=["ipopt", "sumt"], client=client, probability="gaussian"
+        )
         _check_against_synthesize(df, xz)
 
 
@@ -136,8 +147,10 @@ def test_sweep_with_per_parameter_alpha_writes_every_format(tmp_path, fmt):
     pytest.importorskip("pyarrow")
     m = tolsynth.load_model("planar_2r")
     alpha = {"l1": 0.5, "l2": 0.7, "o1": 0.7, "o2": 0.9}
-    df = tolsynth.sweep(m, R=[0.5, 1e-9], p=0.9, alpha=[0.7, alpha], client="serial", pose="elbow90")
-    ref = tolsynth.synthesize(m, 0.5, 0.9, alpha=alpha, pose="elbow90")
+    df = tolsynth.sweep(
+        m, R=[0.5, 1e-9], p=0.9, alpha=[0.7, alpha], client="serial", pose="elbow90", probability="gaussian"
+    )
+    ref = tolsynth.synthesize(m, 0.5, 0.9, alpha=alpha, pose="elbow90", probability="gaussian")
     assert df.loc[1, "cost"] == pytest.approx(ref.cost, rel=1e-8)
     back = tolsynth.read_table(tolsynth.write_table(df, tmp_path / f"s.{fmt}"))
     assert list(back["status"]) == ["optimal", "optimal", "error", "error"]

@@ -45,8 +45,8 @@ COLUMNS = [
     "table,R,p,alpha,dist", COLUMNS, ids=[f"{c[0]}-R{c[1]}-p{c[2]}-a{c[3]}-{c[4]}" for c in COLUMNS]
 )
 def test_ipopt_and_sumt_agree_on_every_column(xz, table, R, p, alpha, dist):
-    ip = synthesize(xz, R, p, dist, alpha, solver="ipopt")
-    su = synthesize(xz, R, p, dist, alpha, solver="sumt")
+    ip = synthesize(xz, R, p, dist, alpha, solver="ipopt", probability="gaussian")
+    su = synthesize(xz, R, p, dist, alpha, solver="sumt", probability="gaussian")
     assert ip.success and ip.status is Status.OPTIMAL, ip.message
     assert su.success, su.message
     assert abs(su.cost - ip.cost) / ip.cost < 1e-6
@@ -67,17 +67,17 @@ def test_ipopt_and_sumt_agree_on_every_column(xz, table, R, p, alpha, dist):
 # exact invariances while no bound is active
 # ------------------------------------------------------------------------------------------
 def test_invariances_R_z_and_normal(xz):
-    base = synthesize(xz, 0.5, 0.99, "uniform", 0.7, options=TIGHT)
+    base = synthesize(xz, 0.5, 0.99, "uniform", 0.7, options=TIGHT, probability="gaussian")
     assert not base.bounds_active
     x0 = base.x
     # linear in R
-    r2 = synthesize(xz, 0.8, 0.99, "uniform", 0.7, options=TIGHT)
+    r2 = synthesize(xz, 0.8, 0.99, "uniform", 0.7, options=TIGHT, probability="gaussian")
     np.testing.assert_allclose(r2.x, x0 * 0.8 / 0.5, rtol=1e-6)
     # linear in 1/z(p)
-    r3 = synthesize(xz, 0.5, 0.8, "uniform", 0.7, options=TIGHT)
+    r3 = synthesize(xz, 0.5, 0.8, "uniform", 0.7, options=TIGHT, probability="gaussian")
     np.testing.assert_allclose(r3.x, x0 * z_of_p(0.99) / z_of_p(0.8), rtol=1e-6)
     # normal (eps^2/9) = sqrt(3) x uniform (eps^2/3)
-    r4 = synthesize(xz, 0.5, 0.99, "normal", 0.7, options=TIGHT)
+    r4 = synthesize(xz, 0.5, 0.99, "normal", 0.7, options=TIGHT, probability="gaussian")
     np.testing.assert_allclose(r4.x, x0 * math.sqrt(3.0), rtol=1e-6)
     # and the cost follows: sum k (s eps)^-alpha = s^-alpha cost
     assert r2.cost == pytest.approx(base.cost * (0.8 / 0.5) ** -0.7, rel=1e-9)
@@ -144,7 +144,7 @@ def test_single_direction_closed_form(tmp_path, solver, alpha):
     a = np.array([1.0, 1e-3, 10.0])  # mm per tolerance unit (mm, um, cm), all along z
     k = np.array([1.0, 2.0, 0.5])
     np.testing.assert_allclose(mech.sensitivity("worst")[2], a, rtol=1e-12)
-    res = synthesize(mech, R, p, "uniform", alpha, solver=solver)
+    res = synthesize(mech, R, p, "uniform", alpha, solver=solver, probability="gaussian")
     assert res.success, res.message
     # Lagrange: alpha k eps^(-alpha-1) = 2 lam a^2 eps  =>  eps_i = t (k_i / a_i^2)^(1/(alpha+2));
     # t from the active constraint sum a_i^2 eps_i^2 / 3 = (R / z)^2
@@ -158,17 +158,17 @@ def test_single_direction_closed_form(tmp_path, solver, alpha):
 # ------------------------------------------------------------------------------------------
 def test_multipliers_match_envelope_theorem(xz):
     R, h = 0.5, 1e-4
-    res = synthesize(xz, R, 0.99, "uniform", 0.7, options=TIGHT)
+    res = synthesize(xz, R, 0.99, "uniform", 0.7, options=TIGHT, probability="gaussian")
     mu = sum(b.multipliers[b.active].sum() for b in res.constraints)
-    fp = synthesize(xz, R + h, 0.99, "uniform", 0.7, options=TIGHT).cost
-    fm = synthesize(xz, R - h, 0.99, "uniform", 0.7, options=TIGHT).cost
+    fp = synthesize(xz, R + h, 0.99, "uniform", 0.7, options=TIGHT, probability="gaussian").cost
+    fm = synthesize(xz, R - h, 0.99, "uniform", 0.7, options=TIGHT, probability="gaussian").cost
     dF_dR = (fp - fm) / (2 * h)
     # g_j = sigma_j z / R - 1: dF*/dR = sum_j mu_j dg_j/dR = -sum_j mu_j / R at g_j = 0
     assert dF_dR == pytest.approx(-mu / R, rel=1e-5)
 
 
 def test_dual_bound_below_every_feasible_point(xz, rng):
-    res = synthesize(xz, 0.5, 0.99, "uniform", 0.7)
+    res = synthesize(xz, 0.5, 0.99, "uniform", 0.7, probability="gaussian")
     assert res.lower_bound <= res.cost * (1 + 1e-12)  # rounding: the point is feasible to ~1e-13
     for _ in range(200):
         eps = res.x * np.exp(rng.normal(0, 0.5, res.x.size))
@@ -183,18 +183,18 @@ def test_dual_bound_below_every_feasible_point(xz, rng):
 # ------------------------------------------------------------------------------------------
 def test_several_poses_meet_every_constraint(xz):
     poses = ["worst", "home"]
-    res = synthesize(xz, 0.5, 0.99, "uniform", 0.7, poses=poses)
+    res = synthesize(xz, 0.5, 0.99, "uniform", 0.7, poses=poses, probability="gaussian")
     assert res.success
     for pose in poses:
         assert max_sigma_z_over_R(xz, res.x, 0.5, 0.99, "uniform", pose) <= 1 + 1e-8
-    single = synthesize(xz, 0.5, 0.99, "uniform", 0.7)
+    single = synthesize(xz, 0.5, 0.99, "uniform", 0.7, probability="gaussian")
     assert res.cost >= single.cost - 1e-9
 
 
 @pytest.mark.parametrize("solver", ["ipopt", "sumt"])
 def test_orientation_constraint(xz, solver):
     Phi = 1e-3  # rad
-    res = synthesize(xz, 0.5, 0.99, "uniform", 0.7, solver=solver, Phi=Phi)
+    res = synthesize(xz, 0.5, 0.99, "uniform", 0.7, solver=solver, Phi=Phi, probability="gaussian")
     assert res.success, res.message
     S = xz.sensitivity("worst")
     Vo = (S[3:] * (res.x**2 / 3.0)) @ S[3:].T
@@ -217,7 +217,7 @@ def test_other_models_agree_between_solvers(model, pose):
 # ------------------------------------------------------------------------------------------
 def test_infeasible_specification_names_the_constraint(xz):
     with pytest.raises(InfeasibleSpecificationError) as info:
-        synthesize(xz, 0.5, 0.99, bounds=(0.5, 5.0))
+        synthesize(xz, 0.5, 0.99, bounds=(0.5, 5.0), probability="gaussian")
     assert "position at pose 'worst'" in str(info.value)
     assert info.value.value > 1
 
@@ -246,7 +246,7 @@ def test_bad_values_get_typed_errors(xz, kwargs, field):
 
 def test_unknown_parameter_in_alpha(xz):
     with pytest.raises(tolsynth.UnknownNameError):
-        synthesize(xz, 0.5, 0.9, alpha={"h99": 0.7})
+        synthesize(xz, 0.5, 0.9, alpha={"h99": 0.7}, probability="gaussian")
 
 
 @pytest.mark.parametrize("solver,options", [("ipopt", {"max_iter": 2}), ("sumt", {"maxfev": 50})])
@@ -254,7 +254,7 @@ def test_non_convergence_is_not_success(xz, solver, options):
     # from a given start: a warm re-solve of a column solved earlier in the session (the cut
     # cache) converges in one IPOPT iteration, which is a success, not what is tested here
     x0 = xz.tolerances("figure3") if solver == "ipopt" else None
-    res = synthesize(xz, 0.5, 0.99, solver=solver, options=options, x0=x0)
+    res = synthesize(xz, 0.5, 0.99, solver=solver, options=options, x0=x0, probability="gaussian")
     assert not res.success
     assert res.status is Status.ITERATION_LIMIT
     assert res.message
@@ -282,6 +282,8 @@ def test_cli_solve_json_matches_api(xz, capsys):
                 "0.7",
                 "--solver",
                 "ipopt",
+                "--probability",
+                "gaussian",
                 "--json",
             ]
         )
@@ -325,7 +327,7 @@ def test_cli_reproduce_json_has_all_columns(capsys):
 # ------------------------------------------------------------------------------------------
 def test_synthesize_workspace_meets_spec_at_random_poses(xz, rng):
     R, p = 0.5, 0.99
-    w = tolsynth.synthesize_workspace(xz, R, p, "uniform", 0.7)
+    w = tolsynth.synthesize_workspace(xz, R, p, "uniform", 0.7, probability="gaussian")
     assert w.success and len(w.rounds) >= 2
     at_paper_pose = w.rounds[0]
     assert at_paper_pose["worst_value"] > 1.05  # the paper's single pose is not enough
@@ -342,14 +344,14 @@ def test_synthesize_workspace_meets_spec_at_random_poses(xz, rng):
         checked += 1
     assert worst <= 1 + 2e-3
     # and the single-pose optimum fails at some of those same kinds of poses
-    assert w.result.cost > synthesize(xz, R, p, "uniform", 0.7).cost
+    assert w.result.cost > synthesize(xz, R, p, "uniform", 0.7, probability="gaussian").cost
 
 
 def test_validate_option_runs_monte_carlo_at_the_optimum(xz):
     """Normal errors: the linear + Gaussian model is exact up to the (tiny) nonlinearity, so the two
     active components must reach p = 0.9 within the Monte Carlo interval (independent sampling
     through the nonlinear kinematics)."""
-    res = synthesize(xz, 0.5, 0.9, "normal", 0.7, validate=400_000, seed=11)
+    res = synthesize(xz, 0.5, 0.9, "normal", 0.7, validate=400_000, seed=11, probability="gaussian")
     v = res.validation
     assert v is not None and v.n == 400_000 and v.seed == 11
     active = res.constraints[0].active
@@ -414,7 +416,7 @@ def test_sphere_criterion_ipopt_and_sumt_agree():
 
 def test_sphere_criterion_validated_by_monte_carlo(xz):
     """Normal errors: the Monte Carlo sphere probability through the nonlinear kinematics matches p."""
-    res = synthesize(xz, 0.5, 0.9, "normal", 0.7, criterion="sphere", validate=400_000, seed=5)
+    res = synthesize(xz, 0.5, 0.9, "normal", 0.7, criterion="sphere", validate=400_000, seed=5, probability="gaussian")
     lo, hi = res.validation.p_sphere_ci
     assert lo - 1e-3 <= 0.9 <= hi + 1e-3
 
@@ -426,7 +428,9 @@ def test_function_evaluations_are_per_solve():
     iteration, and no more than ten per iteration and round."""
     m = tolsynth.load_model("xu_zhang_1988")
     runs = [
-        tolsynth.synthesize(m, 0.5, 0.99, "uniform", 0.7, solver="ipopt", options={"warm_start": False})
+        tolsynth.synthesize(
+            m, 0.5, 0.99, "uniform", 0.7, solver="ipopt", options={"warm_start": False}, probability="gaussian"
+        )
         for _ in range(3)
     ]
     counts = {r.function_evaluations for r in runs}
@@ -435,5 +439,5 @@ def test_function_evaluations_are_per_solve():
     rounds = int(r.message.split(" exchange round")[0].rsplit(" ", 1)[-1])
     assert 2 * r.iterations <= r.function_evaluations <= 10 * (r.iterations + rounds)
     # a warm re-solve of the same column: a handful of evaluations, not the cold solves' total
-    warm = tolsynth.synthesize(m, 0.5, 0.99, "uniform", 0.7, solver="ipopt")
+    warm = tolsynth.synthesize(m, 0.5, 0.99, "uniform", 0.7, solver="ipopt", probability="gaussian")
     assert warm.iterations <= 3 and 2 <= warm.function_evaluations <= 10 * (warm.iterations + 1)

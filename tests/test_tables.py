@@ -54,6 +54,7 @@ def solved(xz):
         k={"a": 2.0},
         bounds={"h2": (0.05, 1.0)},
         options={"tol": 1e-10},
+        probability="gaussian",
     )
 
 
@@ -127,7 +128,7 @@ def _saved(result, path):
 
 
 def test_validation_frame(xz, tmp_path):
-    res = tolsynth.synthesize(xz, R=0.5, p=0.99, validate=3000, seed=2)
+    res = tolsynth.synthesize(xz, R=0.5, p=0.99, validate=3000, seed=2, probability="gaussian")
     v = res.validation
     frame, meta = _read_plain(_saved(v, tmp_path / "v.csv"))
     rows = frame.set_index("quantity")
@@ -138,7 +139,7 @@ def test_validation_frame(xz, tmp_path):
 
 
 def test_workspace_and_worst_pose_frames(xz, solved):
-    w = tolsynth.synthesize_workspace(xz, 0.5, 0.99, max_rounds=2)
+    w = tolsynth.synthesize_workspace(xz, 0.5, 0.99, max_rounds=2, probability="gaussian")
     f = w.to_frame()
     assert list(f["cost"]) == [r["cost"] for r in w.rounds]
     assert f.attrs["summary"]["converged"] == w.converged

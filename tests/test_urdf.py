@@ -567,16 +567,18 @@ def test_ur5_same_optimum_from_urdf_and_dh_where_the_error_parameters_are_the_sa
         sign = np.sign(np.sum(Su * Sd, axis=0))
         assert np.abs(Su * sign - Sd).max() < 1e-8
     assert np.allclose(m.k[cols], d.k) and m.units[0] == "mm"
-    ru = tolsynth.synthesize(m, R=0.5, p=0.99, poses=list(poses))
-    rd = tolsynth.synthesize(d, R=0.5, p=0.99, poses=list(poses))
+    ru = tolsynth.synthesize(m, R=0.5, p=0.99, poses=list(poses), probability="gaussian")
+    rd = tolsynth.synthesize(d, R=0.5, p=0.99, poses=list(poses), probability="gaussian")
     assert ru.success and rd.success
     assert ru.cost == pytest.approx(rd.cost, rel=1e-6)
     tu, td = ru.tolerances, rd.tolerances
     for n in d.error_parameters:
         assert tu[DH_TO_URDF[n]] == pytest.approx(td[n], rel=1e-5, abs=1e-7)
     # the full sets: different problems (see the docstring)
-    full_u = tolsynth.synthesize(tolsynth.load_urdf(_file(UR5[0]), *UR5[1:]), R=0.5, p=0.99, poses=list(poses))
-    full_d = tolsynth.synthesize(_dh_mechanism("all"), R=0.5, p=0.99, poses=list(poses))
+    full_u = tolsynth.synthesize(
+        tolsynth.load_urdf(_file(UR5[0]), *UR5[1:]), R=0.5, p=0.99, poses=list(poses), probability="gaussian"
+    )
+    full_d = tolsynth.synthesize(_dh_mechanism("all"), R=0.5, p=0.99, poses=list(poses), probability="gaussian")
     assert full_u.success and full_d.success and full_u.cost > full_d.cost
 
 

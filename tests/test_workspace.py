@@ -370,7 +370,7 @@ def _check_workspace_result(w, mech, fk, name, n_samples, R=0.5, p=0.99):
 def test_synthesize_workspace_reports_rounds_certificate_and_violation(xz, capsys):
     from test_kinematics import xu_fk
 
-    w = tolsynth.synthesize_workspace(xz, 0.5, 0.99, "uniform", 0.7)
+    w = tolsynth.synthesize_workspace(xz, 0.5, 0.99, "uniform", 0.7, probability="gaussian")
     _check_workspace_result(w, xz, xu_fk, "xu_zhang_1988", 400)
     # the command line prints the certificate and the largest value found afterwards
     from tolsynth.cli import main
@@ -387,6 +387,8 @@ def test_synthesize_workspace_reports_rounds_certificate_and_violation(xz, capsy
             "--dist",
             "uniform",
             "--everywhere",
+            "--probability",
+            "gaussian",
             "--json",
         ]
     )
@@ -408,5 +410,5 @@ def test_synthesize_workspace_on_puma560():
     from test_kinematics import puma_fk
 
     puma = tolsynth.load_model("puma560")
-    w = tolsynth.synthesize_workspace(puma, 0.5, 0.99, "uniform", 0.7, pose="qn")
+    w = tolsynth.synthesize_workspace(puma, 0.5, 0.99, "uniform", 0.7, pose="qn", probability="gaussian")
     _check_workspace_result(w, puma, puma_fk, "puma560", 300)

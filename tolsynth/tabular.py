@@ -150,6 +150,7 @@ def _synthesis_inputs(res) -> dict:
 def synthesis_summary(res) -> dict:
     return {
         "solver": res.solver,
+        "probability": res.probability_kind,
         "status": str(res.status),
         "success": bool(res.success),
         "message": res.message,

@@ -455,9 +455,10 @@ def add_specification_arguments(
     p.add_argument(
         "--probability",
         choices=["gaussian", "exact"] + (["worst_case"] if worst_case else []),
-        default="gaussian",
-        help="gaussian (the paper's: each principal component read as normal) or exact (the exact "
-        "probabilities of the linear error model, along every direction or in the sphere)"
+        default=None,
+        help="exact (the default: the exact probabilities of the linear error model, along every "
+        "direction or in the sphere) or gaussian (the paper's: each principal component read as normal; "
+        "--solver both always reads it)"
         + ("; worst_case: every error anywhere in its band, the hand still within R (no p)" if worst_case else ""),
     )
     p.add_argument(

@@ -71,8 +71,8 @@ def add_design_arguments(p) -> None:
         "--probability",
         choices=list(PROBABILITIES),
         default=None,
-        help="gaussian (the paper's) or exact (the exact probabilities of the linear error model); "
-        "default: the library's (tolsynth.synthesize)",
+        help="exact (the default: the exact probabilities of the linear error model) or gaussian (the "
+        "paper's: each principal component read as normal)",
     )
 
 
@@ -156,6 +156,8 @@ def finish(args, mech, record: dict, *, frame, data, text, ok: bool, failure: st
 
 def design_kwargs(mech, args) -> tuple[dict, dict]:
     """``(keyword arguments of the library call, the resolved values to record)``."""
+    from tolsynth.synthesis.single import DEFAULT_PROBABILITY
+
     dist = dist_for(args, mech)
     alpha = parse_per_parameter(mech, args.alpha, "--alpha", 0.7, "a number > 0 (the paper: 0.7)")
     poses = parse_poses(mech, args.pose)
@@ -169,7 +171,7 @@ def design_kwargs(mech, args) -> tuple[dict, dict]:
         alpha=kw["alpha"],
         poses=[pose_label(q) for q in poses],
         Phi_rad=args.Phi,
-        probability=args.probability,
+        probability=args.probability or DEFAULT_PROBABILITY,
     )
     return kw, record
 

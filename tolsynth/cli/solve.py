@@ -107,10 +107,7 @@ def _print_contributions(reps: dict) -> None:
 
 
 def _spec_kwargs(mech, args) -> tuple:
-    kw = dict(Phi=args.Phi, criterion=args.criterion)
-    probability = args.probability
-    if probability != "gaussian":
-        kw["probability"] = probability
+    kw = dict(Phi=args.Phi, criterion=args.criterion, probability=args.probability)
     if args.verify is not None:
         if args.solver == "both" or getattr(args, "everywhere", False):
             raise InputError(
@@ -135,12 +132,14 @@ def _spec_kwargs(mech, args) -> tuple:
 
 def cmd_solve(args) -> int:
     from tolsynth.synthesis.compare import compare
-    from tolsynth.synthesis.single import synthesize
+    from tolsynth.synthesis.single import DEFAULT_PROBABILITY, synthesize
 
     check_table_out(args)  # before any work
     mech = load_model(args.model)
     if hasattr(args, "dist"):
         args.dist = dist_for(args, mech)
+    if args.probability is None:  # the library's default; the paper's cross-check of two solvers reads Gaussian
+        args.probability = "gaussian" if args.solver == "both" else DEFAULT_PROBABILITY
     if args.probability == "worst_case":
         for flag, given in (
             ("--solver both", args.solver == "both"),
@@ -161,6 +160,11 @@ def cmd_solve(args) -> int:
         f"{mech.name}: R={args.R:g} mm, {p_text}, alpha={args.alpha or 0.7}, "
         + ("errors anywhere in their bands" if args.p is None else f"{dist_label(args.dist)} errors")
         + (f", Phi={args.Phi:g} rad" if args.Phi is not None else "")
+        + (
+            ", the paper's Gaussian criterion (the two solvers' cross-check)"
+            if args.solver == "both" and args.probability == "gaussian"
+            else f", {args.probability.replace('_', '-')} probabilities"
+        )
     )
     record = dict(
         R_mm=args.R,
@@ -303,8 +307,7 @@ def cmd_solve(args) -> int:
         met = c.ipopt if c.ipopt.feasible and c.sumt.feasible else None
     else:
         with Working(
-            f"tolsynth solve: {SOLVER_LABELS[args.solver]}"
-            + (f" ({args.probability.replace('_', '-')} probabilities)" if args.probability != "gaussian" else "")
+            f"tolsynth solve: {SOLVER_LABELS[args.solver]}" + f" ({args.probability.replace('_', '-')} probabilities)"
         ):
             res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
         reps = _contributions(args, {"the optimum": res})

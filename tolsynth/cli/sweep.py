@@ -84,6 +84,7 @@ def _numbers(text: str, field: str, parse) -> list:
 
 
 def cmd_sweep(args) -> int:
+    from tolsynth.synthesis.single import DEFAULT_PROBABILITY
     from tolsynth.synthesis.sweeps import sweep
 
     check_table_out(args)  # before any work: the suffix, pandas / pyarrow, the folder
@@ -117,6 +118,8 @@ def cmd_sweep(args) -> int:
         kw["poses"] = parse_poses(mech, args.pose)
     if args.Phi is not None:
         kw["Phi"] = args.Phi
+    if args.probability is not None:
+        kw["probability"] = args.probability
     if args.scheduler is not None:
         client = args.scheduler
     elif args.workers is None:
@@ -138,6 +141,7 @@ def cmd_sweep(args) -> int:
         k=kw.get("k", mech.k),
         bounds=kw.get("bounds", mech.bounds),
         Phi_rad=args.Phi,
+        probability=args.probability or DEFAULT_PROBABILITY,
         engine=client,
     )
     if args.out is not None:
@@ -151,7 +155,8 @@ def cmd_sweep(args) -> int:
             }
         )
     else:
-        cols = ["R", "p", "alpha", "distribution", "criterion", "solver", "status", "cost", "gap", "time_s"]
+        cols = ["R", "p", "alpha", "distribution", "criterion", "solver", "probability", "status", "cost", "gap"]
+        cols = [c for c in cols if c in df.columns] + ["time_s"]
         print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.6g}"))
         for _, row in df[df["error"] != ""].iterrows():
             print(f"row {row['row']}: {row['error']}")
@@ -231,6 +236,13 @@ def register(sub) -> None:
         type=angle_rad("--Phi"),
         default=None,
         help="orientation accuracy half-angle for every row, rad (suffixes allowed); default: none",
+    )
+    p.add_argument(
+        "--probability",
+        choices=["exact", "gaussian"],
+        default=None,
+        help="exact (the default: the exact probabilities of the linear error model) or gaussian (the "
+        "paper's: each principal component read as normal), for every row",
     )
     add_table_out_argument(p, "the table, one row per solve")
     p.add_argument(

@@ -28,8 +28,9 @@ class ParetoFront:
     axis : str
         ``"R"`` (mm) or ``"p"``.
     rows : list of dict
-        Per point: ``R``, ``p``, ``cost``, ``lower_bound``, ``success`` (and ``processes`` with
-        process choice); an infeasible point has ``cost = inf``.
+        Per point: ``R``, ``p``, ``cost``, ``lower_bound``, ``success``, ``probability`` (the
+        kind the design meets; and ``processes`` with process choice); an infeasible point has
+        ``cost = inf``.
     reference : list of dict
         The paper's columns on this sweep: ``table``, ``R``, ``p``, ``cost`` of the printed
         tolerances.
@@ -116,6 +117,7 @@ def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, pro
                         "cost": pc.cost,
                         "lower_bound": pc.lower_bound,
                         "success": pc.proven,
+                        "probability": pc.result.probability_kind,
                         "processes": pc.processes,
                     }
                 )
@@ -123,7 +125,14 @@ def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, pro
                 res = synthesize(mechanism, Rv, pv, distribution, alpha, x0=x0, **kwargs)
                 x0 = res.x if res.success else None
                 rows.append(
-                    {"R": Rv, "p": pv, "cost": res.cost, "lower_bound": res.lower_bound, "success": res.success}
+                    {
+                        "R": Rv,
+                        "p": pv,
+                        "cost": res.cost,
+                        "lower_bound": res.lower_bound,
+                        "success": res.success,
+                        "probability": res.probability_kind,
+                    }
                 )
         except InfeasibleSpecificationError:
             rows.append({"R": Rv, "p": pv, "cost": float("inf"), "lower_bound": float("inf"), "success": False})
@@ -138,7 +147,10 @@ def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, pro
         )
         fixed_ok = abs(ref.p - p) < 1e-12 if R_seq else abs(ref.R - R) < 1e-12
         swept = ref.R if R_seq else ref.p
-        if same and fixed_ok and values[0] <= swept <= values[-1] and processes is None and not kwargs:
+        # the printed tolerances' cost under the model's own cost (the probability and the solver
+        # change the optimum beside it, not that cost)
+        same_cost = not set(kwargs) - {"probability", "solver", "options", "time_limit"}
+        if same and fixed_ok and values[0] <= swept <= values[-1] and processes is None and same_cost:
             spec = make_specification(mechanism, ref.R, ref.p, ref.distribution, ref.alpha)
             reference.append(
                 {

@@ -131,9 +131,9 @@ def reproduce(
         for key, m in readings.items():
             printed = np.array(ref.tolerances, dtype=float)
             cost, gmax = _printed_eval(m, ref, printed)
-            ip = synthesize(m, ref.R, ref.p, ref.distribution, ref.alpha, solver="ipopt")
+            ip = synthesize(m, ref.R, ref.p, ref.distribution, ref.alpha, solver="ipopt", probability="gaussian")
             su = (
-                synthesize(m, ref.R, ref.p, ref.distribution, ref.alpha, solver="sumt")
+                synthesize(m, ref.R, ref.p, ref.distribution, ref.alpha, solver="sumt", probability="gaussian")
                 if (sumt and key == "printed")
                 else None
             )

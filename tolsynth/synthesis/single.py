@@ -60,7 +60,7 @@ SPHERE_QUADRATURE_TOL = 1e-9
 COARSE_STEP_TOL = 1e-4
 
 #: the probability a design meets when none is named
-DEFAULT_PROBABILITY = "gaussian"
+DEFAULT_PROBABILITY = "exact"
 
 #: solver name -> private entry point (each solver lives in its own module)
 SOLVERS = {"auto": _auto, "ipopt": _ipopt, "sumt": _sumt}
@@ -152,10 +152,13 @@ def synthesize(
         attach the achieved probabilities as ``result.validation``.
     seed : int
         Seed of that Monte Carlo run.
-    probability : {"gaussian", "exact"}
-        ``"gaussian"`` (default, the paper's: the principal components read as normal) or
-        ``"exact"``: the exact probabilities of the linear error model as the constraints, along
-        every direction (per component) or in the sphere (:mod:`tolsynth.solvers.exact`).
+    probability : {"exact", "gaussian", "worst_case"}
+        ``"exact"`` (default): the exact probabilities of the linear error model as the
+        constraints, along every direction (per component) or in the sphere
+        (:mod:`tolsynth.solvers.exact`), with a certificate of global optimality for symmetric
+        log-concave shapes; ``"gaussian"``: the paper's criterion, each principal component read
+        as normal (where every error is normal the two are the same problem);
+        ``"worst_case"``: every error anywhere in its band.
     verify : int or True, optional
         Close the loop (:mod:`tolsynth.analysis.verify`): the nonlinear Monte Carlo at the optimum (this many
         samples per pose; True: chosen from p), and while its 99 % lower bound is below ``p``,

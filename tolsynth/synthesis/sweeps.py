@@ -428,6 +428,7 @@ def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dic
     by_index = {r["row"]: r for r in rows}
     eps_cols = ["eps_" + n for n in mechanism.error_parameters]
     result_cols = [
+        "probability",
         "status",
         "success",
         "cost",

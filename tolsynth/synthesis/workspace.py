@@ -207,7 +207,11 @@ def synthesize_workspace(
         if key not in allowed:
             raise InputError("search", f"unknown key {key!r}", ", ".join(allowed))
     sphere = kwargs.get("criterion", "components") == "sphere"
-    exact = kwargs.get("probability", "gaussian") == "exact"
+    if kwargs.get("probability") is None:  # the library's default, named so every round reads the same
+        from tolsynth.synthesis.single import DEFAULT_PROBABILITY
+
+        kwargs["probability"] = DEFAULT_PROBABILITY
+    exact = kwargs["probability"] == "exact"
     if pose is None:  # no starting pose: the worst pose found at tolerances in the middle of the bounds
         lo, hi = mechanism.bounds
         pose = worst_pose(
