@@ -157,7 +157,10 @@ class ComponentBounds:
                 Pc = np.full(use.shape, np.inf)
                 Pc[use] = self._lower(Bc[use])
                 lb[todo] = np.maximum(lb[todo], np.minimum(Pc.min(axis=1), 1.0))
-        return lb, np.where(ok[:, None], split, np.nan)
+        # a box where the graph is not proven regular (a closed loop near its limits) becomes so
+        # only by narrowing its joints: halve the widest joint, never a direction angle, there
+        widths = np.concatenate([H[:, : self.k] - L[:, : self.k], np.zeros((nb, 2))], axis=1)
+        return lb, np.where(ok[:, None], split, widths)
 
 
 def _direction_angles(B: ComponentBounds, x: np.ndarray) -> np.ndarray:

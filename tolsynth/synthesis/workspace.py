@@ -357,6 +357,7 @@ def _certified_exchange(
             x0=np.array(poses + [w.q]),
             progress=progress,
             target=goal,
+            stop_at=goal,  # a pose found past the goal joins the imposed poses now, as a sampled one does
             **options,
         )
         q = cert.q
