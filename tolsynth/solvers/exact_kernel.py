@@ -36,7 +36,7 @@ from tolsynth.cbuild import C_INCLUDES, disabled, find_compiler, load_library
 from tolsynth.probability.truncnormal import packed as truncnormal_packed
 from tolsynth.solvers.exact_kernel_c import C_SOURCE
 
-__all__ = ["available", "series", "terms", "tail", "split", "closed", "CODES"]
+__all__ = ["available", "evaluate", "series", "terms", "tail", "split", "closed", "CODES"]
 
 #: rows of more columns run the NumPy path (the C source's work arrays are of this size)
 MAX_COLUMNS = 64
@@ -68,7 +68,7 @@ def _lib():
                         C_INCLUDES + C_SOURCE,
                         "exact",
                         cc,
-                        ("ts_series", "ts_tail", "ts_terms", "ts_split", "ts_closed"),
+                        ("ts_series", "ts_tail", "ts_terms", "ts_split", "ts_closed", "ts_eval"),
                     )
                     vp, ci, cd = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
                     lib.ts_series.restype = ci
@@ -81,6 +81,9 @@ def _lib():
                     lib.ts_split.argtypes = [ci, ci, vp, vp, vp, cd, vp, vp, vp]
                     lib.ts_closed.restype = None
                     lib.ts_closed.argtypes = [ci, ci, vp, vp, vp, ci, cd, vp, vp, vp, vp, vp]
+                    lib.ts_eval.restype = ci
+                    lib.ts_eval.argtypes = [ci, ci, vp, vp, cd, vp, ci, ci] + [vp] * 5 + [ci, vp, vp, vp]
+                    lib.ts_eval.argtypes += [cd, cd, ctypes.c_long, cd] + [vp] * 7
                 except (OSError, AttributeError, RuntimeError):  # the NumPy path then runs
                     lib = None
             _state[cc] = lib
@@ -277,3 +280,57 @@ def closed(shapes: tuple, b, R, order: int, tol: float):
         int(r): (float(P[r]), G[r] if order >= 1 else None, H[r] if order >= 2 else None, float(err[r]))
         for r in np.flatnonzero(ok)
     }
+
+
+def evaluate(rw, b, R, tol: float, order: int, Ks: np.ndarray, consts: tuple):
+    """The whole of ``exact_series.probability`` (order 0, before its slow rows) or of
+    ``derivatives`` (order 1, 2; neither rigorous nor the sphere's) in one call: ``(P unclipped,
+    G, H, err, rows after the dropping)``, or None without the kernel.  ``consts``: L's margin,
+    the normal reach, the least number of terms that tries the closed form, the rounding
+    allowance (the caller's constants)."""
+    lib = _lib()
+    if lib is None or b.shape[1] > MAX_COLUMNS:
+        return None
+    lay = _layout(rw)
+    b = _c(b)
+    m, n = b.shape
+    R = _c(np.broadcast_to(R, (m,)))
+    Ks = _c(Ks)
+    bw, gerr = np.empty((m, n)), np.empty((m, n))
+    P, err, K = np.empty(m), np.empty(m), np.empty(m, dtype=np.int64)
+    G = np.empty((m, n)) if order >= 1 else bw
+    H = np.empty((m, n, n)) if order >= 2 else bw
+    lmargin, reach, closed_from, rounding = consts
+    status = lib.ts_eval(
+        m,
+        n,
+        b.ctypes.data,
+        R.ctypes.data,
+        float(tol),
+        Ks.ctypes.data,
+        Ks.size,
+        order,
+        lay.kind.ctypes.data,
+        lay.tnt.ctypes.data,
+        lay.tno.ctypes.data,
+        lay.var.ctypes.data,
+        lay.peak.ctypes.data,
+        lay.fidx.size,
+        lay.fidx.ctypes.data,
+        lay.fmult.ctypes.data,
+        lay.normal.ctypes.data,
+        float(lmargin),
+        float(reach),
+        int(closed_from),
+        float(rounding),
+        bw.ctypes.data,
+        P.ctypes.data,
+        G.ctypes.data,
+        H.ctypes.data,
+        err.ctypes.data,
+        gerr.ctypes.data,
+        K.ctypes.data,
+    )
+    if status:
+        return None
+    return P, (G if order >= 1 else None), (H if order >= 2 else None), err, bw

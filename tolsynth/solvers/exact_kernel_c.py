@@ -8,8 +8,8 @@ C_SOURCE = r"""
 #define TS_PI 3.14159265358979323846
 #define TS_MAXN 64 /* columns at most (MAX_COLUMNS) */
 #define TS_SYNC 16
-#define TS_ROTATE 512 /* rows of more terms take every sine afresh: D2 = -t sin t - D1 multiplies
-                         the sine's rounding by t, which grows with k */
+#define TS_ROTATE 512 /* the sphere's rows of more terms take every sine afresh: its kernel
+                         sin x - x cos x multiplies the rounding by x, which grows with k */
 
 /* phi(t), and for order >= 1 D1 = t phi'(t), D2 = t dD1/dt, of the uniform (0), normal (1,
    3 sigma = 1) and triangular (2) shapes: the closed forms of the NumPy path.  sn, cs: sin and cos
@@ -53,36 +53,66 @@ static double ts_clenshaw(const double *blk, int f, double z) {
   return c[(long)f*pieces + j] + t*b1 - b2;
 }
 
-/* phi, D1, D2 of the truncated normal from its packed interpolants: truncnormal.cf3's formulas */
-static void ts_tn(const double *tb, double s, int order, double *phi, double *d1, double *d2) {
+/* Both functions of a two-function interpolant at z, in one pass (same piece, same t). */
+static void ts_clenshaw2(const double *blk, double z, double *f0, double *f1) {
+  double a = blk[0], h = blk[1], u = (z - a)/h, t, b1 = 0.0, b2 = 0.0, e1 = 0.0, e2 = 0.0, tmp;
+  int pieces = (int)blk[2], deg = (int)blk[3], k;
+  long j;
+  const double *c = blk + 5;
+  double fl = floor(u);
+  j = fl < 0 ? 0 : (fl > pieces - 1 ? pieces - 1 : (long)fl);
+  t = 2.0*(u - (double)j) - 1.0;
+  for (k = deg; k > 0; k--) {
+    const double *ck = c + (long)k*2*pieces + j;
+    tmp = ck[0] + 2.0*t*b1 - b2;
+    b2 = b1;
+    b1 = tmp;
+    tmp = ck[pieces] + 2.0*t*e1 - e2;
+    e2 = e1;
+    e1 = tmp;
+  }
+  *f0 = c[j] + t*b1 - b2;
+  *f1 = c[pieces + j] + t*e1 - e2;
+}
+
+/* phi, D1, D2 of the truncated normal from its packed interpolants: truncnormal.cf3's formulas
+   (sn, cs: sin and cos of s, which is cf3's theta = 2 x y) */
+static void ts_tn(const double *tb, double s, double sn, double cs, int order, double *phi, double *d1,
+                  double *d2) {
   double beta = tb[0], x = tb[1], cc = tb[2], split = tb[3];
-  double y = fabs(s)/(beta*sqrt(2.0)), g = exp(-y*y), I, LI = 0.0, LLI = 0.0, y2 = y*y;
+  double y = fabs(s)/(beta*sqrt(2.0)), g = y > 40.0 ? 0.0 : exp(-y*y), I, LI = 0.0, LLI = 0.0, y2 = y*y;
   if (y <= split) {
     double Is = ts_clenshaw(tb + (long)tb[4], 0, y);
     I = Is;
     if (order >= 1) {
-      double th = 2.0*x*y, I1 = sin(th) - 2.0*y*Is;
+      double I1 = sn - 2.0*y*Is;
       LI = y*I1;
       if (order >= 2) {
-        double I2 = 2.0*x*cos(th) - 2.0*Is - 2.0*y*I1;
+        double I2 = 2.0*x*cs - 2.0*Is - 2.0*y*I1;
         LLI = y*I1 + y*y*I2;
       }
     }
   } else {
     const double *l0 = tb + (long)tb[5];
-    double v = 1.0/y, C = ts_clenshaw(l0, 0, v), S = ts_clenshaw(l0, 1, v), th = 2.0*x*y;
-    double sn = sin(th), cs = cos(th), P = sn*C - cs*S;
+    double v = 1.0/y, C, S, th = 2.0*x*y, P;
+    ts_clenshaw2(l0, v, &C, &S);
+    P = sn*C - cs*S;
     I = 0.5*v*P;
     if (order >= 1) {
       const double *l1 = tb + (long)tb[6];
-      double C1 = ts_clenshaw(l1, 0, v), S1 = ts_clenshaw(l1, 1, v);
-      double Pt = cs*C + sn*S, Pv = sn*C1 - cs*S1, Q = -P + th*Pt - v*Pv;
+      double C1, S1, Pt, Pv, Q;
+      ts_clenshaw2(l1, v, &C1, &S1);
+      Pt = cs*C + sn*S;
+      Pv = sn*C1 - cs*S1;
+      Q = -P + th*Pt - v*Pv;
       LI = 0.5*v*Q;
       if (order >= 2) {
         const double *l2 = tb + (long)tb[7];
-        double C2 = ts_clenshaw(l2, 0, v), S2 = ts_clenshaw(l2, 1, v);
-        double Ptv = cs*C1 + sn*S1, Pvv = sn*C2 - cs*S2;
-        double LQ = 2.0*v*Pv - th*th*P - 2.0*th*v*Ptv + v*v*Pvv;
+        double C2, S2, Ptv, Pvv, LQ;
+        ts_clenshaw2(l2, v, &C2, &S2);
+        Ptv = cs*C1 + sn*S1;
+        Pvv = sn*C2 - cs*S2;
+        LQ = 2.0*v*Pv - th*th*P - 2.0*th*v*Ptv + v*v*Pvv;
         LLI = 0.5*v*(-Q + LQ);
       }
     }
@@ -124,7 +154,7 @@ int ts_series(int m, int n, const double *b, const double *R, const double *L, c
       double tau = TS_PI*(double)k/L[r], x = TS_PI*(double)k*(R[r]/L[r]), s;
       /* sin and cos of k times each angle by rotation, taken afresh every TS_SYNC terms: the
          rotation's rounding (about one ulp a step) never builds up past TS_SYNC ulp */
-      if ((k - 1) % TS_SYNC == 0 || Kr > TS_ROTATE) {
+      if ((k - 1) % TS_SYNC == 0 || (ball && Kr > TS_ROTATE)) {
         for (a = 0; a < nz; a++) {  /* the argument as ts_cf forms it */
           double t = tau*br[col[a]]*(kind[col[a]] == 2 ? 0.5 : 1.0);
           sk[a] = sin(t);
@@ -146,7 +176,7 @@ int ts_series(int m, int n, const double *b, const double *R, const double *L, c
       s = ball ? 2.0/((double)k*TS_PI)*(ks - x*kc) : 2.0/((double)k*TS_PI)*ks;
       for (a = 0; a < nz; a++) {
         j = col[a];
-        if (kind[j] == 3) ts_tn(tnt + tno[j], tau*br[j], order, &phi[a], &d1[a], &d2[a]);
+        if (kind[j] == 3) ts_tn(tnt + tno[j], tau*br[j], sk[a], ck[a], order, &phi[a], &d1[a], &d2[a]);
         else ts_cf(kind[j], tau*br[j], sk[a], ck[a], order, &phi[a], &d1[a], &d2[a]);
       }
       pre[0] = 1.0;
@@ -335,5 +365,46 @@ void ts_terms(int m, int n, const double *b, const double *L, const double *Ks, 
         break;
       }
   }
+}
+/* The whole evaluation of exact_series.probability (order 0) and derivatives (order 1, 2; not
+   the rigorous or sphere variants) per row: the smallest terms dropped (rows of >= 3 columns),
+   L, the number of terms K (the least of Ks within tol), the closed form for rows of at least
+   closed_from terms where it serves, else the series; err = the truncation bound (or the closed
+   form's rounding bound) + rounding + what the dropping may change.  bw: the rows after the
+   dropping; gerr: the gradient's bound of the dropping. */
+int ts_eval(int m, int n, const double *b, const double *R, double tol, const double *Ks, int nk, int order,
+            const int *kind, const double *tnt, const long *tno, const double *var, const double *peak, int nf,
+            const long *fidx, const double *fmult, const int *normal, double lmargin, double reach,
+            long closed_from, double rounding, double *bw, double *P, double *G, double *H, double *err,
+            double *gerr, long *K) {
+  int r, j, anynormal = 0;
+  if (n > TS_MAXN) return 1;
+  for (j = 0; j < n; j++) anynormal |= normal[j];
+  for (r = 0; r < m; r++) {
+    const double *br = b + (long)r*n;
+    double *bo = bw + (long)r*n, *go = gerr + (long)r*n, dropped = 0.0, B = 0.0, sq = 0.0, L;
+    double *Gr = order >= 1 ? G + (long)r*n : NULL, *Hr = order >= 2 ? H + (long)r*n*n : NULL;
+    if (n >= 3 && tol > 0) ts_split(1, n, br, var, peak, 0.25*tol, bo, &dropped, go);
+    else for (j = 0; j < n; j++) { bo[j] = br[j]; go[j] = 0.0; }
+    for (j = 0; j < n; j++) {
+      if (normal[j]) sq += (bo[j]/3.0)*(bo[j]/3.0);
+      else B += bo[j];
+    }
+    if (anynormal) B += reach*sqrt(sq);
+    L = R[r] + 0.5*B*lmargin;
+    ts_terms(1, n, bo, &L, Ks, nk, tol, nf, fidx, fmult, normal, &K[r]);
+    if (K[r] >= closed_from) {
+      int ok = 0;
+      double e = 0.0;
+      ts_closed(1, n, bo, &R[r], kind, order, tol, &ok, &P[r], Gr, Hr, &e);
+      if (ok) {
+        err[r] = e + rounding + dropped;
+        continue;
+      }
+    }
+    ts_series(1, n, bo, &R[r], &L, &K[r], kind, tnt, tno, order, 0, &P[r], Gr, Hr);
+    err[r] = ts_tail1(n, bo, L, (double)K[r], nf, fidx, fmult, normal, -1) + rounding + dropped;
+  }
+  return 0;
 }
 """

@@ -270,6 +270,8 @@ CLOSED_FROM = 512
 #: rounding allowance added to every truncation bound (the running products drift by ~k ulp per
 #: factor; K n ulp stays far below it for K n < 1e4)
 ROUNDING = 1e-12
+#: what the compiled evaluation takes of this module's constants
+_CONSTS = (L_MARGIN, NORMAL_REACH, CLOSED_FROM, ROUNDING)
 
 
 def probability(b, shapes: tuple, R, tol: float = 1e-10):
@@ -278,9 +280,13 @@ def probability(b, shapes: tuple, R, tol: float = 1e-10):
     number of terms."""
     rw = rows_of(tuple(shapes))
     b = np.abs(np.atleast_2d(np.asarray(b, dtype=float)))
-    b, dropped = split_small(b, rw, 0.25 * tol)
     M = b.shape[0]
     Rv = np.broadcast_to(np.asarray(R, dtype=float), (M,))
+    out = exact_kernel.evaluate(rw, b, Rv, tol, 0, _KS[_KS <= 2.0**16], _CONSTS)
+    if out is not None:  # every row in one call of the compiled kernel
+        P, _, _, err, b = out
+        return _slow_rows(P, err, b, shapes, Rv, tol)
+    b, dropped = split_small(b, rw, 0.25 * tol)
     L = rw.half_period(b, Rv)
     K = rw.terms(b, L, tol)
     P = np.empty(M)
@@ -310,6 +316,11 @@ def probability(b, shapes: tuple, R, tol: float = 1e-10):
     err = rw.tail(b, L, np.maximum(K, 1)) + ROUNDING + dropped
     for r, (Pr, _, _, er) in closed.items():
         P[r], err[r] = Pr, er + ROUNDING + dropped[r]
+    return _slow_rows(P, err, b, shapes, Rv, tol)
+
+
+def _slow_rows(P, err, b, shapes, Rv, tol):
+    """Rows whose bound is above ``tol`` from the reference evaluator; P clipped to [0, 1]."""
     slow = np.flatnonzero(err > tol + ROUNDING)
     if slow.size:  # one term dominates (a near-jump): the reference evaluator's closed forms
         from tolsynth.probability import exact as ref
@@ -368,6 +379,18 @@ def derivatives(
     c = np.abs(np.atleast_2d(np.asarray(c, dtype=float)))
     M, n = c.shape
     b = c * np.exp(np.asarray(u, dtype=float))[None, :]
+    if not rigorous and not ball:
+        out = exact_kernel.evaluate(
+            rw,
+            b,
+            np.broadcast_to(np.asarray(R, dtype=float), (M,)),
+            tol,
+            2 if hessian else 1,
+            _KS[_KS <= 2.0**16],
+            _CONSTS,
+        )
+        if out is not None:  # every row in one call of the compiled kernel
+            return np.clip(out[0], 0.0, 1.0), out[1], out[2], out[3], None
     # the dropped terms' own derivatives are second order in them: 0 here, bounded in gerr
     if n >= 3 and not ball:
         b0 = b
