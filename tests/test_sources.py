@@ -326,7 +326,18 @@ XU_TABLES = {
 PLANAR = {"l1": 500.0, "l2": 300.0}
 
 # the parallel robots' sources are typed in and checked in test_parallel_sources.py
-SOURCE_TESTED = {"ur5", "panda", "puma560", "xu_zhang_1988", "planar_2r", "stewart_gough", "delta", "planar_3rrr"}
+# kr6r900sixx: typed in and checked against its URDF chain in test_certify_kr6.py
+SOURCE_TESTED = {
+    "ur5",
+    "panda",
+    "puma560",
+    "xu_zhang_1988",
+    "planar_2r",
+    "stewart_gough",
+    "delta",
+    "planar_3rrr",
+    "kr6r900sixx",
+}
 
 
 def test_every_bundled_model_has_a_source_test():
