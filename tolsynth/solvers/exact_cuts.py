@@ -37,11 +37,19 @@ def _unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross products of (m, 3) arrays (np.cross's axis handling costs more than the
+    arithmetic on these few rows)."""
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
+    return np.column_stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def _tangent(W: np.ndarray) -> np.ndarray:
     """An orthonormal tangent basis (m, 3, 2) at each unit row of W."""
     e = np.eye(3)[np.argmin(np.abs(W), axis=1)]
-    e1 = _unit(np.cross(W, e))
-    return np.stack([e1, np.cross(W, e1)], axis=2)
+    e1 = _unit(_cross(W, e))
+    return np.stack([e1, _cross(W, e1)], axis=2)
 
 
 def sphere_model(A3: np.ndarray, W: np.ndarray, G: np.ndarray, H: np.ndarray):
@@ -135,6 +143,7 @@ class Cuts:
         self._pending = None  # the directions, model and g of the last order-2 evaluation
         self._g = None
         self._slide = np.zeros(0)  # per cut: the fraction of a full slide step it takes next
+        self._stacked = None
 
     def __len__(self) -> int:
         return len(self.w)
@@ -169,14 +178,29 @@ class Cuts:
         self.moving.append(bool(moving))
         self._slide = np.append(self._slide, 1.0 if slides else 0.0)
         self._model = self._dt = self._pending = self._g = None
+        self._stacked = None
         return True
+
+    def _stack(self):
+        """The cuts' blocks (m, 3, n), R, p and the tracking cuts' indices as arrays (kept until
+        a cut is added: every evaluation needs them)."""
+        if self._stacked is None:
+            self._stacked = (
+                np.array(self.A),
+                np.array(self.R),
+                np.array(self.p),
+                np.flatnonzero(self.moving),
+            )
+            for x in self._stacked:
+                x.setflags(write=False)
+        return self._stacked
 
     def rows(self, W=None) -> np.ndarray:
         W = np.array(self.w) if W is None else W
-        return np.abs(np.einsum("mxn,mx->mn", np.array(self.A), W))
+        return np.abs(np.einsum("mxn,mx->mn", self._stack()[0], W))
 
     def arrays(self):
-        return self.rows(), np.array(self.R), np.array(self.p)
+        return self.rows(), self._stack()[1], self._stack()[2]
 
     # ---------------------------------------------------------------------- tracking directions
     def _directions(self) -> np.ndarray:
@@ -184,7 +208,7 @@ class Cuts:
         W = np.array(self.w)
         if self._dt is None or self._a == 0.0:
             return W
-        mv = np.flatnonzero(self.moving)
+        mv = self._stack()[3]
         E = self._model[1]
         W[mv] = _unit(W[mv] + self._a * np.einsum("mxa,ma->mx", E, self._dt))
         return W
@@ -207,8 +231,8 @@ class Cuts:
         dt[~pd] = 0.0
         nd = np.linalg.norm(dt, axis=1)
         dt *= np.minimum(1.0, MAX_TURN / np.maximum(nd, 1e-300))[:, None]
-        mv = np.flatnonzero(self.moving)
-        extra[mv] = np.einsum("ma,ma->m", gt, dt) / (1.0 - np.array(self.p)[mv])
+        mv = self._stack()[3]
+        extra[mv] = np.einsum("ma,ma->m", gt, dt) / (1.0 - self._stack()[2][mv])
         self._dt = dt
         return extra
 
@@ -231,7 +255,7 @@ class Cuts:
             return np.zeros(0), np.zeros((0, n)), np.zeros((0, n, n))
         W = self._directions()
         if order == 0:
-            R, p = np.array(self.R), np.array(self.p)
+            _, R, p, _ = self._stack()
             P, _ = probability(self.rows(W) * np.exp(u)[None, :], self.shapes, R, CUT_EVAL_TOL)
             return (P - p) / (1.0 - p), None, None
         g, J, Hh, model = self._full(u, W)
@@ -240,14 +264,13 @@ class Cuts:
 
     def _full(self, u, W):
         C = self.rows(W)
-        R, p = np.array(self.R), np.array(self.p)
+        A3, R, p, mv = self._stack()
         s = 1.0 / (1.0 - p)
         P, G, H, _, _ = derivatives(C, u, self.shapes, R, tol=CUT_EVAL_TOL)
-        mv = np.flatnonzero(self.moving)
         Hh = H.copy()
         model = None
         if mv.size:
-            E, gt, Hr, B = sphere_model(np.array(self.A)[mv], W[mv], G[mv], H[mv])
+            E, gt, Hr, B = sphere_model(A3[mv], W[mv], G[mv], H[mv])
             pd = _positive(Hr)
             Hinv = np.zeros_like(Hr)
             if pd.any():
@@ -263,7 +286,7 @@ class Cuts:
         if self._model is None or self._g is None or not np.array_equal(self._model[0], u):
             return None
         _, E, _, gt, _, pd, Hr = self._model
-        mv = np.flatnonzero(self.moving)
+        mv = self._stack()[3]
         go = ~pd & (np.linalg.norm(gt, axis=1) > 1e-9) & (self._slide[mv] > 1e-3)
         if not go.any():
             return None

@@ -80,7 +80,7 @@ class Barrier:
         it = 0
         for it in range(1, max_iter + 1):
             # Newton step on the reduced system (multipliers eliminated)
-            W = np.diag(d2f) - np.einsum("j,jab->ab", lam, H) if g.size else np.diag(d2f)
+            W = np.diag(d2f) - (lam @ H.reshape(g.size, -1)).reshape(u.size, u.size) if g.size else np.diag(d2f)
             W = W + (J.T * (lam / g)) @ J if g.size else W
             W = W + np.diag(np.where(free, zl / np.maximum(sl, 1e-300) + zu / np.maximum(su, 1e-300), 0.0))
             rhs = (
