@@ -34,7 +34,7 @@ from scipy.special import erfc
 from tolsynth.probability.stats import z_of_p
 from tolsynth.problem.nlp import ToleranceNLP
 
-__all__ = ["box_bound", "log_box", "envelope_point"]
+__all__ = ["box_bound", "half_space_bound", "log_box", "envelope_point"]
 
 _SQPI = math.sqrt(math.pi)
 
@@ -132,13 +132,19 @@ def box_bound(nlp: ToleranceNLP, eps_start) -> float:
         ph, G, _ = log_box(A, s, c, R, tT)
         ws.append(-G)  # feasible designs: (-G) . s <= (-G) . s* + phi(s*) - ln p
         rhs.append(float(-G @ s) + ph - math.log(p))
-    W, r = np.array(ws), np.array(rhs)
+    return half_space_bound(nlp, np.array(ws), np.array(rhs))
+
+
+def half_space_bound(nlp: ToleranceNLP, W: np.ndarray, r: np.ndarray) -> float:
+    """The cheapest cost within the bounds over the half-spaces ``W_b . eps^2 <= r_b`` (``W >= 0``),
+    from below: the Lagrangian dual ``max over mu >= 0`` of the separable minimum
+    (:meth:`ToleranceNLP.lagrangian_bound`), every value of which is a valid bound (weak duality)."""
 
     def dual(mu):
         return nlp.lagrangian_bound(mu @ W, float(mu @ r))
 
-    if len(blocks) == 1:  # the dual is concave in mu: a bounded search over log mu
+    if len(r) == 1:  # the dual is concave in mu: a bounded search over log mu
         best = minimize_scalar(lambda a: -dual(np.array([math.exp(a)])), bounds=(-40.0, 40.0), method="bounded")
         return max(float(-best.fun), dual(np.zeros(1)))
-    best = minimize(lambda a: -dual(np.exp(a)), np.zeros(len(blocks)), method="Nelder-Mead")
-    return max(float(-best.fun), dual(np.zeros(len(blocks))))
+    best = minimize(lambda a: -dual(np.exp(a)), np.zeros(len(r)), method="Nelder-Mead")
+    return max(float(-best.fun), dual(np.zeros(len(r))))
