@@ -147,6 +147,25 @@ def test_round_limit_is_not_converged_with_the_bound_so_far():
     assert out["worst_value"] <= out["upper_bound"] and out["upper_bound"] > 1.001
 
 
+@pytest.mark.slow  # 3-15 s: five solves and a second of certified search
+def test_everywhere_certify_time_limit_is_not_converged():
+    """A certified search stopped by --certify-time-limit: exit status 1, not converged, the reason,
+    and a bound (possibly infinite, never below) above the worst value found, which is sigma z / R
+    at the reported pose (checked here)."""
+    argv = ["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--dist", "uniform", "--alpha", "0.7"]
+    rc, out, err = _run(
+        *argv, "--probability", "gaussian", "--everywhere", "--certify", "--certify-time-limit", "1", "--json"
+    )
+    assert rc == 1 and "time limit reached" in err
+    assert out["converged"] is False and out["certified"] is False and "time limit reached" in out["reason"]
+    m = tolsynth.load_model("xu_zhang_1988")
+    eps = np.array([out["tolerances"][n] for n in m.error_parameters])
+    worst = _sigma(m, np.array(out["rounds"][-1]["worst_q"]), eps)[0] * z_of_p(0.99) / 0.5
+    assert worst == pytest.approx(out["worst_value"], rel=1e-9) and out["worst_value"] <= float(out["upper_bound"])
+    rc, _, err = _run(*argv, "--everywhere", "--certify-time-limit", "1")
+    assert rc == 2 and "--certify-time-limit" in err
+
+
 @pytest.mark.slow
 def test_everywhere_certified_on_the_paper_robot():
     """The certified exchange proves z sigma_1 / R <= 1 + tol over the continuous joint space; no

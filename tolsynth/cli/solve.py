@@ -201,6 +201,12 @@ def cmd_solve(args) -> int:
             for k, v in (("certify", args.certify or None), ("max_rounds", args.max_rounds), ("tol", args.tol))
             if v is not None
         }
+        if args.certify_time_limit is not None:
+            if not args.certify:
+                raise InputError(
+                    "--certify-time-limit", "only used with --certify", "--certify --certify-time-limit SECONDS"
+                )
+            ex["certify_options"] = {"time_limit": args.certify_time_limit}
         with Working(
             "tolsynth solve: the design for every reachable pose (exchange rounds with the worst-pose search)"
         ):
@@ -271,6 +277,7 @@ def cmd_solve(args) -> int:
         ("--certify", args.certify),
         ("--max-rounds", args.max_rounds is not None),
         ("--tol", args.tol is not None),
+        ("--certify-time-limit", args.certify_time_limit is not None),
     ):
         if given:
             raise InputError(flag, "only used with --everywhere", "--everywhere " + flag)
@@ -419,6 +426,14 @@ def register(sub) -> None:
         type=number("--tol", "a number in (0, 1]", lambda v: 0 < v <= 1),
         default=None,
         help="with --everywhere: relative tolerance on the specification (default 1e-3)",
+    )
+    p.add_argument(
+        "--certify-time-limit",
+        dest="certify_time_limit",
+        type=number("--certify-time-limit", "a number of seconds > 0", lambda v: v > 0),
+        default=None,
+        help="with --everywhere --certify: seconds for each certified search; reached: not converged (exit "
+        "status 1), with the bound reached",
     )
     p.add_argument(
         "--contributions",
