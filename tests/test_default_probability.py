@@ -6,7 +6,7 @@ The designs themselves are checked against independent computations elsewhere (t
 example by FFT convolution, tests/test_exact*.py by convolution, Monte Carlo and brute force); here
 each default design is checked to be the exact design (the same cost as ``probability="exact"``
 to 1e-9, and a different one from the Gaussian design) and to meet p along its worst direction
-by an independent Monte Carlo of the linear error model."""
+by FFT convolution and an independent Monte Carlo of the linear error model."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import tolsynth
+from independent import fft_probabilities, fibonacci_directions
 from tolsynth.model.cost import Chase, PowerLaw
 from tolsynth.synthesis.processes import Process
 
@@ -43,22 +44,18 @@ def test_synthesize_defaults_to_the_exact_design(xz, designs):
     assert d.cost == pytest.approx(e.cost, rel=1e-9)
     assert abs(d.cost - g.cost) > 1e-3 * g.cost  # the two criteria differ on uniform errors
     assert g.probability_kind == "gaussian"
-    # the default design meets p = 0.9 along its worst direction: Monte Carlo of the linear model
+    # the default design meets p = 0.9 along every direction (FFT convolution of the uniform
+    # densities, 1000 directions) and is at p along the worst of them, where an independent Monte
+    # Carlo of the linear model agrees
     A = xz.sensitivity("worst")[:3]
+    W = fibonacci_directions(1000)
+    probs = fft_probabilities((W @ A) * d.x, 0.5)
+    assert 0.9 - 5e-5 <= probs.min() <= 0.9 + 2e-3
+    w = W[int(np.argmin(probs))]
     rng = np.random.default_rng(7)
     U = rng.uniform(-1.0, 1.0, size=(400_000, A.shape[1]))
-    dr = (U * d.x) @ A.T
-    # the worst direction is where the probability is least: search a Fibonacci set of directions
-    n = 600
-    i = np.arange(n) + 0.5
-    z = 1 - 2 * i / n
-    r = np.sqrt(1 - z**2)
-    phi = np.pi * (1 + 5**0.5) * i
-    W = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-    p_dirs = np.array([np.mean(np.abs(dr @ w) <= 0.5) for w in W])
-    half = 3 * np.sqrt(0.9 * 0.1 / U.shape[0])  # a 3-sigma binomial band
-    assert p_dirs.min() >= 0.9 - half
-    assert p_dirs.min() <= 0.9 + 0.01  # some direction is near p: the design is not over-built
+    p_mc = np.mean(np.abs(U @ ((w @ A) * d.x)) <= 0.5)
+    assert abs(p_mc - probs.min()) <= 4 * np.sqrt(0.9 * 0.1 / U.shape[0])
 
 
 def test_the_records_say_which_probability(designs):
@@ -84,15 +81,19 @@ def test_sweep_front_and_budget_default_to_exact(xz, designs):
     assert abs(gauss.value / out.value - 1) > 1e-3  # the Gaussian reading buys another R for that cost
 
 
-def test_workspace_and_processes_default_to_exact(xz):
-    # every round of the exchange reads the default, its searches included: the same design as
-    # with probability="exact" named
-    w = tolsynth.synthesize_workspace(xz, R=0.5, p=0.99)
-    named = tolsynth.synthesize_workspace(xz, R=0.5, p=0.99, probability="exact")
+def _same_exchange(mech, R, p):
+    """The default exchange against the one with probability="exact" named: every round reads the
+    default, its pose searches included."""
+    w = tolsynth.synthesize_workspace(mech, R=R, p=p)
+    named = tolsynth.synthesize_workspace(mech, R=R, p=p, probability="exact")
     assert w.converged and w.result.probability_kind == "exact"
     assert w.result.cost == pytest.approx(named.result.cost, rel=1e-9)
     assert [r["worst_value"] for r in w.rounds] == pytest.approx([r["worst_value"] for r in named.rounds], rel=1e-6)
+
+
+def test_workspace_and_processes_default_to_exact():
     mech = tolsynth.load_model("planar_2r")
+    _same_exchange(mech, 0.5, 0.99)
     lengths = [
         Process("turning", Chase(1.0, 0.4, 1.0), 0.05, 1.0),
         Process("grinding", Chase(3.0, 0.3, 1.0), 0.005, 0.06),
@@ -103,6 +104,11 @@ def test_workspace_and_processes_default_to_exact(xz):
     assert best.proven and best.result.probability_kind == "exact"
     again = tolsynth.synthesize_processes(mech, 0.5, 0.9, procs, probability="exact")
     assert best.cost == pytest.approx(again.cost, rel=1e-9)
+
+
+@pytest.mark.slow
+def test_paper_robot_workspace_defaults_to_exact(xz):
+    _same_exchange(xz, 0.5, 0.99)
 
 
 def test_compare_reads_the_paper_criterion(xz, designs):
@@ -123,13 +129,13 @@ def test_cli_defaults_to_exact_and_opts_out(designs):
     assert d["cost"] == pytest.approx(designs["exact"].cost, rel=1e-9)
     g = json.loads(_cli("solve", "--model", XZ, "--R", "0.5", "--p", "0.9", "--json", "--probability", "gaussian"))
     assert g["probability"] == "gaussian" and g["cost"] == pytest.approx(designs["gaussian"].cost, rel=1e-9)
-    text = _cli("solve", "--model", XZ, "--R", "0.5", "--p", "0.9", "--solver", "both")
-    assert "the paper's Gaussian criterion" in text.splitlines()[0]
-    assert "the paper's Gaussian criterion" in _cli("reproduce", "--no-sumt")
 
 
 @pytest.mark.slow
 def test_cli_sweep_pareto_budget_default_to_exact(designs):
+    text = _cli("solve", "--model", XZ, "--R", "0.5", "--p", "0.9", "--solver", "both")
+    assert "the paper's Gaussian criterion" in text.splitlines()[0]
+    assert "the paper's Gaussian criterion" in _cli("reproduce", "--no-sumt")
     pytest.importorskip("pandas")
     s = json.loads(_cli("sweep", "--model", XZ, "--R", "0.5", "--p", "0.9", "--json", "--quiet"))
     assert s["rows"][0]["probability"] == "exact" and s["inputs"]["probability"] == "exact"
