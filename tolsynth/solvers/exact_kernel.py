@@ -114,7 +114,7 @@ class _Layout:
         self.tnt = np.concatenate([np.zeros(1)] + [t for _, t in tables.values()])
         self.tno[self.kind == 3] += 1
         self.fidx = np.ascontiguousarray(rw.f_idx, dtype=np.int64)
-        self.fmult = np.ascontiguousarray(rw.f_mult, dtype=float)
+        self.fmult = np.ascontiguousarray(np.concatenate([rw.f_mult, rw.f_far, rw.f_far2]), dtype=float)
         self.normal = np.ascontiguousarray(rw.normal, dtype=np.intc)
         self.var = np.array([s.variance for s in rw.shapes])
         self.peak = np.array([s.peak for s in rw.shapes])

@@ -326,15 +326,19 @@ void ts_closed(int m, int n, const double *b, const double *R, const int *kind, 
 }
 
 /* The truncation bound of Rows.tail for one row at K (see its docstring): power factors
-   (fidx, fmult; nf of them), normal columns (normal[j] != 0), column drop left out (-1: none). */
+   (fidx, fmult; nf of them, fmult followed by their far factors a and c: m = min(m, a + c / s0)), normal columns (normal[j] != 0), column drop left out (-1: none). */
 static double ts_tail1(int n, const double *br, double L, double K, int nf, const long *fidx,
                        const double *fmult, const int *normal, int drop) {
   int f, j, q = 0;
   double logC = 0.0, a = 0.0, power = INFINITY, gauss = INFINITY;
   for (f = 0; f < nf; f++) {
-    double bf = br[fidx[f]], c;
+    double bf = br[fidx[f]], c, bb, s0, mf;
     if (fidx[f] == drop || !(bf > 0)) continue;
-    c = fmult[f]*L/(TS_PI*(bf > 1e-300 ? bf : 1e-300));
+    bb = bf > 1e-300 ? bf : 1e-300;
+    s0 = K*TS_PI*bb/L;  /* the factor at the tail's arguments s >= s0 (fmult + nf: a, + 2 nf: c) */
+    mf = fmult[nf + f] + fmult[2*nf + f]/s0;
+    if (fmult[f] < mf) mf = fmult[f];
+    c = mf*L/(TS_PI*bb);
     if (c < K) { q++; logC += log(c); }
   }
   for (j = 0; j < n; j++)

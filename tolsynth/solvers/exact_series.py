@@ -55,6 +55,26 @@ def _power_factors(shp: Shape) -> tuple[float, ...]:
 
 
 @lru_cache(maxsize=None)
+def _far_factor(shp: Shape) -> tuple[float, float]:
+    """``(a, c)`` with ``|phi(s)| <= a / s + c / s^2`` for s > 0, so that for ``s >= s0`` the power
+    factor ``m`` may be ``min(m, a + c / s0)``.  Only the truncated normal gains: its density
+    ``f(y) = f(0) e^{-beta^2 y^2 / 2}`` on [-1, 1], integrated by parts twice,
+    ``phi(s) = 2 f(1) sin(s) / s - (2 f'(1) cos(s) - int f'' cos(sy) dy) / s^2``, so
+    ``a = 2 f(1)`` and ``c = 2 |f'(1)| + int |f''|``, where ``|f'(1)| = beta^2 f(1)`` and
+    ``int |f''|`` is twice the variation of ``f' = -beta^2 y f`` on [0, 1] (falling to its least
+    value ``-beta f(0) e^{-1/2}`` at ``y = 1/beta`` when ``beta > 1``, then rising to ``f'(1)``);
+    its envelope's ``m = 2 f(0)`` is then some seven times too large at ``beta = 2``."""
+    if shp.kind != "truncnormal":
+        m = _power_factors(shp)[0] if shp.bounded else 0.0
+        return m, 0.0
+    b = shp.beta
+    f1 = shp.peak * math.exp(-0.5 * b * b)
+    d1 = b * b * f1  # |f'(1)|
+    tv = 2.0 * b * shp.peak * math.exp(-0.5) - d1 if b > 1.0 else d1  # variation of f' on [0, 1]
+    return 2.0 * f1, 2.0 * d1 + 2.0 * tv
+
+
+@lru_cache(maxsize=None)
 def _d1_sup(shp: Shape) -> float:
     """``sup_t |t phi'(t)|``: uniform ``|cos t - sinc t| <= 2``; triangular ``2 |s| |cos h - s| <= 4``;
     normal ``(t^2/9) e^{-t^2/18} <= 2/e``; truncated normal ``|E[tY sin tY]| <= 1 + 4 f(0)``
@@ -105,14 +125,18 @@ class Rows:
         self.bounded = np.array([s.bounded for s in self.shapes])
         self.normal = ~self.bounded
         # power factors: column index and multiplier, one entry per factor
-        idx, mult = [], []
+        idx, mult, far = [], [], []
         for i, s in enumerate(self.shapes):
             if s.bounded:
                 for m in _power_factors(s):
                     idx.append(i)
                     mult.append(m)
+                    far.append(_far_factor(s))
         self.f_idx = np.array(idx, dtype=int)
         self.f_mult = np.array(mult, dtype=float)
+        # far from the origin a factor may be smaller: m(s0) = min(m, a + c / s0) for s >= s0
+        self.f_far = np.array([a for a, _ in far], dtype=float)
+        self.f_far2 = np.array([c for _, c in far], dtype=float)
         self.d1_sup = np.array([_d1_sup(s) for s in self.shapes])
         # identical shapes evaluate as one block of columns
         groups: dict = {}
@@ -143,11 +167,16 @@ class Rows:
             bf = b[:, self.f_idx]
             if drop is not None:
                 bf = np.where(self.f_idx[None, :] == drop, 0.0, bf)
-            with np.errstate(divide="ignore"):
-                c = np.where(bf > 0, self.f_mult[None, :] * L[:, None] / (np.pi * np.maximum(bf, 1e-300)), np.inf)
-            below = c[:, :, None] < Kc[:, None, :]  # (M, F, T)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                # the factor at the arguments s >= s0 = K pi b / L of the tail's terms
+                s0 = Kc[:, None, :] * np.pi * np.maximum(bf, 1e-300)[:, :, None] / L[:, None, None]  # (M, F, T)
+                m = np.minimum(self.f_mult[None, :, None], self.f_far[None, :, None] + self.f_far2[None, :, None] / s0)
+                c = np.where(
+                    (bf > 0)[:, :, None], m * L[:, None, None] / (np.pi * np.maximum(bf, 1e-300))[:, :, None], np.inf
+                )
+            below = c < Kc[:, None, :]  # (M, F, T)
             q = below.sum(axis=1)  # (M, T)
-            logC = np.where(below, np.log(c)[:, :, None], 0.0).sum(axis=1)
+            logC = np.where(below, np.log(c), 0.0).sum(axis=1)
         else:
             q = np.zeros((b.shape[0], Kc.shape[1]))
             logC = np.zeros_like(q)
@@ -179,8 +208,23 @@ class Rows:
 
 
 @lru_cache(maxsize=64)
-def rows_of(shapes: tuple) -> Rows:
+def _rows_of(shapes: tuple) -> Rows:
     return Rows(shapes)
+
+
+_last_rows: tuple = (None, None)  # the last tuple asked for (by identity) and its Rows, one object
+
+
+def rows_of(shapes) -> Rows:
+    """The :class:`Rows` of a tuple of shapes; the same tuple object as the last call is served
+    without hashing its shapes again (a solve passes one tuple hundreds of times)."""
+    global _last_rows
+    last = _last_rows  # read once: another thread may replace it, never half of it
+    if shapes is last[0] and type(shapes) is tuple:
+        return last[1]
+    rw = _rows_of(tuple(shapes))
+    _last_rows = (shapes, rw)
+    return rw
 
 
 def split_small(b: np.ndarray, rw: "Rows", budget: float) -> tuple[np.ndarray, np.ndarray]:
@@ -278,7 +322,7 @@ def probability(b, shapes: tuple, R, tol: float = 1e-10):
     """``P(|sum_i b_i Y_i| <= R)`` for rows ``b`` (M, n) (``R`` a number or one per row), and the
     rigorous error bound per row (truncation plus a rounding allowance); rows grouped by their own
     number of terms."""
-    rw = rows_of(tuple(shapes))
+    rw = rows_of(shapes)
     b = np.abs(np.atleast_2d(np.asarray(b, dtype=float)))
     M = b.shape[0]
     Rv = np.broadcast_to(np.asarray(R, dtype=float), (M,))
@@ -375,7 +419,7 @@ def derivatives(
 
     Returns ``(P, G (M, n), H (M, n, n) or None, errP (M,), errG (M, n) or None)``; ``errG`` (with
     ``rigorous``) bounds the gradient's truncation error per entry."""
-    rw = rows_of(tuple(shapes))
+    rw = rows_of(shapes)
     c = np.abs(np.atleast_2d(np.asarray(c, dtype=float)))
     M, n = c.shape
     b = c * np.exp(np.asarray(u, dtype=float))[None, :]
