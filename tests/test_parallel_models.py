@@ -230,3 +230,16 @@ def test_hexapod_map_keeps_a_home_pose_level_to_its_anchors_rounding():
         assert np.abs(T[:3, 2] - [0.0, 0.0, 1.0]).max() <= 1e-6
     with pytest.raises(InputError, match="reference pose's platform orientation"):
         tolsynth.probability_map(m, "coarse", R=0.5, n=9, plane="xz", hand_axis=(0.0, 1e-3, 1.0), progress=False)
+
+
+@pytest.mark.xfail(
+    reason="two identical exact solves in one process can differ: one certified, one at its iteration limit"
+)
+def test_repeated_exact_solve_on_the_hexapod_gives_the_same_certified_design():
+    """Results do not depend on what ran before: the same exact design twice in one process (IPOPT).
+    Measured: at R = 0.15 mm, p = 0.98 the first solve stops at its iteration limit (462.9476) and
+    the second is certified (462.9561); at R = 0.1, p = 0.99 the other way round."""
+    m = tolsynth.load_model("stewart_gough")
+    spec = dict(R=0.15, p=0.98, pose="home", probability="exact", solver="ipopt")
+    first, second = (tolsynth.synthesize(m, **spec) for _ in range(2))
+    assert first.success and second.success and abs(first.cost - second.cost) <= 1e-6 * first.cost
