@@ -37,19 +37,22 @@ def _unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross products of (m, 3) arrays (np.cross's axis handling costs more than the
-    arithmetic on these few rows)."""
-    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
-    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
-    return np.column_stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
-
-
 def _tangent(W: np.ndarray) -> np.ndarray:
-    """An orthonormal tangent basis (m, 3, 2) at each unit row of W."""
-    e = np.eye(3)[np.argmin(np.abs(W), axis=1)]
-    e1 = _unit(_cross(W, e))
-    return np.stack([e1, _cross(W, e1)], axis=2)
+    """An orthonormal tangent basis (m, 3, 2) at each unit row of W: the branch-free basis of Duff
+    et al. (2017, "Building an orthonormal basis, revisited"), stable for every unit vector, in a
+    few operations on columns (no cross products)."""
+    x, y, z = W[:, 0], W[:, 1], W[:, 2]
+    sg = np.where(z >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sg + z)
+    b = x * y * a
+    E = np.empty((W.shape[0], 3, 2))
+    E[:, 0, 0] = 1.0 + sg * x * x * a
+    E[:, 1, 0] = sg * b
+    E[:, 2, 0] = -sg * x
+    E[:, 0, 1] = b
+    E[:, 1, 1] = sg + y * y * a
+    E[:, 2, 1] = -y
+    return E
 
 
 def sphere_model(A3: np.ndarray, W: np.ndarray, G: np.ndarray, H: np.ndarray):
@@ -57,17 +60,23 @@ def sphere_model(A3: np.ndarray, W: np.ndarray, G: np.ndarray, H: np.ndarray):
     tangent basis E (m, 3, 2), the tangent gradient gt (m, 2) and Riemannian Hessian Hr (m, 2, 2) of
     P in w, and the mixed derivatives B = P_ut (m, n, 2).  ``d ln b_i / dw = a_i / y_i`` with
     ``y_i = w . a_i``; a term with y_i near 0 (P is even in it) is left out."""
-    y = np.einsum("mxn,mx->mn", A3, W)
-    big = np.abs(y) > 1e-9 * np.maximum(np.abs(y).max(axis=1, keepdims=True), 1e-300)
+    # batched matrix products throughout: einsum's parsing costs more than the arithmetic here
+    y = np.matmul(W[:, None, :], A3)[:, 0, :]
+    ay = np.abs(y)
+    big = ay > 1e-9 * np.maximum(ay.max(axis=1, keepdims=True), 1e-300)
     inv = np.where(big, 1.0 / np.where(big, y, 1.0), 0.0)
     Mi = A3 * inv[:, None, :]  # (m, 3, n)
-    gw = np.einsum("mxn,mn->mx", Mi, G)
-    Hg = H - G[:, :, None] * np.eye(G.shape[1])[None]
-    Hw = np.einsum("mxn,mnk,myk->mxy", Mi, Hg, Mi)
+    MiT = Mi.transpose(0, 2, 1)
+    gw = np.matmul(Mi, G[:, :, None])[:, :, 0]
+    n = G.shape[1]
+    Hg = H.copy()
+    Hg[:, np.arange(n), np.arange(n)] -= G
+    Hw = Mi @ Hg @ MiT
     E = _tangent(W)
-    gt = np.einsum("mxa,mx->ma", E, gw)
-    Hr = np.einsum("mxa,mxy,myb->mab", E, Hw, E) - np.einsum("mx,mx->m", W, gw)[:, None, None] * np.eye(2)[None]
-    B = np.einsum("mnk,myk,mya->mna", H, Mi, E)
+    ET = E.transpose(0, 2, 1)
+    gt = np.matmul(ET, gw[:, :, None])[:, :, 0]
+    Hr = ET @ Hw @ E - np.sum(W * gw, axis=1)[:, None, None] * np.eye(2)[None]
+    B = H @ (MiT @ E)
     return E, gt, Hr, B
 
 
@@ -197,7 +206,7 @@ class Cuts:
 
     def rows(self, W=None) -> np.ndarray:
         W = np.array(self.w) if W is None else W
-        return np.abs(np.einsum("mxn,mx->mn", self._stack()[0], W))
+        return np.abs(np.matmul(W[:, None, :], self._stack()[0])[:, 0, :])
 
     def arrays(self):
         return self.rows(), self._stack()[1], self._stack()[2]
@@ -210,7 +219,7 @@ class Cuts:
             return W
         mv = self._stack()[3]
         E = self._model[1]
-        W[mv] = _unit(W[mv] + self._a * np.einsum("mxa,ma->mx", E, self._dt))
+        W[mv] = _unit(W[mv] + self._a * np.matmul(E, self._dt[:, :, None])[:, :, 0])
         return W
 
     def plan(self, u: np.ndarray, du: np.ndarray, damp: float = 1.0, follow: bool = True) -> np.ndarray:
@@ -225,14 +234,14 @@ class Cuts:
         if self._model is None or not np.array_equal(self._model[0], u):
             return extra
         _, E, Hinv, gt, B, pd, _ = self._model
-        dt = -damp * np.einsum("mab,mb->ma", Hinv, gt)
+        dt = -damp * np.matmul(Hinv, gt[:, :, None])[:, :, 0]
         if follow:
-            dt = dt - np.einsum("mab,mnb,n->ma", Hinv, B, du)
+            dt = dt - np.matmul(Hinv, np.matmul(du, B)[:, :, None])[:, :, 0]
         dt[~pd] = 0.0
         nd = np.linalg.norm(dt, axis=1)
         dt *= np.minimum(1.0, MAX_TURN / np.maximum(nd, 1e-300))[:, None]
         mv = self._stack()[3]
-        extra[mv] = np.einsum("ma,ma->m", gt, dt) / (1.0 - self._stack()[2][mv])
+        extra[mv] = np.sum(gt * dt, axis=1) / (1.0 - self._stack()[2][mv])
         self._dt = dt
         return extra
 
@@ -275,7 +284,7 @@ class Cuts:
             Hinv = np.zeros_like(Hr)
             if pd.any():
                 Hinv[pd] = np.linalg.inv(Hr[pd])
-            Hh[mv] = H[mv] - np.einsum("mna,mab,mkb->mnk", B, Hinv, B)
+            Hh[mv] = H[mv] - B @ Hinv @ B.transpose(0, 2, 1)
             model = (np.array(u, dtype=float), E, Hinv, gt, B, pd, Hr)
         return (P - p) * s, G * s[:, None], Hh * s[:, None, None], model
 
