@@ -59,7 +59,7 @@ def _rays(U, W, R: float, p: float, r0, r1, tol: float = 1e-9):
             x = (a[i] * fb[i] - b[i] * fa[i]) / (fb[i] - fa[i])
         x = np.where((x > a[i]) & (x < b[i]), x, 0.5 * (a[i] + b[i]))
         r = np.exp(x)
-        P, err = p_ball_batch(np.column_stack([r, r * U[i], r * W[i]]), R, return_error=True)
+        P, err = p_ball_batch(np.column_stack([r, r * U[i], r * W[i]]), R, tol=1e-9, return_error=True)
         out = P + err < p
         j, k = i[out], i[~out]
         b[j], fb[j] = x[out], P[out] - p
