@@ -247,8 +247,9 @@ def _layout(rep) -> list[tuple]:
             (
                 "p",
                 "The sphere criterion is not known to be convex: the design meets it (checked), but its optimality "
-                "is not proven; the bound is the better of two relaxations (the per-component problem at the same "
-                "p, and the box of the independent principal components), valid but not tight.",
+                "is not proven; the bound is the best of the per-component problem at the same p, the box of the "
+                "independent principal components and a supporting half-space proven by a branch and bound "
+                "(to 1 %), valid but not tight.",
             )
         )
     elif not spec.convex:
