@@ -111,7 +111,7 @@ def solve_sphere(
         sph.target = np.minimum(sph.target + np.maximum(short, 0.0) + 0.1 * SPHERE_TOL, 1 - 1e-12)
     eps = np.minimum(np.maximum(np.exp(u), spec.lower), spec.upper)
     cost = nlp.cost(eps)
-    lower = comp.lower_bound
+    lower = comp.lower_bound if comp.success else -np.inf  # an uncertified component solve bounds nothing
     cblocks = tuple(
         ConstraintBlock(
             b.label,
@@ -132,7 +132,6 @@ def solve_sphere(
         f"to be convex, so the gap {cost - lower:.4g} is not a certificate; {message}"
     )
     if ok and met:
-        lower = lower if comp.success else -np.inf  # an uncertified component solve bounds nothing
         status = Status.FEASIBLE
         text = (
             "exact probabilities, sphere criterion met, optimality not proven (a local optimum; gap "
