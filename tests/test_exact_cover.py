@@ -61,3 +61,15 @@ def test_a_level_above_the_worst_direction_is_not_proven(design):
     assert not cv.certified and cv.violations
     W = np.array([w for w, _ in cv.violations])
     assert np.all(direction_probability(W @ M, sh, R) < 0.9 + 1e-6 - 3e-8)
+
+
+def test_tangent_bases_are_orthonormal_and_tangent():
+    """The cuts' tangent bases at 2000 random directions and at the axes (both signs of z, where
+    the branch-free formula switches): orthonormal and orthogonal to the direction, to rounding."""
+    from tolsynth.solvers.exact_cuts import _tangent
+
+    W = _grid(2000, seed=3)
+    W = np.vstack([W, np.eye(3), -np.eye(3), [[0.0, 0.6, -0.8]]])
+    E = _tangent(W)
+    assert np.max(np.abs(np.einsum("mxa,mxb->mab", E, E) - np.eye(2))) < 1e-14
+    assert np.max(np.abs(np.einsum("mxa,mx->ma", E, W))) < 1e-14

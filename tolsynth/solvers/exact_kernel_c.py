@@ -14,13 +14,15 @@ C_SOURCE = r"""
 /* phi(t), and for order >= 1 D1 = t phi'(t), D2 = t dD1/dt, of the uniform (0), normal (1,
    3 sigma = 1) and triangular (2) shapes: the closed forms of the NumPy path.  sn, cs: sin and cos
    of t (uniform) or of t/2 (triangular), from the caller's rotation; unused for the normal. */
-static void ts_cf(int kind, double t, double sn, double cs, int order, double *phi, double *d1, double *d2) {
+static void ts_cf(int kind, double t, double sn, double cs, double it, int order, double *phi, double *d1,
+                  double *d2) {
+  /* it: 1/t (uniform) or 2/t (triangular), from reciprocals the caller keeps (no division) */
   if (kind == 0) {
     if (fabs(t) < 1e-4) {
       *phi = 1.0 - t*t/6.0;
       if (order) { *d1 = -t*t/3.0; *d2 = -2.0*t*t/3.0; }
     } else {
-      *phi = sn/t;
+      *phi = sn*it;
       if (order) { *d1 = cs - *phi; *d2 = -t*sn - *d1; }
     }
   } else if (kind == 1) {
@@ -30,7 +32,7 @@ static void ts_cf(int kind, double t, double sn, double cs, int order, double *p
   } else {
     double h = 0.5*t, s, e, he;
     if (fabs(h) < 1e-4) { s = 1.0 - h*h/6.0; e = -h*h/3.0; he = -2.0*h*h/3.0; }
-    else { s = sn/h; e = cs - s; he = -h*sn - e; }
+    else { s = sn*it; e = cs - s; he = -h*sn - e; }
     *phi = s*s;
     if (order) { *d1 = 2.0*s*e; *d2 = 2.0*e*e + 2.0*s*he; }
   }
@@ -135,7 +137,7 @@ int ts_series(int m, int n, const double *b, const double *R, const double *L, c
     int nz = 0, col[TS_MAXN], a, c, j;
     double phi[TS_MAXN], d1[TS_MAXN], d2[TS_MAXN], pre[TS_MAXN + 1], suf[TS_MAXN + 1];
     double sumP = 0.0, g[TS_MAXN], h[TS_MAXN*TS_MAXN];
-    double ang[TS_MAXN], rc[TS_MAXN], rs[TS_MAXN], sk[TS_MAXN], ck[TS_MAXN], xr, xc, xs, ks = 0.0, kc = 1.0;
+    double ang[TS_MAXN], iang[TS_MAXN], rc[TS_MAXN], rs[TS_MAXN], sk[TS_MAXN], ck[TS_MAXN], xr, xc, xs, ks = 0.0, kc = 1.0;
     long k, Kr = K[r];
     for (j = 0; j < n; j++)
       if (br[j] > 0) col[nz++] = j;
@@ -144,6 +146,7 @@ int ts_series(int m, int n, const double *b, const double *R, const double *L, c
     for (a = 0; a < nz; a++) {  /* the angle of k = 1: the whole argument, or half of it */
       j = col[a];
       ang[a] = (kind[j] == 2 ? 0.5 : 1.0)*TS_PI*br[j]/L[r];
+      iang[a] = 1.0/ang[a];
       rc[a] = cos(ang[a]);
       rs[a] = sin(ang[a]);
     }
@@ -151,7 +154,7 @@ int ts_series(int m, int n, const double *b, const double *R, const double *L, c
     xc = cos(xr);
     xs = sin(xr);
     for (k = 1; k <= Kr; k++) {
-      double tau = TS_PI*(double)k/L[r], x = TS_PI*(double)k*(R[r]/L[r]), s;
+      double tau = TS_PI*(double)k/L[r], x = TS_PI*(double)k*(R[r]/L[r]), s, ik = 1.0/(double)k;
       /* sin and cos of k times each angle by rotation, taken afresh every TS_SYNC terms: the
          rotation's rounding (about one ulp a step) never builds up past TS_SYNC ulp */
       if ((k - 1) % TS_SYNC == 0 || (ball && Kr > TS_ROTATE)) {
@@ -173,11 +176,11 @@ int ts_series(int m, int n, const double *b, const double *R, const double *L, c
         ks = ks*xc + kc*xs;
         kc = t0;
       }
-      s = ball ? 2.0/((double)k*TS_PI)*(ks - x*kc) : 2.0/((double)k*TS_PI)*ks;
+      s = ball ? 2.0/((double)k*TS_PI)*(ks - x*kc) : (2.0/TS_PI)*ik*ks;
       for (a = 0; a < nz; a++) {
         j = col[a];
         if (kind[j] == 3) ts_tn(tnt + tno[j], tau*br[j], sk[a], ck[a], order, &phi[a], &d1[a], &d2[a]);
-        else ts_cf(kind[j], tau*br[j], sk[a], ck[a], order, &phi[a], &d1[a], &d2[a]);
+        else ts_cf(kind[j], tau*br[j], sk[a], ck[a], ik*iang[a], order, &phi[a], &d1[a], &d2[a]);
       }
       pre[0] = 1.0;
       for (a = 0; a < nz; a++) pre[a + 1] = pre[a]*phi[a];
