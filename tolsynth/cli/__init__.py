@@ -1,7 +1,8 @@
 """Command line: tolsynth analyze | solve | report | sweep | reproduce | montecarlo | map | worst-pose.
 
 Every sub-command prints a readable report, or one JSON object with --json (its inputs and the
-package version recorded).  Exit status: 0 done; 1 a solver did not converge (the numbers are not
+package version recorded).  Exit status: 0 done (a design that meets the specification without an
+optimality proof, status "feasible", says so in one line); 1 a solver did not converge (the numbers are not
 an optimum); 2 bad input or nothing to do (a one-line message naming the option and the allowed
 range); 130 interrupted (Ctrl-C, wherever it lands); 141 the output pipe was closed.  No command prints a
 traceback: an output file that cannot be written is a one-line error (2), and an unexpected
