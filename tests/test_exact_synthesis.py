@@ -5,6 +5,7 @@ all-normal case (where the exact problem is the Gaussian one), a brute-force gri
 two-parameter problem, and the nonlinear Monte Carlo."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -450,3 +451,36 @@ def test_command_line_exact(xz):
     A = xz.sensitivity(xz.joints("worst"))[:3]
     P = direction_probability(_sphere_directions(2000) @ A * eps, ["uniform"] * xz.n, R)
     assert P.min() >= 0.8 - 1e-7 and P.min() <= 0.8 + 1e-3
+
+
+def test_command_line_sphere_prints_the_design_and_says_it_is_not_proven(capsys):
+    """tolsynth solve --criterion sphere (Gaussian, planar_2r): exit status 0, the tolerances
+    printed, and a last line on stderr giving the status feasible and the gap (before it, the
+    workspace check's warning: the design is for one pose); the printed tolerances meet the sphere,
+    by SciPy's quadrature of the 2-D normal's disk probability (mean over the azimuth of
+    1 - exp(-R^2 / 2 q))."""
+    from scipy import integrate
+
+    from tolsynth.cli import main
+
+    m = tolsynth.load_model("planar_2r")
+    argv = ["solve", "--model", "planar_2r", "--pose", "elbow90", "--R", "0.2", "--p", "0.9", "--dist", "uniform"]
+    rc = main(argv + ["--criterion", "sphere", "--probability", "gaussian"])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    last = cap.err.strip().splitlines()[-1]
+    assert last.startswith("tolsynth solve: status feasible") and "optimality is not proven" in last
+    assert "feasible" in cap.out.splitlines()[1]
+    printed = dict(re.findall(r"^\s+(\w+) = (\S+) ", cap.out, flags=re.M))
+    eps = np.array([float(printed[n]) for n in m.error_parameters])
+    S = m.sensitivity(m.joints("elbow90"))[:3]
+    lam = np.linalg.eigvalsh((S * eps**2 / 3.0) @ S.T)[1:]  # the planar error's two variances
+    P = (
+        integrate.quad(
+            lambda t: 1 - math.exp(-(0.2**2) / (2 * (lam[0] * math.sin(t) ** 2 + lam[1] * math.cos(t) ** 2))),
+            0,
+            math.pi,
+        )[0]
+        / math.pi
+    )
+    assert P == pytest.approx(0.9, abs=2e-5)  # (the printed tolerances have six digits)
