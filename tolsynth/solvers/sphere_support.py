@@ -126,7 +126,9 @@ def support_bound(nlp: ToleranceNLP, eps, rtol: float = RTOL) -> float:
         lam, vec = np.linalg.eigh(0.5 * (V + V.T))
         lam, vec = np.maximum(lam[::-1], 0.0), vec[:, ::-1]
         g = _weights(lam, R)
+        if not (np.all(np.isfinite(g)) and g[0] > 0):  # P is 1 to rounding here: leave the block out
+            continue
         c, _ = weighted_maximum(g / g[0], R, p, rtol)
         rows.append((((vec.T @ A) ** 2) * (g / g[0])[:, None]).sum(axis=0) / spec.c)  # G = grad K at s
         rhs.append(c)
-    return half_space_bound(nlp, np.array(rows), np.array(rhs))
+    return half_space_bound(nlp, np.array(rows), np.array(rhs)) if rows else -math.inf
