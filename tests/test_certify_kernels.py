@@ -27,7 +27,7 @@ def test_contraction_against_einsum():
         assert np.allclose(out[b], ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
 
 
-@pytest.mark.parametrize("name", ["puma560", "panda"])
+@pytest.mark.parametrize("name", ["puma560", pytest.param("panda", marks=pytest.mark.slow)])  # panda: 3-7 s
 def test_polygon_bounds_compiled_equal_numpy_and_hold(name, monkeypatch):
     mech = tolsynth.load_model(name)
     st = structure(mech)
