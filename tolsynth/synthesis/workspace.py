@@ -357,7 +357,9 @@ def _certified_exchange(
             x0=np.array(poses + [w.q]),
             progress=progress,
             target=goal,
-            stop_at=goal,  # a pose found past the goal joins the imposed poses now, as a sampled one does
+            # a pose found past the goal joins the imposed poses at once, as a sampled one does; the
+            # last round searches on, for the bound reached to be reported
+            stop_at=goal if k < max_rounds - 1 else None,
             **options,
         )
         q = cert.q
