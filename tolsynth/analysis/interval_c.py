@@ -106,8 +106,10 @@ static inline __attribute__((always_inline)) void one(const int code, double al,
             case 2: rl = dn(al - bh); rh = up(ah - bl); break;
             case 3: {
                 double p1 = al * bl, p2 = al * bh, p3 = ah * bl, p4 = ah * bh;
-                rl = dn(nmin(nmin(nmin(p1, p2), p3), p4));
-                rh = up(nmax(nmax(nmax(p1, p2), p3), p4));
+                if (p1 != p1 || p2 != p2 || p3 != p3 || p4 != p4) { rl = rh = NAN; break; } /* as nmin/nmax */
+                double m1 = p1 < p2 ? p1 : p2, m2 = p3 < p4 ? p3 : p4, M1 = p1 > p2 ? p1 : p2, M2 = p3 > p4 ? p3 : p4;
+                rl = dn(m1 < m2 ? m1 : m2);
+                rh = up(M1 > M2 ? M1 : M2);
                 break;
             }
             case 5: bl = al; bh = ah; al = 1.0; ah = 1.0; /* fall through: 1 / a */
