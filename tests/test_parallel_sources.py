@@ -239,18 +239,112 @@ def test_hexapod_error_parameters_read_the_sources_real_machine():
     assert np.abs(T[:3, 3] - m.fk("home")[:3, 3]).max() > 1.0  # millimetre-sized errors move it
 
 
-def test_planar_3rrr_is_the_files_own_definition():
-    """The 3-RRR cites no published geometry: its file defines it (base joints on a 300 mm circle,
-    platform joints on a 60 mm one, at 90, 210 and 330 deg; arms and links 200 mm); the model
-    holds exactly that."""
-    m = tolsynth.load_model("planar_3rrr")
-    assert "not that paper's" in m.spec.source
-    ang = np.radians([90.0, 210.0, 330.0])
-    B, C = _leg_points(m)
-    assert np.abs(B - np.c_[300 * np.cos(ang), 300 * np.sin(ang), np.zeros(3)]).max() <= 1e-9
-    assert np.abs(C - np.c_[60 * np.cos(ang), 60 * np.sin(ang), np.zeros(3)]).max() <= 1e-9
-    s = m.spec.symbols
-    assert all(s[leg.symbol("arm")] == 200.0 and s[leg.symbol("link")] == 200.0 for leg in m.spec.legs)
+# ---------------------------------------------------------------------------------------------
+# J. F. Garcia-Samartin, A. Barrientos, "Kinematic Modelling of a 3RRR Planar Parallel Robot Using
+# Genetic Algorithms and Neural Networks", Machines 11(10) (2023) 952, as typed in the authors'
+# repository github.com/Robcib-GIT/3RRR (commit 8926073): the defaults of src/robot3RRR.m (metres,
+# radians) and the vertex formulas of src/Platform.m (equilateral platform, orientation phi):
+#   O = [0 0; 0.595 0; 0.297 0.515], L = [0.2 0.2 0.1155] per leg (arm, link, vertex to centre),
+#   T = [0.2 0.2 0.2], P = [0.3 0.2 0], q = [1.529 1.588 -2.604], sgn = [1 1 1];
+#   L = T / cos(pi/6) / 2, B1 = P - L (cos(pi/6 + phi), sin(pi/6 + phi)), B2 = B1 + T (cos phi,
+#   sin phi), B3 = B1 + T (cos(pi/3 + phi), sin(pi/3 + phi)); A = O + L1 (cos q, sin q).
+GS = {
+    "O": [(0.0, 0.0), (0.595, 0.0), (0.297, 0.515)],
+    "arm": 0.2,
+    "link": 0.2,
+    "L_typed": 0.1155,
+    "T": 0.2,
+    "P": (0.3, 0.2, 0.0),
+    "q": (1.529, 1.588, -2.604),
+}
+
+
+def _gs_vertices(x, y, phi):
+    """The source's platform vertices (m) for the pose (x, y, phi)."""
+    T, L = GS["T"], GS["T"] / math.cos(math.pi / 6) / 2
+    b1 = np.array([x - L * math.cos(math.pi / 6 + phi), y - L * math.sin(math.pi / 6 + phi)])
+    return np.array(
+        [
+            b1,
+            b1 + T * np.array([math.cos(phi), math.sin(phi)]),
+            b1 + T * np.array([math.cos(math.pi / 3 + phi), math.sin(math.pi / 3 + phi)]),
+        ]
+    )
+
+
+def _gs_links(q, pose):
+    """|A_i - B_i| (m) for actuators q (rad) and a pose (m, m, rad): the source's loop closure."""
+    A = np.array(GS["O"]) + GS["arm"] * np.c_[np.cos(q), np.sin(q)]
+    return np.linalg.norm(A - _gs_vertices(*pose), axis=1)
+
+
+@pytest.fixture(scope="module")
+def rrr():
+    return tolsynth.load_model("planar_3rrr")
+
+
+def test_3rrr_numbers_are_the_sources_robot(rrr):
+    """Base joints are the source's O, arms and links its 0.2 m (to 1e-9 mm); the platform joints
+    are its vertex formulas at P = 0, phi = 0 (to 1e-9 mm), 115.47 mm from the centre (the class's
+    typed 0.1155 m to its 4 decimals); every actuator turns about Z0 from X0, as A = O + L1 (cos q,
+    sin q)."""
+    B, C = _leg_points(rrr)
+    assert np.abs(B - np.c_[1000 * np.array(GS["O"]), np.zeros(3)]).max() <= 1e-9
+    assert np.abs(C - np.c_[1000 * _gs_vertices(0.0, 0.0, 0.0), np.zeros(3)]).max() <= 1e-9
+    assert np.abs(np.linalg.norm(C, axis=1) / 1000 - GS["L_typed"]).max() <= 5e-5
+    s = rrr.spec.symbols
+    for leg in rrr.spec.legs:
+        assert s[leg.symbol("arm")] == 1000 * GS["arm"] and s[leg.symbol("link")] == 1000 * GS["link"]
+        assert leg.axis == (0.0, 0.0, 1.0) and leg.zero == (1.0, 0.0, 0.0)
+
+
+def test_3rrr_reproduces_the_sources_pose_and_actuator_angles(rrr):
+    """The source prints q = (1.529, 1.588, -2.604) rad with P = (0.3, 0.2, 0).  The closed-form
+    inverse kinematics at that pose gives (1.528480, 1.588324, -2.604251) rad: q2 and q3 round to
+    the printed values, q1 is 5.2e-4 rad from its printed 1.529 (which rounds 1.52848 up by one
+    unit); the printed angles close the source's legs (NumPy, its formulas) to 0.11 mm of the
+    200 mm links, and Newton's forward kinematics of them lands 0.3 mm and 0.07 deg from the printed
+    pose.  The file's home is that pose to 1e-6 mm."""
+    x = np.array([1000 * GS["P"][0], 1000 * GS["P"][1], GS["P"][2]])
+    q, c = rrr.graphs.ik(x, np.zeros(rrr.n))
+    q = np.asarray(q, dtype=float).ravel()
+    assert np.all(np.abs(np.asarray(c, dtype=float)) <= 1.0)
+    printed = np.array(GS["q"])
+    assert np.abs(q[1:] - printed[1:]).max() <= 5e-4 and abs(q[0] - printed[0]) <= 6e-4, q
+    # the independent closure: the package's actuators close the source's legs exactly
+    assert np.abs(_gs_links(q, GS["P"]) - GS["link"]).max() <= 1e-12
+    assert np.abs(_gs_links(printed, GS["P"]) - GS["link"]).max() <= 1.1e-4
+    T = rrr.fk(printed)
+    assert np.abs(T[:2, 3] - x[:2]).max() <= 0.3 and abs(math.atan2(T[1, 0], T[0, 0])) <= math.radians(0.07)
+    assert np.abs(rrr.fk("home")[:2, 3] - x[:2]).max() <= 1e-6
+    assert np.abs(rrr.joints("home") - q).max() <= 1e-11
+
+
+def test_3rrr_range_holds_the_sources_angles_and_stays_well_conditioned(rrr):
+    """The file's actuator ranges (its assumption) hold the source's printed angles; over a 7^3 grid
+    of them the platform assembles, its legs close to 1e-8 mm (NumPy, the source's formulas) and
+    df/dx (rows: the links' unit directions u and (R c) x u / 115.47 mm, the platform's radius)
+    has condition number <= 6.1, with 4.578 at home: no pose of the box is near a singularity."""
+    lo, hi = (np.degrees([getattr(j, k) for j in rrr.spec.joints]) for k in ("lower", "upper"))
+    assert np.allclose(lo, [83.0, 90.5, -155.0]) and np.allclose(hi, [88.0, 96.0, -144.0])
+    printed = np.degrees(GS["q"])
+    assert np.all(lo <= printed) and np.all(printed <= hi)
+    O, radius = 1000 * np.array(GS["O"]), 1000 * GS["T"] / math.sqrt(3)
+
+    def cond(q):
+        T = rrr.fk(q)
+        x, y, phi = T[0, 3], T[1, 3], math.atan2(T[1, 0], T[0, 0])
+        assert np.abs(_gs_links(q, (x / 1000, y / 1000, phi)) - GS["link"]).max() <= 1e-11
+        Bv = 1000 * _gs_vertices(x / 1000, y / 1000, phi)
+        A = O + 1000 * GS["arm"] * np.c_[np.cos(q), np.sin(q)]
+        u = (Bv - A) / np.linalg.norm(Bv - A, axis=1)[:, None]
+        c = Bv - [x, y]
+        return np.linalg.cond(np.c_[u, (c[:, 0] * u[:, 1] - c[:, 1] * u[:, 0]) / radius])
+
+    assert abs(cond(rrr.joints("home")) - 4.578) <= 1e-3
+    grid = np.array(np.meshgrid(*[np.radians(np.linspace(a, b, 7)) for a, b in zip(lo, hi)])).reshape(3, -1).T
+    conds = [cond(q) for q in grid]
+    assert max(conds) <= 6.1, max(conds)
 
 
 # ---------------------------------------------------------------------------------------------
