@@ -472,7 +472,9 @@ def test_worst_pose_components_certified_with_a_probability_bound(models):
     pose found; the sphere probability says which criterion is certified."""
     m = models["xu_zhang_1988"]
     R = 0.5
-    w = tolsynth.worst_pose(m, "figure3", criterion="components", R=R, certify=True, progress=False)
+    w = tolsynth.worst_pose(
+        m, "figure3", criterion="components", R=R, certify=True, progress=False, probability="gaussian"
+    )
     assert w.certified and w.boxes > 0
     assert w.probability_lower_bound == pytest.approx(math.erf(R / (math.sqrt(2) * w.upper_bound)), abs=1e-14)
     sig = _sigma(m, w.q, m.tolerances("figure3"))[0]

@@ -52,7 +52,17 @@ def test_worst_pose_certify_json_holds_its_proof():
 
 def test_worst_pose_certify_components_gives_a_probability_bound():
     rc, out, _ = _run(
-        "worst-pose", "--model", "planar_2r", "--certify", "--criterion", "components", "--R", "0.1", "--json"
+        "worst-pose",
+        "--model",
+        "planar_2r",
+        "--certify",
+        "--criterion",
+        "components",
+        "--R",
+        "0.1",
+        "--probability",
+        "gaussian",
+        "--json",
     )
     assert rc == 0 and out["certified"] is True
     m = tolsynth.load_model("planar_2r")

@@ -56,7 +56,8 @@ class Certificate:
         Largest principal standard deviation, or smallest per-direction probability.
     probability : {"gaussian", "exact"}
         How ``probability_lower_bound`` reads the error: the Gaussian approximation (it follows
-        from the sigma bound) or the exact distribution of the linear model.
+        from the sigma bound; the default with ``criterion="sigma"``) or the exact distribution
+        of the linear model (the default with ``criterion="components"``).
     certified : bool
         The bound is proven and the best pose found is within the tolerance of it.
     upper_bound : float or None
@@ -262,7 +263,7 @@ def certify_worst_pose(
     distribution=None,
     criterion: str = "sigma",
     R: float | None = None,
-    probability: str = "gaussian",
+    probability: str | None = None,
     *,
     rtol: float | None = None,
     tol: float | None = None,
@@ -338,6 +339,8 @@ def certify_worst_pose(
     mech = as_mechanism(mechanism)
     if criterion not in ("sigma", "components"):
         raise OutOfRangeError("criterion", f"got {criterion!r}", "'sigma' or 'components'")
+    if probability is None:  # the exact reading where one is read, as a design reads it
+        probability = "exact" if criterion == "components" else "gaussian"
     if probability not in ("gaussian", "exact"):
         raise OutOfRangeError("probability", f"got {probability!r}", "'gaussian' or 'exact'")
     if R is not None:

@@ -217,7 +217,7 @@ def worst_pose(
     seed: int = 0,
     *,
     certify: bool = False,
-    probability: str = "gaussian",
+    probability: str | None = None,
     rtol: float | None = None,
     max_boxes: int | None = None,
     progress=None,
@@ -272,8 +272,10 @@ def worst_pose(
         ``boxes`` are set, and the pose reported is the best the search found (the sampled one if
         better).  For ``criterion="sigma"`` or ``"components"``; the sphere probability is not
         certified.
-    probability : {"gaussian", "exact"}
-        Reading of the per-component probability (``criterion="components"``).
+    probability : {"exact", "gaussian"}, optional
+        Reading of the per-component probability (``criterion="components"``): the exact
+        probabilities of the linear error model (the default there, as :func:`tolsynth.synthesize`
+        reads them), or the paper's Gaussian reading.
     rtol, max_boxes, progress, time_limit
         Of the certified search (relative gap, box limit, progress bar, seconds): a limit reached
         leaves ``certified`` False with the bound reached, which holds, only looser.
@@ -296,6 +298,8 @@ def worst_pose(
     mechanism = as_mechanism(mechanism)
     if criterion not in ("sigma", "probability", "components"):
         raise OutOfRangeError("criterion", f"got {criterion!r}", "'sigma', 'probability' or 'components'")
+    if probability is None:  # the exact reading where one is read, as a design reads it
+        probability = "exact" if criterion == "components" else "gaussian"
     if probability not in ("gaussian", "exact"):
         raise OutOfRangeError("probability", f"got {probability!r}", "'gaussian' or 'exact'")
     if certify and criterion == "probability":

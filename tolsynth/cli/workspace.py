@@ -278,9 +278,10 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--probability",
-        choices=["gaussian", "exact"],
-        default="gaussian",
-        help="reading of the per-component probability (--criterion components)",
+        choices=["exact", "gaussian"],
+        default=None,
+        help="reading of the per-component probability (--criterion components): exact (the default) "
+        "or the paper's Gaussian reading",
     )
     p.add_argument(
         "--R",
