@@ -189,6 +189,7 @@ def sweeps(reps: int) -> list[Row]:
             kw.get("p", P),
             DIST,
             kw.get("alpha", ALPHA),
+            probability="gaussian",  # the lean model's problem
             **{k: v for k, v in kw.items() if k not in ("R", "p", "alpha")},
         )
         lean = lambda kw: lm.solve(
