@@ -103,7 +103,9 @@ def assemble(
         bounds_active[name] = "lower" if at_lower[i] else "upper"
         bound_mult[name] = float(bound_mult_u[i] / eps[i])  # d/d eps = (1/eps) d/du
     cost = nlp.cost(eps)
-    if spec.sphere_blocks:  # relaxations, each containing the sphere's feasible set
+    if spec.sphere_blocks and relaxation_bound is None:  # a start for another method: no bound asked
+        lower = -math.inf
+    elif spec.sphere_blocks:  # relaxations, each containing the sphere's feasible set
         lower = max(relaxation_bound(nlp), box_bound(nlp, eps))
         if status is Status.OPTIMAL:  # the proven supporting half-space at the design (about 0.3-1 s)
             lower = max(lower, support_bound(nlp, eps))

@@ -302,13 +302,15 @@ def _row_factor(nlp: ToleranceNLP, blocks: np.ndarray) -> np.ndarray:
     return (nlp.scales[blocks] ** 2 / nlp.spec.c)[:, None]
 
 
-def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
+def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, *, sphere_bounds: bool = True, **options):
     """Solve with IPOPT by the exchange method from ``eps0`` (default: :meth:`ToleranceNLP.start_point`).
 
     Options: tol, constr_viol_tol, max_iter (IPOPT's own, per cut NLP), feas_tol (largest
     ``sigma z / R - 1`` accepted over all blocks; default ``min(1e-9, 10 tol)``), max_rounds
     (exchange rounds) and warm_start (default True: start from the active cuts and the rescaled
     optimum of the last solve of the same blocks, cost model and bounds, if there is one).
+    ``sphere_bounds=False`` leaves out the sphere criterion's lower bounds (their result's
+    ``lower_bound`` is then -inf): for a design wanted only as another method's start.
     """
     opts = {**DEFAULT_OPTIONS, **options}
     unknown = set(opts) - set(DEFAULT_OPTIONS)
@@ -539,7 +541,7 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, **options):
         history,
         mu_sphere=mu_sphere,
         lagrangian=lagrangian if m else None,
-        relaxation_bound=relaxation_bound,
+        relaxation_bound=relaxation_bound if sphere_bounds else None,
     )
 
 
