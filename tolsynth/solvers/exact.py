@@ -77,6 +77,8 @@ SAME_CUT = 1e-5
 START_STEPS = 8
 #: the barrier parameter (a fraction of the cost, per cut and parameter) a later round starts at
 WARM_TAU = 1e-3
+#: fresh barrier paths from a stalled one's last iterate before the solve reports failure
+RESTARTS = 3
 
 
 @dataclass
@@ -292,6 +294,13 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
             max_iter=int(opts["max_iter"]),
             tau0=None if rnd == 0 else WARM_TAU * cost_fn(u_start)[0] / (len(cuts) + spec.n),
         )
+        for _ in range(RESTARTS):  # a stalled path (the 42-error hexapod) re-centred from where it stopped
+            if res.ok or not res.message.startswith("iteration limit"):
+                break
+            iters += res.iterations
+            res = Barrier(cost_fn, cuts, lu, uu).solve(
+                res.u, res.lam, max_iter=int(opts["max_iter"]), tau0=WARM_TAU * cost_fn(res.u)[0] / (len(cuts) + spec.n)
+            )
         iters += res.iterations
         u, lam, zb, ok, message = res.u, res.lam, res.z, res.ok, res.message
         eps = np.exp(u)
