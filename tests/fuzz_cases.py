@@ -326,9 +326,53 @@ def _divisors(mech, distribution):
     return np.array([table[distribution.get(n, default).lower()] for n in mech.error_parameters])
 
 
+def _shape_names(mech, distribution) -> list[str]:
+    """The shape of every error parameter, as ``_divisors`` reads ``distribution``."""
+    if distribution is None:
+        distribution = getattr(mech, "distribution", "uniform")
+    if isinstance(distribution, str):
+        return [distribution.lower()] * len(mech.error_parameters)
+    default = distribution.get("*", "uniform")
+    return [distribution.get(n, default).lower() for n in mech.error_parameters]
+
+
+def _samples(shapes: list[str], n: int, rng) -> np.ndarray:
+    """n draws of the standardised errors (on [-1, 1]; the normal with 3 sigma = 1) by NumPy."""
+    draw = {
+        "uniform": lambda: rng.uniform(-1.0, 1.0, n),
+        "normal": lambda: rng.normal(0.0, 1.0 / 3.0, n),
+        "triangular": lambda: rng.triangular(-1.0, 0.0, 1.0, n),
+    }
+    return np.stack([draw[s]() for s in shapes], axis=1)
+
+
+def _check_exact(mech, eps, R, p, distribution, poses):
+    """An exact design meets p along every direction: a NumPy Monte Carlo of the linear error model
+    (100 000 draws) along the principal axes and 300 spread directions, each within four binomial
+    standard errors of p or above it."""
+    rng = np.random.default_rng(2024)
+    n = 100_000
+    U = _samples(_shape_names(mech, distribution), n, rng) * eps
+    i = np.arange(300) + 0.5
+    z = 1 - 2 * i / 300
+    W = np.stack(
+        [np.sqrt(1 - z**2) * np.cos(np.pi * (1 + 5**0.5) * i), np.sqrt(1 - z**2) * np.sin(np.pi * (1 + 5**0.5) * i), z],
+        1,
+    )
+    slack = 4 * math.sqrt(p * (1 - p) / n) + 1e-9
+    for q in poses:
+        S = mech.sensitivity(q, check_limits=False)[:3]
+        dr = U @ S.T
+        axes = np.linalg.eigh(S @ np.diag(eps**2) @ S.T)[1].T
+        P = (np.abs(dr @ np.vstack([axes, W]).T) <= R).mean(axis=0)
+        if P.min() < p - slack:
+            raise BadNumbers(f"exact optimum below p along a direction: {P.min()} < {p} - {slack:.1e}")
+
+
 def _check_synthesis(mech, res, R, p, distribution, poses):
-    """Independent check of a converged optimum: covariance rebuilt with NumPy from the
-    sensitivities; its eigenvalues must not exceed (R / z)^2 (components criterion)."""
+    """Independent check of a converged optimum: for the paper's Gaussian criterion the covariance
+    rebuilt with NumPy from the sensitivities, whose eigenvalues must not exceed (R / z)^2; for the
+    exact probabilities (the default) a Monte Carlo of the linear error model along directions."""
     from statistics import NormalDist
 
     if res is None:
@@ -339,6 +383,9 @@ def _check_synthesis(mech, res, R, p, distribution, poses):
     finite(eps, res.cost)
     if not np.all(eps > 0):
         raise BadNumbers("a tolerance <= 0")
+    if res.probability_kind == "exact":
+        _check_exact(mech, eps, R, p, distribution, poses)
+        return
     c = _divisors(mech, distribution)
     z = NormalDist().inv_cdf(0.5 + 0.5 * p)
     for q in poses:
