@@ -415,9 +415,10 @@ def half_space_bound(costs, lu, uu, u_star, c_rows, R_rows, p_rows, shapes, lam0
         return math.fsum(val.tolist()) - float(lam @ cj), hs @ u - cj, -(hs * curv[None, :]) @ hs.T
 
     # any multipliers give a valid bound: the ascent stops once the bound is within 1e-8 of the
-    # cost at u_star, far inside the certificate's 1e-6, or once a step gains less than a
-    # thousandth of what is still missing (where the relaxation's own optimum lies lower, with a
-    # cost not convex in u, the last steps crept on for hundreds of evaluations of milliseconds)
+    # cost at u_star, far inside the certificate's 1e-6, or, while more than 1e-4 of it is missing
+    # (no certificate in reach: the relaxation's own optimum lies lower, with a cost not convex in
+    # u), once a step gains less than a thousandth of that (the last steps crept on for hundreds of
+    # evaluations of milliseconds each)
     total = costs.total(u_star)
     if total is None:
         total = math.fsum(float(m.value(x)) for m, x in zip(costs.models, u_star))
@@ -447,6 +448,7 @@ def half_space_bound(costs, lu, uu, u_star, c_rows, R_rows, p_rows, shapes, lam0
             break
         gain = v - best
         lam, best, grad, Hd, best_lam = trial, v, gr, Hn, trial
-        if gain <= max(1e-15 * abs(best), 1e-3 * (enough - best)):
+        missing = enough - best
+        if gain <= 1e-15 * abs(best) or (missing > 1e-4 * abs(total) and gain <= 1e-3 * missing):
             break
     return best, best_lam
