@@ -91,9 +91,13 @@ def _same_exchange(mech, R, p):
     assert [r["worst_value"] for r in w.rounds] == pytest.approx([r["worst_value"] for r in named.rounds], rel=1e-6)
 
 
-def test_workspace_and_processes_default_to_exact():
+def test_workspace_defaults_to_exact():
+    _same_exchange(tolsynth.load_model("planar_2r"), 0.5, 0.99)
+
+
+@pytest.mark.slow  # 12 exact solves of the process search, about 4 s
+def test_processes_default_to_exact():
     mech = tolsynth.load_model("planar_2r")
-    _same_exchange(mech, 0.5, 0.99)
     lengths = [
         Process("turning", Chase(1.0, 0.4, 1.0), 0.05, 1.0),
         Process("grinding", Chase(3.0, 0.3, 1.0), 0.005, 0.06),

@@ -36,7 +36,12 @@ def _map(name, tol, kw):
 
 
 @needs_cc
-@pytest.mark.parametrize("name, tol, kw", CASES, ids=[f"{c[0]}-{i}" for i, c in enumerate(CASES)])
+@pytest.mark.parametrize(
+    "name, tol, kw",
+    # the six- and seven-joint maps take 3-4 s each: with the slow tests
+    [pytest.param(*c, marks=pytest.mark.slow) if c[0] != "xu_zhang_1988" else c for c in CASES],
+    ids=[f"{c[0]}-{i}" for i, c in enumerate(CASES)],
+)
 def test_compiled_map_is_the_numpy_map(name, tol, kw, monkeypatch):
     comp = _map(name, tol, kw)
     assert ik_compiled.backend_status()["backend"] == "compiled"
