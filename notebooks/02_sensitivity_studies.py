@@ -420,7 +420,7 @@ S_worst = m.sensitivity("worst")
 for pp in p_grid:
     comp = tolsynth.synthesize(m, BASE["R"], pp, "uniform", BASE["alpha"], probability="gaussian")
     sph = tolsynth.synthesize(m, BASE["R"], pp, "uniform", BASE["alpha"], criterion="sphere", probability="gaussian")
-    assert comp.success and sph.success
+    assert comp.success and sph.feasible  # the sphere: met, its optimality not proven (not convex)
     sig, _ = principal(covariance(S_worst, comp.x, "uniform")[0])
     rows.append((pp, p_ball(sig**2, BASE["R"]), comp.cost, sph.cost))
 print(

@@ -52,5 +52,7 @@ def test_every_command_runs(name):
 @pytest.mark.parametrize("name", MODELS)
 def test_map_runs(name):
     m, tol, _ = _args(name)
-    out = _run(["map", "--model", name, "--tolerances", tol, "--R", "0.5", "--n", "6"])
+    # the 3-RRR moves in the xy plane, away from the default xz plane's y = 0
+    plane = ["--plane", "xy"] if name == "planar_3rrr" else []
+    out = _run(["map", "--model", name, "--tolerances", tol, "--R", "0.5", "--n", "6", *plane])
     assert out["inputs"]["model"]["name"] == name
