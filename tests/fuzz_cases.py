@@ -318,12 +318,7 @@ def _divisors(mech, distribution):
     normal with 3 sigma = eps: eps^2/9; triangular: eps^2/6). ``None`` is the model's own shapes;
     names are case-blind; a mapping names parameters, with ``"*"`` for the rest."""
     table = {"uniform": 3.0, "normal": 9.0, "triangular": 6.0}
-    if distribution is None:
-        distribution = getattr(mech, "distribution", "uniform")
-    if isinstance(distribution, str):
-        return table[distribution.lower()]
-    default = distribution.get("*", "uniform")
-    return np.array([table[distribution.get(n, default).lower()] for n in mech.error_parameters])
+    return np.array([table[s] for s in _shape_names(mech, distribution)])
 
 
 def _shape_names(mech, distribution) -> list[str]:
