@@ -322,7 +322,8 @@ def _divisors(mech, distribution):
 
 
 def _shape_names(mech, distribution) -> list[str]:
-    """The shape of every error parameter, as ``_divisors`` reads ``distribution``."""
+    """The shape of every error parameter: ``None`` is the model's own; a mapping names parameters, with
+    ``"*"`` for the rest."""
     if distribution is None:
         distribution = getattr(mech, "distribution", "uniform")
     if isinstance(distribution, str):
