@@ -15,6 +15,7 @@ _guard_start()  # noqa: E702,I001  (Ctrl-C while the command starts: one line)
 from tolsynth.analysis.certify import Certificate, certify_worst_pose
 from tolsynth.analysis.certify_map import CertifiedMap, certified_map
 from tolsynth.analysis.contributions import Contributions, contributions
+from tolsynth.analysis.interval_arb import EnclosureCheck, check_certificate_enclosures
 from tolsynth.analysis.montecarlo import MonteCarloResult, monte_carlo
 from tolsynth.analysis.plot import plot_map
 from tolsynth.analysis.pose_search import WorstPose, worst_pose
@@ -90,6 +91,8 @@ __all__ = [
     "Certificate",
     "certified_map",
     "CertifiedMap",
+    "check_certificate_enclosures",
+    "EnclosureCheck",
     "probability_map",
     "ProbabilityMap",
     "plot_map",
