@@ -228,27 +228,46 @@ def test_sigma_bounds_are_sound_on_random_boxes(models, name, polygon):
 
 
 def test_exact_component_bounds_are_sound_and_quasi_concave():
-    """Lower bounds of the exact per-direction probability on random (joint, direction) boxes stay
-    below the probability at sampled points; and the fact behind the corners: P along a segment of
-    coefficient vectors is never below both ends (quasi-concavity, GUARANTEES section 1)."""
-    from tolsynth.analysis.certify_exact import ComponentBounds
+    """Lower bounds of the exact per-direction probability on random (joint box, direction patch)
+    pairs stay below the probability at sampled joint values and directions of the patch (computed
+    here from the model's own sensitivity and an FFT convolution, not the package's series); and
+    the fact behind the vertices: P along a segment of coefficient vectors is never below both
+    ends (quasi-concavity, GUARANTEES section 1)."""
+    from tolsynth.analysis.certify_exact import ExactBounds, JointEnclosure, taylor_enclosure
     from tolsynth.probability.distributions import shapes_of
     from tolsynth.probability.exact import direction_probability_batch
+    from tests.independent import fft_probabilities
 
     m = tolsynth.load_model("xu_zhang_1988")
     st = structure(m)
+    cols = list(st.columns)
     eps = m.tolerances("figure3")
     shapes = shapes_of("uniform", m.error_parameters, m.index)
-    B = ComponentBounds(st, 5, [1, 2, 3], {0: 0.0, 4: 0.0}, eps, shapes, 0.7)
+    enc = JointEnclosure(st, 5, [1, 2, 3], {0: 0.0, 4: 0.0})
+    B = ExactBounds(enc, eps[cols], tuple(shapes[i] for i in cols), 0.7)
     rng = np.random.default_rng(9)
-    lo = np.radians([140.0, 50.0, -110.0, 0.0, -180.0])
-    hi = np.radians([200.0, 130.0, 110.0, 90.0, 180.0])
-    for h in (0.3, 0.02):
-        C = lo + (hi - lo) * rng.random((10, 5))
-        lb, _ = B.bound(C - h, C + h)
-        X = (C - h)[:, None] + 2 * h * rng.random((10, 40, 5))
-        P = B.point(X.reshape(-1, 5)).reshape(10, 40)
-        assert np.all(lb <= P.min(axis=1) + 1e-12)
+    lo = np.radians([140.0, 50.0, -110.0])
+    hi = np.radians([200.0, 130.0, 110.0])
+    faces = rng.integers(0, 3, 8)
+    for h, ph in ((0.3, 0.5), (0.02, 0.0625)):
+        C = lo + (hi - lo) * rng.random((8, 3))
+        Y, use, E, ok, _ = taylor_enclosure(enc, C - h, C + h)
+        s0 = rng.integers(0, int(2 / ph), 8) * ph - 1.0
+        t0 = rng.integers(0, int(2 / ph), 8) * ph - 1.0
+        lb, *_ = B.pairs((Y, use, E, ok), np.arange(8), faces, s0, t0, np.full(8, ph), 2.0)
+        for i in range(8):
+            X = (C[i] - h) + 2 * h * rng.random((6, 3))
+            F = np.eye(3)[[faces[i], (faces[i] + 1) % 3, (faces[i] + 2) % 3]]
+            st_ = rng.random((6, 2)) * ph + [s0[i], t0[i]]
+            U = F[0] + st_[:, :1] * F[1] + st_[:, 1:] * F[2]
+            U /= np.linalg.norm(U, axis=1, keepdims=True)
+            rows = []
+            for x, u in zip(X, U):
+                A = m.sensitivity(np.concatenate([[0.0], x, [0.0]]), check_limits=False)[:3]
+                rows.append(np.abs(u @ A) * eps)
+            assert lb[i] <= fft_probabilities(rows, 0.7, 1 << 14).min() + 5e-5
+        if h == 0.02:
+            assert np.median(lb) > 0.5  # small boxes are not bounded trivially
     a, b = rng.uniform(-0.2, 0.2, (2, 200, 11))
     t = rng.random((200, 1))
     Pa, _ = direction_probability_batch(a, ["uniform"] * 11, 0.6)
