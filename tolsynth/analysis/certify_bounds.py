@@ -327,20 +327,35 @@ class SigmaBounds:
 # ---------------------------------------------------------------------------------------------
 # serial chains: A as an exact trigonometric polynomial, bounded over arc polygons
 # ---------------------------------------------------------------------------------------------
-def arc_polygons(a: np.ndarray, b: np.ndarray):
-    """Four points per arc ``[a, b]`` of the unit circle (arrays (n,)) whose convex hull holds the
-    arc: the end points and the two crossings of the tangents at the ends and the middle (arcs up
-    to a quarter turn), else the corners of the arc's bounding rectangle.  Returns ``(P, rad)``:
-    the points (n, 4, 2) and a bound of each coordinate's rounding (n, 4, 2)."""
+#: tangent pieces per arc of the polygons (None: the most, up to four, whose tuples a box stay within
+#: POLYGON_TUPLES).  The points sit at most ``1 / cos(h / pieces) - 1`` outside the unit circle (h:
+#: the arc's half-width), so four pieces (six points a joint) leave a quarter of the excess of two
+#: (four points): on a flat maximum, where the boxes are many in every searched joint, the Puma 560's
+#: five joints need about a sixth of the boxes for four times the work a box; eight points a joint
+#: (32 768 tuples) cost more than they save
+POLYGON_PIECES = None
+#: the most tuples of polygon points a box when the pieces are chosen
+POLYGON_TUPLES = 8192
+#: tuples of polygon points bounded in one pass (the eigenvalue bound's work arrays)
+TUPLES_PER_CHUNK = 1 << 18
+
+
+def arc_polygons(a: np.ndarray, b: np.ndarray, pieces: int = 2):
+    """``pieces + 2`` points per arc ``[a, b]`` of the unit circle (arrays (n,)) whose convex hull
+    holds the arc: the end points and the crossings of the tangents at ``pieces + 1`` equally spaced
+    angles from ``a`` to ``b`` (arcs up to a quarter turn; between two tangents ``d`` apart the
+    crossing lies at radius ``1 / cos(d / 2)``), else the corners of the arc's bounding rectangle
+    (repeated to the same count).  Returns ``(P, rad)``: the points (n, pieces + 2, 2) and a bound
+    of each coordinate's rounding (n, pieces + 2, 2)."""
     # the arc widened by its end points' rounding, so that it holds the exact one
     a = a - 4.0 * _U * (np.abs(a) + 1.0)
     b = b + 4.0 * _U * (np.abs(b) + 1.0)
     h = 0.5 * (b - a)
-    c = 0.5 * (a + b)
     small = h <= np.pi / 4
-    rho = 1.0 / np.cos(np.minimum(h, np.pi / 4) / 2)
-    ang = np.stack([a, c - h / 2, c + h / 2, b], axis=1)
-    rad_ = np.stack([np.ones_like(a), rho, rho, np.ones_like(a)], axis=1)
+    step = 2.0 * np.minimum(h, np.pi / 4) / pieces  # between tangent angles
+    rho = 1.0 / np.cos(step / 2)
+    ang = np.stack([a] + [a + (i + 0.5) * step for i in range(pieces)] + [b], axis=1)
+    rad_ = np.concatenate([np.ones((len(a), 1)), np.repeat(rho[:, None], pieces, axis=1), np.ones((len(a), 1))], axis=1)
     P_small = np.stack([rad_ * np.cos(ang), rad_ * np.sin(ang)], axis=2)
     # bounding rectangle: the extremes of cos and sin over [a, b], end points and the crossings
     # of the axes inside
@@ -354,10 +369,13 @@ def arc_polygons(a: np.ndarray, b: np.ndarray):
     xmin = np.where(hits(np.pi), -1.0, np.minimum(ca_, cb_))
     ymax = np.where(hits(np.pi / 2), 1.0, np.maximum(sa_, sb_))
     ymin = np.where(hits(-np.pi / 2), -1.0, np.minimum(sa_, sb_))
-    P_big = np.stack(
-        [np.stack([xmin, ymin], 1), np.stack([xmax, ymin], 1), np.stack([xmax, ymax], 1), np.stack([xmin, ymax], 1)],
-        axis=1,
-    )
+    corners = [
+        np.stack([xmin, ymin], 1),
+        np.stack([xmax, ymin], 1),
+        np.stack([xmax, ymax], 1),
+        np.stack([xmin, ymax], 1),
+    ]
+    P_big = np.stack([corners[min(i, 3)] for i in range(pieces + 2)], axis=1)
     P = np.where(small[:, None, None], P_small, P_big)
     # library sin/cos are within an ulp or two; the angles' own rounding moves a point along the
     # tangent lines by at most the same relative amount: 64 units of roundoff cover both
@@ -436,11 +454,11 @@ class PolygonSigmaBounds:
     trigonometric polynomial of ``A`` (:func:`tolsynth.analysis.certify_structure.trig_polynomial`).
 
     ``A`` has degree one in each pair ``(cos t_j, sin t_j)``, so over a box it stays in the convex
-    hull of its values at the ``4^k`` tuples of polygon points that hold each joint's arc
+    hull of its values at the ``(pieces + 2)^k`` tuples of polygon points that hold each joint's arc
     (:func:`arc_polygons`; multi-affine maps send products of convex sets into the hull of the
     images of their vertices), and ``sigma_1``, a norm of ``A W^1/2``, is largest at one of them.
     The excess over the true maximum is a scaling of each joint's part of ``A`` by at most
-    ``1 / cos(h / 2) - 1 ~ h^2 / 8`` (h: the half-width): small where a joint moves little of the
+    ``1 / cos(h / pieces) - 1 ~ h^2 / (2 pieces^2)`` (h: the half-width): small where a joint moves little of the
     error, which is where a Taylor bound is least efficient.
 
     At the tuples only ``V = A W A^T`` is needed: its six entries are polynomials of degree two in
@@ -449,9 +467,13 @@ class PolygonSigmaBounds:
     over absolute values).
     """
 
-    def __init__(self, poly, free, w):
+    def __init__(self, poly, free, w, pieces: int | None = None):
         T = np.vectorize(float, otypes=[float])(poly.coefficients)  # exact values, rounded to nearest
         self.k = T.ndim - 1
+        pieces = POLYGON_PIECES if pieces is None else pieces
+        if pieces is None:
+            pieces = max([p for p in (4, 3) if (p + 2) ** self.k <= POLYGON_TUPLES], default=2)
+        self.pieces = int(pieces)
         self.na = T.shape[0]
         self.m = self.na // 3
         self.free = tuple(free)
@@ -523,27 +545,32 @@ class PolygonSigmaBounds:
 
     def bound(self, L: np.ndarray, H: np.ndarray):
         """``(ub, split)`` as :meth:`SigmaBounds.bound`."""
-        nb, k = len(L), self.k
+        nb, k, pieces = len(L), self.k, self.pieces
         a = L + self.offsets
         b = H + self.offsets
         V, Vabs = [], []
         for j in range(k):
-            P, rad = arc_polygons(a[:, j], b[:, j])
+            P, rad = arc_polygons(a[:, j], b[:, j], pieces)
             x, y = P[..., 0], P[..., 1]
             V.append(self._monomials(x, y))
             Vabs.append(self._monomials(np.abs(x) + rad[..., 0], np.abs(y) + rad[..., 1]))
+        ub = np.empty(nb)
+        # a few hundred thousand tuples at a time: the eigenvalue bound's work arrays stay small
+        chunk = max(1, TUPLES_PER_CHUNK // (pieces + 2) ** k)
         with np.errstate(all="ignore"):
-            g = self._contract(self.gamma, V)  # (nb, 6, 4^k)
-            # error: Gamma's own, the points' (64 u relative per coordinate, two per monomial),
-            # and the contraction's (two roundings per joint)
-            # (one bound for every tuple of a box, from each joint's largest monomials: the terms
-            # are products of nonnegative numbers, so the largest factors bound each tuple's sum)
-            Vmax = [v.max(axis=1, keepdims=True) for v in Vabs]
-            err = self._contract(self.gamma_err + self.gamma_abs * ((130.0 + 4.0) * (k + 1) * _U), Vmax)
-            lam = lambda_max_bound_entries(
-                tuple(g[:, i, :] for i in range(6)), np.moveaxis(err, 1, 2), reduce_last=True
-            )
-            ub = _up(np.sqrt(np.maximum(lam, 0.0)))
+            for s in range(0, nb, chunk):
+                rows = slice(s, min(nb, s + chunk))
+                g = self._contract(self.gamma, [v[rows] for v in V])  # (n, 6, (pieces + 2)^k)
+                # error: Gamma's own, the points' (64 u relative per coordinate, two per monomial),
+                # and the contraction's (two roundings per joint)
+                # (one bound for every tuple of a box, from each joint's largest monomials: the terms
+                # are products of nonnegative numbers, so the largest factors bound each tuple's sum)
+                Vmax = [v[rows].max(axis=1, keepdims=True) for v in Vabs]
+                err = self._contract(self.gamma_err + self.gamma_abs * ((130.0 + 4.0) * (k + 1) * _U), Vmax)
+                lam = lambda_max_bound_entries(
+                    tuple(g[:, i, :] for i in range(6)), np.moveaxis(err, 1, 2), reduce_last=True
+                )
+                ub[rows] = _up(np.sqrt(np.maximum(lam, 0.0)))
             # where to halve: each joint's derivative of V at the centre times the scaling it allows
             c = 0.5 * (a + b)
             cx, sx = np.cos(c), np.sin(c)
@@ -554,7 +581,7 @@ class PolygonSigmaBounds:
                 Vc[j] = np.stack([np.zeros(nb), -y, x, -2 * x * y, x * x - y * y, 2 * x * y], axis=1)[:, None, :]
                 dV = self._contract(self.gamma, Vc)[:, :, 0]
                 h = 0.5 * (b[:, j] - a[:, j])
-                grow = np.where(h <= np.pi / 4, 1.0 / np.cos(np.minimum(h, np.pi / 4) / 2) - 1.0, 1.0 + h)
+                grow = np.where(h <= np.pi / 4, 1.0 / np.cos(np.minimum(h, np.pi / 4) / pieces) - 1.0, 1.0 + h)
                 split[:, j] = grow * np.sqrt((dV**2).sum(axis=1))
         ub = np.where(np.isfinite(ub), ub, np.inf)
         return ub, split

@@ -1,0 +1,69 @@
+"""Arc polygons with more tangent pieces: their hull holds the arc (SciPy's convex hull of the
+points, checked at dense points of the arc), the polygons nest (more pieces, a smaller hull, so a
+bound no larger), and the Puma 560's bound holds at dense random poses of random boxes
+(sigma_1 from ``Mechanism.sensitivity`` and NumPy's eigensolver)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import ConvexHull
+
+import tolsynth
+from tolsynth.analysis.certify_bounds import PolygonSigmaBounds, arc_polygons
+from tolsynth.analysis.certify_structure import structure, trig_polynomial
+
+
+@pytest.mark.parametrize("pieces", [2, 3, 4, 6])
+def test_polygon_holds_the_arc(pieces):
+    rng = np.random.default_rng(pieces)
+    a = rng.uniform(-7.0, 7.0, 40)
+    b = a + np.concatenate([rng.uniform(1e-4, np.pi / 2, 30), rng.uniform(np.pi / 2, 2 * np.pi, 10)])
+    P, rad = arc_polygons(a, b, pieces)
+    assert P.shape == (40, pieces + 2, 2) and rad.shape == P.shape
+    for i in range(40):
+        hull = ConvexHull(P[i])
+        t = np.linspace(a[i], b[i], 2001)
+        pts = np.stack([np.cos(t), np.sin(t)], axis=1)
+        # inside every facet, to the points' stated rounding
+        assert (pts @ hull.equations[:, :2].T + hull.equations[:, 2] <= 4 * rad[i].max()).all()
+
+
+def test_more_pieces_a_smaller_polygon():
+    # the tangents of two pieces are among those of four: the hull of four pieces lies in that of two
+    rng = np.random.default_rng(1)
+    a = rng.uniform(-4.0, 4.0, 30)
+    b = a + rng.uniform(1e-3, np.pi / 2, 30)
+    P2, _ = arc_polygons(a, b, 2)
+    P4, _ = arc_polygons(a, b, 4)
+    for i in range(30):
+        eq = ConvexHull(P2[i]).equations
+        assert (P4[i] @ eq[:, :2].T + eq[:, 2] <= 1e-13).all()
+
+
+def test_puma_bounds_hold_and_tighten_with_pieces():
+    mech = tolsynth.load_model("puma560")
+    st = structure(mech)
+    free = [j for j in st.joints if j != st.rotation]
+    eps = mech.tolerances(list(mech.tolerance_sets)[0])
+    w = (eps**2 / 3.0)[list(st.columns)]
+    poly = trig_polynomial(st, free, st.rotation)
+    rng = np.random.default_rng(7)
+    c = rng.uniform(-3, 3, (12, len(free)))
+    h = rng.uniform(0.01, 0.5, (12, len(free)))
+    ub2, _ = PolygonSigmaBounds(poly, free, w, pieces=2).bound(c - h, c + h)
+    ub4, split = PolygonSigmaBounds(poly, free, w, pieces=4).bound(c - h, c + h)
+    assert (ub4 <= ub2 * (1 + 1e-12)).all() and (ub4 < ub2).any()
+    assert np.isfinite(split).all() and (split >= 0).all()
+    for i in range(12):
+        X = c[i] - h[i] + 2 * h[i] * rng.random((120, len(free)))
+        q = np.zeros((120, len(mech.joint_names)))
+        q[:, free] = X
+        s1 = [
+            np.sqrt(max(np.linalg.eigvalsh((A * (eps**2 / 3.0)) @ A.T)[-1], 0.0))
+            for A in (mech.sensitivity(x, check_limits=False)[:3] for x in q)
+        ]
+        assert max(s1) <= ub4[i]
+        # a box's bound is no lower than the largest value found in it, nor far above it on small boxes
+        if h[i].max() < 0.1:
+            assert ub4[i] <= max(s1) * 1.01
