@@ -168,9 +168,12 @@ def synthesize_workspace(
     search looks" (its grid is in ``search``, keyword arguments of ``worst_pose``).
 
     With ``probability="exact"`` each round's optimum has the exact probabilities at its poses
-    (:mod:`tolsynth.solvers.exact`); the search still ranks poses by the linear model (largest
-    sigma, or lowest Gaussian sphere probability), and the pose it finds is judged by its exact
-    probability, ``worst_value = (1 - P) / (1 - p)``.
+    (:mod:`tolsynth.solvers.exact`), and the search minimises the exact per-direction probability
+    itself over joints and directions
+    (:func:`tolsynth.analysis.exact_pose_search.worst_exact_pose`, started from the sigma search's
+    pose and a grid ranked by it): ``worst_value = (1 - P) / (1 - p)``.  (The sphere criterion's
+    search still ranks poses by the linear model, its Gaussian sphere probability, and judges the
+    pose it finds exactly.)
 
     For the paper's robot at R = 0.5 mm, p = 0.99, uniform, alpha = 0.7 this takes 5 rounds and
     costs 5 % more than the optimum at the paper's pose, which violates the specification
@@ -229,10 +232,20 @@ def synthesize_workspace(
         else:
             w = worst_pose(mechanism, eps, criterion="sigma", distribution=distribution, **opts)
             g = w.value * z / R
-        if exact:  # the search ranks poses by the linear model; the pose it finds is judged exactly
+        if exact and not sphere:
+            # the pose of largest sigma need not be the pose of lowest exact probability: search for
+            # the exact one itself, from the sigma search's pose and a grid ranked by it
+            from tolsynth.analysis.exact_pose_search import worst_exact_pose
+
+            keys = ("fixed", "seed", "step_tol")
+            e = worst_exact_pose(
+                mechanism, eps, R, p, distribution, x0=[w.q], **{k: opts[k] for k in keys if k in opts}
+            )
+            return e, e.margin
+        if exact:  # the sphere's search ranks poses by the linear model; the pose found is judged exactly
             from tolsynth.solvers.exact import exact_margin
 
-            g = exact_margin(mechanism, w.q, eps, distribution, R, p, "sphere" if sphere else "components")
+            g = exact_margin(mechanism, w.q, eps, distribution, R, p, "sphere")
         return w, g
 
     # a pose to add needs no more than a coarse local search (final step 1e-4 of each joint's
