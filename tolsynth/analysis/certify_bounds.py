@@ -30,7 +30,7 @@ import itertools
 import casadi as ca
 import numpy as np
 
-from tolsynth.analysis.certify_kernels import contract
+from tolsynth.analysis.certify_kernels import contract, lambda_max
 from tolsynth.analysis.interval_ops import round_up as _up
 from tolsynth.analysis.intervals import IntervalFunction
 
@@ -327,17 +327,14 @@ class SigmaBounds:
 # ---------------------------------------------------------------------------------------------
 # serial chains: A as an exact trigonometric polynomial, bounded over arc polygons
 # ---------------------------------------------------------------------------------------------
-#: tangent pieces per arc of the polygons (None: the most, up to four, whose tuples a box stay within
-#: POLYGON_TUPLES).  The points sit at most ``1 / cos(h / pieces) - 1`` outside the unit circle (h:
-#: the arc's half-width), so four pieces (six points a joint) leave a quarter of the excess of two
-#: (four points): on a flat maximum, where the boxes are many in every searched joint, the Puma 560's
-#: five joints need about a sixth of the boxes for four times the work a box; eight points a joint
-#: (32 768 tuples) cost more than they save
+#: tangent pieces per arc (None: the most, up to four, keeping a box's tuples within POLYGON_TUPLES);
+#: four leave a quarter of the excess of two, for about four times the work a box (see PolygonSigmaBounds)
 POLYGON_PIECES = None
-#: the most tuples of polygon points a box when the pieces are chosen
 POLYGON_TUPLES = 8192
-#: tuples of polygon points bounded in one pass (the eigenvalue bound's work arrays)
-TUPLES_PER_CHUNK = 1 << 18
+#: a box is bounded again with more pieces when its bound with two is within this fraction of sigma_1
+#: at its centre (a wider excess is rarely decided by the finer bound, at four times the cost)
+REFINE = 0.03
+TUPLES_PER_CHUNK = 1 << 18  # tuples bounded in one pass: the eigenvalue bound's work arrays stay small
 
 
 def arc_polygons(a: np.ndarray, b: np.ndarray, pieces: int = 2):
@@ -369,13 +366,8 @@ def arc_polygons(a: np.ndarray, b: np.ndarray, pieces: int = 2):
     xmin = np.where(hits(np.pi), -1.0, np.minimum(ca_, cb_))
     ymax = np.where(hits(np.pi / 2), 1.0, np.maximum(sa_, sb_))
     ymin = np.where(hits(-np.pi / 2), -1.0, np.minimum(sa_, sb_))
-    corners = [
-        np.stack([xmin, ymin], 1),
-        np.stack([xmax, ymin], 1),
-        np.stack([xmax, ymax], 1),
-        np.stack([xmin, ymax], 1),
-    ]
-    P_big = np.stack([corners[min(i, 3)] for i in range(pieces + 2)], axis=1)
+    xs, ys = (xmin, xmax, xmax, xmin), (ymin, ymin, ymax, ymax)  # the corners, repeated to the count
+    P_big = np.stack([np.stack([xs[min(i, 3)], ys[min(i, 3)]], 1) for i in range(pieces + 2)], axis=1)
     P = np.where(small[:, None, None], P_small, P_big)
     # library sin/cos are within an ulp or two; the angles' own rounding moves a point along the
     # tangent lines by at most the same relative amount: 64 units of roundoff cover both
@@ -389,14 +381,6 @@ for _a, _b, _mu in [(0, 0, 0), (0, 1, 1), (1, 0, 1), (0, 2, 2), (2, 0, 2), (1, 1
     _FOLD[_a, _b, _mu] = 1.0
 #: the six entries 00, 11, 22, 01, 02, 12 of a symmetric 3 x 3 matrix
 _SYM = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
-
-
-def _sym_matrix(g: np.ndarray) -> np.ndarray:
-    """(..., 6) entries in the order of ``_SYM`` -> (..., 3, 3)."""
-    G = np.empty(g.shape[:-1] + (3, 3))
-    for i, (r, c) in enumerate(_SYM):
-        G[..., r, c] = G[..., c, r] = g[..., i]
-    return G
 
 
 def _eig_estimate(G: np.ndarray) -> np.ndarray:
@@ -543,34 +527,63 @@ class PolygonSigmaBounds:
         M = self.values(Q) * self.sw
         return np.sqrt(np.maximum(np.linalg.eigvalsh(M @ np.swapaxes(M, -1, -2))[:, -1], 0.0))
 
-    def bound(self, L: np.ndarray, H: np.ndarray):
-        """``(ub, split)`` as :meth:`SigmaBounds.bound`."""
-        nb, k, pieces = len(L), self.k, self.pieces
-        a = L + self.offsets
-        b = H + self.offsets
-        V, Vabs = [], []
-        for j in range(k):
-            P, rad = arc_polygons(a[:, j], b[:, j], pieces)
-            x, y = P[..., 0], P[..., 1]
-            V.append(self._monomials(x, y))
-            Vabs.append(self._monomials(np.abs(x) + rad[..., 0], np.abs(y) + rad[..., 1]))
+    def _bound(self, a: np.ndarray, b: np.ndarray, pieces: int) -> np.ndarray:
+        """Upper bounds of sigma_1 on the arcs ``[a, b]`` (n, k), ``pieces`` tangent pieces on each
+        arc up to a quarter turn (a wider one has its rectangle's four corners: more would repeat
+        them), the boxes grouped by which of their arcs are wide."""
+        nb, k = a.shape
         ub = np.empty(nb)
-        # a few hundred thousand tuples at a time: the eigenvalue bound's work arrays stay small
-        chunk = max(1, TUPLES_PER_CHUNK // (pieces + 2) ** k)
-        with np.errstate(all="ignore"):
-            for s in range(0, nb, chunk):
-                rows = slice(s, min(nb, s + chunk))
-                g = self._contract(self.gamma, [v[rows] for v in V])  # (n, 6, (pieces + 2)^k)
+        wide = 0.5 * (b - a) > np.pi / 4
+        groups = (
+            [np.arange(nb)]
+            if pieces == 2
+            else [np.flatnonzero((wide == w).all(axis=1)) for w in np.unique(wide, axis=0)]
+        )
+        for rows in groups:
+            V, Vabs = [], []
+            for j in range(k):
+                P, rad = arc_polygons(a[rows, j], b[rows, j], 2 if pieces == 2 or wide[rows[0], j] else pieces)
+                x, y = P[..., 0], P[..., 1]
+                V.append(self._monomials(x, y))
+                Vabs.append(self._monomials(np.abs(x) + rad[..., 0], np.abs(y) + rad[..., 1]))
+            chunk = max(1, TUPLES_PER_CHUNK // int(np.prod([v.shape[1] for v in V])))
+            for s in range(0, len(rows), chunk):
+                part = slice(s, min(len(rows), s + chunk))
+                g = self._contract(self.gamma, [v[part] for v in V])  # (n, 6, tuples)
                 # error: Gamma's own, the points' (64 u relative per coordinate, two per monomial),
                 # and the contraction's (two roundings per joint)
                 # (one bound for every tuple of a box, from each joint's largest monomials: the terms
                 # are products of nonnegative numbers, so the largest factors bound each tuple's sum)
-                Vmax = [v[rows].max(axis=1, keepdims=True) for v in Vabs]
+                Vmax = [v[part].max(axis=1, keepdims=True) for v in Vabs]
                 err = self._contract(self.gamma_err + self.gamma_abs * ((130.0 + 4.0) * (k + 1) * _U), Vmax)
-                lam = lambda_max_bound_entries(
-                    tuple(g[:, i, :] for i in range(6)), np.moveaxis(err, 1, 2), reduce_last=True
-                )
-                ub[rows] = _up(np.sqrt(np.maximum(lam, 0.0)))
+                lam, ok = np.empty(len(g)), np.zeros(len(g), dtype=bool)
+                compiled = lambda_max(g, err[:, :, 0])  # the same bound box after box (None: no compiler)
+                if compiled is not None:
+                    lam, ok = _up(compiled[0]), compiled[1]
+                if not ok.all():
+                    lam[~ok] = lambda_max_bound_entries(
+                        tuple(g[~ok, i, :] for i in range(6)), np.moveaxis(err[~ok], 1, 2), reduce_last=True
+                    )
+                ub[rows[part]] = _up(np.sqrt(np.maximum(lam, 0.0)))
+        return ub
+
+    def bound(self, L: np.ndarray, H: np.ndarray):
+        """``(ub, split)`` as :meth:`SigmaBounds.bound`.  Every box is bounded with four points a
+        joint; a box whose bound is then within REFINE of sigma_1 at its centre (where the maximum
+        is flat: the box would otherwise be halved in joint after joint) is bounded again with
+        ``self.pieces``, and the smaller bound kept."""
+        nb, k = len(L), self.k
+        a = L + self.offsets
+        b = H + self.offsets
+        used = np.full(nb, 2)
+        with np.errstate(all="ignore"):
+            ub = self._bound(a, b, 2)
+            if self.pieces > 2 and nb:
+                centre = self.point(0.5 * (L + H))
+                again = np.flatnonzero(np.isfinite(ub) & (ub - centre <= REFINE * centre))
+                if len(again):
+                    ub[again] = np.fmin(ub[again], self._bound(a[again], b[again], self.pieces))
+                    used[again] = self.pieces
             # where to halve: each joint's derivative of V at the centre times the scaling it allows
             c = 0.5 * (a + b)
             cx, sx = np.cos(c), np.sin(c)
@@ -581,7 +594,7 @@ class PolygonSigmaBounds:
                 Vc[j] = np.stack([np.zeros(nb), -y, x, -2 * x * y, x * x - y * y, 2 * x * y], axis=1)[:, None, :]
                 dV = self._contract(self.gamma, Vc)[:, :, 0]
                 h = 0.5 * (b[:, j] - a[:, j])
-                grow = np.where(h <= np.pi / 4, 1.0 / np.cos(np.minimum(h, np.pi / 4) / pieces) - 1.0, 1.0 + h)
+                grow = np.where(h <= np.pi / 4, 1.0 / np.cos(np.minimum(h, np.pi / 4) / used) - 1.0, 1.0 + h)
                 split[:, j] = grow * np.sqrt((dV**2).sum(axis=1))
         ub = np.where(np.isfinite(ub), ub, np.inf)
         return ub, split

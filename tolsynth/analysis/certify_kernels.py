@@ -19,7 +19,7 @@ import numpy as np
 
 from tolsynth.cbuild import disabled, find_compiler, load_library
 
-__all__ = ["contract"]
+__all__ = ["contract", "lambda_max"]
 
 _SOURCE = r"""
 #include <stdlib.h>
@@ -72,6 +72,79 @@ int ts_contract(int n, int k, const int *p, const double *g, const double *V, do
     free(b1); free(b2);
     return 0;
 }
+
+/* The largest eigenvalue bound of certify_bounds.lambda_max_bound_entries (reduce_last) for each box
+   of T tuples g[b, 0..5, t] (entries 00 11 22 01 02 12), statement for statement its NumPy
+   arithmetic: the characteristic polynomial's coefficients moved by their rounding, a candidate
+   proven above every root by the cubic and its first two derivatives.  The candidate only rises
+   (a value proven above the roots stays so further up: the third derivative is 6), from the
+   tuples' closed-form eigenvalues where a tuple does not prove it (raised a little where that
+   estimate falls short).  out[b] before its last
+   rounding up; ok[b] = 0 where some tuple proved nothing (the caller's NumPy path decides). */
+#include <math.h>
+#define U_ 1.1102230246251565e-16
+static int above(double lam, double a1, double a2, double a3) {
+    double aa1 = fabs(a1), aa2 = fabs(a2), aa3 = fabs(a3);
+    double mag = ((lam + aa1) * lam + aa2) * lam + aa3;
+    double p = ((lam - a1) * lam + a2) * lam - a3;
+    double dp = (3.0 * lam - 2.0 * a1) * lam + a2;
+    double ddp = 3.0 * lam - a1;
+    return (p > 16 * U_ * mag) && (dp > 16 * U_ * (3.0 * lam * lam + 2.0 * aa1 * lam + aa2))
+        && (ddp > 16 * U_ * (3.0 * lam + aa1));
+}
+static double estimate(double g00, double g11, double g22, double g01, double g02, double g12) {
+    double q = (g00 + g11 + g22) / 3.0;
+    double off = g01 * g01 + g02 * g02 + g12 * g12;
+    double d0 = g00 - q, d1 = g11 - q, d2 = g22 - q;
+    double p = (d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * off) / 6.0;
+    p = sqrt(p > 0.0 ? p : 0.0);
+    double det = d0 * (d1 * d2 - g12 * g12) - g01 * (g01 * d2 - g12 * g02) + g02 * (g01 * g12 - d1 * g02);
+    double r = p > 0 ? det / (2.0 * p * p * p) : 0.0;
+    r = r < -1.0 ? -1.0 : (r > 1.0 ? 1.0 : r);
+    return q + 2.0 * p * cos(acos(r) / 3.0);
+}
+void ts_lambda_max(int n, int T, const double *g, const double *err, double *out, int *ok) {
+    for (int b = 0; b < n; b++) {
+        const double *G = g + (size_t)b * 6 * T, *e = err + (size_t)b * 6;
+        double frob = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + 2.0 * (e[3] * e[3] + e[4] * e[4] + e[5] * e[5]));
+        double L = -INFINITY, best = -INFINITY;
+        int good = 1;
+        for (int t = 0; t < T && good; t++) {
+            double g00 = G[t], g11 = G[T + t], g22 = G[2 * T + t], g01 = G[3 * T + t], g02 = G[4 * T + t], g12 = G[5 * T + t];
+            double c1 = (g00 + g11 + g22) * (1.0 + 8.0 * U_);
+            double p0 = g00 * g11, p1 = g01 * g01, p2 = g00 * g22, p3 = g02 * g02, p4 = g11 * g22, p5 = g12 * g12;
+            double c2 = p0 - p1 + p2 - p3 + p4 - p5;
+            double s2 = 0.0 + fabs(p0);
+            s2 = s2 + fabs(p1); s2 = s2 + fabs(p2); s2 = s2 + fabs(p3); s2 = s2 + fabs(p4); s2 = s2 + fabs(p5);
+            c2 = c2 - 8.0 * U_ * s2;
+            double r0 = g00 * (g11 * g22), r1 = g00 * (g12 * g12), r2 = g01 * (g01 * g22), r3 = g01 * (g12 * g02),
+                   r4 = g02 * (g01 * g12), r5 = g02 * (g11 * g02);
+            double c3 = r0 - r1 - r2 + r3 + r4 - r5;
+            double s3 = 0.0 + fabs(r0);
+            s3 = s3 + fabs(r1); s3 = s3 + fabs(r2); s3 = s3 + fabs(r3); s3 = s3 + fabs(r4); s3 = s3 + fabs(r5);
+            c3 = c3 + 12.0 * U_ * s3;
+            double s = fabs(c1) > 1e-100 ? fabs(c1) : 1.0;
+            double a1 = c1 / s, a2 = c2 / (s * s), a3 = c3 / (s * s * s);
+            double x = (L / s > 0.0 ? L / s : 0.0) * (1.0 + 1e-12) + 1e-13;
+            if (!above(x, a1, a2, a3)) {
+                double lam = estimate(g00, g11, g22, g01, g02, g12);
+                if (!(lam <= INFINITY)) { good = 0; break; }
+                if (lam > L) L = lam;
+                x = (L / s > 0.0 ? L / s : 0.0) * (1.0 + 1e-12) + 1e-13;
+                /* the closed form loses digits where the top eigenvalues nearly meet (a nearly
+                   isotropic V): raised a little at a time, as the NumPy path's last resort does */
+                for (int r = 0; r < 14 && !above(x, a1, a2, a3); r++) x = x * (1.0 + 1e-12 * (double)(1L << (3 * r))) + 1e-300;
+                if (!above(x, a1, a2, a3)) { good = 0; break; }
+                if (x * s > L) L = x * s;
+            }
+            double v = x * s * (1.0 + 8.0 * U_) + frob * (1.0 + 8.0 * U_);
+            if (!(v <= INFINITY)) { good = 0; break; }
+            if (v > best) best = v;
+        }
+        out[b] = best;
+        ok[b] = good;
+    }
+}
 """
 
 _state: dict = {}
@@ -85,13 +158,16 @@ def _library():
         return None
     if cc not in _state:
         try:
-            lib, _ = load_library(_SOURCE, "tolsynth_polygon", cc, ("ts_contract",))
+            lib, _ = load_library(_SOURCE, "tolsynth_polygon", cc, ("ts_contract", "ts_lambda_max"))
             fn = lib.ts_contract
             f64 = np.ctypeslib.ndpointer(np.float64, flags="C_CONTIGUOUS")
             i32 = np.ctypeslib.ndpointer(np.int32, flags="C_CONTIGUOUS")
             fn.argtypes = [ctypes.c_int, ctypes.c_int, i32, f64, f64, f64]
             fn.restype = ctypes.c_int
-            _state[cc] = fn
+            lm = lib.ts_lambda_max
+            lm.argtypes = [ctypes.c_int, ctypes.c_int, f64, f64, f64, i32]
+            lm.restype = None
+            _state[cc] = (fn, lm)
         except (OSError, AttributeError, RuntimeError):
             _state[cc] = None
     return _state[cc]
@@ -101,9 +177,10 @@ def contract(g: np.ndarray, V: list):
     """``g`` (6, 6^k) contracted with each joint's monomials ``V[j]`` (n, p_j, 6): shape
     (n, 6, prod p_j), the tuples with the first joint's point most significant; None when the
     compiled kernel is not available (the caller then runs its NumPy path)."""
-    fn = _library()
-    if fn is None:
+    lib = _library()
+    if lib is None:
         return None
+    fn = lib[0]
     k = len(V)
     n = V[0].shape[0]
     p = np.array([v.shape[1] for v in V], dtype=np.int32)
@@ -112,3 +189,20 @@ def contract(g: np.ndarray, V: list):
     if n and fn(n, k, p, np.ascontiguousarray(g, dtype=np.float64), Vc, out) != 0:
         raise MemoryError("the polygon contraction could not allocate its work area")
     return out
+
+
+def lambda_max(g: np.ndarray, err: np.ndarray):
+    """Per box, the largest over its tuples of the bound of
+    :func:`tolsynth.analysis.certify_bounds.lambda_max_bound_entries` before its last rounding up:
+    ``g`` (n, 6, T) the tuples' entries, ``err`` (n, 6) their common error.  Returns ``(out, ok)``
+    (``ok`` False where a tuple proved nothing: the caller bounds that box itself), or None
+    without the compiled kernel."""
+    lib = _library()
+    if lib is None:
+        return None
+    n, _, T = g.shape
+    out = np.empty(n)
+    ok = np.zeros(n, dtype=np.int32)
+    if n:
+        lib[1](n, T, np.ascontiguousarray(g, dtype=np.float64), np.ascontiguousarray(err, dtype=np.float64), out, ok)
+    return out, ok.astype(bool)
