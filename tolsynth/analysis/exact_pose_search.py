@@ -51,6 +51,9 @@ DESCENT = 1e-12
 #: global direction checks (a lattice of directions at the pose found, then another local search
 #: where a lower direction turns up there)
 DIRECTION_CHECKS = 3
+#: a pose this close (a fraction of each joint's range) to a joint limit or joint constraint is
+#: tried on it (the coarse searches of the workspace exchange end 1e-4 of the range from a corner)
+SNAP = 1e-3
 #: the checks' lattice of directions, the lattice points (at least 0.3 rad apart) Newton's method
 #: starts from, and its steps
 CHECK_DIRECTIONS = 400
@@ -180,16 +183,17 @@ def worst_exact_pose(
     waist and the roll); (2) a grid over the other joints inside every joint limit and joint
     constraint (``grid`` points per joint, default as many as keep it under ``max_grid_points``),
     each pose's lowest probability over its principal axes, their bisectors and a Fibonacci
-    lattice of ``directions`` directions, then a few Newton steps on the sphere at the lowest 128; (3) from the
-    ``starts`` best mutually separated grid poses and every pose of ``x0`` (e.g. the sigma
-    search's worst pose), a pattern search over the joints (compass directions and the tangents
-    of the linear joint constraints, infeasible polls rejected, step halved on failure down to
-    ``step_tol`` of each joint's range) in which every polled pose's value is the minimum over
-    directions reached by Newton's method on the sphere from the incumbent's direction: a
-    descent over joints and directions together; (4) at the pose found, a lattice of 400
-    directions checks that no other direction is lower (if one is, the search goes on from it).
-    Every value is the compiled exact evaluator's (rigorous error bound; 1e-11 in the search), so
-    the result depends on the inputs alone.
+    lattice of ``directions`` directions, then a few Newton steps on the sphere at the lowest 128;
+    (3) from the ``starts`` best mutually separated grid poses and every pose of ``x0`` (e.g. the
+    sigma search's worst pose), a pattern search over the joints (compass directions and the
+    tangents of the linear joint constraints, infeasible polls rejected, step halved on failure
+    down to ``step_tol`` of each joint's range) in which every polled pose's value is the minimum
+    over directions reached by Newton's method on the sphere from the incumbent's direction: a
+    descent over joints and directions together, whose end is tried on the limits and joint
+    constraints within 1e-3 of the range (a pattern search ends a step away from a corner);
+    (4) at the pose found, a lattice of 400 directions checks that no other direction is lower
+    (if one is, the search goes on from it).  Every value is the compiled exact evaluator's
+    (rigorous error bound; 1e-11 in the search), so the result depends on the inputs alone.
 
     Parameters
     ----------
@@ -364,6 +368,43 @@ def worst_exact_pose(
             X = np.hstack([X, Ux[:, okx]])
             WX, FX = np.vstack([WX, Wx]), np.concatenate([FX, Fx])
 
+    # the linear joint constraints in scaled coordinates: a @ U + c between their bounds
+    lin = []
+    for con in mech.spec.joint_constraints:
+        a, c0 = np.zeros(k), 0.0
+        for jn, coef in con.terms.items():
+            j = names.index(jn)
+            if j in held:
+                c0 += coef * held[j]
+            else:
+                a[free.index(j)] = coef * span[free.index(j)]
+                c0 += coef * lo[j]
+        if np.any(a):
+            lin.append((a, c0, con.lower, con.upper))
+
+    def snap(u: np.ndarray) -> np.ndarray:
+        """``u`` moved onto the limits and the joint constraints within :data:`SNAP` of it (the
+        least change of the other coordinates), then inward by rounding's width if it must be:
+        a pattern search ends a final step away from a corner, not on it."""
+        y = np.where(u < SNAP, 0.0, np.where(u > 1.0 - SNAP, 1.0, u))
+        rows, rhs = [], []
+        for a, c0, lower, upper in lin:
+            v = a @ y + c0
+            for bound in (lower, upper):
+                if abs(v - bound) <= SNAP * np.linalg.norm(a):
+                    rows.append(a)
+                    rhs.append(bound - c0)
+        move = (y > 0.0) & (y < 1.0)
+        if rows and np.any(move):
+            Aeq = np.array(rows)[:, move]
+            r = np.array(rhs) - np.array(rows) @ y
+            y[move] += np.linalg.lstsq(Aeq, r, rcond=None)[0]
+        for shrink in (0.0, 1e-13, 1e-11, 1e-9):  # inward along the way back to u, as rounding needs
+            t = y + shrink * (u - y) / max(float(np.max(np.abs(u - y))), 1e-300)
+            if _feasible(mech, full(t[:, None]))[0] and np.all((t >= 0) & (t <= 1)):
+                return t
+        return u
+
     # (3) the pattern search over joints, each poll's value its own minimum over directions
     D = _tangent_directions(mech, free, span) if k else np.zeros((0, 0))
     h = np.full(X.shape[1], 0.5 * h0)
@@ -388,6 +429,13 @@ def worst_exact_pose(
                     WX[s] = dirs[a_i * nd + j[a_i]]
                 else:
                     h[s] *= 0.5
+        if k:  # onto the limits and joint constraints a pose ends near, where that is lower
+            Y = np.column_stack([snap(X[:, s]) for s in range(X.shape[1])])
+            My, oky = blocks(Y)
+            if np.any(oky):
+                Wy, Py = descend(My[oky], WX[oky], CHECK_STEPS, SEARCH_TOL)
+                better = np.flatnonzero(oky)[Py <= FX[oky]]
+                X[:, better], WX[better], FX[better] = Y[:, better], Wy[Py <= FX[oky]], Py[Py <= FX[oky]]
         # (4) no other direction lower at the poses found
         Mf, _ = blocks(X)
         Wc, Pc = lowest_direction(Mf, WX)
