@@ -22,6 +22,8 @@ from tolsynth.cbuild import disabled, find_compiler, load_library
 __all__ = ["contract", "lambda_max"]
 
 _SOURCE = r"""
+/* the loops over the tuples vectorised (each sum still its six products in order: the same bits) */
+#pragma GCC optimize("O3")
 #include <stdlib.h>
 #include <string.h>
 
@@ -47,6 +49,22 @@ int ts_contract(int n, int k, const int *p, const double *g, const double *V, do
             voff -= (size_t)pj * 6;
             const double *Vj = V + (size_t)b * vstride + voff;
             double *dst = (j == 0) ? out + (size_t)b * 6 * P : (src == b1 ? b2 : b1);
+            if (Q == 1 && pj <= 64) {  /* the first joint: across its points, each sum in the same order */
+                double Vt[6][64];
+                for (int q = 0; q < pj; q++)
+                    for (int m = 0; m < 6; m++) Vt[m][q] = Vj[(size_t)q * 6 + m];
+                for (size_t r = 0; r < R; r++) {
+                    const double *s0 = src + r * 6;
+                    double *d = dst + r * (size_t)pj;
+                    for (int q = 0; q < pj; q++) d[q] = s0[0] * Vt[0][q];
+                    for (int m = 1; m < 6; m++)
+                        for (int q = 0; q < pj; q++) d[q] += s0[m] * Vt[m][q];
+                }
+                src = dst;
+                Q *= (size_t)pj;
+                R /= 6;
+                continue;
+            }
             for (size_t r = 0; r < R; r++) {
                 const double *s0 = src + r * 6 * Q;
                 for (int q = 0; q < pj; q++) {
