@@ -233,10 +233,10 @@ def test_exact_component_bounds_are_sound_and_quasi_concave():
     here from the model's own sensitivity and an FFT convolution, not the package's series); and
     the fact behind the vertices: P along a segment of coefficient vectors is never below both
     ends (quasi-concavity, GUARANTEES section 1)."""
+    from tests.independent import fft_probabilities
     from tolsynth.analysis.certify_exact import ExactBounds, JointEnclosure, taylor_enclosure
     from tolsynth.probability.distributions import shapes_of
     from tolsynth.probability.exact import direction_probability_batch
-    from tests.independent import fft_probabilities
 
     m = tolsynth.load_model("xu_zhang_1988")
     st = structure(m)
@@ -251,10 +251,10 @@ def test_exact_component_bounds_are_sound_and_quasi_concave():
     faces = rng.integers(0, 3, 8)
     for h, ph in ((0.3, 0.5), (0.02, 0.0625)):
         C = lo + (hi - lo) * rng.random((8, 3))
-        Y, use, E, ok, _ = taylor_enclosure(enc, C - h, C + h)
+        Y, use, E, ok, _, bits = taylor_enclosure(enc, C - h, C + h)
         s0 = rng.integers(0, int(2 / ph), 8) * ph - 1.0
         t0 = rng.integers(0, int(2 / ph), 8) * ph - 1.0
-        lb, *_ = B.pairs((Y, use, E, ok), np.arange(8), faces, s0, t0, np.full(8, ph), 2.0)
+        lb, *_ = B.pairs((Y, use, E, ok, bits), np.arange(8), faces, s0, t0, np.full(8, ph), 2.0)
         for i in range(8):
             X = (C[i] - h) + 2 * h * rng.random((6, 3))
             F = np.eye(3)[[faces[i], (faces[i] + 1) % 3, (faces[i] + 2) % 3]]

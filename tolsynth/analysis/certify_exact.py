@@ -59,12 +59,16 @@ EXACT_TOL = 2e-7
 HESSIAN_FACTOR = 4.0
 #: the same with the compiled interval interpreter (evaluations cheaper than the boxes they save)
 HESSIAN_FACTOR_COMPILED = 16.0
+#: the third derivatives' graph is used when it has at most this many times the Hessian's operations
+THIRD_FACTOR = 4.0
 #: patches per cube face side at the start
 START_GRID = 2
 #: joint boxes taken from the heap per round
 BATCH = 32
-#: patch refinements per joint box before the box itself is split
-PATCH_ROUNDS = 6
+#: rounds of patch refinement per joint box before the box itself is split
+PATCH_ROUNDS = 8
+#: joints whose sides group the corners in the bound's first passes (at most 2^levels groups)
+GROUP_LEVELS = 3
 #: joint sides halved together: those with at least this share of the largest one's remainder
 SPLIT_SHARE = 0.6
 #: a lifted direction's rounding is covered by raising every coefficient by this relative amount
@@ -97,6 +101,14 @@ class JointEnclosure:
         self.use_hessian = hess.n_operations <= factor * self.centre.n_operations
         self.hess = hess
         self.box = hess if self.use_hessian else self.centre
+        # third derivatives over the box with the Hessian at the centre: a third-order remainder,
+        # where the interval Hessian over a wider box is much wider than the Hessian itself
+        self.third = None
+        if self.use_hessian:
+            T = ca.jacobian(ca.vec(ca.jacobian(ca.vec(ca.jacobian(a, x)), x)), x)
+            third = IntervalFunction(ca.Function("aT", [x], [a, ca.densify(ca.vec(T))]))
+            if third.n_operations <= THIRD_FACTOR * hess.n_operations:
+                self.third = third
 
     def values(self, X: np.ndarray) -> np.ndarray:
         """``A`` at points X (n, k), shape (n, 3, m) (floating point)."""
@@ -110,7 +122,8 @@ def taylor_enclosure(g: JointEnclosure, L: np.ndarray, H: np.ndarray, linear=())
     hull of the corner matrices ``Y[b, c]`` (column-major vectors, (n, C, 3 m); only where ``use``)
     plus ``[-E, E]`` entrywise (n, 3 m) for every x of the box that meets the linear constraints;
     ``ok`` False where the graph is not proven regular on the box (a closed loop near its limits);
-    ``share`` (n, 3 m, k): each coordinate's part of the remainder (where to halve)."""
+    ``share`` (n, 3 m, k): each coordinate's part of the remainder (where to halve); ``bits`` (n, C,
+    levels): each corner's side of the centre along the joints that move A most, the most first."""
     na, k = g.na, g.k
     nb = len(L)
     C = np.minimum(np.maximum(0.5 * (L + H), L), H)
@@ -127,6 +140,16 @@ def taylor_enclosure(g: JointEnclosure, L: np.ndarray, H: np.ndarray, linear=())
         if g.use_hessian:
             Ha = np.maximum(np.abs(BL[:, na:]), np.abs(BH[:, na:])).reshape(nb, na, k, k)
             share = 0.5 * np.einsum("bnjk,bj,bk->bnk", Ha, r, r)
+            if g.third is not None:
+                # |d^T H(c) d| / 2 + |T(B)| r^3 / 6, coordinate by coordinate, where it is smaller
+                HcL, HcH, _ = g.hess.evaluate(C, C)
+                Hc = np.maximum(np.abs(HcL[:, na:]), np.abs(HcH[:, na:])).reshape(nb, na, k, k)
+                TL, TH, treg = g.third.evaluate(L, H)
+                # vec of the (na k) x k Jacobian of vec(J): entry (n + na (j + k l)) -> T[n, j, l, ...]
+                Ta = np.maximum(np.abs(TL[:, na:]), np.abs(TH[:, na:])).reshape(nb, k, k, k, na)
+                s3 = 0.5 * np.einsum("bnjk,bj,bk->bnk", Hc, r, r) + np.einsum("blkjn,bj,bk,bl->bnl", Ta, r, r, r) / 6.0
+                better = treg[:, None] & np.isfinite(s3).all(axis=2) & (s3.sum(axis=2) < share.sum(axis=2))
+                share = np.where(better[:, :, None], s3, share)
         else:
             dev = np.maximum(np.abs(BL[:, na:].reshape(nb, k, na) - Jm), np.abs(BH[:, na:].reshape(nb, k, na) - Jm))
             share = np.einsum("bkn,bk->bnk", dev, r)
@@ -136,7 +159,12 @@ def taylor_enclosure(g: JointEnclosure, L: np.ndarray, H: np.ndarray, linear=())
         E = E + 1e-12 * np.einsum("bkn,bk->bn", np.abs(Jm), r) if linear else E
         Y = am[:, None, :] + np.einsum("bkn,bck->bcn", Jm, D)
         ok = breg & creg & np.isfinite(E).all(axis=1) & np.isfinite(Y).all(axis=(1, 2))
-    return np.where(ok[:, None, None], Y, 0.0), use, np.where(ok[:, None], E, 0.0), ok, share
+    # the corners grouped for the bound's first passes: by their side of the centre along the
+    # joints that move A most, the most first
+    spread = np.linalg.norm(Jm, axis=2) * r  # (n, k)
+    order = np.argsort(-spread, axis=1)[:, :GROUP_LEVELS]
+    bits = np.take_along_axis(D, order[:, None, :], axis=2) >= 0.0  # (n, C, levels)
+    return np.where(ok[:, None, None], Y, 0.0), use, np.where(ok[:, None], E, 0.0), ok, share, bits
 
 
 def _rays(face, s0, t0, h):
@@ -210,32 +238,47 @@ class ExactBounds:
         P, _ = probability(B, self.shapes, self.R, EVAL_TOL)
         return P
 
-    def _vertex_pairs(self, Bc, use, lb, thr):
-        """The pairs' bound from every (joint corner, direction vertex): the most likely to fail first
-        (largest variance), and the rest only where those pass; a pair that fails keeps its
-        monotone bound ``lb`` (valid, looser), which only orders the search."""
+    def _vertex_pairs(self, Bc, use, bits, lb, thr):
+        """The pairs' bound from every (joint corner, direction vertex), settled group by group: the
+        corners on one side of the centre along the joint moving A most, then along the next, ...,
+        each group bounded at its largest ``|b_i|`` (monotone: one evaluation a direction vertex
+        proves all of its corners), and only the corners of groups that fail one by one.  A pair
+        found to fail keeps its bound ``lb`` (valid, looser), which only orders the search."""
         p, C, K, m = Bc.shape
-        score = np.where(use[:, :, None], np.einsum("pckm,m->pck", Bc**2, self.var), -np.inf).reshape(p, C * K)
-        order = np.argsort(-score, axis=1)
-        live = np.isfinite(np.take_along_axis(score, order, axis=1))
-        flat = Bc.reshape(p, C * K, m)
+        done = ~use.copy()  # (p, C) corners settled (or not used)
         low = np.full(p, np.inf)
-        alive = np.ones(p, dtype=bool)
-        start = 0
-        for width in (2, C * K):
-            cols = slice(start, min(start + width, C * K))
-            idx = order[:, cols]
-            sel = live[:, cols] & alive[:, None]
-            if not sel.any():
+        # first the corner of largest variance at each direction vertex: the likeliest to fail
+        score = np.where(use[:, :, None], np.einsum("pckm,m->pck", Bc**2, self.var), -np.inf)
+        top = np.argmax(score, axis=1)  # (p, K)
+        first = np.take_along_axis(Bc, top[:, None, :, None], axis=1)[:, 0]  # (p, K, m)
+        val = self.lower(first.reshape(-1, m), thr).reshape(p, K)
+        alive = (val >= thr).all(axis=1)
+        low = np.minimum(low, val.min(axis=1))
+        for t in range(1, bits.shape[2] + 1):
+            code = (bits[:, :, :t] * (1 << np.arange(t))).sum(axis=2)  # (p, C)
+            G = 1 << t
+            onehot = (code[:, :, None] == np.arange(G)) & ~done[:, :, None] & alive[:, None, None]  # (p, C, G)
+            has = onehot.any(axis=1)  # (p, G)
+            if not has.any():
                 break
-            rows = np.take_along_axis(flat, idx[..., None], axis=1)[sel]
-            P = np.full(sel.shape, np.inf)
-            P[sel] = self.lower(rows, thr)
-            low = np.minimum(low, P.min(axis=1))
-            alive &= low >= thr
-            start = cols.stop
-            if start >= C * K:
-                break
+            pi, gi = np.nonzero(has)
+            mag = np.where(onehot[pi, :, gi][:, :, None, None], Bc[pi], 0.0).max(axis=1)  # (n, K, m)
+            val = self.lower(mag.reshape(-1, m), thr).reshape(-1, K).min(axis=1)
+            ok = val >= thr
+            np.minimum.at(low, pi[ok], val[ok])
+            settled = np.zeros((p, G), dtype=bool)
+            settled[pi[ok], gi[ok]] = True
+            done |= np.take_along_axis(settled, code, axis=1) & use
+            single = onehot.sum(axis=1)[pi, gi] == 1
+            alive[pi[~ok & single]] = False  # one corner below the threshold: the pair fails
+        rest = ~done & alive[:, None]
+        if rest.any():
+            pi, ci = np.nonzero(rest)
+            val = self.lower(Bc[pi, ci].reshape(-1, m), thr).reshape(-1, K).min(axis=1)
+            np.minimum.at(low, pi, val)
+            bad = np.zeros(p, dtype=bool)
+            bad[pi[val < thr]] = True
+            alive &= ~bad
         return np.where(alive, np.minimum(low, 1.0), lb)
 
     @staticmethod
@@ -250,7 +293,7 @@ class ExactBounds:
     def pairs(self, enc_box, bi, face, s0, t0, h, thr):
         """Lower bounds (n,) on the pairs (joint box ``bi``, patch), the lift excess and the
         remainder's relative size of each (where to refine), and the patches' inner unit vectors."""
-        Y, use, E, ok = enc_box
+        Y, use, E, ok, bits = enc_box
         m = self.m
         V = _rays(face, s0, t0, h)
         n, scale = _lift(V)
@@ -274,7 +317,7 @@ class ExactBounds:
             Z = np.abs(np.einsum("pcmr,pkr->pckm", Yb, Vt))
             rnd = 1e-14 * np.einsum("pmr,pkr->pkm", np.abs(Ymb[todo]) + Yrb[todo], np.abs(Vt))
             Bc = _up((Z * (1.0 + _LIFT_SLACK) + (rnd + e[todo][:, None, :])[:, None]) * self.eps)
-            lb[todo] = self._vertex_pairs(Bc, use[bt], lb[todo], thr)
+            lb[todo] = self._vertex_pairs(Bc, use[bt], bits[bt], lb[todo], thr)
         lb = np.where(ok[bi], lb, 0.0)
         centre = np.abs(Z0).max(axis=1)  # (p, m) a typical coefficient vector
         rel = np.linalg.norm(e * self.eps, axis=1) / np.maximum(np.linalg.norm(centre * self.eps, axis=1), 1e-300)
@@ -282,11 +325,11 @@ class ExactBounds:
 
 
 class _Box:
-    __slots__ = ("L", "H", "face", "s0", "t0", "h", "lb", "proven", "feasible", "side", "worst")
+    __slots__ = ("L", "H", "face", "s0", "t0", "h", "plb", "lb", "proven", "feasible", "side", "worst")
 
-    def __init__(self, L, H, face, s0, t0, h, lb, proven, feasible):
+    def __init__(self, L, H, face, s0, t0, h, plb, lb, proven, feasible):
         self.L, self.H = L, H
-        self.face, self.s0, self.t0, self.h, self.lb = face, s0, t0, h, lb
+        self.face, self.s0, self.t0, self.h, self.plb, self.lb = face, s0, t0, h, plb, lb
         self.proven, self.feasible = proven, feasible
         self.side, self.worst = (0,), None
 
@@ -393,44 +436,48 @@ class _Search:
 
     # -- boxes -----------------------------------------------------------------------------------
     def evaluate(self, boxes: list) -> None:
-        """Bound the direction patches of new joint boxes: patches proven at the threshold go, the
-        others are split while their lift is the larger part of the bound's excess, then kept."""
+        """Bound the direction patches of new joint boxes: patches proven at the threshold go; one
+        failing because of its lift (more than the joint box's remainder) is split in four and its
+        quarters bounded in the next round; the others are kept, for the box's halves."""
         thr = self.threshold()
+        nb = len(boxes)
         L = np.array([b.L for b in boxes])
         H = np.array([b.H for b in boxes])
-        Y, use, E, ok, share = taylor_enclosure(self.b.enc, L, H, self.b.linear)
-        enc_box = (Y, use, E, ok)
-        counts = [len(b.face) for b in boxes]
-        bi = np.repeat(np.arange(len(boxes)), counts)
-        face = np.concatenate([b.face for b in boxes])
-        s0 = np.concatenate([b.s0 for b in boxes])
-        t0 = np.concatenate([b.t0 for b in boxes])
-        h = np.concatenate([b.h for b in boxes])
+        Y, use, E, ok, share, bits = taylor_enclosure(self.b.enc, L, H, self.b.linear)
+        enc_box = (Y, use, E, ok, bits)
+        bi = np.repeat(np.arange(nb), [len(b.face) for b in boxes])
+        face, s0, t0, h, fall = (
+            np.concatenate([getattr(b, a) for b in boxes]) for a in ("face", "s0", "t0", "h", "plb")
+        )
         proven = np.array([b.proven for b in boxes])
         kept = []
-        for rnd in range(PATCH_ROUNDS + 1):
+        for _ in range(PATCH_ROUNDS):
             if bi.size == 0:
                 break
-            lb, lift, rel, n = self.b.pairs(enc_box, bi, face, s0, t0, h, thr)
+            lb, lift, rel, _n = self.b.pairs(enc_box, bi, face.astype(int), s0, t0, h, thr)
+            lb = np.maximum(lb, np.minimum(fall, thr))  # a parent's bound holds on its parts
             done = lb >= thr
             np.minimum.at(proven, bi[done], lb[done])
-            refine = ~done & (lift > rel) & (rnd < PATCH_ROUNDS) & (h > 2.0**-40)
+            refine = ~done & (lift > rel) & (h > 2.0**-40)
             stay = ~done & ~refine
-            kept.append((bi[stay], face[stay], s0[stay], t0[stay], h[stay], lb[stay], n[stay]))
+            kept.append((bi[stay], face[stay], s0[stay], t0[stay], h[stay], lb[stay]))
+            fall = np.repeat(lb[refine], 4)
             bi = np.repeat(bi[refine], 4)
-            face, s0, t0, h = _children(face[refine], s0[refine], t0[refine], h[refine])
-        kb, kf, ks, kt, kh, kl, kn = (np.concatenate(parts) for parts in zip(*kept)) if kept else [np.zeros(0)] * 7
+            face, s0, t0, h = _children(face[refine].astype(int), s0[refine], t0[refine], h[refine])
+        kept.append((bi, face, s0, t0, h, fall))  # split, not yet bounded: their parents' bounds
+        kb, kf, ks, kt, kh, kl = (np.concatenate(parts) for parts in zip(*kept))
         order = np.argsort(kb, kind="stable")
-        kb, kf, ks, kt, kh, kl, kn = (a[order] for a in (kb, kf, ks, kt, kh, kl, kn))
-        cuts = np.searchsorted(kb, np.arange(len(boxes) + 1))
+        kb, kf, ks, kt, kh, kl = (a[order] for a in (kb, kf, ks, kt, kh, kl))
+        cuts = np.searchsorted(kb, np.arange(nb + 1))
         weights = np.sqrt(np.einsum("bnk,n->bk", share**2, self.w))
         for i, b in enumerate(boxes):
             a, z = cuts[i], cuts[i + 1]
-            b.face, b.s0, b.t0, b.h = kf[a:z].astype(int), ks[a:z], kt[a:z], kh[a:z]
+            b.face, b.s0, b.t0, b.h, b.plb = kf[a:z].astype(int), ks[a:z], kt[a:z], kh[a:z], kl[a:z]
             b.proven = float(proven[i])
             b.lb = float(kl[a:z].min()) if z > a else math.inf
             if z > a:
-                b.worst = kn[a + int(np.argmin(kl[a:z]))]
+                j = a + int(np.argmin(kl[a:z]))
+                b.worst = _lift(_rays(kf[j : j + 1].astype(int), ks[j : j + 1], kt[j : j + 1], kh[j : j + 1]))[0][0]
             wide = (b.H - b.L) > 0
             if ok[i] and np.isfinite(weights[i]).all() and weights[i][wide].max(initial=0.0) > 0:
                 wi = np.where(wide, weights[i], -1.0)
@@ -478,7 +525,8 @@ def certify_components_exact(
         s.consider(np.asarray(x)[None], s.direction(np.asarray(x))[None])
     s.polish()
     scale = np.where(hi > lo, hi - lo, 1.0)
-    root = _Box(lo.copy(), hi.copy(), *_start_patches(), 0.0, math.inf, False)
+    face0 = _start_patches()
+    root = _Box(lo.copy(), hi.copy(), *face0, np.zeros(len(face0[0])), 0.0, math.inf, False)
     heap: list = []
     seq = 0
     kept = [] if leaves is not None else None
@@ -532,7 +580,7 @@ def certify_components_exact(
                 up = np.array(upper)
                 L[sides] = np.where(up, mid, b.L[sides])
                 H[sides] = np.where(up, b.H[sides], mid)
-                kids.append(_Box(L, H, b.face, b.s0, b.t0, b.h, b.lb, b.proven, b.feasible))
+                kids.append(_Box(L, H, b.face, b.s0, b.t0, b.h, b.plb, b.lb, b.proven, b.feasible))
         KL = np.array([c.L for c in kids])
         KH = np.array([c.H for c in kids])
         todo = [c for c in kids if c.feasible]
