@@ -333,7 +333,7 @@ POLYGON_PIECES = None
 POLYGON_TUPLES = 8192
 #: a box is bounded again with more pieces when its bound with two is within this fraction of sigma_1
 #: at its centre (a wider excess is rarely decided by the finer bound, at four times the cost)
-REFINE = 0.03
+REFINE = 0.1
 TUPLES_PER_CHUNK = 1 << 18  # tuples bounded in one pass: the eigenvalue bound's work arrays stay small
 
 
