@@ -234,7 +234,7 @@ def test_exact_component_bounds_are_sound_and_quasi_concave():
     the fact behind the vertices: P along a segment of coefficient vectors is never below both
     ends (quasi-concavity, GUARANTEES section 1)."""
     from tests.independent import fft_probabilities
-    from tolsynth.analysis.certify_exact import ExactBounds, JointEnclosure, taylor_enclosure
+    from tolsynth.analysis.certify_exact_bounds import ExactBounds, JointEnclosure, taylor_enclosure
     from tolsynth.probability.distributions import shapes_of
     from tolsynth.probability.exact import direction_probability_batch
 
@@ -251,10 +251,10 @@ def test_exact_component_bounds_are_sound_and_quasi_concave():
     faces = rng.integers(0, 3, 8)
     for h, ph in ((0.3, 0.5), (0.02, 0.0625)):
         C = lo + (hi - lo) * rng.random((8, 3))
-        Y, use, E, ok, _, bits = taylor_enclosure(enc, C - h, C + h)
+        box = taylor_enclosure(enc, C - h, C + h)
         s0 = rng.integers(0, int(2 / ph), 8) * ph - 1.0
         t0 = rng.integers(0, int(2 / ph), 8) * ph - 1.0
-        lb, *_ = B.pairs((Y, use, E, ok, bits), np.arange(8), faces, s0, t0, np.full(8, ph), 2.0)
+        lb, *_ = B.pairs(box, np.arange(8), faces, s0, t0, np.full(8, ph), 2.0)
         for i in range(8):
             X = (C[i] - h) + 2 * h * rng.random((6, 3))
             F = np.eye(3)[[faces[i], (faces[i] + 1) % 3, (faces[i] + 2) % 3]]
@@ -268,6 +268,27 @@ def test_exact_component_bounds_are_sound_and_quasi_concave():
             assert lb[i] <= fft_probabilities(rows, 0.7, 1 << 14).min() + 5e-5
         if h == 0.02:
             assert np.median(lb) > 0.5  # small boxes are not bounded trivially
+    # boxes crossed by the interference limit 50 <= theta'2 - theta2 <= 130 deg: the feasible
+    # part's own corners, checked at feasible points only
+    lin = ((np.array([1.0, -1.0, 0.0]), math.radians(50.0), math.radians(130.0)),)
+    B = ExactBounds(enc, eps[cols], tuple(shapes[i] for i in cols), 0.7, lin)
+    C = np.radians(np.array([[150.0, 100.0 - 30.0 * i, 20.0 * i - 60.0] for i in range(6)]))
+    C[:, 1] = C[:, 0] - np.radians([50.0, 130.0, 50.0, 130.0, 50.0, 130.0])  # on a limit
+    box = taylor_enclosure(enc, C - 0.03, C + 0.03, lin)
+    assert box.cross.all()
+    lb, *_ = B.pairs(box, np.arange(6), np.zeros(6, dtype=int), np.full(6, -0.5), np.full(6, -0.5), np.full(6, 1.0), 2.0)
+    for i in range(6):
+        X = (C[i] - 0.03) + 0.06 * rng.random((40, 3))
+        X = X[(X[:, 0] - X[:, 1] >= math.radians(50.0)) & (X[:, 0] - X[:, 1] <= math.radians(130.0))][:6]
+        st_ = rng.random((len(X), 2)) - 0.5
+        U = np.array([1.0, 0.0, 0.0]) + st_[:, :1] * np.array([0.0, 1.0, 0.0]) + st_[:, 1:] * np.array([0.0, 0.0, 1.0])
+        U /= np.linalg.norm(U, axis=1, keepdims=True)
+        rows = [
+            np.abs(u @ m.sensitivity(np.concatenate([[0.0], x, [0.0]]), check_limits=False)[:3]) * eps
+            for x, u in zip(X, U)
+        ]
+        assert len(rows) and lb[i] <= fft_probabilities(rows, 0.7, 1 << 14).min() + 5e-5
+    assert lb.min() > 0.0
     a, b = rng.uniform(-0.2, 0.2, (2, 200, 11))
     t = rng.random((200, 1))
     Pa, _ = direction_probability_batch(a, ["uniform"] * 11, 0.6)

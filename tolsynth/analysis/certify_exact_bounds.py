@@ -1,0 +1,400 @@
+"""Lower bounds of the exact per-direction probability over (joint box, direction patch) pairs.
+
+Along a unit direction ``u`` the hand error is ``u . dr = sum_i b_i Y_i`` with ``b_i = eps_i u . a_i(q)``
+and ``Y_i`` independent on [-1, 1] with the parameters' shapes.  For symmetric log-concave ``Y_i``
+the set ``{b : P(|b . Y| <= R) >= t}`` is convex for every level t (Lagoa, Li & Sznaier 2005) and,
+as ``P`` falls when any ``|b_i|`` grows (Anderson's theorem), it is closed downwards in ``|b|``:
+``P`` is quasi-concave in ``b``, and stays so after any ``|b_i|`` is raised by a constant.
+
+* A joint box (centre ``c``, half-widths ``r``) gives ``A(c + d) = A(c) + J(c) d + E`` with the
+  remainder ``|E|`` from an interval bound of the second derivatives over the box, or of the third
+  with the Hessian at the centre where that is tighter (:func:`taylor_enclosure`); the affine
+  part's corners are the box's vertices, cut by the joint constraints.
+* A direction patch is the cone over a square of a cube face (``u`` and ``-u`` give the same
+  probability, so three faces suffice) with corner rays ``v_k``; with ``n`` a unit vector inside
+  it, every direction of the patch is ``x / |x|`` for an ``x`` of the quadrilateral of the points
+  ``v_k / (n . v_k)``, all on the plane ``n . x = 1`` and so outside the unit ball: ``b(x) =
+  |x| b(x / |x|)`` is larger, and ``P`` there smaller.
+* Over the product, ``b`` is bilinear in (joint corner, point of the quadrilateral) plus the
+  remainder, so the smallest probability is at one of the pairs of vertices, with ``|b_i|``
+  raised by the remainder's part ``eps_i sum_r |E_ri| max_k |v_kr| / (n . v_k)``.
+
+The corners are settled cheaply first: at the interval hull of the joint corners (one evaluation
+per patch corner), at the corner of largest variance (the likeliest to fail), then in groups by
+their side of the centre along the joints that move ``A`` most, each group at its largest
+``|b_i|`` (``|y + sum_j s_j g_j|`` over the signs of the free joints is at most ``|y + fixed part| +
+sum_free |g_j|``, coordinate by coordinate), halving the failing groups joint by joint.  Every
+probability is the compiled series (:func:`tolsynth.solvers.exact_series.probability`) with its
+rigorous error bound subtracted.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import casadi as ca
+import numpy as np
+
+from tolsynth.analysis.certify_bounds import polytope_vertices
+from tolsynth.analysis.interval_ops import round_up as _up
+from tolsynth.analysis.intervals import IntervalFunction
+from tolsynth.solvers.exact_series import probability
+
+__all__ = ["ExactBounds", "JointEnclosure", "taylor_enclosure", "start_patches", "children", "patch_normals"]
+
+_U = 2.0**-53
+#: error allowed in each exact probability the search evaluates
+EVAL_TOL = 1e-10
+#: the first, cheaper tolerance: most rows are settled against the threshold by it
+LOOSE_TOL = 1e-7
+#: the Hessian's graph is used when it has at most this many times the Jacobian's operations
+HESSIAN_FACTOR = 4.0
+#: the same with the compiled interval interpreter (evaluations cheaper than the boxes they save)
+HESSIAN_FACTOR_COMPILED = 16.0
+#: the third derivatives' graph is used when it has at most this many times the Hessian's operations
+THIRD_FACTOR = 4.0
+#: patches per cube face side at the start
+START_GRID = 2
+#: joints whose sides group the corners of a box crossed by a joint constraint (2^levels groups)
+GROUP_LEVELS = 3
+#: a lifted direction's rounding is covered by raising every coefficient by this relative amount
+_LIFT_SLACK = 1e-13
+#: relative rounding allowed for the sums forming a coefficient bound (a few dozen roundings)
+_SUM_SLACK = 1e-14
+
+_E = np.eye(3)
+_FRAMES = np.array([(_E[a], _E[(a + 1) % 3], _E[(a + 2) % 3]) for a in range(3)])  # face, (n, s, t), xyz
+_STEPS = np.array([(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)])
+
+
+class JointEnclosure:
+    """Interval functions of ``A`` over boxes of the searched joints (the other joints held)."""
+
+    def __init__(self, st, nq: int, free, held: dict):
+        cols = list(st.columns)
+        self.m = len(cols)
+        self.k = len(free)
+        x = ca.SX.sym("x", self.k)
+        q = [ca.SX(float(held.get(j, 0.0))) for j in range(nq)]
+        for i, j in enumerate(free):
+            q[j] = x[i]
+        A = st.A.call([ca.vertcat(*q)])[0][:, cols]
+        a = ca.densify(ca.vec(A))  # column-major: the three rows of column 0, then column 1, ...
+        self.na = a.numel()
+        self.point_fn = ca.Function("A", [x], [a])
+        self.centre = IntervalFunction(ca.Function("aJ", [x], [a, ca.densify(ca.jacobian(a, x))]))
+        H = ca.densify(ca.vertcat(*[ca.vec(ca.hessian(a[i], x)[0]) for i in range(self.na)]))
+        hess = IntervalFunction(ca.Function("aH", [x], [a, H]))
+        factor = HESSIAN_FACTOR_COMPILED if hess.compiled else HESSIAN_FACTOR
+        self.use_hessian = hess.n_operations <= factor * self.centre.n_operations
+        self.hess = hess
+        self.box = hess if self.use_hessian else self.centre
+        # third derivatives over the box with the Hessian at the centre: a third-order remainder,
+        # where the interval Hessian over a wider box is much wider than the Hessian itself
+        self.third = None
+        if self.use_hessian:
+            T = ca.jacobian(ca.vec(ca.jacobian(ca.vec(ca.jacobian(a, x)), x)), x)
+            third = IntervalFunction(ca.Function("aT", [x], [a, ca.densify(ca.vec(T))]))
+            if third.n_operations <= THIRD_FACTOR * hess.n_operations:
+                self.third = third
+
+    def values(self, X: np.ndarray) -> np.ndarray:
+        """``A`` at points X (n, k), shape (n, 3, m) (floating point)."""
+        X = np.atleast_2d(X)
+        a = np.array(self.point_fn.map(len(X))(X.T)).T.reshape(len(X), self.m, 3)
+        return a.transpose(0, 2, 1)
+
+
+def taylor_enclosure(g: JointEnclosure, L: np.ndarray, H: np.ndarray, linear=()):
+    """``A`` over each box ``L <= x <= H`` (n, k): ``A(x)`` in the convex
+    hull of the corner matrices ``Y[b, c]`` (column-major vectors, (n, C, 3 m); only where ``use``)
+    plus ``[-E, E]`` entrywise (n, 3 m) for every x of the box that meets the linear constraints;
+    ``ok`` False where the graph is not proven regular on the box (a closed loop near its limits);
+    ``share`` (n, 3 m, k): each coordinate's part of the remainder (where to halve).  Returned as an
+    :class:`Enclosure`, with the centre and Jacobian too (the affine part over a box without a
+    constraint crossing it is ``am + Jm d`` for every ``|d| <= r``)."""
+    na, k = g.na, g.k
+    nb = len(L)
+    C = np.minimum(np.maximum(0.5 * (L + H), L), H)
+    r = np.maximum(_up(H - C), _up(C - L))
+    with np.errstate(all="ignore"):
+        BL, BH, breg = g.box.evaluate(L, H)
+        CL, CH, creg = g.centre.evaluate(C, C)
+        am = 0.5 * (CL[:, :na] + CH[:, :na])
+        Jl, Jh = CL[:, na:].reshape(nb, k, na), CH[:, na:].reshape(nb, k, na)
+        Jm = 0.5 * (Jl + Jh)
+        # the centre's own enclosure widths and the rounding of am + Jm d, then the remainder
+        lin = np.einsum("bkn,bk->bn", np.maximum(Jh - Jm, Jm - Jl) + 4.0 * (k + 2) * _U * np.abs(Jm), r)
+        E = np.maximum(CH[:, :na] - am, am - CL[:, :na]) + lin + 4.0 * _U * np.abs(am)
+        if g.use_hessian:
+            Ha = np.maximum(np.abs(BL[:, na:]), np.abs(BH[:, na:])).reshape(nb, na, k, k)
+            share = 0.5 * np.einsum("bnjk,bj,bk->bnk", Ha, r, r)
+            if g.third is not None:
+                # |d^T H(c) d| / 2 + |T(B)| r^3 / 6, coordinate by coordinate, where it is smaller
+                HcL, HcH, _ = g.hess.evaluate(C, C)
+                Hc = np.maximum(np.abs(HcL[:, na:]), np.abs(HcH[:, na:])).reshape(nb, na, k, k)
+                TL, TH, treg = g.third.evaluate(L, H)
+                # vec of the (na k) x k Jacobian of vec(J): entry (n + na (j + k l)) -> T[n, j, l, ...]
+                Ta = np.maximum(np.abs(TL[:, na:]), np.abs(TH[:, na:])).reshape(nb, k, k, k, na)
+                s3 = 0.5 * np.einsum("bnjk,bj,bk->bnk", Hc, r, r) + np.einsum("blkjn,bj,bk,bl->bnl", Ta, r, r, r) / 6.0
+                better = treg[:, None] & np.isfinite(s3).all(axis=2) & (s3.sum(axis=2) < share.sum(axis=2))
+                share = np.where(better[:, :, None], s3, share)
+        else:
+            dev = np.maximum(np.abs(BL[:, na:].reshape(nb, k, na) - Jm), np.abs(BH[:, na:].reshape(nb, k, na) - Jm))
+            share = np.einsum("bkn,bk->bnk", dev, r)
+        E = _up(E + share.sum(axis=2) * (1.0 + 4.0 * (k + 2) * _U))
+        D, use = polytope_vertices(C, r, linear)
+        # the constraint crossings are computed: their rounding moves the image by at most this
+        E = E + 1e-12 * np.einsum("bkn,bk->bn", np.abs(Jm), r) if linear else E
+        Y = am[:, None, :] + np.einsum("bkn,bck->bcn", Jm, D)
+        ok = breg & creg & np.isfinite(E).all(axis=1) & np.isfinite(Y).all(axis=(1, 2))
+    # the joints that move A most, the most first: the corners are grouped by their sides
+    spread = np.linalg.norm(Jm, axis=2) * r  # (n, k)
+    order = np.argsort(-spread, axis=1)
+    bits = np.take_along_axis(D, order[:, None, :], axis=2) >= 0.0  # (n, C, k)
+    corners = 1 << k
+    cross = ~(use[:, :corners].all(axis=1) & ~use[:, corners:].any(axis=1))
+    return Enclosure(
+        np.where(ok[:, None], am, 0.0),
+        np.where(ok[:, None, None], Jm, 0.0),
+        r,
+        np.where(ok[:, None], E, 0.0),
+        ok,
+        share,
+        order,
+        cross,
+        np.where(ok[:, None, None], Y, 0.0),
+        use,
+        bits,
+    )
+
+
+class Enclosure(NamedTuple):
+    """``A`` over joint boxes (:func:`taylor_enclosure`)."""
+
+    am: np.ndarray  # (n, 3 m) A at the centres (column-major)
+    Jm: np.ndarray  # (n, k, 3 m) its Jacobian there
+    r: np.ndarray  # (n, k) half-widths
+    E: np.ndarray  # (n, 3 m) remainder bound (with every rounding)
+    ok: np.ndarray  # (n,) the graph proven regular on the box
+    share: np.ndarray  # (n, 3 m, k) each joint's part of the remainder
+    order: np.ndarray  # (n, k) joints by how much they move A, the most first
+    cross: np.ndarray  # (n,) a joint constraint crosses the box (its corners are not all feasible)
+    Y: np.ndarray  # (n, C, 3 m) the affine part at the corners of the feasible part
+    use: np.ndarray  # (n, C) which of them
+    bits: np.ndarray  # (n, C, k) their sides of the centre along ``order``
+
+
+def _rays(face, s0, t0, h):
+    """Corner rays (n, 4, 3) of the patches (exact: dyadic face coordinates)."""
+    F = _FRAMES[face]
+    s = s0[:, None] + _STEPS[None, :, 0] * h[:, None]
+    t = t0[:, None] + _STEPS[None, :, 1] * h[:, None]
+    return F[:, None, 0] + s[..., None] * F[:, None, 1] + t[..., None] * F[:, None, 2]
+
+
+def _lift(V):
+    """Per patch the unit ``n`` inside it and the factors ``1 / (n . v_k)`` (n, 4), raised to cover
+    their rounding and ``|n| != 1``: the lifted corners lie on a plane outside the unit ball."""
+    U = V / np.linalg.norm(V, axis=2, keepdims=True)
+    n = U.sum(axis=1)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    return n, (1.0 + _LIFT_SLACK) / np.einsum("pkx,px->pk", V, n)
+
+
+class ExactBounds:
+    """Lower bounds of the exact per-direction probability over (joint box, direction patch) pairs.
+
+    Parameters
+    ----------
+    enc : JointEnclosure
+    eps : ndarray
+        Tolerances of the kept columns (tolerance units).
+    shapes : tuple
+        The shape of every kept column.
+    R : float
+    linear : tuple
+        Joint constraints ``(a, lo, hi)`` over the searched joints.
+    """
+
+    def __init__(self, enc: JointEnclosure, eps, shapes, R: float, linear=()):
+        self.enc = enc
+        self.m = enc.m
+        self.eps = np.asarray(eps, dtype=float)
+        self.shapes = tuple(shapes)
+        self.R = float(R)
+        self.linear = tuple(linear)
+        self.bounded = all(s.name != "normal" for s in self.shapes)
+        self.var = np.array([s.variance for s in self.shapes])
+        self.evaluations = 0
+
+    def lower(self, B: np.ndarray, thr: float = -math.inf) -> np.ndarray:
+        """Rigorous lower bounds of P at rows of coefficients ``B`` (n, m) (upper bounds of ``|b|``),
+        to the precision that settles each against ``thr``: a sum of bounded errors that cannot
+        leave R (P = 1); else the series to a loose tolerance, and to :data:`EVAL_TOL` where that
+        leaves the row within its error of ``thr``."""
+        out = np.ones(len(B))
+        if len(B) == 0:
+            return out
+        todo = np.flatnonzero(~(self.bounded & (B.sum(axis=1) * (1.0 + 4 * self.m * _U) <= self.R)))
+        if todo.size:
+            P, err = probability(B[todo], self.shapes, self.R, LOOSE_TOL)
+            low = P - err - 4.0 * _U
+            near = np.flatnonzero((low < thr) & (P + err + 4.0 * _U >= thr))
+            if near.size:
+                P2, err2 = probability(B[todo[near]], self.shapes, self.R, EVAL_TOL)
+                low[near] = P2 - err2 - 4.0 * _U
+            out[todo] = np.maximum(low, 0.0)
+            self.evaluations += todo.size + near.size
+        return out
+
+    def point(self, X: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """P at joint points X (n, k) along unit directions U (n, 3) (floating point: a value found,
+        not a bound)."""
+        A = self.enc.values(X)
+        B = np.abs(np.einsum("nrm,nr->nm", A, U)) * self.eps
+        P, _ = probability(B, self.shapes, self.R, EVAL_TOL)
+        return P
+
+    def _vertex_pairs(self, Bc, use, bits, lb, thr):
+        """The pairs' bound from every (joint corner, direction vertex), settled group by group: the
+        corners on one side of the centre along the joint moving A most, then along the next, ...,
+        each group bounded at its largest ``|b_i|`` (monotone: one evaluation a direction vertex
+        proves all of its corners), and only the corners of groups that fail one by one.  A pair
+        found to fail keeps its bound ``lb`` (valid, looser), which only orders the search."""
+        p, C, K, m = Bc.shape
+        done = ~use.copy()  # (p, C) corners settled (or not used)
+        low = np.full(p, np.inf)
+        # first the corner of largest variance at each direction vertex: the likeliest to fail
+        score = np.where(use[:, :, None], np.einsum("pckm,m->pck", Bc**2, self.var), -np.inf)
+        top = np.argmax(score, axis=1)  # (p, K)
+        first = np.take_along_axis(Bc, top[:, None, :, None], axis=1)[:, 0]  # (p, K, m)
+        val = self.lower(first.reshape(-1, m), thr).reshape(p, K)
+        alive = (val >= thr).all(axis=1)
+        low = np.minimum(low, val.min(axis=1))
+        for t in range(1, bits.shape[2] + 1):
+            code = (bits[:, :, :t] * (1 << np.arange(t))).sum(axis=2)  # (p, C)
+            G = 1 << t
+            onehot = (code[:, :, None] == np.arange(G)) & ~done[:, :, None] & alive[:, None, None]  # (p, C, G)
+            has = onehot.any(axis=1)  # (p, G)
+            if not has.any():
+                break
+            pi, gi = np.nonzero(has)
+            mag = np.where(onehot[pi, :, gi][:, :, None, None], Bc[pi], 0.0).max(axis=1)  # (n, K, m)
+            val = self.lower(mag.reshape(-1, m), thr).reshape(-1, K).min(axis=1)
+            ok = val >= thr
+            np.minimum.at(low, pi[ok], val[ok])
+            settled = np.zeros((p, G), dtype=bool)
+            settled[pi[ok], gi[ok]] = True
+            done |= np.take_along_axis(settled, code, axis=1) & use
+            single = onehot.sum(axis=1)[pi, gi] == 1
+            alive[pi[~ok & single]] = False  # one corner below the threshold: the pair fails
+        rest = ~done & alive[:, None]
+        if rest.any():
+            pi, ci = np.nonzero(rest)
+            val = self.lower(Bc[pi, ci].reshape(-1, m), thr).reshape(-1, K).min(axis=1)
+            np.minimum.at(low, pi, val)
+            bad = np.zeros(p, dtype=bool)
+            bad[pi[val < thr]] = True
+            alive &= ~bad
+        return np.where(alive, np.minimum(low, 1.0), lb)
+
+    def _tree(self, y0, G, order, base, lb, thr):
+        """Non-crossed boxes: the pairs' bound over every joint corner from the centre's image
+        ``y0`` (p, 4, m) and each joint's ``G_j = r_j J_j^T x`` (p, 4, k, m): first the corner of
+        largest variance, then groups with the sides of the most moving joints fixed, halved where
+        they fail (a group at ``|y0 + fixed part| + sum_free |G_j|``, its largest ``|b_i|``)."""
+        p, K, k, m = G.shape
+        aG = np.abs(G)
+        w = self.var * self.eps**2
+        sign = np.where(np.einsum("pkjm,pkm,m->pkj", G, y0, w) >= 0.0, 1.0, -1.0)
+        first = np.abs(y0 + np.einsum("pkj,pkjm->pkm", sign, G)) + base
+        val = self.lower(self._rows(first), thr).reshape(p, K).min(axis=1)
+        alive = val >= thr
+        low = np.where(alive, val, np.inf)
+        gp = np.flatnonzero(alive)
+        S, F = y0[gp], aG[gp].sum(axis=2)
+        for t in range(k):
+            if gp.size == 0:
+                break
+            j = order[gp, t]
+            Gj = G[gp, :, j, :]
+            gp = np.repeat(gp, 2)
+            S = np.repeat(S, 2, axis=0) + np.tile(np.array([1.0, -1.0]), len(Gj))[:, None, None] * np.repeat(
+                Gj, 2, axis=0
+            )
+            F = np.maximum(np.repeat(F - np.abs(Gj), 2, axis=0), 0.0)
+            keep = alive[gp]
+            gp, S, F = gp[keep], S[keep], F[keep]
+            val = self.lower(self._rows(np.abs(S) + F + base[gp]), thr).reshape(-1, K).min(axis=1)
+            ok = val >= thr
+            np.minimum.at(low, gp[ok], val[ok])
+            if t == k - 1:
+                alive[gp[~ok]] = False  # a single corner below the threshold: the pair fails
+            gp, S, F = gp[~ok], S[~ok], F[~ok]
+        return np.where(alive, np.minimum(low, 1.0), lb)
+
+    def _rows(self, X):
+        """Coefficient bounds ``(..., m)`` as rows, raised to cover the lift's rounding, in units."""
+        return _up(X * (1.0 + _LIFT_SLACK) * self.eps).reshape(-1, self.m)
+
+    def pairs(self, enc, bi, face, s0, t0, h, thr):
+        """Lower bounds (n,) on the pairs (joint box ``bi`` of the :class:`Enclosure`, patch), the lift
+        excess and the remainder's relative size of each (where to refine)."""
+        m, k, p = self.m, self.enc.k, len(bi)
+        V = _rays(face, s0, t0, h)
+        _, scale = _lift(V)
+        lift = (np.linalg.norm(V, axis=2) * scale).max(axis=1) - 1.0
+        Vs = V * scale[..., None]  # the lifted corners (p, 4, 3)
+        reach = np.abs(Vs).max(axis=1)  # (p, 3): the largest |x_r| on the quadrilateral
+        e = np.einsum("pmr,pr->pm", enc.E[bi].reshape(p, m, 3), reach)
+        am = enc.am[bi].reshape(p, m, 3)
+        Jr = (enc.Jm[bi] * enc.r[bi][:, :, None]).reshape(p, k, m, 3)
+        y0 = np.einsum("pmr,pkr->pkm", am, Vs)
+        G = np.einsum("pjmr,pkr->pkjm", Jr, Vs)
+        # every sum below is of these terms: their rounding is a small multiple of their absolute sum
+        size = np.einsum("pmr,pkr->pkm", np.abs(am) + np.abs(Jr).sum(axis=1), np.abs(Vs))
+        base = e[:, None, :] + _SUM_SLACK * size
+        lb = self.lower(self._rows(np.abs(y0) + np.abs(G).sum(axis=2) + base), thr).reshape(p, 4).min(axis=1)
+        todo = enc.ok[bi] & (lb < thr)
+        plain = np.flatnonzero(todo & ~enc.cross[bi])
+        if plain.size:
+            lb[plain] = self._tree(y0[plain], G[plain], enc.order[bi[plain]], base[plain], lb[plain], thr)
+        crossed = np.flatnonzero(todo & enc.cross[bi])
+        if crossed.size:  # the feasible part's own corners
+            bt = bi[crossed]
+            Yb = enc.Y[bt].reshape(crossed.size, enc.Y.shape[1], m, 3)
+            Z = np.abs(np.einsum("pcmr,pkr->pckm", Yb, Vs[crossed])) + base[crossed][:, None]
+            Bc = _up(Z * (1.0 + _LIFT_SLACK) * self.eps)
+            bits = enc.bits[bt][:, :, :GROUP_LEVELS]
+            lb[crossed] = self._vertex_pairs(Bc, enc.use[bt], bits, lb[crossed], thr)
+        lb = np.where(enc.ok[bi], lb, 0.0)
+        centre = np.abs(y0).max(axis=1)  # (p, m) a typical coefficient vector
+        rel = np.linalg.norm(e * self.eps, axis=1) / np.maximum(np.linalg.norm(centre * self.eps, axis=1), 1e-300)
+        return lb, lift, np.where(enc.ok[bi], rel, np.inf)
+
+
+def patch_normals(face, s0, t0, h):
+    """The unit vector inside each patch that its lift uses (n, 3)."""
+    return _lift(_rays(face, s0, t0, h))[0]
+
+
+def start_patches():
+    g = np.arange(START_GRID) * (2.0 / START_GRID) - 1.0
+    S, T = np.meshgrid(g, g, indexing="ij")
+    face = np.repeat(np.arange(3), S.size)
+    return face, np.tile(S.ravel(), 3), np.tile(T.ravel(), 3), np.full(face.size, 2.0 / START_GRID)
+
+
+def children(face, s0, t0, h):
+    """Each patch's four quarters (exact: halving a dyadic square)."""
+    hh = 0.5 * h
+    ds = np.array([0.0, 1.0, 0.0, 1.0])
+    dt = np.array([0.0, 0.0, 1.0, 1.0])
+    return (
+        np.repeat(face, 4),
+        (s0[:, None] + ds * hh[:, None]).ravel(),
+        (t0[:, None] + dt * hh[:, None]).ravel(),
+        np.repeat(hh, 4),
+    )
