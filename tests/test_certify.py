@@ -233,7 +233,7 @@ def test_exact_component_bounds_are_sound_and_quasi_concave():
     here from the model's own sensitivity and an FFT convolution, not the package's series); and
     the fact behind the vertices: P along a segment of coefficient vectors is never below both
     ends (quasi-concavity, GUARANTEES section 1)."""
-    from tests.independent import fft_probabilities
+    from independent import fft_probabilities
     from tolsynth.analysis.certify_exact_bounds import ExactBounds, JointEnclosure, taylor_enclosure
     from tolsynth.probability.distributions import shapes_of
     from tolsynth.probability.exact import direction_probability_batch

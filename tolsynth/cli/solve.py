@@ -419,7 +419,7 @@ def register(sub) -> None:
         "--max-rounds",
         type=number("--max-rounds", "an integer >= 1", lambda v: v >= 1, integer=True),
         default=None,
-        help="with --everywhere: exchange rounds before giving up (default 12); reached: not converged",
+        help="with --everywhere: exchange rounds before giving up (default 20); reached: not converged",
     )
     p.add_argument(
         "--tol",

@@ -149,7 +149,7 @@ def synthesize_workspace(
     *,
     pose="worst",
     tol: float = 1e-3,
-    max_rounds: int = 12,
+    max_rounds: int = 20,
     search: dict | None = None,
     certify: bool = False,
     certify_options: dict | None = None,
