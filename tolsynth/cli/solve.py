@@ -244,9 +244,12 @@ def cmd_solve(args) -> int:
             emit_json(out)
         else:
             print(f"{head}, every pose")
+            # what the exchange ranks poses by: the Gaussian sigma ratio, else the probability's margin
+            gauss = w.result.probability_kind == "gaussian" and args.criterion != "sphere"
+            measure = "sigma z/R" if gauss else f"{w.result.probability_kind} (1-P)/(1-p)"
             for k, r in enumerate(w.rounds):
                 print(
-                    f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.6g}, worst sigma z/R over the "
+                    f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.6g}, worst {measure} over the "
                     f"workspace {r['worst_value']:.5f} at hand {_fmt(r['worst_position'])} mm"
                 )
             print(
