@@ -104,10 +104,12 @@ plt.show()
 # The home pose is the easy one. `synthesize_workspace` imposes the specification at every
 # actuator vector of the strokes (600 to 640 mm each, a box the model file chose to stay clear of
 # singularities: its condition number of df/dx is at most 12, against 6.7 at home) where the platform assembles: optimise at a
-# set of poses, search the strut space for the pose of largest principal sigma at that optimum,
-# add it, repeat. The search treats a strut vector where Newton's method cannot assemble the
-# platform as outside the workspace. Its coarse grid here is 4 points per strut (4^6 = 4096
-# strut vectors, then a pattern search from the best of them).
+# set of poses, search the strut space for the pose of lowest exact per-direction probability at
+# that optimum (from the pose of largest principal sigma and a grid ranked by the exact
+# probability, then a local search over struts and directions), add it, repeat. The search treats
+# a strut vector where Newton's method cannot assemble the platform as outside the workspace. The
+# sigma search's coarse grid here is 4 points per strut (4^6 = 4096 strut vectors, then a pattern
+# search from the best of them).
 
 # %%
 ws = tolsynth.synthesize_workspace(m, pose="home", search={"grid": 4}, **SPEC)
