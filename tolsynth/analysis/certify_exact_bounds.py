@@ -155,6 +155,11 @@ def taylor_enclosure(g: JointEnclosure, L: np.ndarray, H: np.ndarray, linear=())
     bits = np.take_along_axis(D, order[:, None, :], axis=2) >= 0.0  # (n, C, k)
     corners = 1 << k
     cross = ~(use[:, :corners].all(axis=1) & ~use[:, corners:].any(axis=1))
+    # the used points first, the array cut to the most any box uses
+    keep = np.argsort(~use, axis=1, kind="stable")[:, : max(int(use.sum(axis=1).max(initial=0)), 1)]
+    Y = np.take_along_axis(Y, keep[:, :, None], axis=1)
+    bits = np.take_along_axis(bits, keep[:, :, None], axis=1)
+    use = np.take_along_axis(use, keep, axis=1)
     return Enclosure(
         np.where(ok[:, None], am, 0.0),
         np.where(ok[:, None, None], Jm, 0.0),
@@ -273,23 +278,32 @@ class ExactBounds:
         val = self.lower(first.reshape(-1, m), thr).reshape(p, K)
         alive = (val >= thr).all(axis=1)
         low = np.minimum(low, val.min(axis=1))
+        pair = np.repeat(np.arange(p), C)
         for t in range(1, bits.shape[2] + 1):
-            code = (bits[:, :, :t] * (1 << np.arange(t))).sum(axis=2)  # (p, C)
             G = 1 << t
-            onehot = (code[:, :, None] == np.arange(G)) & ~done[:, :, None] & alive[:, None, None]  # (p, C, G)
-            has = onehot.any(axis=1)  # (p, G)
-            if not has.any():
+            live = ~done & alive[:, None]
+            if not live.any():
                 break
-            pi, gi = np.nonzero(has)
-            mag = np.where(onehot[pi, :, gi][:, :, None, None], Bc[pi], 0.0).max(axis=1)  # (n, K, m)
-            val = self.lower(mag.reshape(-1, m), thr).reshape(-1, K).min(axis=1)
+            # the groups of each pair contiguous (settled corners last): one maximum per run
+            code = np.where(live, (bits[:, :, :t] * (1 << np.arange(t))).sum(axis=2), G)
+            order = np.argsort(code, axis=1, kind="stable")
+            flat = np.take_along_axis(code, order, axis=1).ravel()
+            new = np.ones(p * C, dtype=bool)
+            new[1:] = (flat[1:] != flat[:-1]) | (pair[1:] != pair[:-1])
+            starts = np.flatnonzero(new)
+            Bs = np.take_along_axis(Bc, order[:, :, None, None], axis=1).reshape(p * C, K, m)
+            mags = np.maximum.reduceat(Bs, starts, axis=0)
+            sp, sc = pair[starts], flat[starts]
+            size = np.diff(np.append(starts, p * C))
+            keep = sc < G
+            mags, sp, sc, size = mags[keep], sp[keep], sc[keep], size[keep]
+            val = self.lower(mags.reshape(-1, m), thr).reshape(-1, K).min(axis=1)
             ok = val >= thr
-            np.minimum.at(low, pi[ok], val[ok])
-            settled = np.zeros((p, G), dtype=bool)
-            settled[pi[ok], gi[ok]] = True
-            done |= np.take_along_axis(settled, code, axis=1) & use
-            single = onehot.sum(axis=1)[pi, gi] == 1
-            alive[pi[~ok & single]] = False  # one corner below the threshold: the pair fails
+            np.minimum.at(low, sp[ok], val[ok])
+            settled = np.zeros((p, G + 1), dtype=bool)
+            settled[sp[ok], sc[ok]] = True
+            done |= np.take_along_axis(settled, code, axis=1)
+            alive[sp[~ok & (size == 1)]] = False  # one corner below the threshold: the pair fails
         rest = ~done & alive[:, None]
         if rest.any():
             pi, ci = np.nonzero(rest)
