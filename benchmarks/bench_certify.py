@@ -7,7 +7,7 @@ boxes per CPU second, the bound reached and the worst value found (both as ``z s
 certified or not.  ``--target`` sets the decision's goal (default ``1 + tol``, tol 1e-3): the
 proof's cost is set by the room between the design's true maximum and the goal, so a sweep of
 targets shows how it grows as the room closes.  ``--pieces`` sets the arc polygons' tangent pieces
-(tolsynth.analysis.certify_bounds.POLYGON_PIECES; default: as many as keep a box's tuples within
+(tolsynth.analysis.certify_polygon.POLYGON_PIECES; default: as many as keep a box's tuples within
 POLYGON_TUPLES).  ``--exchange`` also times the full certified
 exchange, ``synthesize_workspace(..., certify=True)``.
 
@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 import tolsynth
-import tolsynth.analysis.certify_bounds as certify_bounds
+import tolsynth.analysis.certify_polygon as certify_polygon
 from tolsynth.analysis.certify import certify_worst_pose
 from tolsynth.probability.stats import z_of_p
 
@@ -74,8 +74,8 @@ def main() -> None:
     ap.add_argument("--exchange", action="store_true")
     args = ap.parse_args()
     if args.pieces is not None:
-        certify_bounds.POLYGON_PIECES = args.pieces
-    print(f"arc polygons: {certify_bounds.POLYGON_PIECES or 'automatic'} tangent pieces per arc")
+        certify_polygon.POLYGON_PIECES = args.pieces
+    print(f"arc polygons: {certify_polygon.POLYGON_PIECES or 'automatic'} tangent pieces per arc")
     targets = args.target or [1.0 + args.tol]
     print(
         f"{'model':14} {'target':>8} {'boxes':>8} {'CPU s':>7} {'wall s':>7} {'box/s':>6} {'bound':>9} {'best':>9}  certified"

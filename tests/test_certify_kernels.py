@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth.analysis.certify_bounds import PolygonSigmaBounds
 from tolsynth.analysis.certify_kernels import contract, lambda_max
+from tolsynth.analysis.certify_polygon import PolygonSigmaBounds
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 
 

@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial import ConvexHull
 
 import tolsynth
-from tolsynth.analysis.certify_bounds import PolygonSigmaBounds, arc_polygons
+from tolsynth.analysis.certify_polygon import PolygonSigmaBounds, arc_polygons
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 
 

@@ -1,4 +1,4 @@
-"""Compiled contraction of the arc-polygon bound (:class:`tolsynth.analysis.certify_bounds.PolygonSigmaBounds`).
+"""Compiled contraction of the arc-polygon bound (:class:`tolsynth.analysis.certify_polygon.PolygonSigmaBounds`).
 
 The bound evaluates the six entries of ``V = A W A^T``, a polynomial of degree two in each joint's
 ``(cos, sin)``, at every tuple of polygon points: the coefficient tensor ``gamma`` (6, 6^k) is
@@ -91,7 +91,7 @@ int ts_contract(int n, int k, const int *p, const double *g, const double *V, do
     return 0;
 }
 
-/* The largest eigenvalue bound of certify_bounds.lambda_max_bound_entries (reduce_last) for each box
+/* The largest eigenvalue bound of certify_polygon.lambda_max_bound_entries (reduce_last) for each box
    of T tuples g[b, 0..5, t] (entries 00 11 22 01 02 12), statement for statement its NumPy
    arithmetic: the characteristic polynomial's coefficients moved by their rounding, a candidate
    proven above every root by the cubic and its first two derivatives.  The candidate only rises
@@ -211,7 +211,7 @@ def contract(g: np.ndarray, V: list):
 
 def lambda_max(g: np.ndarray, err: np.ndarray):
     """Per box, the largest over its tuples of the bound of
-    :func:`tolsynth.analysis.certify_bounds.lambda_max_bound_entries` before its last rounding up:
+    :func:`tolsynth.analysis.certify_polygon.lambda_max_bound_entries` before its last rounding up:
     ``g`` (n, 6, T) the tuples' entries, ``err`` (n, 6) their common error.  Returns ``(out, ok)``
     (``ok`` False where a tuple proved nothing: the caller bounds that box itself), or None
     without the compiled kernel."""
