@@ -47,6 +47,7 @@ from tolsynth.analysis.certify_exact_bounds import (
     start_patches,
     taylor_enclosure,
 )
+from tolsynth.analysis.exact_pose_search import worst_exact_pose
 from tolsynth.errors import OutOfRangeError
 
 __all__ = ["certify_components_exact", "EXACT_TOL"]
@@ -240,6 +241,11 @@ def certify_components_exact(
     for x in starts:
         s.consider(np.asarray(x)[None], s.direction(np.asarray(x))[None])
     s.polish()
+    # the sampled search for the pose of lowest exact probability (joints and direction together,
+    # ending on the joint constraints where the minimum lies there: a compass search from a box
+    # centre stops short of a corner of the domain, and the bound cannot close on it)
+    w = worst_exact_pose(mech, eps, R, distribution=distribution, x0=[_full_pose(dom, x, nq) for x in starts])
+    s.consider(np.asarray(w.q, dtype=float)[list(dom.free)][None], np.asarray(w.direction, dtype=float)[None])
     scale = np.where(hi > lo, hi - lo, 1.0)
     face0 = start_patches()
     root = _Box(lo.copy(), hi.copy(), *face0, np.zeros(len(face0[0])), 0.0, math.inf, False)
@@ -345,6 +351,14 @@ def certify_components_exact(
         reason=reason,
         method="exact probabilities at the vertex pairs of joint boxes and lifted direction patches",
     )
+
+
+def _full_pose(dom, x, nq: int) -> np.ndarray:
+    q = np.zeros(nq)
+    for j, v in dom.held.items():
+        q[j] = v
+    q[list(dom.free)] = x
+    return q
 
 
 def _lower_bound(s: _Search, heap) -> float:
