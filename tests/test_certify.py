@@ -234,7 +234,8 @@ def test_exact_component_bounds_are_sound_and_quasi_concave():
     the fact behind the vertices: P along a segment of coefficient vectors is never below both
     ends (quasi-concavity, GUARANTEES section 1)."""
     from independent import fft_probabilities
-    from tolsynth.analysis.certify_exact_bounds import ExactBounds, JointEnclosure, taylor_enclosure
+    from tolsynth.analysis.certify_bounds import taylor_enclosure
+    from tolsynth.analysis.certify_exact_bounds import ExactBounds
     from tolsynth.probability.distributions import shapes_of
     from tolsynth.probability.exact import direction_probability_batch
 
@@ -243,7 +244,7 @@ def test_exact_component_bounds_are_sound_and_quasi_concave():
     cols = list(st.columns)
     eps = m.tolerances("figure3")
     shapes = shapes_of("uniform", m.error_parameters, m.index)
-    enc = JointEnclosure(st, 5, [1, 2, 3], {0: 0.0, 4: 0.0})
+    enc = JointGraphs(st, 5, [1, 2, 3], {0: 0.0, 4: 0.0})
     B = ExactBounds(enc, eps[cols], tuple(shapes[i] for i in cols), 0.7)
     rng = np.random.default_rng(9)
     lo = np.radians([140.0, 50.0, -110.0])
@@ -276,7 +277,9 @@ def test_exact_component_bounds_are_sound_and_quasi_concave():
     C[:, 1] = C[:, 0] - np.radians([50.0, 130.0, 50.0, 130.0, 50.0, 130.0])  # on a limit
     box = taylor_enclosure(enc, C - 0.03, C + 0.03, lin)
     assert box.cross.all()
-    lb, *_ = B.pairs(box, np.arange(6), np.zeros(6, dtype=int), np.full(6, -0.5), np.full(6, -0.5), np.full(6, 1.0), 2.0)
+    lb, *_ = B.pairs(
+        box, np.arange(6), np.zeros(6, dtype=int), np.full(6, -0.5), np.full(6, -0.5), np.full(6, 1.0), 2.0
+    )
     for i in range(6):
         X = (C[i] - 0.03) + 0.06 * rng.random((40, 3))
         X = X[(X[:, 0] - X[:, 1] >= math.radians(50.0)) & (X[:, 0] - X[:, 1] <= math.radians(130.0))][:6]

@@ -26,6 +26,7 @@ added to ``E``, and an eigenvalue computed by LAPACK is raised by a bound on its
 from __future__ import annotations
 
 import itertools
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -45,7 +46,7 @@ from tolsynth.analysis.certify_polygon import (  # noqa: F401
 from tolsynth.analysis.interval_ops import round_up as _up
 from tolsynth.analysis.intervals import IntervalFunction
 
-__all__ = ["JointGraphs", "SigmaBounds", "largest_singular_bound", "HESSIAN_FACTOR"]
+__all__ = ["JointGraphs", "SigmaBounds", "largest_singular_bound", "taylor_enclosure", "Enclosure", "HESSIAN_FACTOR"]
 
 #: boxes wider than this (rad, on some side) also get the natural interval bound
 NATURAL_WIDTH = 0.2
@@ -56,6 +57,8 @@ HESSIAN_FACTOR = 4.0
 #: corner bounds of the boxes they save (the paper's robot: 12.7 times the operations, 4.7 times
 #: fewer boxes)
 HESSIAN_FACTOR_COMPILED = 16.0
+#: the third derivatives' graph is used when it has at most this many times the Hessian's operations
+THIRD_FACTOR = 4.0
 
 
 def largest_singular_bound(M: np.ndarray, reduce_last: bool = False) -> np.ndarray:
@@ -116,8 +119,18 @@ class JointGraphs:
         hess = IntervalFunction(ca.Function("aH", [x], [a, H]))
         factor = HESSIAN_FACTOR_COMPILED if hess.compiled else HESSIAN_FACTOR
         self.use_hessian = hess.n_operations <= factor * self.centre.n_operations
+        self.hess = hess
         self.box = hess if self.use_hessian else self.centre
         self.corners = np.array(list(itertools.product([-1.0, 1.0], repeat=self.k))) if self.k else np.zeros((1, 0))
+        # third derivatives over the box with the Hessian at the centre: a third-order remainder,
+        # where the interval Hessian over a wider box is much wider than the Hessian itself (the
+        # paper robot's, over a 0.06 rad box, three times)
+        self.third = None
+        if self.use_hessian and self.k:
+            T = ca.jacobian(ca.vec(ca.jacobian(ca.vec(J), x)), x)
+            third = IntervalFunction(ca.Function("aT", [x], [a, ca.densify(ca.vec(T))]))
+            if third.n_operations <= THIRD_FACTOR * hess.n_operations:
+                self.third = third
 
     def values(self, X: np.ndarray) -> np.ndarray:
         """``A`` at the points X (n, k), shape (n, 3, m)."""
@@ -165,6 +178,95 @@ def polytope_vertices(C: np.ndarray, r: np.ndarray, linear=()):
     return np.where(ok[..., None], D, 0.0), ok
 
 
+def taylor_enclosure(g: JointGraphs, L: np.ndarray, H: np.ndarray, linear=()):
+    """``A`` over each box ``L <= x <= H`` (n, k): ``A(x)`` in the convex
+    hull of the corner matrices ``Y[b, c]`` (column-major vectors, (n, C, 3 m); only where ``use``)
+    plus ``[-E, E]`` entrywise (n, 3 m) for every x of the box that meets the linear constraints;
+    ``ok`` False where the graph is not proven regular on the box (a closed loop near its limits);
+    ``share`` (n, 3 m, k): each coordinate's part of the remainder (where to halve).  Returned as an
+    :class:`Enclosure`, with the centre and Jacobian too (the affine part over a box without a
+    constraint crossing it is ``am + Jm d`` for every ``|d| <= r``)."""
+    na, k = g.na, g.k
+    nb = len(L)
+    C = np.minimum(np.maximum(0.5 * (L + H), L), H)
+    r = np.maximum(_up(H - C), _up(C - L))
+    with np.errstate(all="ignore"):
+        BL, BH, breg = g.box.evaluate(L, H)
+        CL, CH, creg = g.centre.evaluate(C, C)
+        am = 0.5 * (CL[:, :na] + CH[:, :na])
+        Jl, Jh = CL[:, na:].reshape(nb, k, na), CH[:, na:].reshape(nb, k, na)
+        Jm = 0.5 * (Jl + Jh)
+        # the centre's own enclosure widths and the rounding of am + Jm d, then the remainder
+        lin = np.einsum("bkn,bk->bn", np.maximum(Jh - Jm, Jm - Jl) + 4.0 * (k + 2) * _U * np.abs(Jm), r)
+        E = np.maximum(CH[:, :na] - am, am - CL[:, :na]) + lin + 4.0 * _U * np.abs(am)
+        if g.use_hessian:
+            Ha = np.maximum(np.abs(BL[:, na:]), np.abs(BH[:, na:])).reshape(nb, na, k, k)
+            share = 0.5 * np.einsum("bnjk,bj,bk->bnk", Ha, r, r)
+            if g.third is not None:
+                # |d^T H(c) d| / 2 + |T(B)| r^3 / 6, coordinate by coordinate, where it is smaller
+                HcL, HcH, _ = g.hess.evaluate(C, C)
+                Hc = np.maximum(np.abs(HcL[:, na:]), np.abs(HcH[:, na:])).reshape(nb, na, k, k)
+                TL, TH, treg = g.third.evaluate(L, H)
+                # vec of the (na k) x k Jacobian of vec(J): entry (n + na (j + k l)) -> T[n, j, l, ...]
+                Ta = np.maximum(np.abs(TL[:, na:]), np.abs(TH[:, na:])).reshape(nb, k, k, k, na)
+                s3 = 0.5 * np.einsum("bnjk,bj,bk->bnk", Hc, r, r) + np.einsum("blkjn,bj,bk,bl->bnl", Ta, r, r, r) / 6.0
+                better = treg[:, None] & np.isfinite(s3).all(axis=2) & (s3.sum(axis=2) < share.sum(axis=2))
+                share = np.where(better[:, :, None], s3, share)
+        else:
+            dev = np.maximum(np.abs(BL[:, na:].reshape(nb, k, na) - Jm), np.abs(BH[:, na:].reshape(nb, k, na) - Jm))
+            share = np.einsum("bkn,bk->bnk", dev, r)
+        E = _up(E + share.sum(axis=2) * (1.0 + 4.0 * (k + 2) * _U))
+        D, use = polytope_vertices(C, r, linear)
+        # the constraint crossings are computed: their rounding moves the image by at most this
+        E = E + 1e-12 * np.einsum("bkn,bk->bn", np.abs(Jm), r) if linear else E
+        Y = am[:, None, :] + np.einsum("bkn,bck->bcn", Jm, D)
+        ok = breg & creg & np.isfinite(E).all(axis=1) & np.isfinite(Y).all(axis=(1, 2))
+    # the joints that move A most, the most first: the corners are grouped by their sides
+    spread = np.linalg.norm(Jm, axis=2) * r  # (n, k)
+    order = np.argsort(-spread, axis=1)
+    bits = np.take_along_axis(D, order[:, None, :], axis=2) >= 0.0  # (n, C, k)
+    corners = 1 << k
+    cross = ~(use[:, :corners].all(axis=1) & ~use[:, corners:].any(axis=1))
+    # the used points first, the array cut to the most any box uses
+    keep = np.argsort(~use, axis=1, kind="stable")[:, : max(int(use.sum(axis=1).max(initial=0)), 1)]
+    Y = np.take_along_axis(Y, keep[:, :, None], axis=1)
+    bits = np.take_along_axis(bits, keep[:, :, None], axis=1)
+    use = np.take_along_axis(use, keep, axis=1)
+    return Enclosure(
+        BL[:, :na],
+        BH[:, :na],
+        np.where(ok[:, None], am, 0.0),
+        np.where(ok[:, None, None], Jm, 0.0),
+        r,
+        np.where(ok[:, None], E, 0.0),
+        ok,
+        share,
+        order,
+        cross,
+        np.where(ok[:, None, None], Y, 0.0),
+        use,
+        bits,
+    )
+
+
+class Enclosure(NamedTuple):
+    """``A`` over joint boxes (:func:`taylor_enclosure`)."""
+
+    alo: np.ndarray  # (n, 3 m) interval evaluation of A over the box (NaN: no information)
+    ahi: np.ndarray
+    am: np.ndarray  # (n, 3 m) A at the centres (column-major)
+    Jm: np.ndarray  # (n, k, 3 m) its Jacobian there
+    r: np.ndarray  # (n, k) half-widths
+    E: np.ndarray  # (n, 3 m) remainder bound (with every rounding)
+    ok: np.ndarray  # (n,) the graph proven regular on the box
+    share: np.ndarray  # (n, 3 m, k) each joint's part of the remainder
+    order: np.ndarray  # (n, k) joints by how much they move A, the most first
+    cross: np.ndarray  # (n,) a joint constraint crosses the box (its corners are not all feasible)
+    Y: np.ndarray  # (n, C, 3 m) the affine part at the corners of the feasible part
+    use: np.ndarray  # (n, C) which of them
+    bits: np.ndarray  # (n, C, k) their sides of the centre along ``order``
+
+
 class SigmaBounds:
     """Upper bounds of ``sigma_1`` on boxes of the searched joints, at one set of variances.
 
@@ -192,12 +294,13 @@ class SigmaBounds:
         coordinate, that coordinate's share of the corner bound's remainder (where to halve)."""
         g, m, k = self.g, self.g.m, self.g.k
         nb = len(L)
-        C = np.minimum(np.maximum(0.5 * (L + H), L), H)
-        r = np.maximum(_up(H - C), _up(C - L))
         with np.errstate(all="ignore"):
-            BL, BH, breg = g.box.evaluate(L, H)
-            na = g.na
-            aBl, aBh = BL[:, :na], BH[:, :na]
+            if k == 0:
+                BL, BH, _ = g.box.evaluate(L, H)
+                aBl, aBh = BL[:, : g.na], BH[:, : g.na]
+            else:
+                enc = taylor_enclosure(g, L, H, self.linear)
+                aBl, aBh = enc.alo, enc.ahi
             nat_ok = np.isfinite(aBl).all(axis=1) & np.isfinite(aBh).all(axis=1)
             amid = np.where(nat_ok[:, None], 0.5 * (aBl + aBh), 0.0)
             arad = np.where(nat_ok[:, None], _up(np.maximum(aBh - amid, amid - aBl)), 0.0)
@@ -215,31 +318,8 @@ class SigmaBounds:
                 natural(np.ones(nb, dtype=bool))
                 return nat, None
             natural((H - L).max(axis=1) > NATURAL_WIDTH)
-            CL, CH, creg = g.centre.evaluate(C, C)
-            am = 0.5 * (CL[:, :na] + CH[:, :na])
-            Jl = CL[:, na:].reshape(nb, k, na)
-            Jh = CH[:, na:].reshape(nb, k, na)
-            Jm = 0.5 * (Jl + Jh)
-            # the centre's own enclosure widths and the rounding of am + Jm d, then the remainder
-            lin = np.einsum("bkn,bk->bn", np.maximum(Jh - Jm, Jm - Jl) + 4.0 * (k + 2) * _U * np.abs(Jm), r)
-            E = np.maximum(CH[:, :na] - am, am - CL[:, :na]) + lin + 4.0 * _U * np.abs(am)
-            if g.use_hessian:
-                Ha = np.maximum(np.abs(BL[:, na:]), np.abs(BH[:, na:])).reshape(nb, na, k, k)
-                share = 0.5 * np.einsum("bnjk,bj,bk->bnk", Ha, r, r)  # coordinate k's part of the remainder
-            else:
-                JBl = BL[:, na:].reshape(nb, k, na)
-                JBh = BH[:, na:].reshape(nb, k, na)
-                dev = np.maximum(np.abs(JBl - Jm), np.abs(JBh - Jm))
-                share = np.einsum("bkn,bk->bnk", dev, r)
-            E = _up(E + share.sum(axis=2) * (1.0 + 4.0 * (k + 2) * _U))
-            D, use = polytope_vertices(C, r, self.linear)
-            # the crossings are computed: their rounding moves the image by at most this much
-            E = E + 1e-12 * np.einsum("bkn,bk->bn", np.abs(Jm), r) if self.linear else E
-            Y = am[:, None, :] + np.einsum("bkn,bck->bcn", Jm, D)
-            ok = breg & creg & np.isfinite(E).all(axis=1) & np.isfinite(Y).all(axis=(1, 2))
-            Y = np.where(ok[:, None, None], Y, 0.0)
-            E = np.where(ok[:, None], E, 0.0)
-            Y = np.where(use[..., None], Y, 0.0)  # points outside the constraints: a zero matrix
+            ok, use, E, share = enc.ok, enc.use, enc.E, enc.share
+            Y = np.where(use[..., None], enc.Y, 0.0)  # points outside the constraints: a zero matrix
             cor = np.where(use.any(axis=1), largest_singular_bound(_mat(Y, m) * self.sw, reduce_last=True), -np.inf)
             cor = _up(cor + largest_singular_bound(_mat(E, m) * self.sw))
             cor = np.where(ok, cor, np.inf)

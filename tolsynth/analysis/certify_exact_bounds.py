@@ -31,29 +31,20 @@ rigorous error bound subtracted.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
-import casadi as ca
 import numpy as np
 
-from tolsynth.analysis.certify_bounds import polytope_vertices
+from tolsynth.analysis.certify_bounds import JointGraphs
 from tolsynth.analysis.interval_ops import round_up as _up
-from tolsynth.analysis.intervals import IntervalFunction
 from tolsynth.solvers.exact_series import probability
 
-__all__ = ["ExactBounds", "JointEnclosure", "taylor_enclosure", "start_patches", "children", "patch_normals"]
+__all__ = ["ExactBounds", "start_patches", "children", "patch_normals"]
 
 _U = 2.0**-53
 #: error allowed in each exact probability the search evaluates
 EVAL_TOL = 1e-10
 #: the first, cheaper tolerance: most rows are settled against the threshold by it
 LOOSE_TOL = 1e-7
-#: the Hessian's graph is used when it has at most this many times the Jacobian's operations
-HESSIAN_FACTOR = 4.0
-#: the same with the compiled interval interpreter (evaluations cheaper than the boxes they save)
-HESSIAN_FACTOR_COMPILED = 16.0
-#: the third derivatives' graph is used when it has at most this many times the Hessian's operations
-THIRD_FACTOR = 4.0
 #: patches per cube face side at the start
 START_GRID = 2
 #: joints whose sides group the corners of a box crossed by a joint constraint (2^levels groups)
@@ -66,129 +57,6 @@ _SUM_SLACK = 1e-14
 _E = np.eye(3)
 _FRAMES = np.array([(_E[a], _E[(a + 1) % 3], _E[(a + 2) % 3]) for a in range(3)])  # face, (n, s, t), xyz
 _STEPS = np.array([(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)])
-
-
-class JointEnclosure:
-    """Interval functions of ``A`` over boxes of the searched joints (the other joints held)."""
-
-    def __init__(self, st, nq: int, free, held: dict):
-        cols = list(st.columns)
-        self.m = len(cols)
-        self.k = len(free)
-        x = ca.SX.sym("x", self.k)
-        q = [ca.SX(float(held.get(j, 0.0))) for j in range(nq)]
-        for i, j in enumerate(free):
-            q[j] = x[i]
-        A = st.A.call([ca.vertcat(*q)])[0][:, cols]
-        a = ca.densify(ca.vec(A))  # column-major: the three rows of column 0, then column 1, ...
-        self.na = a.numel()
-        self.point_fn = ca.Function("A", [x], [a])
-        self.centre = IntervalFunction(ca.Function("aJ", [x], [a, ca.densify(ca.jacobian(a, x))]))
-        H = ca.densify(ca.vertcat(*[ca.vec(ca.hessian(a[i], x)[0]) for i in range(self.na)]))
-        hess = IntervalFunction(ca.Function("aH", [x], [a, H]))
-        factor = HESSIAN_FACTOR_COMPILED if hess.compiled else HESSIAN_FACTOR
-        self.use_hessian = hess.n_operations <= factor * self.centre.n_operations
-        self.hess = hess
-        self.box = hess if self.use_hessian else self.centre
-        # third derivatives over the box with the Hessian at the centre: a third-order remainder,
-        # where the interval Hessian over a wider box is much wider than the Hessian itself
-        self.third = None
-        if self.use_hessian:
-            T = ca.jacobian(ca.vec(ca.jacobian(ca.vec(ca.jacobian(a, x)), x)), x)
-            third = IntervalFunction(ca.Function("aT", [x], [a, ca.densify(ca.vec(T))]))
-            if third.n_operations <= THIRD_FACTOR * hess.n_operations:
-                self.third = third
-
-    def values(self, X: np.ndarray) -> np.ndarray:
-        """``A`` at points X (n, k), shape (n, 3, m) (floating point)."""
-        X = np.atleast_2d(X)
-        a = np.array(self.point_fn.map(len(X))(X.T)).T.reshape(len(X), self.m, 3)
-        return a.transpose(0, 2, 1)
-
-
-def taylor_enclosure(g: JointEnclosure, L: np.ndarray, H: np.ndarray, linear=()):
-    """``A`` over each box ``L <= x <= H`` (n, k): ``A(x)`` in the convex
-    hull of the corner matrices ``Y[b, c]`` (column-major vectors, (n, C, 3 m); only where ``use``)
-    plus ``[-E, E]`` entrywise (n, 3 m) for every x of the box that meets the linear constraints;
-    ``ok`` False where the graph is not proven regular on the box (a closed loop near its limits);
-    ``share`` (n, 3 m, k): each coordinate's part of the remainder (where to halve).  Returned as an
-    :class:`Enclosure`, with the centre and Jacobian too (the affine part over a box without a
-    constraint crossing it is ``am + Jm d`` for every ``|d| <= r``)."""
-    na, k = g.na, g.k
-    nb = len(L)
-    C = np.minimum(np.maximum(0.5 * (L + H), L), H)
-    r = np.maximum(_up(H - C), _up(C - L))
-    with np.errstate(all="ignore"):
-        BL, BH, breg = g.box.evaluate(L, H)
-        CL, CH, creg = g.centre.evaluate(C, C)
-        am = 0.5 * (CL[:, :na] + CH[:, :na])
-        Jl, Jh = CL[:, na:].reshape(nb, k, na), CH[:, na:].reshape(nb, k, na)
-        Jm = 0.5 * (Jl + Jh)
-        # the centre's own enclosure widths and the rounding of am + Jm d, then the remainder
-        lin = np.einsum("bkn,bk->bn", np.maximum(Jh - Jm, Jm - Jl) + 4.0 * (k + 2) * _U * np.abs(Jm), r)
-        E = np.maximum(CH[:, :na] - am, am - CL[:, :na]) + lin + 4.0 * _U * np.abs(am)
-        if g.use_hessian:
-            Ha = np.maximum(np.abs(BL[:, na:]), np.abs(BH[:, na:])).reshape(nb, na, k, k)
-            share = 0.5 * np.einsum("bnjk,bj,bk->bnk", Ha, r, r)
-            if g.third is not None:
-                # |d^T H(c) d| / 2 + |T(B)| r^3 / 6, coordinate by coordinate, where it is smaller
-                HcL, HcH, _ = g.hess.evaluate(C, C)
-                Hc = np.maximum(np.abs(HcL[:, na:]), np.abs(HcH[:, na:])).reshape(nb, na, k, k)
-                TL, TH, treg = g.third.evaluate(L, H)
-                # vec of the (na k) x k Jacobian of vec(J): entry (n + na (j + k l)) -> T[n, j, l, ...]
-                Ta = np.maximum(np.abs(TL[:, na:]), np.abs(TH[:, na:])).reshape(nb, k, k, k, na)
-                s3 = 0.5 * np.einsum("bnjk,bj,bk->bnk", Hc, r, r) + np.einsum("blkjn,bj,bk,bl->bnl", Ta, r, r, r) / 6.0
-                better = treg[:, None] & np.isfinite(s3).all(axis=2) & (s3.sum(axis=2) < share.sum(axis=2))
-                share = np.where(better[:, :, None], s3, share)
-        else:
-            dev = np.maximum(np.abs(BL[:, na:].reshape(nb, k, na) - Jm), np.abs(BH[:, na:].reshape(nb, k, na) - Jm))
-            share = np.einsum("bkn,bk->bnk", dev, r)
-        E = _up(E + share.sum(axis=2) * (1.0 + 4.0 * (k + 2) * _U))
-        D, use = polytope_vertices(C, r, linear)
-        # the constraint crossings are computed: their rounding moves the image by at most this
-        E = E + 1e-12 * np.einsum("bkn,bk->bn", np.abs(Jm), r) if linear else E
-        Y = am[:, None, :] + np.einsum("bkn,bck->bcn", Jm, D)
-        ok = breg & creg & np.isfinite(E).all(axis=1) & np.isfinite(Y).all(axis=(1, 2))
-    # the joints that move A most, the most first: the corners are grouped by their sides
-    spread = np.linalg.norm(Jm, axis=2) * r  # (n, k)
-    order = np.argsort(-spread, axis=1)
-    bits = np.take_along_axis(D, order[:, None, :], axis=2) >= 0.0  # (n, C, k)
-    corners = 1 << k
-    cross = ~(use[:, :corners].all(axis=1) & ~use[:, corners:].any(axis=1))
-    # the used points first, the array cut to the most any box uses
-    keep = np.argsort(~use, axis=1, kind="stable")[:, : max(int(use.sum(axis=1).max(initial=0)), 1)]
-    Y = np.take_along_axis(Y, keep[:, :, None], axis=1)
-    bits = np.take_along_axis(bits, keep[:, :, None], axis=1)
-    use = np.take_along_axis(use, keep, axis=1)
-    return Enclosure(
-        np.where(ok[:, None], am, 0.0),
-        np.where(ok[:, None, None], Jm, 0.0),
-        r,
-        np.where(ok[:, None], E, 0.0),
-        ok,
-        share,
-        order,
-        cross,
-        np.where(ok[:, None, None], Y, 0.0),
-        use,
-        bits,
-    )
-
-
-class Enclosure(NamedTuple):
-    """``A`` over joint boxes (:func:`taylor_enclosure`)."""
-
-    am: np.ndarray  # (n, 3 m) A at the centres (column-major)
-    Jm: np.ndarray  # (n, k, 3 m) its Jacobian there
-    r: np.ndarray  # (n, k) half-widths
-    E: np.ndarray  # (n, 3 m) remainder bound (with every rounding)
-    ok: np.ndarray  # (n,) the graph proven regular on the box
-    share: np.ndarray  # (n, 3 m, k) each joint's part of the remainder
-    order: np.ndarray  # (n, k) joints by how much they move A, the most first
-    cross: np.ndarray  # (n,) a joint constraint crosses the box (its corners are not all feasible)
-    Y: np.ndarray  # (n, C, 3 m) the affine part at the corners of the feasible part
-    use: np.ndarray  # (n, C) which of them
-    bits: np.ndarray  # (n, C, k) their sides of the centre along ``order``
 
 
 def _rays(face, s0, t0, h):
@@ -213,7 +81,7 @@ class ExactBounds:
 
     Parameters
     ----------
-    enc : JointEnclosure
+    enc : JointGraphs
     eps : ndarray
         Tolerances of the kept columns (tolerance units).
     shapes : tuple
@@ -223,7 +91,7 @@ class ExactBounds:
         Joint constraints ``(a, lo, hi)`` over the searched joints.
     """
 
-    def __init__(self, enc: JointEnclosure, eps, shapes, R: float, linear=()):
+    def __init__(self, enc: JointGraphs, eps, shapes, R: float, linear=()):
         self.enc = enc
         self.m = enc.m
         self.eps = np.asarray(eps, dtype=float)

@@ -24,11 +24,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from tolsynth.analysis.pose_search import _tangent_directions
 from tolsynth.checks import check_count, check_mapping, check_positive, check_real, check_seed
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
 from tolsynth.kinematics.batch_stats import SMALL_BATCH, _evaluator, _small_maps
-from tolsynth.kinematics.joint_space import MODEL_REFERENCE, _feasible, _limits, _reference
+from tolsynth.kinematics.joint_space import MODEL_REFERENCE, _feasible, _limits, _reference, tangent_directions
 from tolsynth.probability.exact import _fibonacci_hemisphere
 from tolsynth.solvers.exact_cuts import minimise_directions
 from tolsynth.solvers.exact_series import probability
@@ -406,7 +405,7 @@ def worst_exact_pose(
         return u
 
     # (3) the pattern search over joints, each poll's value its own minimum over directions
-    D = _tangent_directions(mech, free, span) if k else np.zeros((0, 0))
+    D = tangent_directions(mech, free, span) if k else np.zeros((0, 0))
     h = np.full(X.shape[1], 0.5 * h0)
     checks = 0
     while True:

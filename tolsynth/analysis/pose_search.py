@@ -25,7 +25,7 @@ import numpy as np
 from tolsynth.checks import check_count, check_mapping, check_positive, check_real, check_seed
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
 from tolsynth.kinematics.batch_stats import _criterion_batch, principal_std_batch
-from tolsynth.kinematics.joint_space import MODEL_REFERENCE, _feasible, _limits, _reference
+from tolsynth.kinematics.joint_space import MODEL_REFERENCE, _feasible, _limits, _reference, tangent_directions
 from tolsynth.probability.stats import p_ball
 from tolsynth.tabular import Tabular
 
@@ -167,33 +167,6 @@ class WorstPose(Tabular):
         )
         lines.append("active       " + (", ".join(self.active) or "none (interior)"))
         return "\n".join(lines)
-
-
-def _tangent_directions(mech, free: list[int], scale: np.ndarray) -> np.ndarray:
-    """Poll directions in scaled coordinates: +-e_i and the constraint-tangent projections of
-    e_i (so that the search can slide along an active joint constraint)."""
-    k = len(free)
-    dirs = [np.eye(k)[i] for i in range(k)]
-    names = list(mech.joint_names)
-    for c in mech.spec.joint_constraints:
-        a = np.zeros(k)
-        for jn, coef in c.terms.items():
-            j = names.index(jn)
-            if j in free:
-                a[free.index(j)] = coef * scale[free.index(j)]
-        if not np.any(a):
-            continue
-        for i in range(k):
-            t = np.eye(k)[i] - a[i] / (a @ a) * a
-            if np.linalg.norm(t) > 1e-12:
-                dirs.append(t / np.linalg.norm(t))
-    D = []
-    for d in dirs:
-        for s in (1.0, -1.0):
-            v = s * d
-            if not any(np.allclose(v, e) for e in D):
-                D.append(v)
-    return np.array(D)
 
 
 #: error allowed in P(|dr| <= R) (criterion "probability") on the coarse grid, which only picks the
@@ -412,7 +385,7 @@ def worst_pose(
             break
     best_u = U[:, picked[0]].copy()
     if k:
-        D = _tangent_directions(mechanism, free, hi[free] - lo[free])
+        D = tangent_directions(mechanism, free, hi[free] - lo[free])
         X = U[:, picked].copy()  # (k, S)
         F = vals[picked].copy()
         h = np.full(len(picked), 0.5 * h0)

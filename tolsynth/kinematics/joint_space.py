@@ -11,7 +11,7 @@ import numpy as np
 
 from tolsynth.errors import UnknownNameError
 
-__all__ = ["MODEL_REFERENCE", "model_reference"]
+__all__ = ["MODEL_REFERENCE", "model_reference", "tangent_directions"]
 
 
 class _ModelReference:
@@ -102,3 +102,30 @@ def _limit_margin(mech, Q: np.ndarray) -> np.ndarray:
         norm = math.sqrt(sum(coef * coef for coef in c.terms.values()))
         m = np.minimum(m, np.minimum(v - c.lower, c.upper - v) / norm)
     return m
+
+
+def tangent_directions(mech, free: list[int], scale: np.ndarray) -> np.ndarray:
+    """Poll directions in scaled coordinates: +-e_i and the constraint-tangent projections of
+    e_i (so that the search can slide along an active joint constraint)."""
+    k = len(free)
+    dirs = [np.eye(k)[i] for i in range(k)]
+    names = list(mech.joint_names)
+    for c in mech.spec.joint_constraints:
+        a = np.zeros(k)
+        for jn, coef in c.terms.items():
+            j = names.index(jn)
+            if j in free:
+                a[free.index(j)] = coef * scale[free.index(j)]
+        if not np.any(a):
+            continue
+        for i in range(k):
+            t = np.eye(k)[i] - a[i] / (a @ a) * a
+            if np.linalg.norm(t) > 1e-12:
+                dirs.append(t / np.linalg.norm(t))
+    D = []
+    for d in dirs:
+        for s in (1.0, -1.0):
+            v = s * d
+            if not any(np.allclose(v, e) for e in D):
+                D.append(v)
+    return np.array(D)
