@@ -244,7 +244,7 @@ def test_exact_component_bounds_are_sound_and_quasi_concave():
     cols = list(st.columns)
     eps = m.tolerances("figure3")
     shapes = shapes_of("uniform", m.error_parameters, m.index)
-    enc = JointGraphs(st, 5, [1, 2, 3], {0: 0.0, 4: 0.0})
+    enc = JointGraphs(st, 5, [1, 2, 3], {0: 0.0, 4: 0.0}, third=True)
     B = ExactBounds(enc, eps[cols], tuple(shapes[i] for i in cols), 0.7)
     rng = np.random.default_rng(9)
     lo = np.radians([140.0, 50.0, -110.0])
