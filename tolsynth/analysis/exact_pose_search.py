@@ -25,9 +25,17 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from tolsynth.checks import check_count, check_mapping, check_positive, check_real, check_seed
-from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
+from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.kinematics.batch_stats import SMALL_BATCH, _evaluator, _small_maps
-from tolsynth.kinematics.joint_space import MODEL_REFERENCE, _feasible, _limits, _reference, tangent_directions
+from tolsynth.kinematics.joint_space import (
+    MODEL_REFERENCE,
+    _feasible,
+    _limits,
+    _reference,
+    hold_fixed,
+    scaled_joints,
+    tangent_directions,
+)
 from tolsynth.probability.exact import _fibonacci_hemisphere
 from tolsynth.solvers.exact_cuts import minimise_directions
 from tolsynth.solvers.exact_series import probability
@@ -246,13 +254,7 @@ def worst_exact_pose(
         j: float(np.clip(base_q[j], lo[j], hi[j]))
         for j in _rotation_invariant(mech, eps, lo, hi, np.random.default_rng(seed))
     }
-    for name, v in fixed.items():
-        if name not in names:
-            raise UnknownNameError("fixed", f"unknown joint {name!r}", "one of " + ", ".join(names))
-        j = names.index(name)
-        if not lo[j] <= v <= hi[j]:
-            raise OutOfRangeError(f"fixed[{name}]", f"{v:g} rad", f"{lo[j]:g} to {hi[j]:g} rad")
-        held[j] = v
+    hold_fixed(mech, fixed, lo, hi, held)
     free = [j for j in range(nq) if j not in held]
     k = len(free)
     span = hi[free] - lo[free]
@@ -260,12 +262,7 @@ def worst_exact_pose(
     n_eval = 0
 
     def full(U: np.ndarray) -> np.ndarray:  # scaled (k, N) -> joints (nq, N)
-        Q = np.empty((nq, U.shape[1]))
-        for j, v in held.items():
-            Q[j] = v
-        for i, j in enumerate(free):
-            Q[j] = np.where(U[i] >= 1.0, hi[j], lo[j] + span[i] * U[i])  # the limit itself at 1
-        return Q
+        return scaled_joints(U, held, free, lo, hi)
 
     def scaled(q: np.ndarray) -> np.ndarray:
         return np.clip((q[free] - lo[free]) / span, 0.0, 1.0)

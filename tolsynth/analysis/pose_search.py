@@ -23,9 +23,17 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from tolsynth.checks import check_count, check_mapping, check_positive, check_real, check_seed
-from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
+from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.kinematics.batch_stats import _criterion_batch, principal_std_batch
-from tolsynth.kinematics.joint_space import MODEL_REFERENCE, _feasible, _limits, _reference, tangent_directions
+from tolsynth.kinematics.joint_space import (
+    MODEL_REFERENCE,
+    _feasible,
+    _limits,
+    _reference,
+    hold_fixed,
+    scaled_joints,
+    tangent_directions,
+)
 from tolsynth.probability.stats import p_ball
 from tolsynth.tabular import Tabular
 
@@ -312,27 +320,13 @@ def worst_pose(
     base_q = ref_q if ref_q is not None else np.clip(np.zeros(nq), lo, hi)
     for j in _invariant_joints(mechanism, eps, distribution, rng):
         held[j] = float(np.clip(base_q[j], lo[j], hi[j]))
-    for name, v in (fixed or {}).items():
-        if name not in names:
-            raise UnknownNameError("fixed", f"unknown joint {name!r}", "one of " + ", ".join(names))
-        if not lo[names.index(name)] <= float(v) <= hi[names.index(name)]:
-            raise OutOfRangeError(
-                f"fixed[{name}]",
-                f"{math.degrees(v):g} deg",
-                f"{math.degrees(lo[names.index(name)]):g} to {math.degrees(hi[names.index(name)]):g} deg",
-            )
-        held[names.index(name)] = float(v)
+    hold_fixed(mechanism, fixed or {}, lo, hi, held)
     free = [j for j in range(nq) if j not in held]
     k = len(free)
     n_eval = 0
 
     def full(U: np.ndarray) -> np.ndarray:  # scaled (k, N) -> joints (nq, N)
-        Q = np.empty((nq, U.shape[1]))
-        for j, v in held.items():
-            Q[j] = v
-        for i, j in enumerate(free):
-            Q[j] = np.where(U[i] >= 1.0, hi[j], lo[j] + (hi[j] - lo[j]) * U[i])  # the limit itself at 1
-        return Q
+        return scaled_joints(U, held, free, lo, hi)
 
     def evaluate(U: np.ndarray, tol: float = SEARCH_P_TOL) -> np.ndarray:
         nonlocal n_eval

@@ -11,7 +11,7 @@ import numpy as np
 
 from tolsynth.errors import UnknownNameError
 
-__all__ = ["MODEL_REFERENCE", "model_reference", "tangent_directions"]
+__all__ = ["MODEL_REFERENCE", "model_reference", "tangent_directions", "hold_fixed", "scaled_joints"]
 
 
 class _ModelReference:
@@ -129,3 +129,31 @@ def tangent_directions(mech, free: list[int], scale: np.ndarray) -> np.ndarray:
             if not any(np.allclose(v, e) for e in D):
                 D.append(v)
     return np.array(D)
+
+
+def hold_fixed(mech, fixed: dict, lo: np.ndarray, hi: np.ndarray, held: dict) -> None:
+    """Add the joints of ``fixed`` (name -> value, rad; checked numbers) to ``held`` (index ->
+    value), each inside its limits."""
+    from tolsynth.errors import OutOfRangeError, UnknownNameError
+
+    names = list(mech.joint_names)
+    for name, v in fixed.items():
+        if name not in names:
+            raise UnknownNameError("fixed", f"unknown joint {name!r}", "one of " + ", ".join(names))
+        j = names.index(name)
+        if not lo[j] <= float(v) <= hi[j]:
+            raise OutOfRangeError(
+                f"fixed[{name}]", f"{math.degrees(v):g} deg", f"{math.degrees(lo[j]):g} to {math.degrees(hi[j]):g} deg"
+            )
+        held[j] = float(v)
+
+
+def scaled_joints(U: np.ndarray, held: dict, free: list, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Joint vectors (nq, N) from coordinates ``U`` (k, N) scaled to [0, 1] over the free joints'
+    limits (the limit itself at 1, not a rounding below it), the held joints at their values."""
+    Q = np.empty((len(lo), U.shape[1]))
+    for j, v in held.items():
+        Q[j] = v
+    for i, j in enumerate(free):
+        Q[j] = np.where(U[i] >= 1.0, hi[j], lo[j] + (hi[j] - lo[j]) * U[i])
+    return Q
