@@ -28,7 +28,7 @@ import casadi as ca
 import numpy as np
 
 from tolsynth.analysis.branch_bound import maximize
-from tolsynth.analysis.certify_bounds import JointGraphs, PolygonSigmaBounds, SigmaBounds
+from tolsynth.analysis.certify_bounds import PolygonSigmaBounds, SigmaBounds, joint_graphs
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 from tolsynth.analysis.interval_ops import round_down as _dn
 from tolsynth.analysis.interval_ops import round_up as _up
@@ -511,7 +511,7 @@ def _sigma_bounds(st, dom, nq, w):
     held_zero = dict(dom.held)
     if st.rotation is not None:
         held_zero[st.rotation] = 0.0
-    bounds = SigmaBounds(JointGraphs(st, nq, dom.free, held_zero), w, dom.linear)
+    bounds = SigmaBounds(joint_graphs(st, nq, dom.free, held_zero), w, dom.linear)
     return bounds, "second-order Taylor corners" if bounds.g.use_hessian else "Taylor corners (interval Jacobian)"
 
 

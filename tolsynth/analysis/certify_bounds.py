@@ -26,6 +26,7 @@ added to ``E``, and an eigenvalue computed by LAPACK is raised by a bound on its
 from __future__ import annotations
 
 import itertools
+import weakref
 from typing import NamedTuple
 
 import casadi as ca
@@ -46,7 +47,7 @@ from tolsynth.analysis.certify_polygon import (  # noqa: F401
 from tolsynth.analysis.interval_ops import round_up as _up
 from tolsynth.analysis.intervals import IntervalFunction
 
-__all__ = ["JointGraphs", "SigmaBounds", "largest_singular_bound", "taylor_enclosure", "Enclosure", "HESSIAN_FACTOR"]
+__all__ = ["JointGraphs", "joint_graphs", "SigmaBounds", "largest_singular_bound", "taylor_enclosure", "Enclosure", "HESSIAN_FACTOR"]
 
 #: boxes wider than this (rad, on some side) also get the natural interval bound
 NATURAL_WIDTH = 0.2
@@ -84,6 +85,21 @@ def largest_singular_bound(M: np.ndarray, reduce_last: bool = False) -> np.ndarr
     lam = cand * s * (1.0 + 8.0 * _U) + (m + 2) * 2.0 * _U * frob
     out = _up(np.sqrt(np.maximum(lam, 0.0)))
     return out.max(axis=-1) if reduce_last else out
+
+
+_GRAPHS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def joint_graphs(structure, nq: int, free, held: dict, third: bool = False) -> "JointGraphs":
+    """:class:`JointGraphs`, built once per structure, searched joints, held values and order: a
+    certified exchange certifies the same joint space every round, and compiling the interval
+    programs costs about a second (the graphs depend on nothing else, so the answers cannot)."""
+    key = (int(nq), tuple(int(j) for j in free), tuple(sorted((int(j), float(v)) for j, v in held.items())), bool(third))
+    cache = _GRAPHS.setdefault(structure, {})
+    hit = cache.get(key)
+    if hit is None:
+        hit = cache[key] = JointGraphs(structure, nq, free, held, third=third)
+    return hit
 
 
 class JointGraphs:

@@ -39,7 +39,7 @@ import math
 
 import numpy as np
 
-from tolsynth.analysis.certify_bounds import JointGraphs, taylor_enclosure
+from tolsynth.analysis.certify_bounds import joint_graphs, taylor_enclosure
 from tolsynth.analysis.certify_exact_bounds import ExactBounds, children, patch_normals, start_patches
 from tolsynth.analysis.exact_pose_search import worst_exact_pose
 from tolsynth.errors import OutOfRangeError
@@ -227,7 +227,7 @@ def certify_components_exact(
     held = dict(dom.held)
     if st.rotation is not None and st.rotation in held:
         held[st.rotation] = 0.0  # the proven rotation: any value gives the same probabilities
-    enc = JointGraphs(st, nq, dom.free, held, third=True)
+    enc = joint_graphs(st, nq, dom.free, held, third=True)
     bounds = ExactBounds(enc, np.asarray(eps, dtype=float)[cols], tuple(shapes[i] for i in cols), R, dom.linear)
     lo, hi = np.asarray(dom.lo, dtype=float), np.asarray(dom.hi, dtype=float)
     s = _Search(bounds, lo, hi, dom.constraint_fn, tol, target)
