@@ -270,7 +270,7 @@ def synthesize_workspace(
             progress,
             sphere,
             kwargs,
-            lambda eps: search_at(eps, coarse),
+            lambda eps, fine=False: search_at(eps, full if fine else coarse),
         )
     from tolsynth.progress import Progress
 
@@ -315,10 +315,11 @@ def _certified_exchange(
 ) -> WorkspaceSynthesis:
     """The exchange of :func:`synthesize_workspace` with the certified search deciding (its docstring).
 
-    A round whose sampled search (``sampled(eps) -> (WorstPose, value)``, cheap) finds the
-    specification missed adds that pose, as the uncertified exchange does; only when it finds none
-    does the certified search run, which either proves the specification met or returns the worst
-    pose it found (within its tolerance of the worst anywhere), to be added in turn."""
+    A round whose sampled search (``sampled(eps, fine=False) -> (WorstPose, value)``, cheap; ``fine``
+    the full search rather than the coarse one) finds the specification missed adds that pose, as
+    the uncertified exchange does; only when it finds none does the certified search run, which
+    either proves the specification met or returns the worst pose it found (within its tolerance of
+    the worst anywhere), to be added in turn."""
     from tolsynth.analysis.certify import certify_worst_pose
     from tolsynth.synthesis.single import DEFAULT_PROBABILITY
 
@@ -337,13 +338,19 @@ def _certified_exchange(
     rounds, res, cert = [], None, None
     converged, reason = False, f"round limit ({max_rounds}) reached"
     ub_ratio = p_lb = None
+    # a sampled pose counts as missed where the certified search would count it (the exact goal,
+    # p - EXACT_SLACK, is far tighter than tol): a pose found by sampling costs a fraction of
+    # a second, one found by the certified search a full search
+    missed = 1.0 + (EXACT_SLACK / (2.0 * (1.0 - p)) if exact else tol)
     for k in range(max_rounds):
         res = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
         if not res.success:
             reason = f"the solve at {len(poses)} pose(s) did not succeed: {res.message}"
             break
         w, g = sampled(res.x)
-        if g > 1 + tol and k < max_rounds - 1:  # missed at a sampled pose: no proof needed to go on
+        if g <= missed:  # the coarse search found no miss: the full one decides whether to prove
+            w, g = sampled(res.x, True)
+        if g > missed and k < max_rounds - 1:  # missed at a sampled pose: no proof needed to go on
             rounds.append(
                 {
                     "n_poses": len(poses),
