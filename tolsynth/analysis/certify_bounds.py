@@ -90,15 +90,23 @@ def largest_singular_bound(M: np.ndarray, reduce_last: bool = False) -> np.ndarr
 _GRAPHS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
-def joint_graphs(structure, nq: int, free, held: dict, third: bool = False) -> "JointGraphs":
-    """:class:`JointGraphs`, built once per structure, searched joints, held values and order: a
-    certified exchange certifies the same joint space every round, and compiling the interval
-    programs costs about a second (the graphs depend on nothing else, so the answers cannot)."""
-    key = (int(nq), tuple(int(j) for j in free), tuple(sorted((int(j), float(v)) for j, v in held.items())), bool(third))
+def joint_graphs(structure, nq: int, free, held: dict, third: bool = False, M=None) -> "JointGraphs":
+    """:class:`JointGraphs`, built once per structure, searched joints, held values, order and
+    coordinates: a certified exchange certifies the same joint space every round, and compiling the
+    interval programs costs about a second (the graphs depend on nothing else, so the answers
+    cannot)."""
+    shear = None if M is None else np.asarray(M, dtype=float)
+    key = (
+        int(nq),
+        tuple(int(j) for j in free),
+        tuple(sorted((int(j), float(v)) for j, v in held.items())),
+        bool(third),
+        None if shear is None else (shear.shape, shear.tobytes()),
+    )
     cache = _GRAPHS.setdefault(structure, {})
     hit = cache.get(key)
     if hit is None:
-        hit = cache[key] = JointGraphs(structure, nq, free, held, third=third)
+        hit = cache[key] = JointGraphs(structure, nq, free, held, third=third, M=shear)
     return hit
 
 
@@ -116,17 +124,22 @@ class JointGraphs:
         Joint index -> value (rad) of every other joint.
     third : bool
         Also the third derivatives, for the third-order remainder of :func:`taylor_enclosure`.
+    M : ndarray, optional
+        The box coordinates ``x`` give the searched joints as ``M x`` (k, k); by default they are
+        the joints themselves.  A joint constraint taken as a coordinate turns its planes into
+        faces of the boxes (:func:`tolsynth.analysis.certify_domain.sheared`).
     """
 
-    def __init__(self, structure, nq: int, free, held: dict, third: bool = False):
+    def __init__(self, structure, nq: int, free, held: dict, third: bool = False, M=None):
         self.free = tuple(int(j) for j in free)
         self.k = len(self.free)
         cols = list(structure.columns)
         self.m = len(cols)
         x = ca.SX.sym("x", self.k)
+        joints = x if M is None else ca.mtimes(ca.DM(np.asarray(M, dtype=float)), x)
         q = [ca.SX(float(held.get(j, 0.0))) for j in range(nq)]
         for i, j in enumerate(self.free):
-            q[j] = x[i]
+            q[j] = joints[i]
         A = structure.A.call([ca.vertcat(*q)])[0][:, cols]
         a = ca.densify(ca.vec(A))  # column-major: the 3 rows of column 0, then column 1, ...
         self.na = a.numel()

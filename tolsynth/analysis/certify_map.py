@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tolsynth.analysis.certify import _domain, _sigma_bounds
+from tolsynth.analysis.certify import _sigma_bounds
+from tolsynth.analysis.certify_domain import domain as _domain
 from tolsynth.analysis.certify_structure import structure
 from tolsynth.checks import check_count
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError

@@ -1,0 +1,179 @@
+"""The joint space a certified search covers: the searched joints, their box and the joint
+constraints inside it, in the search's coordinates.
+
+By default the coordinates are the searched joints.  :func:`sheared` takes a joint constraint on
+two joints as a coordinate in place of one of them (``s_r = a . x``), so the constraint's planes
+become faces of the boxes: the worst poses of a design made at a sampled set of poses lie along
+such a constraint (the paper robot's interference limit), and boxes crossed by a plane need their
+own polytope points where a box with the plane as a face needs none.  The replaced joint's limits
+become the constraint rows instead, crossing the boxes only where they meet.  Units: rad.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from tolsynth.analysis.interval_ops import round_down as _dn
+from tolsynth.analysis.interval_ops import round_up as _up
+from tolsynth.analysis.intervals import IntervalFunction
+from tolsynth.kinematics.joint_space import _feasible, _limits
+
+__all__ = ["Domain", "domain", "constraints", "full", "sheared"]
+
+
+@dataclass
+class Domain:
+    free: list
+    held: dict  # joint -> value (rad) in the reported pose
+    why: dict  # joint -> reason
+    lo: np.ndarray  # the box of the coordinates
+    hi: np.ndarray
+    constraint_fn: object
+    linear: tuple  # (a, lower, upper) of each linear constraint, a over the coordinates
+    M: np.ndarray | None = None  # the searched joints are M @ coordinates; None: the coordinates themselves
+
+    def joints(self, X: np.ndarray) -> np.ndarray:
+        """Searched joints (n, k) at coordinates X (n, k)."""
+        X = np.asarray(X, dtype=float)
+        return X if self.M is None else X @ self.M.T
+
+    def coords(self, Q: np.ndarray) -> np.ndarray:
+        """Coordinates (n, k) of searched joints Q (n, k)."""
+        Q = np.asarray(Q, dtype=float)
+        return Q if self.M is None else np.linalg.solve(self.M, Q.T).T
+
+
+def domain(mech, st, base_q: np.ndarray) -> Domain:
+    lo_q, hi_q = _limits(mech)
+    nq = len(lo_q)
+    names = list(mech.joint_names)
+    constrained = {names.index(jn) for c in mech.spec.joint_constraints for jn in c.terms}
+    free = [j for j in range(nq) if (j in st.joints and j != st.rotation) or j in constrained]
+    why = {}
+    for j in range(nq):
+        if j == st.rotation and j not in constrained:
+            why[j] = "turns the error distribution rigidly about the base z axis"
+        elif j not in free:
+            why[j] = "the hand position's sensitivity does not depend on it"
+    held = {j: float(np.clip(base_q[j], lo_q[j], hi_q[j])) for j in range(nq) if j not in free}
+    lo, hi = lo_q[free].copy(), hi_q[free].copy()
+    for i, j in enumerate(free):
+        if j in st.periodic and j not in constrained and hi[i] - lo[i] > 2 * math.pi:
+            hi[i] = lo[i] + 2 * math.pi  # one period: the joint enters only through sin and cos
+    linear = tuple(_rows(mech, free))
+    return Domain(free, held, why, lo, hi, constraints(mech, free, held, linear), linear)
+
+
+def _rows(mech, free):
+    names = list(mech.joint_names)
+    for c in mech.spec.joint_constraints:
+        a = np.zeros(len(free))
+        for jn, coef in c.terms.items():
+            a[free.index(names.index(jn))] = coef
+        yield a, c.lower, c.upper
+
+
+def constraints(mech, free, held, rows, M=None):
+    """``g(x) <= 0`` on boxes of the coordinates: the linear rows ``(a, lower, upper)`` (two each)
+    and, for closed loops, ``c^2 - 1`` of every loop's closure argument at zero error.  On points
+    the package's own feasibility test decides (the one Mechanism.joints applies)."""
+    names = list(mech.joint_names)
+    rows = list(rows)
+    clos = None
+    graphs = mech.graphs
+    if getattr(graphs, "closure", None) is not None and graphs.closure.numel_out(0) > 0:
+        x = ca.SX.sym("x", len(free))
+        joints = x if M is None else ca.mtimes(ca.DM(M), x)
+        q = [ca.SX(float(held.get(j, 0.0))) for j in range(len(names))]
+        for i, j in enumerate(free):
+            q[j] = joints[i]
+        cl = graphs.closure
+        cl = cl if cl.is_a("SXFunction") else cl.expand()
+        c = cl.call([ca.vertcat(*q), ca.DM.zeros(cl.nnz_in(1))])[0]
+        clos = IntervalFunction(ca.Function("closure_margin", [x], [ca.densify(c * c - 1.0)]))
+    if not rows and clos is None:
+        return None
+    nq = len(names)
+
+    def fn(L, H):
+        parts_lo, parts_hi = [], []
+        for a, lower, upper in rows:
+            terms_lo = np.where(a > 0, a * L, a * H)
+            terms_hi = np.where(a > 0, a * H, a * L)
+            slack = 4.0 * len(a) * 2.0**-53 * np.abs(np.concatenate([terms_lo, terms_hi], axis=1)).sum(axis=1)
+            v_lo, v_hi = _dn(terms_lo.sum(axis=1) - slack), _up(terms_hi.sum(axis=1) + slack)
+            parts_lo += [v_lo - upper, lower - v_hi]
+            parts_hi += [v_hi - upper, lower - v_lo]
+        g_lo = np.array(parts_lo).T if parts_lo else np.zeros((len(L), 0))
+        g_hi = np.array(parts_hi).T if parts_hi else np.zeros((len(L), 0))
+        if clos is not None:
+            cl_lo, cl_hi, _ = clos.evaluate(L, H)
+            g_lo, g_hi = np.hstack([g_lo, cl_lo]), np.hstack([g_hi, cl_hi])
+        point = np.all(L == H, axis=1)
+        if point.any():  # a point: the package's own test of the limits and joint constraints
+            Q = np.empty((nq, int(point.sum())))
+            for j, v in held.items():
+                Q[j] = v
+            X = L[point] if M is None else L[point] @ M.T
+            for i, j in enumerate(free):
+                Q[j] = X[:, i]
+            ok = _feasible(mech, Q)
+            g_hi[point, : 2 * len(rows)] = np.where(ok, 0.0, 1.0)[:, None]
+        return g_lo, g_hi
+
+    return fn
+
+
+def full(dom: Domain, x: np.ndarray, nq: int) -> np.ndarray:
+    """The whole joint vector at coordinates ``x`` (k,)."""
+    q = np.empty(nq)
+    for j, v in dom.held.items():
+        q[j] = v
+    xj = dom.joints(np.asarray(x, dtype=float)[None])[0]
+    for i, j in enumerate(dom.free):
+        q[j] = xj[i]
+    return q
+
+
+def sheared(mech, dom: Domain) -> Domain:
+    """``dom`` with its first joint constraint on two joints with coefficients +-1 taken as a
+    coordinate (the module docstring), or ``dom`` itself where there is none.  The joint it replaces
+    is the one of the narrower range (on the paper's robot the exact proof then needs 5 095 boxes,
+    with the other 7 443).  The map is exact: ``x_r = a_r (s_r - a_o x_o)`` with ``a_r, a_o`` in
+    {-1, 1}."""
+    if dom.M is not None:
+        return dom
+    for n, (a, lower, upper) in enumerate(dom.linear):
+        support = np.flatnonzero(a)
+        if len(support) != 2 or not np.all(np.abs(a[support]) == 1.0):
+            continue
+        width = dom.hi[support] - dom.lo[support]
+        r, o = (support[1], support[0]) if width[1] < width[0] else (support[0], support[1])
+        k = len(dom.free)
+        M = np.eye(k)
+        M[r, r] = a[r]
+        M[r, o] = -a[r] * a[o]
+        # the band's value over the box: the coordinate's range is the band cut to it
+        reach_lo = a[o] * (dom.lo[o] if a[o] > 0 else dom.hi[o]) + a[r] * (dom.lo[r] if a[r] > 0 else dom.hi[r])
+        reach_hi = a[o] * (dom.hi[o] if a[o] > 0 else dom.lo[o]) + a[r] * (dom.hi[r] if a[r] > 0 else dom.lo[r])
+        lo, hi = dom.lo.copy(), dom.hi.copy()
+        lo[r], hi[r] = max(lower, _dn(reach_lo)), min(upper, _up(reach_hi))
+        if not lo[r] <= hi[r]:
+            return dom  # nothing feasible: the plain domain says so
+        rows = [(M[r].copy(), dom.lo[r], dom.hi[r])]  # the replaced joint's limits
+        rows += [(b @ M, bl, bu) for m, (b, bl, bu) in enumerate(dom.linear) if m != n]
+        return Domain(
+            dom.free,
+            dom.held,
+            dom.why,
+            lo,
+            hi,
+            constraints(mech, dom.free, dom.held, rows, M),
+            tuple(rows),
+            M,
+        )
+    return dom
