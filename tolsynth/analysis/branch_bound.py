@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tolsynth.analysis.certify_parallel import run
 from tolsynth.errors import InputError
 
 __all__ = ["MaximizeResult", "maximize"]
@@ -84,7 +85,10 @@ def _vector(v, field: str) -> np.ndarray:
 
 
 class _Search:
-    """State of one run: the best point, the heap and the bounds of the boxes set aside."""
+    """State of one run: the best point, the heap and the bounds of the boxes set aside (and what
+    :func:`tolsynth.analysis.certify_parallel.run` needs to share it out)."""
+
+    sense = 1.0  # a maximum
 
     def __init__(self, point_fn, constraint_fn, lo, hi, tol, rtol, scale):
         self.point_fn, self.constraint_fn = point_fn, constraint_fn
@@ -96,11 +100,18 @@ class _Search:
         self.target = None  # boxes bounded by it are dropped too (a decision)
         self.stuck = -np.inf  # largest bound of a box too small to split
         self.leaves = None  # when kept: (lo, hi, ub) of every box set aside, a cover of the feasible part
+        self.processed = 0  # boxes bounded
+        self.shared = None  # on several processes: the incumbent they share (certify_parallel.Shared)
+
+    def incumbent(self) -> float:
+        """The best value found, by any worker: the threshold every worker uses is the serial one."""
+        return self.best if self.shared is None else max(self.best, self.shared.incumbent())
 
     def threshold(self) -> float:
-        if self.target is not None and not self.best > self.target:
+        best = self.incumbent()
+        if self.target is not None and not best > self.target:
             return self.target  # the decision: only boxes that may exceed the target matter
-        return self.best + self.tol + self.rtol * abs(self.best) if np.isfinite(self.best) else -np.inf
+        return best + self.tol + self.rtol * abs(best) if np.isfinite(best) else -np.inf
 
     def feasible_points(self, x):
         if self.constraint_fn is None:
@@ -122,6 +133,8 @@ class _Search:
         if len(v) and v.max() > self.best:
             j = int(np.argmax(v))
             self.best, self.best_x = float(v[j]), x[j].copy()
+            if self.shared is not None:
+                self.shared.offer(self.best)
             return True
         return False
 
@@ -170,8 +183,52 @@ class _Search:
             self.leaves.append((np.array(lo, dtype=float), np.array(hi, dtype=float), float(ub)))
 
     def upper(self) -> float:
-        top = -self.heap[0][0] if self.heap else -np.inf
-        return max(top, self.dropped, self.stuck, self.best)
+        return max(self.open_bound(), self.dropped, self.stuck, self.best)
+
+    bound = upper
+
+    # -- what certify_parallel.run needs ------------------------------------------------------
+    @staticmethod
+    def key(entry) -> float:
+        return -entry[0]
+
+    def open_bound(self) -> float:
+        return -self.heap[0][0] if self.heap else -np.inf
+
+    def open_count(self) -> int:
+        return len(self.heap) if self.heap and -self.heap[0][0] > self.threshold() else 0
+
+    def settled(self, thr) -> bool:
+        if -self.heap[0][0] <= thr:  # nothing left can beat the best by more than the tolerance
+            self.dropped = max(self.dropped, -self.heap[0][0])
+            return True
+        return False
+
+    def past(self, level) -> str:
+        return f"a point above {level:.9g} found" if self.best > level else ""
+
+    def to_worker(self, heap, shared) -> None:
+        self.heap, self.shared, self.processed = heap, shared, 0
+        self.dropped = self.stuck = -np.inf
+        self.leaves = None if self.leaves is None else []
+
+    def part(self) -> dict:
+        return dict(
+            best=self.best,
+            x=self.best_x,
+            dropped=self.dropped,
+            stuck=self.stuck,
+            n_boxes=self.processed,
+            leaves=self.leaves,
+        )
+
+    def merge(self, p) -> None:
+        if p["best"] > self.best:
+            self.best, self.best_x = p["best"], p["x"]
+        self.dropped, self.stuck = max(self.dropped, p["dropped"]), max(self.stuck, p["stuck"])
+        self.processed += p["n_boxes"]
+        if self.leaves is not None:
+            self.leaves.extend(p["leaves"])
 
 
 def _bounds(bound_fn, lo, hi):
@@ -227,6 +284,7 @@ def maximize(
     target: float | None = None,
     stop_above: float | None = None,
     leaves: list | None = None,
+    workers: int = 1,
 ) -> MaximizeResult:
     """Certified maximum of an objective over the box ``lo <= x <= hi`` (and ``g(x) <= 0``).
 
@@ -283,6 +341,10 @@ def maximize(
         to split, or left open) is appended: together with the boxes proven infeasible they cover
         the box, so the largest of their bounds over a region bounds the objective there (a
         certified map).
+    workers : int
+        Processes: past :data:`~tolsynth.analysis.certify_parallel.SERIAL_SECONDS` of serial search
+        the open boxes are dealt to this many workers sharing the best value
+        (:mod:`tolsynth.analysis.certify_parallel`); 1: serial throughout.
 
     Returns
     -------
@@ -307,7 +369,7 @@ def maximize(
 
     L, H = lo[None, :], hi[None, :]
     feasible = np.array([constraint_fn is None])
-    processed = 1
+    s.processed = 1
     if constraint_fn is not None:
         bad, feasible = _infeasible(constraint_fn, L, H)
         if bad[0]:
@@ -320,19 +382,8 @@ def maximize(
     ub, g_lo, g_hi, split = _bounds(bound_fn, L, H)
     s.push(L, H, ub, feasible, min_width, g_lo, g_hi, split)
 
-    stopped = ""
-    while s.heap and processed < max_boxes:
-        if stop_above is not None and s.best > stop_above:
-            stopped = f"a point above {stop_above:.9g} found"
-            break
-        if stop is not None:
-            stopped = stop() or ""
-            if stopped:
-                break
-        thr = s.threshold()
-        if -s.heap[0][0] <= thr:  # nothing left can beat the best by more than the tolerance
-            s.dropped = max(s.dropped, -s.heap[0][0])
-            break
+    def step(thr):
+        """One round: the most promising boxes halved, their halves bounded and kept or set aside."""
         take = []
         while s.heap and len(take) < batch and -s.heap[0][0] > thr:
             take.append(heapq.heappop(s.heap))
@@ -350,7 +401,7 @@ def maximize(
         C_feas = np.concatenate([P_feas, P_feas])
         ub, g_lo, g_hi, split = _bounds(bound_fn, C_lo, C_hi)
         ub = np.minimum(ub, np.concatenate([P_ub, P_ub]))  # a parent's bound holds on its halves
-        processed += len(C_lo)
+        s.processed += len(C_lo)
         keep = np.ones(len(C_lo), dtype=bool)
         if constraint_fn is not None and not C_feas.all():
             todo = np.flatnonzero(~C_feas)
@@ -364,7 +415,7 @@ def maximize(
                 if split is not None and split2 is not None:
                     split[red] = split2
                 ub[red] = np.minimum(ub[red], ub2)
-                processed += len(red)
+                s.processed += len(red)
         if s.consider(0.5 * (C_lo[keep] + C_hi[keep])):
             s.polish(local_steps)
         s.push(
@@ -377,13 +428,12 @@ def maximize(
             None if g_hi is None else g_hi[keep],
             None if split is None else split[keep],
         )
-        if callback is not None:
-            callback(processed, s.upper(), s.best)
 
+    s.step = step
+    stopped = run(s, workers=workers, max_boxes=max_boxes, stop=stop, level=stop_above, callback=callback, start=t0)
+    processed = s.processed
     upper = s.upper()
-    n_open = len(s.heap)
-    if s.heap and -s.heap[0][0] <= s.threshold():
-        n_open = 0  # the boxes left cannot beat the best by more than the tolerance: decided
+    n_open = s.open_count()
     for t in s.heap:
         s.keep_leaf(t[2], t[3], -t[0])
     if leaves is not None:

@@ -29,6 +29,7 @@ import numpy as np
 
 from tolsynth.analysis.branch_bound import maximize
 from tolsynth.analysis.certify_bounds import PolygonSigmaBounds, SigmaBounds, joint_graphs
+from tolsynth.analysis.certify_parallel import worker_count
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 from tolsynth.analysis.interval_ops import round_down as _dn
 from tolsynth.analysis.interval_ops import round_up as _up
@@ -275,6 +276,7 @@ def certify_worst_pose(
     target: float | None = None,
     stop_at: float | None = None,
     keep_boxes: bool = False,
+    workers: int | None = None,
 ) -> Certificate:
     """A proven bound of the worst accuracy over the whole joint space (module docstring).
 
@@ -317,6 +319,10 @@ def certify_worst_pose(
         Stop as soon as a pose worse than this is found (sigma above it, probability below it).
     keep_boxes : bool
         Keep the boxes set aside and their bounds (``Certificate.leaves``), for a certified map.
+    workers : int, optional
+        Processes for a search that outlasts its first half second (default: the machine's cores,
+        at most 8; 1: one process throughout).  The certificate means the same whatever the count;
+        its numbers may differ within the search's tolerance.
 
     Returns
     -------
@@ -354,6 +360,7 @@ def certify_worst_pose(
             "criterion='components' with probability='exact', or probability='gaussian'",
         )
     max_boxes = check_count(max_boxes, "max_boxes", 1, 10**9)
+    workers = worker_count(workers)
     rtol = DEFAULT_RTOL if rtol is None else check_positive(rtol, "rtol", "relative", upper=0.5, lower=1e-12)
     distribution = resolve(distribution, mech)
     eps = mech.tolerances(tolerances)
@@ -417,6 +424,7 @@ def certify_worst_pose(
                 target=target,
                 stop_above=stop_at,
                 leaves=leaves,
+                workers=workers,
             )
             if not np.isfinite(r.best_value):
                 raise OutOfRangeError(
@@ -459,6 +467,7 @@ def certify_worst_pose(
                 target=target,
                 stop_at=stop_at,
                 leaves=leaves,
+                workers=workers,
             )
             q = _full(dom, out["x"], nq)
             direction = out["direction"]

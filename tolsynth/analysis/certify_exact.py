@@ -36,11 +36,14 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
+import time
 
 import numpy as np
 
 from tolsynth.analysis.certify_bounds import joint_graphs, taylor_enclosure
+from tolsynth.analysis.certify_domain import full, sheared
 from tolsynth.analysis.certify_exact_bounds import ExactBounds, children, patch_normals, start_patches
+from tolsynth.analysis.certify_parallel import run
 from tolsynth.analysis.exact_pose_search import worst_exact_pose
 from tolsynth.errors import OutOfRangeError
 
@@ -76,20 +79,33 @@ def _infeasible(constraint_fn, L, H):
 
 
 class _Search:
-    """One certified search (:func:`certify_components_exact`)."""
+    """One certified search (:func:`certify_components_exact`), and what
+    :func:`tolsynth.analysis.certify_parallel.run` needs to share it out."""
 
-    def __init__(self, bounds: ExactBounds, lo, hi, constraint_fn, tol, target):
+    sense = -1.0  # a minimum
+
+    def __init__(self, bounds: ExactBounds, lo, hi, constraint_fn, tol, target, kept):
         self.b = bounds
         self.lo, self.hi = lo, hi
+        self.scale = np.where(hi > lo, hi - lo, 1.0)
         self.constraint_fn = constraint_fn
         self.tol, self.target = tol, target
         self.best, self.best_x, self.best_u = math.inf, None, None
         self.dropped = math.inf  # least bound of a joint box set aside, every direction proven
         self.stuck = math.inf  # least bound of a box too small to split
         self.w = np.repeat(bounds.eps**2, 3)  # column-major entries of A: each column's weight
+        self.heap: list = []
+        self.seq = 0
+        self.processed = 0
+        self.kept = kept  # when kept: (lo, hi, -bound) of every joint box set aside
+        self.shared = None  # on several processes: the incumbent they share (certify_parallel.Shared)
+
+    def incumbent(self) -> float:
+        """The best value found, by any worker: the threshold every worker uses is the serial one."""
+        return self.best if self.shared is None else min(self.best, self.shared.incumbent())
 
     def threshold(self) -> float:
-        t = self.best - self.tol
+        t = self.incumbent() - self.tol
         return t if self.target is None else min(float(self.target), t)
 
     # -- points ----------------------------------------------------------------------------------
@@ -106,6 +122,8 @@ class _Search:
         j = int(np.argmin(P))
         if P[j] < self.best:
             self.best, self.best_x, self.best_u = float(P[j]), X[j].copy(), U[j].copy()
+            if self.shared is not None:
+                self.shared.offer(self.best)
             return True
         return False
 
@@ -198,6 +216,101 @@ class _Search:
             else:
                 b.side = (int(np.argmax(b.H - b.L)),)
 
+    def set_aside(self, b, bound) -> None:
+        if self.kept is not None:
+            self.kept.append((b.L.copy(), b.H.copy(), -float(bound)))
+
+    def push(self, boxes) -> None:
+        thr = self.threshold()
+        for b in boxes:
+            bound = min(b.lb, b.proven)
+            if b.lb >= thr:  # every direction proven at the threshold
+                self.dropped = min(self.dropped, bound)
+                self.set_aside(b, bound)
+            elif np.all((b.H - b.L) < 1e-12 * self.scale):
+                self.stuck = min(self.stuck, bound)
+                self.set_aside(b, bound)
+            else:
+                self.seq += 1
+                heapq.heappush(self.heap, (b.lb, self.seq, b))
+
+    def step(self, thr) -> None:
+        """One round: the lowest-bound joint boxes split, their parts' patches bounded."""
+        take = []
+        while self.heap and len(take) < BATCH and self.heap[0][0] < thr:
+            take.append(heapq.heappop(self.heap)[2])
+        kids = []
+        for b in take:
+            sides = list(b.side)
+            mid = 0.5 * (b.L[sides] + b.H[sides])
+            for upper in itertools.product((False, True), repeat=len(sides)):
+                L, H = b.L.copy(), b.H.copy()
+                up = np.array(upper)
+                L[sides] = np.where(up, mid, b.L[sides])
+                H[sides] = np.where(up, b.H[sides], mid)
+                kids.append(_Box(L, H, b.face, b.s0, b.t0, b.h, b.plb, b.lb, b.proven, b.feasible))
+        KL = np.array([c.L for c in kids])
+        KH = np.array([c.H for c in kids])
+        todo = [c for c in kids if c.feasible]
+        rest = [i for i, c in enumerate(kids) if not c.feasible]
+        if rest:
+            bad, feas = _infeasible(self.constraint_fn, KL[rest], KH[rest])
+            for i, bd, fs in zip(rest, bad, feas):
+                if not bd:
+                    kids[i].feasible = bool(fs)
+                    todo.append(kids[i])
+        self.processed += len(kids)
+        if todo:
+            self.evaluate(todo)
+            live = [c for c in todo if c.worst is not None]
+            if live and self.consider(np.array([0.5 * (c.L + c.H) for c in live]), np.array([c.worst for c in live])):
+                self.polish(rounds=1, steps=12)
+            self.push(todo)
+
+    # -- what certify_parallel.run needs ------------------------------------------------------
+    @staticmethod
+    def key(entry) -> float:
+        return entry[0]
+
+    def open_bound(self) -> float:
+        return min((min(b.lb, b.proven) for _, _, b in self.heap), default=math.inf)
+
+    def bound(self) -> float:
+        return min(self.open_bound(), self.dropped, self.stuck, self.best)
+
+    def open_count(self) -> int:
+        return len(self.heap) if self.heap and self.heap[0][0] < self.threshold() else 0
+
+    def settled(self, thr) -> bool:
+        return self.heap[0][0] >= thr
+
+    def past(self, level) -> str:
+        return f"a pose below {level:.9g} found" if self.best < level else ""
+
+    def to_worker(self, heap, shared) -> None:
+        self.heap, self.shared, self.processed = heap, shared, 0
+        self.dropped = self.stuck = math.inf
+        self.kept = None if self.kept is None else []
+
+    def part(self) -> dict:
+        return dict(
+            best=self.best,
+            x=self.best_x,
+            u=self.best_u,
+            dropped=self.dropped,
+            stuck=self.stuck,
+            n_boxes=self.processed,
+            kept=self.kept,
+        )
+
+    def merge(self, p) -> None:
+        if p["best"] < self.best:
+            self.best, self.best_x, self.best_u = p["best"], p["x"], p["u"]
+        self.dropped, self.stuck = min(self.dropped, p["dropped"]), min(self.stuck, p["stuck"])
+        self.processed += p["n_boxes"]
+        if self.kept is not None:
+            self.kept.extend(p["kept"])
+
 
 def certify_components_exact(
     mech,
@@ -215,9 +328,11 @@ def certify_components_exact(
     target=None,
     stop_at=None,
     leaves=None,
+    workers=1,
 ) -> dict:
     """The search of the module docstring on the domain of :func:`tolsynth.analysis.certify.certify_worst_pose`:
-    best first over joint boxes (lowest bound first), a box's patches inherited by its halves."""
+    best first over joint boxes (lowest bound first), a box's patches inherited by its halves; past
+    the first :data:`~tolsynth.analysis.certify_parallel.SERIAL_SECONDS` on ``workers`` processes."""
     from tolsynth.probability.distributions import shapes_of
 
     shapes = shapes_of(distribution, mech.error_parameters, mech.index)
@@ -227,10 +342,13 @@ def certify_components_exact(
     held = dict(dom.held)
     if st.rotation is not None and st.rotation in held:
         held[st.rotation] = 0.0  # the proven rotation: any value gives the same probabilities
-    enc = joint_graphs(st, nq, dom.free, held, third=True)
+    if leaves is None:  # a joint constraint as a coordinate (kept boxes are reported in joints)
+        dom = sheared(mech, dom)
+        seeds = None if seeds is None else dom.coords(np.atleast_2d(seeds))
+    enc = joint_graphs(st, nq, dom.free, held, third=True, M=dom.M)
     bounds = ExactBounds(enc, np.asarray(eps, dtype=float)[cols], tuple(shapes[i] for i in cols), R, dom.linear)
     lo, hi = np.asarray(dom.lo, dtype=float), np.asarray(dom.hi, dtype=float)
-    s = _Search(bounds, lo, hi, dom.constraint_fn, tol, target)
+    s = _Search(bounds, lo, hi, dom.constraint_fn, tol, target, [] if leaves is not None else None)
     starts = [0.5 * (lo + hi)] + ([] if seeds is None else list(np.clip(np.atleast_2d(seeds), lo, hi)))
     for x in starts:
         s.consider(np.asarray(x)[None], s.direction(np.asarray(x))[None])
@@ -238,90 +356,34 @@ def certify_components_exact(
     # the sampled search for the pose of lowest exact probability (joints and direction together,
     # ending on the joint constraints where the minimum lies there: a compass search from a box
     # centre stops short of a corner of the domain, and the bound cannot close on it)
-    w = worst_exact_pose(mech, eps, R, distribution=distribution, x0=[_full_pose(dom, x, nq) for x in starts])
-    s.consider(np.asarray(w.q, dtype=float)[list(dom.free)][None], np.asarray(w.direction, dtype=float)[None])
-    scale = np.where(hi > lo, hi - lo, 1.0)
+    w = worst_exact_pose(mech, eps, R, distribution=distribution, x0=[full(dom, x, nq) for x in starts])
+    s.consider(
+        dom.coords(np.asarray(w.q, dtype=float)[list(dom.free)][None]), np.asarray(w.direction, dtype=float)[None]
+    )
     face0 = start_patches()
     root = _Box(lo.copy(), hi.copy(), *face0, np.zeros(len(face0[0])), 0.0, math.inf, False)
-    heap: list = []
-    seq = 0
-    kept = [] if leaves is not None else None
-
-    def set_aside(b, bound):
-        if kept is not None:
-            kept.append((b.L.copy(), b.H.copy(), -float(bound)))
-
-    def push(boxes):
-        nonlocal seq
-        thr = s.threshold()
-        for b in boxes:
-            bound = min(b.lb, b.proven)
-            if b.lb >= thr:  # every direction proven at the threshold
-                s.dropped = min(s.dropped, bound)
-                set_aside(b, bound)
-            elif np.all((b.H - b.L) < 1e-12 * scale):
-                s.stuck = min(s.stuck, bound)
-                set_aside(b, bound)
-            else:
-                seq += 1
-                heapq.heappush(heap, (b.lb, seq, b))
-
     bad, feas = _infeasible(dom.constraint_fn, root.L[None], root.H[None])
-    processed = 1
-    stopped = ""
+    s.processed = 1
+    t0 = time.perf_counter()
     if not bad[0]:
         root.feasible = bool(feas[0])
         s.evaluate([root])
-        push([root])
-    while heap and processed < max_boxes:
-        if stop_at is not None and s.best < stop_at:
-            stopped = f"a pose below {stop_at:.9g} found"
-            break
-        if stop is not None:
-            stopped = stop() or ""
-            if stopped:
-                break
-        thr = s.threshold()
-        if heap[0][0] >= thr:
-            break
-        take = []
-        while heap and len(take) < BATCH and heap[0][0] < thr:
-            take.append(heapq.heappop(heap)[2])
-        kids = []
-        for b in take:
-            sides = list(b.side)
-            mid = 0.5 * (b.L[sides] + b.H[sides])
-            for upper in itertools.product((False, True), repeat=len(sides)):
-                L, H = b.L.copy(), b.H.copy()
-                up = np.array(upper)
-                L[sides] = np.where(up, mid, b.L[sides])
-                H[sides] = np.where(up, b.H[sides], mid)
-                kids.append(_Box(L, H, b.face, b.s0, b.t0, b.h, b.plb, b.lb, b.proven, b.feasible))
-        KL = np.array([c.L for c in kids])
-        KH = np.array([c.H for c in kids])
-        todo = [c for c in kids if c.feasible]
-        rest = [i for i, c in enumerate(kids) if not c.feasible]
-        if rest:
-            bad, feas = _infeasible(dom.constraint_fn, KL[rest], KH[rest])
-            for i, bd, fs in zip(rest, bad, feas):
-                if not bd:
-                    kids[i].feasible = bool(fs)
-                    todo.append(kids[i])
-        processed += len(kids)
-        if todo:
-            s.evaluate(todo)
-            live = [c for c in todo if c.worst is not None]
-            if live and s.consider(np.array([0.5 * (c.L + c.H) for c in live]), np.array([c.worst for c in live])):
-                s.polish(rounds=1, steps=12)
-            push(todo)
-        if callback is not None:
-            callback(processed, -_lower_bound(s, heap), -s.best)
-    lower = _lower_bound(s, heap)
-    n_open = len(heap) if heap and heap[0][0] < s.threshold() else 0
-    for _, _, b in heap:
-        set_aside(b, min(b.lb, b.proven))
+        s.push([root])
+    stopped = run(
+        s,
+        workers=workers,
+        max_boxes=max_boxes,
+        stop=stop,
+        level=stop_at,
+        callback=None if callback is None else (lambda n, lb, best: callback(n, -lb, -best)),
+        start=t0,
+    )
+    lower = s.bound()
+    n_open, processed = s.open_count(), s.processed
+    for _, _, b in s.heap:
+        s.set_aside(b, min(b.lb, b.proven))
     if leaves is not None:
-        leaves.extend(kept)
+        leaves.extend(s.kept)
     if s.best_x is None:
         raise OutOfRangeError(
             "joint limits", "no pose satisfies every joint limit and constraint", "a non-empty feasible joint space"
@@ -335,7 +397,7 @@ def certify_components_exact(
             or "boxes at the resolution limit still bound below the best"
         )
     return dict(
-        x=s.best_x,
+        x=dom.joints(s.best_x[None])[0],
         direction=s.best_u,
         certified=bool(certified),
         probability_lower_bound=max(0.0, float(lower)),
@@ -345,16 +407,3 @@ def certify_components_exact(
         reason=reason,
         method="exact probabilities at the vertex pairs of joint boxes and lifted direction patches",
     )
-
-
-def _full_pose(dom, x, nq: int) -> np.ndarray:
-    q = np.zeros(nq)
-    for j, v in dom.held.items():
-        q[j] = v
-    q[list(dom.free)] = x
-    return q
-
-
-def _lower_bound(s: _Search, heap) -> float:
-    top = min((min(b.lb, b.proven) for _, _, b in heap), default=math.inf)
-    return min(top, s.dropped, s.stuck, s.best)
