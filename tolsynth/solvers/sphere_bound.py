@@ -28,8 +28,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.optimize import minimize, minimize_scalar
-from scipy.special import erfc
 
 from tolsynth.probability.stats import z_of_p
 from tolsynth.problem.nlp import ToleranceNLP
@@ -41,6 +39,8 @@ _SQPI = math.sqrt(math.pi)
 
 def _h(v: np.ndarray, R: float) -> tuple[np.ndarray, np.ndarray]:
     """``h(v) = ln erf(R / sqrt(2 v))`` and ``h'(v)`` (0 and 0 at v = 0)."""
+    from scipy.special import erfc  # scipy loads in about a second: only when a sphere bound is asked
+
     v = np.maximum(np.asarray(v, dtype=float), 1e-300)
     x = np.minimum(R / np.sqrt(2.0 * v), 40.0)  # beyond, erfc(x) and h' underflow to 0 (a planar arm's 0)
     E = 1.0 - erfc(x)
@@ -90,6 +90,8 @@ def log_box(A: np.ndarray, s: np.ndarray, c: float, R: float, tT: float):
 def box_bound(nlp: ToleranceNLP, eps_start) -> float:
     """A rigorous lower bound on the Gaussian sphere problem's cost (module docstring), from the box
     relaxation at every sphere block of ``nlp``; its other constraints are left out (a relaxation)."""
+    from scipy.optimize import minimize
+
     spec = nlp.spec
     c = float(spec.c)
     blocks = []
@@ -139,6 +141,7 @@ def half_space_bound(nlp: ToleranceNLP, W: np.ndarray, r: np.ndarray) -> float:
     """The cheapest cost within the bounds over the half-spaces ``W_b . eps^2 <= r_b`` (``W >= 0``),
     from below: the Lagrangian dual ``max over mu >= 0`` of the separable minimum
     (:meth:`ToleranceNLP.lagrangian_bound`), every value of which is a valid bound (weak duality)."""
+    from scipy.optimize import minimize, minimize_scalar
 
     def dual(mu):
         return nlp.lagrangian_bound(mu @ W, float(mu @ r))

@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.stats import chi2
 
 from tolsynth.probability.stats import p_ball, p_ball_batch, z_of_p
 from tolsynth.problem.nlp import ToleranceNLP
@@ -74,6 +73,8 @@ def weighted_maximum(g, R: float, p: float, rtol: float = RTOL, max_rays: int = 
     """``(proven, found)``: an upper bound on ``sum_j g_j lambda_j`` over sorted variances with
     ``P(sum_j lambda_j Z_j^2 <= R^2) >= p`` (``g`` descending, >= 0), and the largest value found
     at a point of the set (module docstring)."""
+    from scipy.stats import chi2  # scipy.stats loads in over half a second: only when asked
+
     g = np.asarray(g, dtype=float)
     vp = (R / z_of_p(p)) ** 2  # lambda_1 <= v_p: the ball lies in the slab of the first component
     r0, r1 = R * R / float(chi2.ppf(p, 3)), vp * (1 + 1e-9)  # (1, u, w) <= (1, 1, 1): r0 meets p
