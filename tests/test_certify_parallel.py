@@ -248,3 +248,29 @@ def test_ctrl_c_ends_the_workers_and_raises_keyboard_interrupt(tmp_path):
     for pid in children:
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
+
+
+def test_boxes_kept_on_workers_cover_the_joint_space_with_sound_bounds(dealt):
+    """Paper's robot, figure3, keep_boxes on two workers: random feasible poses lie in a kept box
+    whose bound is above their sigma_1 (numeric sensitivity, NumPy); the largest bound kept is the
+    certificate's, and the history ends at the certificate's numbers."""
+    m = tolsynth.load_model("xu_zhang_1988")
+    eps = m.tolerances("figure3")
+    c = certify_worst_pose(m, eps, "uniform", progress=False, keep_boxes=True, workers=2)
+    assert dealt and c.certified
+    lo, hi, ub = c.leaves
+    names = list(m.joint_names)
+    free = [names.index(n) for n in c.searched]
+    lq, hq = _limits(m)
+    Q = lq + (hq - lq) * np.random.default_rng(17).random((400, len(names)))
+    Q[:, [0, 4]] = 0.0
+    Q = Q[_feasible(m, Q.T)][:150]
+    X = Q[:, free]
+    inside = (X[:, None] >= lo[None] - 1e-12).all(axis=2) & (X[:, None] <= hi[None] + 1e-12).all(axis=2)
+    assert inside.any(axis=1).all()
+    bound_at = np.where(inside, ub[None], -np.inf).max(axis=1)
+    assert np.all(_sigma(m, Q, eps) <= bound_at * (1 + 1e-12))
+    assert ub.max() == pytest.approx(c.upper_bound, rel=1e-12)
+    H = np.array(c.history)
+    assert np.all(np.diff(H[:, 0]) >= 0) and np.all(np.diff(H[:, 2]) >= 0)
+    assert H[-1, 1] == pytest.approx(c.upper_bound) and H[-1, 2] == pytest.approx(c.best_value)

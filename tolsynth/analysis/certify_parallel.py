@@ -51,10 +51,12 @@ POLL = 0.05
 
 
 def worker_count(workers) -> int:
-    """Processes for a search: ``None`` the machine's cores (at most :data:`MAX_WORKERS`), else an
+    """Processes for a search: ``None`` the cores this process may use (at most
+    :data:`MAX_WORKERS`; 1 inside a worker process, whose siblings have the other cores), else an
     integer >= 1 (1: the serial search alone); 1 where processes cannot be forked."""
     if workers is None:
-        n = min(os.cpu_count() or 1, MAX_WORKERS)
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+        n = 1 if multiprocessing.parent_process() is not None else min(cores or 1, MAX_WORKERS)
     else:
         try:
             n = int(workers)
@@ -183,14 +185,17 @@ def fan_out(parts: list, run, shared: Shared, *, stop=None, tick=None) -> list:
 
 def run(s, *, workers: int, max_boxes: int, start: float, stop=None, level=None, callback=None):
     """The search ``s`` (module docstring) to its end: serial rounds until :data:`SERIAL_SECONDS`
-    after ``start`` (time.perf_counter), then, if boxes are still open, on ``workers`` processes.  ``stop() -> str``
-    ends it with that reason (a time limit), ``level`` when the best point passes it, and
-    ``callback(boxes, bound, best)`` follows it.  Returns the reason it stopped early, or ""."""
+    after ``start`` (time.perf_counter), then, while boxes are open, on ``workers`` processes.
+    ``stop() -> str`` ends it with that reason (a time limit), ``level`` when the best point passes
+    it, and ``callback(boxes, bound, best)`` follows it.  Returns the reason it stopped early, or
+    ""."""
 
     def more():
         return s.processed < max_boxes
 
-    pause = start + SERIAL_SECONDS if int(workers) > 1 else math.inf
+    # a daemonic process (a pool's worker) may not start processes of its own
+    forks = int(workers) > 1 and not multiprocessing.current_process().daemon
+    pause = start + SERIAL_SECONDS if forks else math.inf
     stopped, paused = _rounds(s, more, stop, level, callback, pause)
     while paused:
         stopped = _fan(s, min(int(workers), len(s.heap)), max_boxes, stop, level, callback)
@@ -264,6 +269,8 @@ def _fan(s, n, max_boxes, stop, level, callback) -> str:
         for entry in p["heap"]:
             s.seq += 1  # entries of different workers may share a sequence number
             heapq.heappush(s.heap, (entry[0], s.seq, *entry[2:]))
+    if callback is not None:
+        callback(s.processed, s.bound(), s.best)
     reason = s.past(level) if level is not None else ""
     reason = reason or next((p["reason"] for p in out if p["reason"] and p["reason"] != HALTED), "")
     return reason or ((stop() or "") if stop is not None else "")
