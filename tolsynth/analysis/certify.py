@@ -24,19 +24,17 @@ import math
 import time
 from dataclasses import dataclass, field
 
-import casadi as ca
 import numpy as np
 
 from tolsynth.analysis.branch_bound import maximize
 from tolsynth.analysis.certify_bounds import PolygonSigmaBounds, SigmaBounds, joint_graphs
+from tolsynth.analysis.certify_domain import domain as _domain
+from tolsynth.analysis.certify_domain import full as _full
 from tolsynth.analysis.certify_parallel import worker_count
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 from tolsynth.analysis.interval_ops import round_down as _dn
-from tolsynth.analysis.interval_ops import round_up as _up
-from tolsynth.analysis.intervals import IntervalFunction
 from tolsynth.checks import check_count, check_positive
 from tolsynth.errors import InputError, OutOfRangeError
-from tolsynth.kinematics.joint_space import _feasible, _limits
 from tolsynth.progress import Progress, remaining
 
 __all__ = ["Certificate", "certify_worst_pose", "DEFAULT_RTOL", "DEFAULT_MAX_BOXES"]
@@ -152,109 +150,6 @@ class Certificate:
         if self.dropped:
             lines.append("  no effect on the hand position: " + ", ".join(self.dropped))
         return "\n".join(lines)
-
-
-# ---------------------------------------------------------------------------------------------
-# the search domain
-# ---------------------------------------------------------------------------------------------
-@dataclass
-class _Domain:
-    free: list
-    held: dict  # joint -> value (rad) in the reported pose
-    why: dict  # joint -> reason
-    lo: np.ndarray
-    hi: np.ndarray
-    constraint_fn: object
-    linear: tuple  # (a, lower, upper) of each joint constraint, a over the searched joints
-
-
-def _domain(mech, st, base_q: np.ndarray) -> _Domain:
-    lo_q, hi_q = _limits(mech)
-    nq = len(lo_q)
-    names = list(mech.joint_names)
-    constrained = {names.index(jn) for c in mech.spec.joint_constraints for jn in c.terms}
-    free = [j for j in range(nq) if (j in st.joints and j != st.rotation) or j in constrained]
-    why = {}
-    for j in range(nq):
-        if j == st.rotation and j not in constrained:
-            why[j] = "turns the error distribution rigidly about the base z axis"
-        elif j not in free:
-            why[j] = "the hand position's sensitivity does not depend on it"
-    held = {j: float(np.clip(base_q[j], lo_q[j], hi_q[j])) for j in range(nq) if j not in free}
-    lo, hi = lo_q[free].copy(), hi_q[free].copy()
-    for i, j in enumerate(free):
-        if j in st.periodic and j not in constrained and hi[i] - lo[i] > 2 * math.pi:
-            hi[i] = lo[i] + 2 * math.pi  # one period: the joint enters only through sin and cos
-    linear = []
-    for c in mech.spec.joint_constraints:
-        a = np.zeros(len(free))
-        for jn, coef in c.terms.items():
-            a[free.index(names.index(jn))] = coef
-        linear.append((a, c.lower, c.upper))
-    return _Domain(free, held, why, lo, hi, _constraints(mech, free, held), tuple(linear))
-
-
-def _constraints(mech, free, held):
-    """``g(x) <= 0`` on boxes of the searched joints: the linear joint constraints (two rows each)
-    and, for closed loops, ``c^2 - 1`` of every loop's closure argument at zero error.  On points
-    the package's own feasibility test decides (the one Mechanism.joints applies)."""
-    names = list(mech.joint_names)
-    rows = []
-    for c in mech.spec.joint_constraints:
-        a = np.zeros(len(free))
-        for jn, coef in c.terms.items():
-            a[free.index(names.index(jn))] = coef
-        rows.append((a, c.lower, c.upper))
-    clos = None
-    graphs = mech.graphs
-    if getattr(graphs, "closure", None) is not None and graphs.closure.numel_out(0) > 0:
-        x = ca.SX.sym("x", len(free))
-        q = [ca.SX(float(held.get(j, 0.0))) for j in range(len(names))]
-        for i, j in enumerate(free):
-            q[j] = x[i]
-        cl = graphs.closure
-        cl = cl if cl.is_a("SXFunction") else cl.expand()
-        c = cl.call([ca.vertcat(*q), ca.DM.zeros(cl.nnz_in(1))])[0]
-        clos = IntervalFunction(ca.Function("closure_margin", [x], [ca.densify(c * c - 1.0)]))
-    if not rows and clos is None:
-        return None
-    nq = len(names)
-
-    def fn(L, H):
-        parts_lo, parts_hi = [], []
-        for a, lower, upper in rows:
-            terms_lo = np.where(a > 0, a * L, a * H)
-            terms_hi = np.where(a > 0, a * H, a * L)
-            slack = 4.0 * len(a) * 2.0**-53 * np.abs(np.concatenate([terms_lo, terms_hi], axis=1)).sum(axis=1)
-            v_lo, v_hi = _dn(terms_lo.sum(axis=1) - slack), _up(terms_hi.sum(axis=1) + slack)
-            parts_lo += [v_lo - upper, lower - v_hi]
-            parts_hi += [v_hi - upper, lower - v_lo]
-        g_lo = np.array(parts_lo).T if parts_lo else np.zeros((len(L), 0))
-        g_hi = np.array(parts_hi).T if parts_hi else np.zeros((len(L), 0))
-        if clos is not None:
-            cl_lo, cl_hi, _ = clos.evaluate(L, H)
-            g_lo, g_hi = np.hstack([g_lo, cl_lo]), np.hstack([g_hi, cl_hi])
-        point = np.all(L == H, axis=1)
-        if point.any():  # a point: the package's own test of the limits and joint constraints
-            Q = np.empty((nq, int(point.sum())))
-            for j, v in held.items():
-                Q[j] = v
-            for i, j in enumerate(free):
-                Q[j] = L[point, i]
-            ok = _feasible(mech, Q)
-            g_hi[point, : 2 * len(rows)] = np.where(ok, 0.0, 1.0)[:, None]
-        return g_lo, g_hi
-
-    return fn
-
-
-def _full(dom: _Domain, x: np.ndarray, nq: int) -> np.ndarray:
-    q = np.empty(nq)
-    for j, v in dom.held.items():
-        q[j] = v
-    for i, j in enumerate(dom.free):
-        q[j] = x[i]
-    return q
 
 
 # ---------------------------------------------------------------------------------------------
