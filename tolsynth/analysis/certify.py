@@ -30,6 +30,7 @@ from tolsynth.analysis.branch_bound import maximize
 from tolsynth.analysis.certify_bounds import PolygonSigmaBounds, SigmaBounds, joint_graphs
 from tolsynth.analysis.certify_domain import domain as _domain
 from tolsynth.analysis.certify_domain import full as _full
+from tolsynth.analysis.certify_domain import sheared
 from tolsynth.analysis.certify_parallel import worker_count
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 from tolsynth.analysis.interval_ops import round_down as _dn
@@ -296,7 +297,13 @@ def certify_worst_pose(
     leaves = [] if keep_boxes else None
     try:
         if criterion == "sigma" or probability == "gaussian":
-            bounds, method = _sigma_bounds(st, dom, nq, (eps**2 / c)[cols])
+            sdom = dom
+            bounds, method = _sigma_bounds(st, sdom, nq, (eps**2 / c)[cols])
+            if leaves is None and not isinstance(bounds, PolygonSigmaBounds):
+                # a joint constraint as a coordinate (kept boxes are reported in joints)
+                sdom = sheared(mech, dom)
+                if sdom is not dom:
+                    bounds, method = _sigma_bounds(st, sdom, nq, (eps**2 / c)[cols])
             if criterion == "components" and (target is not None or stop_at is not None):
                 raise InputError(
                     "target",
@@ -306,13 +313,13 @@ def certify_worst_pose(
             r = maximize(
                 lambda L, H: _with_split(bounds.bound(L, H)),
                 bounds.point,
-                dom.lo,
-                dom.hi,
+                sdom.lo,
+                sdom.hi,
                 tol=0.0,
                 rtol=rtol,
                 max_boxes=max_boxes,
-                constraint_fn=dom.constraint_fn,
-                x0=seeds,
+                constraint_fn=sdom.constraint_fn,
+                x0=None if seeds is None else sdom.coords(seeds),
                 callback=callback,
                 stop=stop,
                 batch=512,
@@ -328,7 +335,7 @@ def certify_worst_pose(
                     "a non-empty feasible joint space",
                 )
             ub = float(r.upper_bound)
-            q = _full(dom, r.best_x, nq)
+            q = _full(sdom, r.best_x, nq)
             best = float(r.best_value)
             p_lb = None
             if R is not None:
@@ -410,12 +417,12 @@ def _sigma_bounds(st, dom, nq, w):
     columns), and the method's name: arc polygons where the sensitivity is a trigonometric
     polynomial of the searched joints, Taylor corners elsewhere."""
     poly = trig_polynomial(st, dom.free, st.rotation) if st.rotation is None or st.rotation in dom.held else None
-    if poly is not None and all(j in st.joints for j in dom.free):
+    if poly is not None and all(j in st.joints for j in dom.free) and dom.M is None:
         return PolygonSigmaBounds(poly, dom.free, w), "arc polygons of the exact trigonometric polynomial"
     held_zero = dict(dom.held)
     if st.rotation is not None:
         held_zero[st.rotation] = 0.0
-    bounds = SigmaBounds(joint_graphs(st, nq, dom.free, held_zero), w, dom.linear)
+    bounds = SigmaBounds(joint_graphs(st, nq, dom.free, held_zero, M=dom.M), w, dom.linear)
     return bounds, "second-order Taylor corners" if bounds.g.use_hessian else "Taylor corners (interval Jacobian)"
 
 
