@@ -274,3 +274,18 @@ def test_boxes_kept_on_workers_cover_the_joint_space_with_sound_bounds(dealt):
     H = np.array(c.history)
     assert np.all(np.diff(H[:, 0]) >= 0) and np.all(np.diff(H[:, 2]) >= 0)
     assert H[-1, 1] == pytest.approx(c.upper_bound) and H[-1, 2] == pytest.approx(c.best_value)
+
+
+def test_a_failing_background_step_raises_in_the_parent():
+    """An exception in the forked process comes back as a RuntimeError naming it; the process ends."""
+
+    def fail():
+        raise ValueError("no such pose")
+
+    with pytest.raises(RuntimeError, match="no such pose"):
+        with certify_parallel.Background(fail) as job:
+            proc = job.proc
+            job.result()
+    assert proc is not None and not proc.is_alive()
+    with certify_parallel.Background(lambda: os.getpid()) as job:
+        assert job.result() != os.getpid()  # it ran in another process

@@ -43,7 +43,7 @@ import numpy as np
 from tolsynth.analysis.certify_bounds import joint_graphs, taylor_enclosure
 from tolsynth.analysis.certify_domain import full, sheared
 from tolsynth.analysis.certify_exact_bounds import ExactBounds, children, patch_normals, start_patches
-from tolsynth.analysis.certify_parallel import run
+from tolsynth.analysis.certify_parallel import Background, run
 from tolsynth.analysis.exact_pose_search import worst_exact_pose
 from tolsynth.errors import OutOfRangeError
 
@@ -350,16 +350,21 @@ def certify_components_exact(
     lo, hi = np.asarray(dom.lo, dtype=float), np.asarray(dom.hi, dtype=float)
     s = _Search(bounds, lo, hi, dom.constraint_fn, tol, target, [] if leaves is not None else None)
     starts = [0.5 * (lo + hi)] + ([] if seeds is None else list(np.clip(np.atleast_2d(seeds), lo, hi)))
-    for x in starts:
-        s.consider(np.asarray(x)[None], s.direction(np.asarray(x))[None])
-    s.polish()
-    # the sampled search for the pose of lowest exact probability (joints and direction together,
-    # ending on the joint constraints where the minimum lies there: a compass search from a box
-    # centre stops short of a corner of the domain, and the bound cannot close on it)
-    w = worst_exact_pose(mech, eps, R, distribution=distribution, x0=[full(dom, x, nq) for x in starts])
-    s.consider(
-        dom.coords(np.asarray(w.q, dtype=float)[list(dom.free)][None]), np.asarray(w.direction, dtype=float)[None]
-    )
+
+    def sampled():
+        # the sampled search for the pose of lowest exact probability (joints and direction together,
+        # ending on the joint constraints where the minimum lies there: a compass search from a box
+        # centre stops short of a corner of the domain, and the bound cannot close on it)
+        w = worst_exact_pose(mech, eps, R, distribution=distribution, x0=[full(dom, x, nq) for x in starts])
+        return np.asarray(w.q, dtype=float)[list(dom.free)], np.asarray(w.direction, dtype=float)
+
+    # it does not depend on the starts' directions and their polish: on a second core, alongside them
+    with Background(sampled, enabled=int(workers) > 1) as job:
+        for x in starts:
+            s.consider(np.asarray(x)[None], s.direction(np.asarray(x))[None])
+        s.polish()
+        wq, wu = job.result()
+    s.consider(dom.coords(wq[None]), wu[None])
     face0 = start_patches()
     root = _Box(lo.copy(), hi.copy(), *face0, np.zeros(len(face0[0])), 0.0, math.inf, False)
     bad, feas = _infeasible(dom.constraint_fn, root.L[None], root.H[None])

@@ -38,7 +38,7 @@ from multiprocessing.connection import wait
 
 from tolsynth.errors import InputError
 
-__all__ = ["SERIAL_SECONDS", "MAX_WORKERS", "worker_count", "run", "Shared", "fan_out"]
+__all__ = ["SERIAL_SECONDS", "MAX_WORKERS", "worker_count", "run", "Shared", "fan_out", "Background"]
 
 #: seconds of serial search before the open boxes go to workers (a small problem ends before)
 SERIAL_SECONDS = 0.5
@@ -274,6 +274,44 @@ def _fan(s, n, max_boxes, stop, level, callback) -> str:
     reason = s.past(level) if level is not None else ""
     reason = reason or next((p["reason"] for p in out if p["reason"] and p["reason"] != HALTED), "")
     return reason or ((stop() or "") if stop is not None else "")
+
+
+class Background:
+    """``fn()`` in a forked process while the caller goes on (``enabled``; else it runs inside
+    :meth:`result`): a search's start-up steps that do not depend on each other overlap.  Use as a
+    context manager: leaving the block (an exception, Ctrl-C) terminates the process."""
+
+    def __init__(self, fn, enabled: bool = True):
+        self.fn, self.proc, self.conn = fn, None, None
+        if enabled and not multiprocessing.current_process().daemon:
+            ctx = multiprocessing.get_context("fork")
+            self.conn, w = ctx.Pipe(duplex=False)
+            self.proc = ctx.Process(target=_child, args=(lambda *_: fn(), 0, None, None, w, os.getpid()), daemon=True)
+            self.proc.start()
+            w.close()
+
+    def result(self):
+        if self.proc is None:
+            return self.fn()
+        try:
+            status, value = self.conn.recv()
+        except EOFError:
+            self.proc.join()
+            raise RuntimeError(f"background step ended without a result (exit code {self.proc.exitcode})") from None
+        if status != "ok":
+            raise RuntimeError(f"background step failed:\n{value}")
+        return value
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self.proc is not None:
+            if self.proc.is_alive():
+                self.proc.terminate()
+            self.proc.join()
+            self.conn.close()
+        return False
 
 
 def _end_with_parent(parent: int) -> None:  # pragma: no cover - runs in the forked worker
