@@ -277,15 +277,17 @@ def test_boxes_kept_on_workers_cover_the_joint_space_with_sound_bounds(dealt):
 
 
 def test_a_failing_background_step_raises_in_the_parent():
-    """An exception in the forked process comes back as a RuntimeError naming it; the process ends."""
+    """An exception in the forked process is raised again in the parent, with the worker's
+    traceback as its cause; the process ends."""
 
     def fail():
         raise ValueError("no such pose")
 
-    with pytest.raises(RuntimeError, match="no such pose"):
+    with pytest.raises(ValueError, match="no such pose") as err:
         with certify_parallel.Background(fail) as job:
             proc = job.proc
             job.result()
+    assert isinstance(err.value.__cause__, RuntimeError) and "in fail" in str(err.value.__cause__)
     assert proc is not None and not proc.is_alive()
     with certify_parallel.Background(lambda: os.getpid()) as job:
         assert job.result() != os.getpid()  # it ran in another process

@@ -129,20 +129,34 @@ def _child(run, i, part, shared, conn, parent) -> None:  # pragma: no cover - ru
     _end_with_parent(parent)
     try:
         out = ("ok", run(i, part, shared))
-    except BaseException:  # noqa: BLE001 - reported to the parent, which raises it
-        out = ("error", traceback.format_exc())
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent, which raises it
+        out = ("error", (exc, traceback.format_exc()))
     try:
-        conn.send(out)
+        try:
+            conn.send(out)
+        except Exception:  # an exception that cannot be pickled: its traceback alone
+            conn.send(("error", (None, out[1][1])))
     finally:
         conn.close()
+
+
+def _raise(what: str, value) -> None:
+    """A worker's exception raised in the parent: the same exception (a typed input error stays
+    one) where it could be sent, with the worker's traceback as its cause."""
+    exc, tb = value
+    cause = RuntimeError(f"{what} failed:\n{tb}")
+    if isinstance(exc, Exception):
+        raise exc from cause
+    raise cause
 
 
 def fan_out(parts: list, run, shared: Shared, *, stop=None, tick=None) -> list:
     """``run(i, parts[i], shared)`` in a forked worker for each part; their return values, in order.
 
     ``stop() -> str`` (a time limit) is checked by the parent too, and ``tick(shared)`` is called at
-    every look (progress).  A worker's exception is raised in the parent as a RuntimeError with its
-    traceback; any exception in the parent (KeyboardInterrupt too) terminates the workers first.
+    every look (progress).  A worker's exception is raised again in the parent (a RuntimeError with
+    the worker's traceback where it cannot be sent); any exception in the parent (KeyboardInterrupt
+    too) terminates the workers first.
     """
     ctx = multiprocessing.get_context("fork")
     procs, pending = [], {}
@@ -166,7 +180,7 @@ def fan_out(parts: list, run, shared: Shared, *, stop=None, tick=None) -> list:
                 finally:
                     conn.close()
                 if status != "ok":
-                    raise RuntimeError(f"search worker {i} failed:\n{value}")
+                    _raise(f"search worker {i}", value)
                 results[i] = value
             if tick is not None:
                 tick(shared)
@@ -299,7 +313,7 @@ class Background:
             self.proc.join()
             raise RuntimeError(f"background step ended without a result (exit code {self.proc.exitcode})") from None
         if status != "ok":
-            raise RuntimeError(f"background step failed:\n{value}")
+            _raise("background step", value)
         return value
 
     def __enter__(self):
