@@ -291,3 +291,17 @@ def test_a_failing_background_step_raises_in_the_parent():
     assert proc is not None and not proc.is_alive()
     with certify_parallel.Background(lambda: os.getpid()) as job:
         assert job.result() != os.getpid()  # it ran in another process
+
+
+def test_box_limit_still_ends_the_search_on_workers(dealt):
+    """The box limit counts every worker's boxes: past it the search ends, not certified, with the
+    bound reached still above sigma_1 at the serial search's certified worst pose."""
+    m = tolsynth.load_model("xu_zhang_1988")
+    eps = m.tolerances("figure3")
+    c = certify_worst_pose(m, eps, "uniform", progress=False, rtol=1e-4, workers=2, max_boxes=600)
+    assert dealt
+    assert not c.certified and c.reason.startswith("box limit reached") and c.open_boxes > 0
+    assert 600 <= c.boxes <= 600 + 2 * 2 * 2 * 512  # a round per worker may pass it: two halves a box
+    full = certify_worst_pose(m, eps, "uniform", progress=False, rtol=1e-4, workers=1)
+    assert full.certified
+    assert _sigma(m, full.q, eps)[0] <= c.upper_bound
