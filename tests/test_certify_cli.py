@@ -39,8 +39,9 @@ def _sigma(mech, Q, eps, c=3.0):
     return np.array(out)
 
 
-def test_worst_pose_certify_json_holds_its_proof():
-    rc, out, _ = _run("worst-pose", "--model", "planar_2r", "--certify", "--json")
+@pytest.mark.parametrize("workers", [None, "1", "2"])
+def test_worst_pose_certify_json_holds_its_proof(workers):
+    rc, out, _ = _run("worst-pose", "--model", "planar_2r", "--certify", "--json", *(["--workers", workers] if workers else []))
     assert rc == 0
     m = tolsynth.load_model("planar_2r")
     sig = _sigma(m, np.array(out["q"]), np.array(list(out["tolerances"].values())))[0]
@@ -98,8 +99,23 @@ def test_worst_pose_certify_components_gives_a_probability_bound():
         ),
         (["worst-pose", "--model", "planar_2r", "--certify-time-limit", "3"], "--certify"),
         (["worst-pose", "--model", "planar_2r", "--certify", "--certify-time-limit", "0"], "seconds > 0"),
+        (["worst-pose", "--model", "planar_2r", "--workers", "2"], "--certify"),
+        (["worst-pose", "--model", "planar_2r", "--certify", "--workers", "0"], "integer >= 1"),
+        (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--everywhere", "--workers", "2"], "--certify"),
+        (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--workers", "2"], "--everywhere"),
     ],
-    ids=["sphere-probability", "certify-alone", "max-rounds-alone", "sphere-everywhere", "time-alone", "time-zero"],
+    ids=[
+        "sphere-probability",
+        "certify-alone",
+        "max-rounds-alone",
+        "sphere-everywhere",
+        "time-alone",
+        "time-zero",
+        "workers-alone",
+        "workers-zero",
+        "workers-without-certify",
+        "workers-without-everywhere",
+    ],
 )
 def test_certify_usage_errors_exit_2_naming_the_choice(argv, says, capsys):
     # in this process (the command's own entry point; a child process per case took 2 s each, and

@@ -203,6 +203,7 @@ def worst_pose(
     max_boxes: int | None = None,
     progress=None,
     time_limit: float | None = None,
+    workers: int | None = None,
 ) -> WorstPose:
     """Search the joint space for the pose of worst accuracy at given tolerances.
 
@@ -260,6 +261,8 @@ def worst_pose(
     rtol, max_boxes, progress, time_limit
         Of the certified search (relative gap, box limit, progress bar, seconds): a limit reached
         leaves ``certified`` False with the bound reached, which holds, only looser.
+    workers : int, optional
+        Processes of the certified search (default: the cores this process may use; 1: one).
 
     Returns
     -------
@@ -416,6 +419,7 @@ def worst_pose(
             base_q=base_q,
             progress=progress,
             time_limit=time_limit,
+            workers=workers,
         )
         better = (
             cert.best_value > _value_at(mechanism, q, eps, distribution, R, criterion, probability)

@@ -201,12 +201,12 @@ def cmd_solve(args) -> int:
             for k, v in (("certify", args.certify or None), ("max_rounds", args.max_rounds), ("tol", args.tol))
             if v is not None
         }
-        if args.certify_time_limit is not None:
-            if not args.certify:
-                raise InputError(
-                    "--certify-time-limit", "only used with --certify", "--certify --certify-time-limit SECONDS"
-                )
-            ex["certify_options"] = {"time_limit": args.certify_time_limit}
+        for flag, value in (("--certify-time-limit", args.certify_time_limit), ("--workers", args.workers)):
+            if value is not None and not args.certify:
+                raise InputError(flag, "only used with --certify", f"--certify {flag} VALUE")
+        options = {"time_limit": args.certify_time_limit, "workers": args.workers}
+        if any(v is not None for v in options.values()):
+            ex["certify_options"] = {k: v for k, v in options.items() if v is not None}
         with Working(
             "tolsynth solve: the design for every reachable pose (exchange rounds with the worst-pose search)"
         ):
@@ -281,6 +281,7 @@ def cmd_solve(args) -> int:
         ("--max-rounds", args.max_rounds is not None),
         ("--tol", args.tol is not None),
         ("--certify-time-limit", args.certify_time_limit is not None),
+        ("--workers", args.workers is not None),
     ):
         if given:
             raise InputError(flag, "only used with --everywhere", "--everywhere " + flag)
@@ -437,6 +438,13 @@ def register(sub) -> None:
         default=None,
         help="with --everywhere --certify: seconds for each certified search; reached: not converged (exit "
         "status 1), with the bound reached",
+    )
+    p.add_argument(
+        "--workers",
+        type=number("--workers", "an integer >= 1", lambda v: v >= 1, integer=True),
+        default=None,
+        help="with --everywhere --certify: processes of each certified search (default: the cores this "
+        "process may use; 1: one)",
     )
     p.add_argument(
         "--contributions",

@@ -155,8 +155,9 @@ def _cmd_worst(args) -> int:
     mech = load_model(args.model)
     if hasattr(args, "dist"):
         args.dist = dist_for(args, mech)
-    if args.certify_time_limit is not None and not args.certify:
-        raise InputError("--certify-time-limit", "only used with --certify", "--certify --certify-time-limit SECONDS")
+    for flag, value in (("--certify-time-limit", args.certify_time_limit), ("--workers", args.workers)):
+        if value is not None and not args.certify:
+            raise InputError(flag, "only used with --certify", f"--certify {flag} VALUE")
     eps, label = _tolerances(mech, args.tolerances)
     what = "the grid and pattern search" + (", then the certified branch and bound" if args.certify else "")
     with Working(f"tolsynth worst-pose: {what}"):
@@ -171,6 +172,7 @@ def _cmd_worst(args) -> int:
             certify=args.certify,
             probability=args.probability,
             time_limit=args.certify_time_limit,
+            workers=args.workers,
         )
     record = dict(
         tolerances=w.tolerances, distribution=args.dist, R_mm=args.R, criterion=args.criterion, reference=w.reference
@@ -275,6 +277,13 @@ def register(sub) -> None:
         default=None,
         help="with --certify: seconds for the branch and bound; reached: not proven (exit status 1), "
         "the bound reached reported (it holds, only looser); default: none (the box limit)",
+    )
+    p.add_argument(
+        "--workers",
+        type=number("--workers", "an integer >= 1", lambda v: v >= 1, integer=True),
+        default=None,
+        help="with --certify: processes of the branch and bound (default: the cores this process may use; "
+        "1: one)",
     )
     p.add_argument(
         "--probability",

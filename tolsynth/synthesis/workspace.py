@@ -192,8 +192,8 @@ def synthesize_workspace(
     imposed poses unless the bound already meets the specification to ``tol`` (exact: the
     probability to ``p - 1e-6``); then ``certified`` is True.  When the round limit is reached, or
     the search cannot close its gap within its box limit, the result says so (``converged`` False,
-    ``reason``) with the bound reached.  ``certify_options``: ``rtol``, ``tol``, ``max_boxes`` and
-    ``time_limit`` of each certified search.  ``progress``: a progress bar on stderr, of the
+    ``reason``) with the bound reached.  ``certify_options``: ``rtol``, ``tol``, ``max_boxes``,
+    ``time_limit`` and ``workers`` (processes; default the cores) of each certified search.  ``progress``: a progress bar on stderr, of the
     exchange's rounds (with ``certify``: of each certified search's boxes); None shows it on a
     terminal for runs over a couple of seconds.  The sphere criterion
     is not certified.
@@ -331,8 +331,8 @@ def _certified_exchange(
         )
     options = check_mapping(options, "certify_options", "keyword arguments of the certified search") or {}
     for key in options:
-        if key not in ("rtol", "tol", "max_boxes", "time_limit"):
-            raise InputError("certify_options", f"unknown key {key!r}", "rtol, tol, max_boxes, time_limit")
+        if key not in ("rtol", "tol", "max_boxes", "time_limit", "workers"):
+            raise InputError("certify_options", f"unknown key {key!r}", "rtol, tol, max_boxes, time_limit, workers")
     probability = kwargs.get("probability") or DEFAULT_PROBABILITY
     exact = probability == "exact"
     rounds, res, cert = [], None, None
