@@ -43,8 +43,10 @@ __all__ = ["ExactBounds", "start_patches", "children", "patch_normals"]
 _U = 2.0**-53
 #: error allowed in each exact probability the search evaluates
 EVAL_TOL = 1e-10
-#: the first, cheaper tolerance: most rows are settled against the threshold by it
-LOOSE_TOL = 1e-7
+#: the tolerances a row is evaluated to, in turn, until one settles it against the threshold: 87 %
+#: of the paper robot's rows lie more than 1e-5 from it, and a row to 1e-5 costs 60 % of one to
+#: 1e-7 (its exact proof: the series' time 10.5 -> 6.8 s, the same boxes and bound)
+TOLS = (1e-5, 1e-7, EVAL_TOL)
 #: patches per cube face side at the start
 START_GRID = 2
 #: joints whose sides group the corners of a box crossed by a joint constraint (2^levels groups)
@@ -105,21 +107,25 @@ class ExactBounds:
     def lower(self, B: np.ndarray, thr: float = -math.inf) -> np.ndarray:
         """Rigorous lower bounds of P at rows of coefficients ``B`` (n, m) (upper bounds of ``|b|``),
         to the precision that settles each against ``thr``: a sum of bounded errors that cannot
-        leave R (P = 1); else the series to a loose tolerance, and to :data:`EVAL_TOL` where that
-        leaves the row within its error of ``thr``."""
+        leave R (P = 1); else the series to each tolerance of :data:`TOLS` in turn while that leaves
+        the row within its error of ``thr``."""
         out = np.ones(len(B))
         if len(B) == 0:
             return out
         todo = np.flatnonzero(~(self.bounded & (B.sum(axis=1) * (1.0 + 4 * self.m * _U) <= self.R)))
         if todo.size:
-            P, err = probability(B[todo], self.shapes, self.R, LOOSE_TOL)
-            low = P - err - 4.0 * _U
-            near = np.flatnonzero((low < thr) & (P + err + 4.0 * _U >= thr))
-            if near.size:
-                P2, err2 = probability(B[todo[near]], self.shapes, self.R, EVAL_TOL)
-                low[near] = P2 - err2 - 4.0 * _U
+            rows = todo
+            low = np.empty(todo.size)
+            at = np.arange(todo.size)
+            for tol in TOLS:  # each row to the first precision that settles it against thr
+                P, err = probability(B[rows], self.shapes, self.R, tol)
+                low[at] = P - err - 4.0 * _U
+                self.evaluations += rows.size
+                near = (low[at] < thr) & (P + err + 4.0 * _U >= thr)
+                rows, at = rows[near], at[near]
+                if rows.size == 0:
+                    break
             out[todo] = np.maximum(low, 0.0)
-            self.evaluations += todo.size + near.size
         return out
 
     def point(self, X: np.ndarray, U: np.ndarray) -> np.ndarray:
