@@ -41,7 +41,9 @@ def _sigma(mech, Q, eps, c=3.0):
 
 @pytest.mark.parametrize("workers", [None, "1", "2"])
 def test_worst_pose_certify_json_holds_its_proof(workers):
-    rc, out, _ = _run("worst-pose", "--model", "planar_2r", "--certify", "--json", *(["--workers", workers] if workers else []))
+    rc, out, _ = _run(
+        "worst-pose", "--model", "planar_2r", "--certify", "--json", *(["--workers", workers] if workers else [])
+    )
     assert rc == 0
     m = tolsynth.load_model("planar_2r")
     sig = _sigma(m, np.array(out["q"]), np.array(list(out["tolerances"].values())))[0]

@@ -47,7 +47,15 @@ from tolsynth.analysis.certify_polygon import (  # noqa: F401
 from tolsynth.analysis.interval_ops import round_up as _up
 from tolsynth.analysis.intervals import IntervalFunction
 
-__all__ = ["JointGraphs", "joint_graphs", "SigmaBounds", "largest_singular_bound", "taylor_enclosure", "Enclosure", "HESSIAN_FACTOR"]
+__all__ = [
+    "JointGraphs",
+    "joint_graphs",
+    "SigmaBounds",
+    "largest_singular_bound",
+    "taylor_enclosure",
+    "Enclosure",
+    "HESSIAN_FACTOR",
+]
 
 #: boxes wider than this (rad, on some side) also get the natural interval bound
 NATURAL_WIDTH = 0.2

@@ -282,8 +282,7 @@ def register(sub) -> None:
         "--workers",
         type=number("--workers", "an integer >= 1", lambda v: v >= 1, integer=True),
         default=None,
-        help="with --certify: processes of the branch and bound (default: the cores this process may use; "
-        "1: one)",
+        help="with --certify: processes of the branch and bound (default: the cores this process may use; 1: one)",
     )
     p.add_argument(
         "--probability",
