@@ -173,6 +173,7 @@ def certify_worst_pose(
     stop_at: float | None = None,
     keep_boxes: bool = False,
     workers: int | None = None,
+    search: bool = True,
 ) -> Certificate:
     """A proven bound of the worst accuracy over the whole joint space (module docstring).
 
@@ -219,6 +220,10 @@ def certify_worst_pose(
         Processes for a search that outlasts its first half second (default: the machine's cores,
         at most 8; 1: one process throughout).  The certificate means the same whatever the count;
         its numbers may differ within the search's tolerance.
+    search : bool
+        Exact reading: before the branch and bound, the sampled search for the pose of lowest
+        probability from the seeds ``x0`` (its incumbent); False where the caller has just run it
+        (the certified exchange: its full sampled search precedes every proof).  Speed only.
 
     Returns
     -------
@@ -370,6 +375,7 @@ def certify_worst_pose(
                 stop_at=stop_at,
                 leaves=leaves,
                 workers=workers,
+                search=search,
             )
             q = _full(dom, out["x"], nq)
             direction = out["direction"]

@@ -329,6 +329,7 @@ def certify_components_exact(
     stop_at=None,
     leaves=None,
     workers=1,
+    search=True,
 ) -> dict:
     """The search of the module docstring on the domain of :func:`tolsynth.analysis.certify.certify_worst_pose`:
     best first over joint boxes (lowest bound first), a box's patches inherited by its halves; past
@@ -352,6 +353,8 @@ def certify_components_exact(
     starts = [0.5 * (lo + hi)] + ([] if seeds is None else list(np.clip(np.atleast_2d(seeds), lo, hi)))
 
     def sampled():
+        if not search:  # the caller has just run it from the same seeds
+            return None
         # the sampled search for the pose of lowest exact probability (joints and direction together,
         # ending on the joint constraints where the minimum lies there: a compass search from a box
         # centre stops short of a corner of the domain, and the bound cannot close on it)
@@ -359,12 +362,13 @@ def certify_components_exact(
         return np.asarray(w.q, dtype=float)[list(dom.free)], np.asarray(w.direction, dtype=float)
 
     # it does not depend on the starts' directions and their polish: on a second core, alongside them
-    with Background(sampled, enabled=int(workers) > 1) as job:
+    with Background(sampled, enabled=search and int(workers) > 1) as job:
         for x in starts:
             s.consider(np.asarray(x)[None], s.direction(np.asarray(x))[None])
         s.polish()
-        wq, wu = job.result()
-    s.consider(dom.coords(wq[None]), wu[None])
+        found = job.result()
+    if found is not None:
+        s.consider(dom.coords(found[0][None]), found[1][None])
     face0 = start_patches()
     root = _Box(lo.copy(), hi.copy(), *face0, np.zeros(len(face0[0])), 0.0, math.inf, False)
     bad, feas = _infeasible(dom.constraint_fn, root.L[None], root.H[None])

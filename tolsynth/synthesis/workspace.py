@@ -382,6 +382,7 @@ def _certified_exchange(
             # a pose found past the goal joins the imposed poses at once, as a sampled one does; the
             # last round searches on, for the bound reached to be reported
             stop_at=goal if k < max_rounds - 1 else None,
+            search=False,  # the full sampled search of this round has just run from the same poses
             **options,
         )
         q = cert.q
