@@ -450,3 +450,37 @@ def test_the_compiled_series_against_the_reference_and_central_differences(rng, 
     assert closed.keys() == closed_n.keys()
     for r in closed:
         assert all(np.max(np.abs(np.asarray(x) - y)) < 1e-13 for x, y in zip(closed[r], closed_n[r]))
+
+
+def test_the_compiled_uniform_series_against_fft_and_the_numpy_path(rng, monkeypatch):
+    """Rows of eleven uniform terms (the paper robot's rows; the compiled kernel sums them by its
+    own loop when P alone is asked) to 1e-5, 1e-7 and 1e-10, from 16 to more than 64 series terms
+    and one row with a term small enough for sinc's small-argument form: against FFT convolution
+    of the densities (R on a cell edge), and the NumPy path (TOLSYNTH_NO_COMPILE) to rounding."""
+    from independent import fft_at_edge
+    from tolsynth.solvers import exact_kernel
+    from tolsynth.solvers.exact_series import probability, rows_of
+
+    sh = (shape("uniform"),) * 11
+    b = rng.uniform(0.02, 0.2, (40, 11))
+    b[30:] = rng.uniform(0.005, 0.03, (10, 11))
+    b[30:, :2] = [0.45, 0.4]  # two dominant terms: hundreds of series terms at 1e-10
+    b[39, 5] = 1e-5
+    R = 0.5
+    ref = fft_at_edge(b, R, 1 << 16)  # error ~ 1e-8
+    rw = rows_of(sh)
+    L = rw.half_period(b, R)
+    assert rw.terms(b, L, 1e-5).min() == 16 and rw.terms(b, L, 1e-10).max() > 64
+    assert np.all((ref > 0.5) & (ref < 0.9999))
+    out = []
+    for tol in (1e-5, 1e-7, 1e-10):
+        P, err = probability(b, sh, R, tol)
+        assert np.all(err <= tol) and np.all(np.abs(P - ref) <= err + 2e-8)
+        out.append((P, err))
+    if not exact_kernel.available():
+        pytest.skip("no C compiler: the NumPy path ran above")
+    monkeypatch.setenv("TOLSYNTH_NO_COMPILE", "1")
+    assert not exact_kernel.available()
+    for tol, (P, err) in zip((1e-5, 1e-7, 1e-10), out):
+        Pn, en = probability(b, sh, R, tol)
+        assert np.max(np.abs(P - Pn)) < 1e-13 and np.allclose(err, en, rtol=1e-12, atol=0)

@@ -124,6 +124,64 @@ static void ts_tn(const double *tb, double s, double sn, double cs, int order, d
   if (order >= 2) *d2 = (4.0*y2*y2 - 4.0*y2)*g + cc*LLI;
 }
 
+/* Whether a row's nonzero columns are all uniform, their arguments k ang (ang: that of k = 1)
+   never below the small-argument form's 1e-4 (the argument grows with k): ts_sum_uniform0 then
+   serves it. */
+static int ts_uniform0(int nz, const int *col, const double *br, const int *kind, double L, const double *ang) {
+  int a;
+  for (a = 0; a < nz; a++)
+    if (kind[col[a]] != 0 || !(ang[a] >= 1e-4)) return 0;
+  return 1;
+}
+
+/* 1/k of the first terms (the series' rows mostly have 16 or 32 terms) */
+#define TS_NINV 64
+static const double ts_inv[TS_NINV + 1] = {
+  0.0, 1.0/1, 1.0/2, 1.0/3, 1.0/4, 1.0/5, 1.0/6, 1.0/7, 1.0/8, 1.0/9, 1.0/10, 1.0/11, 1.0/12, 1.0/13, 1.0/14,
+  1.0/15, 1.0/16, 1.0/17, 1.0/18, 1.0/19, 1.0/20, 1.0/21, 1.0/22, 1.0/23, 1.0/24, 1.0/25, 1.0/26, 1.0/27,
+  1.0/28, 1.0/29, 1.0/30, 1.0/31, 1.0/32, 1.0/33, 1.0/34, 1.0/35, 1.0/36, 1.0/37, 1.0/38, 1.0/39, 1.0/40,
+  1.0/41, 1.0/42, 1.0/43, 1.0/44, 1.0/45, 1.0/46, 1.0/47, 1.0/48, 1.0/49, 1.0/50, 1.0/51, 1.0/52, 1.0/53,
+  1.0/54, 1.0/55, 1.0/56, 1.0/57, 1.0/58, 1.0/59, 1.0/60, 1.0/61, 1.0/62, 1.0/63, 1.0/64};
+
+/* ts_series' sum for P alone over a row of uniform columns (see ts_uniform0): the same
+   arithmetic term by term, phi = sin(k ang) * (1/k * 1/ang), without its kinds and derivatives.
+   rc, rs: cos and sin of the angles of k = 1; xc, xs: of pi R / L. */
+static double ts_sum_uniform0(int nz, long Kr, const double *br, const int *col, double L, double R,
+                              const double *rc, const double *rs, double xc, double xs, const double *iang) {
+  double sk[TS_MAXN], ck[TS_MAXN], ks = xs, kc = xc, sum = 0.0, t0;
+  long k;
+  int a;
+  for (a = 0; a < nz; a++) {
+    sk[a] = rs[a];
+    ck[a] = rc[a];
+  }
+  for (k = 1; k <= Kr; k++) {
+    double ik = k <= TS_NINV ? ts_inv[k] : 1.0/(double)k, prod = 1.0;
+    if (k > 1 && (k - 1) % TS_SYNC == 0) {  /* afresh, as ts_series takes them */
+      double tau = TS_PI*(double)k/L, x = TS_PI*(double)k*(R/L);
+      for (a = 0; a < nz; a++) {
+        double t = tau*br[col[a]]*1.0;
+        sk[a] = sin(t);
+        ck[a] = cos(t);
+      }
+      ks = sin(x);
+      kc = cos(x);
+    } else if (k > 1) {
+      for (a = 0; a < nz; a++) {
+        t0 = ck[a]*rc[a] - sk[a]*rs[a];
+        sk[a] = sk[a]*rc[a] + ck[a]*rs[a];
+        ck[a] = t0;
+      }
+      t0 = kc*xc - ks*xs;
+      ks = ks*xc + kc*xs;
+      kc = t0;
+    }
+    for (a = 0; a < nz; a++) prod *= sk[a]*(ik*iang[a]);
+    sum += (2.0/TS_PI)*ik*ks*prod;
+  }
+  return sum;
+}
+
 /* The series of every row r (b: m x n, row-major, coefficients >= 0): P[r], and for order >= 1
    G[r, :] (d/du), order 2 H[r, :, :].  K[r] terms; a truncated normal column j (kind 3) has its
    packed interpolants at tnt + tno[j].  ball: the sphere's kernel. */
@@ -143,21 +201,33 @@ int ts_series(int m, int n, const double *b, const double *R, const double *L, c
       if (br[j] > 0) col[nz++] = j;
     for (a = 0; a < nz; a++) g[a] = 0.0;
     if (order > 1) for (a = 0; a < nz*nz; a++) h[a] = 0.0;
-    for (a = 0; a < nz; a++) {  /* the angle of k = 1: the whole argument, or half of it */
+    for (a = 0; a < nz; a++) {  /* the angle of k = 1 as the loop forms it: the argument, or half */
       j = col[a];
-      ang[a] = (kind[j] == 2 ? 0.5 : 1.0)*TS_PI*br[j]/L[r];
+      ang[a] = TS_PI*1.0/L[r]*br[j]*(kind[j] == 2 ? 0.5 : 1.0);
       iang[a] = 1.0/ang[a];
       rc[a] = cos(ang[a]);
       rs[a] = sin(ang[a]);
     }
-    xr = TS_PI*(R[r]/L[r]);
+    xr = TS_PI*1.0*(R[r]/L[r]);
     xc = cos(xr);
     xs = sin(xr);
+    if (!order && !ball && ts_uniform0(nz, col, br, kind, L[r], ang)) {
+      P[r] = R[r]/L[r] + ts_sum_uniform0(nz, Kr, br, col, L[r], R[r], rc, rs, xc, xs, iang);
+      continue;
+    }
     for (k = 1; k <= Kr; k++) {
       double tau = TS_PI*(double)k/L[r], x = TS_PI*(double)k*(R[r]/L[r]), s, ik = 1.0/(double)k;
       /* sin and cos of k times each angle by rotation, taken afresh every TS_SYNC terms: the
-         rotation's rounding (about one ulp a step) never builds up past TS_SYNC ulp */
-      if ((k - 1) % TS_SYNC == 0 || (ball && Kr > TS_ROTATE)) {
+         rotation's rounding (about one ulp a step) never builds up past TS_SYNC ulp; at k = 1
+         they are those of the angles above */
+      if (k == 1) {
+        for (a = 0; a < nz; a++) {
+          sk[a] = rs[a];
+          ck[a] = rc[a];
+        }
+        ks = xs;
+        kc = xc;
+      } else if ((k - 1) % TS_SYNC == 0 || (ball && Kr > TS_ROTATE)) {
         for (a = 0; a < nz; a++) {  /* the argument as ts_cf forms it */
           double t = tau*br[col[a]]*(kind[col[a]] == 2 ? 0.5 : 1.0);
           sk[a] = sin(t);
@@ -360,18 +430,24 @@ void ts_tail(int m, int n, const double *b, const double *L, const double *K, in
     out[r] = ts_tail1(n, b + (long)r*n, L[r], K[r], nf, fidx, fmult, normal, drop);
 }
 
-/* K[r] = the least of Ks (ascending, nk of them) whose tail bound is <= tol, else the last. */
+/* The least of Ks (ascending, nk of them) whose tail bound is <= tol, else the last, for one row;
+   *tail: the bound at it. */
+static long ts_terms1(int n, const double *br, double L, const double *Ks, int nk, double tol, int nf,
+                      const long *fidx, const double *fmult, const int *normal, double *tail) {
+  int i;
+  for (i = 0; i < nk; i++) {
+    *tail = ts_tail1(n, br, L, Ks[i], nf, fidx, fmult, normal, -1);
+    if (*tail <= tol) return (long)Ks[i];
+  }
+  return (long)Ks[nk - 1];
+}
+
+/* K[r] = ts_terms1 of row r. */
 void ts_terms(int m, int n, const double *b, const double *L, const double *Ks, int nk, double tol, int nf,
               const long *fidx, const double *fmult, const int *normal, long *K) {
-  int r, i;
-  for (r = 0; r < m; r++) {
-    K[r] = (long)Ks[nk - 1];
-    for (i = 0; i < nk; i++)
-      if (ts_tail1(n, b + (long)r*n, L[r], Ks[i], nf, fidx, fmult, normal, -1) <= tol) {
-        K[r] = (long)Ks[i];
-        break;
-      }
-  }
+  int r;
+  double tail;
+  for (r = 0; r < m; r++) K[r] = ts_terms1(n, b + (long)r*n, L[r], Ks, nk, tol, nf, fidx, fmult, normal, &tail);
 }
 /* The whole evaluation of exact_series.probability (order 0) and derivatives (order 1, 2; not
    the rigorous or sphere variants) per row: the smallest terms dropped (rows of >= 3 columns),
@@ -389,7 +465,7 @@ int ts_eval(int m, int n, const double *b, const double *R, double tol, const do
   for (j = 0; j < n; j++) anynormal |= normal[j];
   for (r = 0; r < m; r++) {
     const double *br = b + (long)r*n;
-    double *bo = bw + (long)r*n, *go = gerr + (long)r*n, dropped = 0.0, B = 0.0, sq = 0.0, L;
+    double *bo = bw + (long)r*n, *go = gerr + (long)r*n, dropped = 0.0, B = 0.0, sq = 0.0, L, tail;
     double *Gr = order >= 1 ? G + (long)r*n : NULL, *Hr = order >= 2 ? H + (long)r*n*n : NULL;
     if (n >= 3 && tol > 0) ts_split(1, n, br, var, peak, 0.25*tol, bo, &dropped, go);
     else for (j = 0; j < n; j++) { bo[j] = br[j]; go[j] = 0.0; }
@@ -399,7 +475,7 @@ int ts_eval(int m, int n, const double *b, const double *R, double tol, const do
     }
     if (anynormal) B += reach*sqrt(sq);
     L = R[r] + 0.5*B*lmargin;
-    ts_terms(1, n, bo, &L, Ks, nk, tol, nf, fidx, fmult, normal, &K[r]);
+    K[r] = ts_terms1(n, bo, L, Ks, nk, tol, nf, fidx, fmult, normal, &tail);
     if (K[r] >= closed_from) {
       int ok = 0;
       double e = 0.0;
@@ -410,7 +486,7 @@ int ts_eval(int m, int n, const double *b, const double *R, double tol, const do
       }
     }
     ts_series(1, n, bo, &R[r], &L, &K[r], kind, tnt, tno, order, 0, &P[r], Gr, Hr);
-    err[r] = ts_tail1(n, bo, L, (double)K[r], nf, fidx, fmult, normal, -1) + rounding + dropped;
+    err[r] = tail + rounding + dropped;  /* the bound at K[r], as ts_terms1 found it */
   }
   return 0;
 }
