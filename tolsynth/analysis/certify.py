@@ -223,7 +223,8 @@ def certify_worst_pose(
     search : bool
         Exact reading: before the branch and bound, the sampled search for the pose of lowest
         probability from the seeds ``x0`` (its incumbent); False where the caller has just run it
-        (the certified exchange: its full sampled search precedes every proof).  Speed only.
+        and gives its result as the last of ``x0`` (the certified exchange: its full sampled search
+        precedes every proof), the incumbent then taken there.  Speed only.
 
     Returns
     -------

@@ -351,6 +351,8 @@ def certify_components_exact(
     lo, hi = np.asarray(dom.lo, dtype=float), np.asarray(dom.hi, dtype=float)
     s = _Search(bounds, lo, hi, dom.constraint_fn, tol, target, [] if leaves is not None else None)
     starts = [0.5 * (lo + hi)] + ([] if seeds is None else list(np.clip(np.atleast_2d(seeds), lo, hi)))
+    if not search and seeds is not None:
+        starts = starts[-1:]  # the caller's sampled search ended at its last seed
 
     def sampled():
         if not search:  # the caller has just run it from the same seeds
