@@ -147,14 +147,18 @@ static const double ts_inv[TS_NINV + 1] = {
    arithmetic term by term, phi = sin(k ang) * (1/k * 1/ang), without its kinds and derivatives.
    rc, rs: cos and sin of the angles of k = 1; xc, xs: of pi R / L. */
 static double ts_sum_uniform0(int nz, long Kr, const double *br, const int *col, double L, double R,
-                              const double *rc, const double *rs, double xc, double xs, const double *iang) {
-  double sk[TS_MAXN], ck[TS_MAXN], ks = xs, kc = xc, sum = 0.0, t0;
+                              const double *rc0, const double *rs0, double xc, double xs, const double *iang) {
+  /* the columns by pairs (a last one paired with a still one, never multiplied in), so that the
+     compiler may rotate two at once */
+  double sk[TS_MAXN + 1], ck[TS_MAXN + 1], rc[TS_MAXN + 1], rs[TS_MAXN + 1], ks = xs, kc = xc, sum = 0.0, t0;
   long k;
-  int a;
+  int a, p, np = (nz + 1)/2;
   for (a = 0; a < nz; a++) {
-    sk[a] = rs[a];
-    ck[a] = rc[a];
+    sk[a] = rs[a] = rs0[a];
+    ck[a] = rc[a] = rc0[a];
   }
+  sk[nz] = rs[nz] = 0.0;
+  ck[nz] = rc[nz] = 1.0;
   for (k = 1; k <= Kr; k++) {
     double ik = k <= TS_NINV ? ts_inv[k] : 1.0/(double)k, prod = 1.0;
     if (k > 1 && (k - 1) % TS_SYNC == 0) {  /* afresh, as ts_series takes them */
@@ -167,10 +171,14 @@ static double ts_sum_uniform0(int nz, long Kr, const double *br, const int *col,
       ks = sin(x);
       kc = cos(x);
     } else if (k > 1) {
-      for (a = 0; a < nz; a++) {
-        t0 = ck[a]*rc[a] - sk[a]*rs[a];
-        sk[a] = sk[a]*rc[a] + ck[a]*rs[a];
-        ck[a] = t0;
+      for (p = 0; p < np; p++) {
+        double *s = sk + 2*p, *c = ck + 2*p;
+        const double *u = rc + 2*p, *v = rs + 2*p;
+        double c0 = c[0]*u[0] - s[0]*v[0], c1 = c[1]*u[1] - s[1]*v[1];
+        s[0] = s[0]*u[0] + c[0]*v[0];
+        s[1] = s[1]*u[1] + c[1]*v[1];
+        c[0] = c0;
+        c[1] = c1;
       }
       t0 = kc*xc - ks*xs;
       ks = ks*xc + kc*xs;
@@ -403,21 +411,28 @@ void ts_closed(int m, int n, const double *b, const double *R, const int *kind, 
 static double ts_tail1(int n, const double *br, double L, double K, int nf, const long *fidx,
                        const double *fmult, const int *normal, int drop) {
   int f, j, q = 0;
-  double logC = 0.0, a = 0.0, power = INFINITY, gauss = INFINITY;
+  double logC = 0.0, C = 1.0, a = 0.0, power = INFINITY, gauss = INFINITY;
   for (f = 0; f < nf; f++) {
     double bf = br[fidx[f]], c, bb, s0, mf;
     if (fidx[f] == drop || !(bf > 0)) continue;
     bb = bf > 1e-300 ? bf : 1e-300;
-    s0 = K*TS_PI*bb/L;  /* the factor at the tail's arguments s >= s0 (fmult + nf: a, + 2 nf: c) */
-    mf = fmult[nf + f] + fmult[2*nf + f]/s0;
+    /* the factor at the tail's arguments s >= s0 (fmult + nf: a, + 2 nf: c; c / s0 = 0 if c = 0) */
+    if (fmult[2*nf + f] != 0.0) {
+      s0 = K*TS_PI*bb/L;
+      mf = fmult[nf + f] + fmult[2*nf + f]/s0;
+    } else mf = fmult[nf + f];
     if (fmult[f] < mf) mf = fmult[f];
     c = mf*L/(TS_PI*bb);
-    if (c < K) { q++; logC += log(c); }
+    if (c < K) {  /* the product of the c, its logarithm taken once (and whenever it nears the range's end) */
+      q++;
+      C *= c;
+      if (!(C < 1e250 && C > 1e-250)) { logC += log(C); C = 1.0; }
+    }
   }
   for (j = 0; j < n; j++)
     if (normal[j] && j != drop) a += br[j]*br[j];
   a *= (TS_PI/L)*(TS_PI/L)/18.0;
-  if (q > 0) power = (2.0/TS_PI)*exp(logC - q*log(K) - a*K*K)/q;
+  if (q > 0) power = (2.0/TS_PI)*exp(logC + log(C) - q*log(K) - a*K*K)/q;
   if (a > 0) gauss = exp(-a*K*K)/(TS_PI*a*K*K);
   return power < gauss ? power : gauss;
 }
