@@ -144,12 +144,13 @@ static const double ts_inv[TS_NINV + 1] = {
   1.0/54, 1.0/55, 1.0/56, 1.0/57, 1.0/58, 1.0/59, 1.0/60, 1.0/61, 1.0/62, 1.0/63, 1.0/64};
 
 /* ts_series' sum for P alone over a row of uniform columns (see ts_uniform0): the same
-   arithmetic term by term, phi = sin(k ang) * (1/k * 1/ang), without its kinds and derivatives.
+   arithmetic term by term, phi = sin(k ang) * (1/k * 1/ang), without its kinds and derivatives,
+   but for the order of the product's factors (its rounding only).
    rc, rs: cos and sin of the angles of k = 1; xc, xs: of pi R / L. */
 static double ts_sum_uniform0(int nz, long Kr, const double *br, const int *col, double L, double R,
                               const double *rc0, const double *rs0, double xc, double xs, const double *iang) {
   /* the columns by pairs (a last one paired with a still one, never multiplied in), so that the
-     compiler may rotate two at once */
+     compiler may rotate two at once; the product likewise, of the even and of the odd columns */
   double sk[TS_MAXN + 1], ck[TS_MAXN + 1], rc[TS_MAXN + 1], rs[TS_MAXN + 1], ks = xs, kc = xc, sum = 0.0, t0;
   long k;
   int a, p, np = (nz + 1)/2;
@@ -184,7 +185,15 @@ static double ts_sum_uniform0(int nz, long Kr, const double *br, const int *col,
       ks = ks*xc + kc*xs;
       kc = t0;
     }
-    for (a = 0; a < nz; a++) prod *= sk[a]*(ik*iang[a]);
+    {  /* two products side by side: each half as long a chain of dependent multiplications */
+      double p2 = 1.0;
+      for (p = 0; p < nz/2; p++) {
+        prod *= sk[2*p]*(ik*iang[2*p]);
+        p2 *= sk[2*p + 1]*(ik*iang[2*p + 1]);
+      }
+      if (nz & 1) prod *= sk[nz - 1]*(ik*iang[nz - 1]);
+      prod *= p2;
+    }
     sum += (2.0/TS_PI)*ik*ks*prod;
   }
   return sum;
@@ -307,12 +316,21 @@ void ts_split(int m, int n, const double *b, const double *var, const double *pe
     const double *br = b + (long)r*n;
     double *orow = out + (long)r*n, *grow = gerr + (long)r*n;
     double S, S3, cv, var_e = 0.0, b1, b2, b3;
-    int count = 0;
-    for (i = 0; i < n; i++) {  /* ascending, stable */
-      int x = i;
-      for (j = i; j > 0 && br[ord[j - 1]] > br[x]; j--) ord[j] = ord[j - 1];
-      ord[j] = x;
+    int count = 0, nan = 0;
+    for (i = 0; i < n; i++) {  /* ascending, stable: each column's rank, counted without branches */
+      int rank = 0;
+      double v = br[i];
+      for (j = 0; j < i; j++) rank += br[j] <= v;
+      for (j = i + 1; j < n; j++) rank += br[j] < v;
+      ord[rank] = i;
+      nan |= v != v;
     }
+    if (nan)  /* no order of ranks then: an insertion sort's order */
+      for (i = 0; i < n; i++) {
+        int x = i;
+        for (j = i; j > 0 && br[ord[j - 1]] > br[x]; j--) ord[j] = ord[j - 1];
+        ord[j] = x;
+      }
     b1 = br[ord[n - 1]];
     b2 = br[ord[n - 2]];
     b3 = br[ord[n - 3]];
