@@ -8,6 +8,11 @@ C_SOURCE = r"""
 #define TS_PI 3.14159265358979323846
 #define TS_MAXN 64 /* columns at most (MAX_COLUMNS) */
 #define TS_SYNC 16
+#if defined(__GNUC__)
+#define TS_INLINE static inline __attribute__((always_inline)) /* one copy per constant argument */
+#else
+#define TS_INLINE static inline
+#endif
 #define TS_ROTATE 512 /* the sphere's rows of more terms take every sine afresh: its kernel
                          sin x - x cos x multiplies the rounding by x, which grows with k */
 
@@ -124,16 +129,6 @@ static void ts_tn(const double *tb, double s, double sn, double cs, int order, d
   if (order >= 2) *d2 = (4.0*y2*y2 - 4.0*y2)*g + cc*LLI;
 }
 
-/* Whether a row's nonzero columns are all uniform, their arguments k ang (ang: that of k = 1)
-   never below the small-argument form's 1e-4 (the argument grows with k): ts_sum_uniform0 then
-   serves it. */
-static int ts_uniform0(int nz, const int *col, const double *br, const int *kind, double L, const double *ang) {
-  int a;
-  for (a = 0; a < nz; a++)
-    if (kind[col[a]] != 0 || !(ang[a] >= 1e-4)) return 0;
-  return 1;
-}
-
 /* 1/k of the first terms (the series' rows mostly have 16 or 32 terms) */
 #define TS_NINV 64
 static const double ts_inv[TS_NINV + 1] = {
@@ -143,58 +138,107 @@ static const double ts_inv[TS_NINV + 1] = {
   1.0/41, 1.0/42, 1.0/43, 1.0/44, 1.0/45, 1.0/46, 1.0/47, 1.0/48, 1.0/49, 1.0/50, 1.0/51, 1.0/52, 1.0/53,
   1.0/54, 1.0/55, 1.0/56, 1.0/57, 1.0/58, 1.0/59, 1.0/60, 1.0/61, 1.0/62, 1.0/63, 1.0/64};
 
-/* ts_series' sum for P alone over a row of uniform columns (see ts_uniform0): the same
-   arithmetic term by term, phi = sin(k ang) * (1/k * 1/ang), without its kinds and derivatives,
-   but for the order of the product's factors (its rounding only).
-   rc, rs: cos and sin of the angles of k = 1; xc, xs: of pi R / L. */
-static double ts_sum_uniform0(int nz, long Kr, const double *br, const int *col, double L, double R,
-                              const double *rc0, const double *rs0, double xc, double xs, const double *iang) {
-  /* the columns by pairs (a last one paired with a still one, never multiplied in), so that the
-     compiler may rotate two at once; the product likewise, of the even and of the odd columns */
-  double sk[TS_MAXN + 1], ck[TS_MAXN + 1], rc[TS_MAXN + 1], rs[TS_MAXN + 1], ks = xs, kc = xc, sum = 0.0, t0;
-  long k;
-  int a, p, np = (nz + 1)/2;
-  for (a = 0; a < nz; a++) {
-    sk[a] = rs[a] = rs0[a];
-    ck[a] = rc[a] = rc0[a];
+/* Rotates n pairs (s, c) by the angles of (rc, rs), two columns at a time (the compiler's vector
+   arithmetic; the same operations per column). */
+static inline void ts_turn(int n, double *sk, double *ck, const double *rc, const double *rs) {
+  int p;
+  for (p = 0; p < (n + 1)/2; p++) {
+    double *s = sk + 2*p, *c = ck + 2*p;
+    const double *u = rc + 2*p, *v = rs + 2*p;
+    double c0 = c[0]*u[0] - s[0]*v[0], c1 = c[1]*u[1] - s[1]*v[1];
+    s[0] = s[0]*u[0] + c[0]*v[0];
+    s[1] = s[1]*u[1] + c[1]*v[1];
+    c[0] = c0;
+    c[1] = c1;
   }
-  sk[nz] = rs[nz] = 0.0;
-  ck[nz] = rc[nz] = 1.0;
+}
+
+/* ts_series' sum for P alone (order 0, not the sphere's), the same factors phi by the same
+   formulas, grouped by kind: the uniform columns whose arguments k ang never reach the
+   small-argument form's 1e-4 (ang: that of k = 1; the argument grows with k) as
+   sin(k ang) * (1/k * 1/ang), rotated by pairs and multiplied in two products (even and odd
+   places); the normal columns as one exponential, exp(-tau^2 sum b^2 / 18); the others by
+   ts_cf and ts_tn.  Only the order of the products differs from ts_series (their rounding).
+   rc, rs: cos and sin of the angles of k = 1; xc, xs: of pi R / L. */
+TS_INLINE double ts_sum0(int nz, long Kr, const double *br, const int *col, const int *kind,
+                         const double *tnt, const long *tno, double L, double R, const double *ang,
+                         const double *iang, const double *rc, const double *rs, double xc, double xs, int mixed) {
+  /* u: the uniform columns, o: the others but the normal; each padded to pairs by a still column */
+  double su[TS_MAXN + 1], cu[TS_MAXN + 1], ucos[TS_MAXN + 1], usin[TS_MAXN + 1], iu[TS_MAXN + 1];
+  double so[TS_MAXN + 1], co[TS_MAXN + 1], ocos[TS_MAXN + 1], osin[TS_MAXN + 1], io[TS_MAXN];
+  double ks = xs, kc = xc, sum = 0.0, t0, bn = 0.0;
+  long k;
+  int a, p, nu = 0, no = 0, nn = 0, oc[TS_MAXN], ou[TS_MAXN];
+  for (a = 0; a < nz; a++) {
+    int j = col[a];
+    if (!mixed || (kind[j] == 0 && ang[a] >= 1e-4)) {
+      ou[nu] = j;
+      usin[nu] = rs[a];
+      ucos[nu] = rc[a];
+      iu[nu++] = iang[a];
+    } else if (kind[j] == 1) {
+      bn += br[j]*br[j];
+      nn++;
+    } else {
+      oc[no] = j;
+      io[no] = iang[a];
+      osin[no] = rs[a];
+      ocos[no++] = rc[a];
+    }
+  }
+  for (a = 0; a < nu; a++) {
+    su[a] = usin[a];
+    cu[a] = ucos[a];
+  }
+  for (a = 0; mixed && a < no; a++) {
+    so[a] = osin[a];
+    co[a] = ocos[a];
+  }
+  su[nu] = usin[nu] = so[no] = osin[no] = 0.0;
+  cu[nu] = ucos[nu] = co[no] = ocos[no] = 1.0;
   for (k = 1; k <= Kr; k++) {
-    double ik = k <= TS_NINV ? ts_inv[k] : 1.0/(double)k, prod = 1.0;
-    if (k > 1 && (k - 1) % TS_SYNC == 0) {  /* afresh, as ts_series takes them */
-      double tau = TS_PI*(double)k/L, x = TS_PI*(double)k*(R/L);
-      for (a = 0; a < nz; a++) {
-        double t = tau*br[col[a]]*1.0;
-        sk[a] = sin(t);
-        ck[a] = cos(t);
+    double ik = k <= TS_NINV ? ts_inv[k] : 1.0/(double)k, tau = 0.0, pe = 1.0, po = 1.0, pr = 1.0;
+    int fresh = k > 1 && (k - 1) % TS_SYNC == 0;
+    if (fresh || (mixed && (no || nn))) tau = TS_PI*(double)k/L;  /* the uniform columns' need it only afresh */
+    if (fresh) {  /* afresh, as ts_series takes them */
+      double x = TS_PI*(double)k*(R/L);
+      for (a = 0; a < nu; a++) {
+        double t = tau*br[ou[a]]*1.0;
+        su[a] = sin(t);
+        cu[a] = cos(t);
+      }
+      for (a = 0; mixed && a < no; a++) {
+        double t = tau*br[oc[a]]*(kind[oc[a]] == 2 ? 0.5 : 1.0);
+        so[a] = sin(t);
+        co[a] = cos(t);
       }
       ks = sin(x);
       kc = cos(x);
     } else if (k > 1) {
-      for (p = 0; p < np; p++) {
-        double *s = sk + 2*p, *c = ck + 2*p;
-        const double *u = rc + 2*p, *v = rs + 2*p;
-        double c0 = c[0]*u[0] - s[0]*v[0], c1 = c[1]*u[1] - s[1]*v[1];
-        s[0] = s[0]*u[0] + c[0]*v[0];
-        s[1] = s[1]*u[1] + c[1]*v[1];
-        c[0] = c0;
-        c[1] = c1;
-      }
+      ts_turn(nu, su, cu, ucos, usin);
+      if (mixed && no) ts_turn(no, so, co, ocos, osin);
       t0 = kc*xc - ks*xs;
       ks = ks*xc + kc*xs;
       kc = t0;
     }
-    {  /* two products side by side: each half as long a chain of dependent multiplications */
-      double p2 = 1.0;
-      for (p = 0; p < nz/2; p++) {
-        prod *= sk[2*p]*(ik*iang[2*p]);
-        p2 *= sk[2*p + 1]*(ik*iang[2*p + 1]);
-      }
-      if (nz & 1) prod *= sk[nz - 1]*(ik*iang[nz - 1]);
-      prod *= p2;
+    for (p = 0; p < nu/2; p++) {  /* two products side by side: half as long a chain each */
+      pe *= su[2*p]*(ik*iu[2*p]);
+      po *= su[2*p + 1]*(ik*iu[2*p + 1]);
     }
-    sum += (2.0/TS_PI)*ik*ks*prod;
+    if (nu & 1) pe *= su[nu - 1]*(ik*iu[nu - 1]);
+    if (!mixed) {
+      sum += (2.0/TS_PI)*ik*ks*(pe*po);
+      continue;
+    }
+    if (nn) pr = exp(-(tau*tau*bn)/18.0);
+    for (a = 0; a < no; a++) {
+      int j = oc[a];
+      double phi, d;
+      if (kind[j] == 3) ts_tn(tnt + tno[j], tau*br[j], so[a], co[a], 0, &phi, &d, &d);
+      else ts_cf(kind[j], tau*br[j], so[a], co[a], ik*io[a], 0, &phi, &d, &d);
+      pr *= phi;
+    }
+    sum += (2.0/TS_PI)*ik*ks*((pe*po)*pr);
   }
   return sum;
 }
@@ -228,8 +272,11 @@ int ts_series(int m, int n, const double *b, const double *R, const double *L, c
     xr = TS_PI*1.0*(R[r]/L[r]);
     xc = cos(xr);
     xs = sin(xr);
-    if (!order && !ball && ts_uniform0(nz, col, br, kind, L[r], ang)) {
-      P[r] = R[r]/L[r] + ts_sum_uniform0(nz, Kr, br, col, L[r], R[r], rc, rs, xc, xs, iang);
+    if (!order && !ball) {  /* rows of uniform columns alone by a copy of ts_sum0 without the others */
+      int mixed = 0;
+      for (a = 0; a < nz; a++) mixed |= kind[col[a]] != 0 || !(ang[a] >= 1e-4);
+      P[r] = R[r]/L[r] + (mixed ? ts_sum0(nz, Kr, br, col, kind, tnt, tno, L[r], R[r], ang, iang, rc, rs, xc, xs, 1)
+                                : ts_sum0(nz, Kr, br, col, kind, tnt, tno, L[r], R[r], ang, iang, rc, rs, xc, xs, 0));
       continue;
     }
     for (k = 1; k <= Kr; k++) {
@@ -468,6 +515,7 @@ void ts_tail(int m, int n, const double *b, const double *L, const double *K, in
 static long ts_terms1(int n, const double *br, double L, const double *Ks, int nk, double tol, int nf,
                       const long *fidx, const double *fmult, const int *normal, double *tail) {
   int i;
+  *tail = INFINITY;
   for (i = 0; i < nk; i++) {
     *tail = ts_tail1(n, br, L, Ks[i], nf, fidx, fmult, normal, -1);
     if (*tail <= tol) return (long)Ks[i];
