@@ -363,32 +363,49 @@ void ts_split(int m, int n, const double *b, const double *var, const double *pe
     const double *br = b + (long)r*n;
     double *orow = out + (long)r*n, *grow = gerr + (long)r*n;
     double S, S3, cv, var_e = 0.0, b1, b2, b3;
-    int count = 0, nan = 0;
-    for (i = 0; i < n; i++) {  /* ascending, stable: each column's rank, counted without branches */
-      int rank = 0;
+    int count = 0, nan = 0, t0 = -1, t1 = -1, t2 = -1, low = 0;
+    /* the three last and the first of the stable ascending order in one pass: the whole order is
+       needed only where the first is dropped (most rows keep every column) */
+    for (i = 0; i < n; i++) {
       double v = br[i];
-      for (j = 0; j < i; j++) rank += br[j] <= v;
-      for (j = i + 1; j < n; j++) rank += br[j] < v;
-      ord[rank] = i;
       nan |= v != v;
+      if (v < br[low]) low = i;
+      if (t0 < 0 || v >= br[t0]) {
+        t2 = t1;
+        t1 = t0;
+        t0 = i;
+      } else if (t1 < 0 || v >= br[t1]) {
+        t2 = t1;
+        t1 = i;
+      } else if (t2 < 0 || v >= br[t2])
+        t2 = i;
     }
-    if (nan)  /* no order of ranks then: an insertion sort's order */
-      for (i = 0; i < n; i++) {
-        int x = i;
-        for (j = i; j > 0 && br[ord[j - 1]] > br[x]; j--) ord[j] = ord[j - 1];
-        ord[j] = x;
-      }
-    b1 = br[ord[n - 1]];
-    b2 = br[ord[n - 2]];
-    b3 = br[ord[n - 3]];
-    S = 2.0*peak[ord[n - 1]]*peak[ord[n - 2]]/(b1*b2 > 1e-300 ? b1*b2 : 1e-300);
-    S3 = 4.0*peak[ord[n - 1]]*peak[ord[n - 2]]*peak[ord[n - 3]]/(b1*b2*b3 > 1e-300 ? b1*b2*b3 : 1e-300);
+    b1 = br[t0];
+    b2 = br[t1];
+    b3 = br[t2];
+    S = 2.0*peak[t0]*peak[t1]/(b1*b2 > 1e-300 ? b1*b2 : 1e-300);
+    S3 = 4.0*peak[t0]*peak[t1]*peak[t2]/(b1*b2*b3 > 1e-300 ? b1*b2*b3 : 1e-300);
     cv = 0.0;
-    for (i = 0; i < n - 2; i++) {  /* the cumulative variance is increasing: the dropped are a prefix */
-      double next = cv + br[ord[i]]*br[ord[i]]*var[ord[i]];
-      if (!(next*S <= budget)) break;
-      cv = next;
-      count = i + 1;
+    if (nan || br[low]*br[low]*var[low]*S <= budget) {
+      for (i = 0; i < n; i++) {  /* ascending, stable: each column's rank, counted without branches */
+        int rank = 0;
+        double v = br[i];
+        for (j = 0; j < i; j++) rank += br[j] <= v;
+        for (j = i + 1; j < n; j++) rank += br[j] < v;
+        ord[rank] = i;
+      }
+      if (nan)  /* no order of ranks then: an insertion sort's order */
+        for (i = 0; i < n; i++) {
+          int x = i;
+          for (j = i; j > 0 && br[ord[j - 1]] > br[x]; j--) ord[j] = ord[j - 1];
+          ord[j] = x;
+        }
+      for (i = 0; i < n - 2; i++) {  /* the cumulative variance is increasing: the dropped are a prefix */
+        double next = cv + br[ord[i]]*br[ord[i]]*var[ord[i]];
+        if (!(next*S <= budget)) break;
+        cv = next;
+        count = i + 1;
+      }
     }
     var_e = count > 0 ? cv : 0.0;
     for (i = 0; i < n; i++) orow[i] = br[i];
