@@ -53,7 +53,7 @@ static double ts_clenshaw(const double *blk, int f, double z) {
   j = fl < 0 ? 0 : (fl > pieces - 1 ? pieces - 1 : (long)fl);
   t = 2.0*(u - (double)j) - 1.0;
   for (k = deg; k > 0; k--) {
-    tmp = c[((long)k*nf + f)*pieces + j] + 2.0*t*b1 - b2;
+    tmp = (c[((long)k*nf + f)*pieces + j] - b2) + 2.0*t*b1;  /* b2 off the chain of b1 */
     b2 = b1;
     b1 = tmp;
   }
@@ -71,10 +71,10 @@ static void ts_clenshaw2(const double *blk, double z, double *f0, double *f1) {
   t = 2.0*(u - (double)j) - 1.0;
   for (k = deg; k > 0; k--) {
     const double *ck = c + (long)k*2*pieces + j;
-    tmp = ck[0] + 2.0*t*b1 - b2;
+    tmp = (ck[0] - b2) + 2.0*t*b1;
     b2 = b1;
     b1 = tmp;
-    tmp = ck[pieces] + 2.0*t*e1 - e2;
+    tmp = (ck[pieces] - e2) + 2.0*t*e1;
     e2 = e1;
     e1 = tmp;
   }
