@@ -15,7 +15,10 @@ every row, each row in registers:
   ``theta``, taken afresh every 16 terms so that the rotation's rounding stays below 16 ulp; rows
   of more than 512 terms take each afresh), and the truncated normal's from the interpolants of
   :func:`tolsynth.probability.truncnormal.cf3` (:func:`~tolsynth.probability.truncnormal.packed`),
-  by the same formulas.
+  by the same formulas.  For P alone (order 0, not the sphere's) the columns go by kind: the
+  uniform ones rotated and multiplied two at a time (which the compiler turns into vector
+  arithmetic), the normal ones as one exponential; the products' order, so their rounding, is all
+  that differs.
 * :func:`terms` and :func:`tail`: the rigorous truncation bound of :meth:`.exact_series.Rows.tail`
   and the least power of two that meets a tolerance.
 
