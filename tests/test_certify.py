@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import tolsynth
+from independent import dense_then_local, sigma_max
 from tolsynth.analysis.certify import certify_worst_pose
 from tolsynth.analysis.certify_bounds import (
     JointGraphs,
@@ -30,15 +31,6 @@ from tolsynth.analysis.certify_structure import _PolyWalk, structure, trig_polyn
 from tolsynth.errors import InputError
 from tolsynth.kinematics.joint_space import _limits
 from tolsynth.probability.stats import z_of_p
-
-
-def _sigma(mech, Q, eps, c=3.0):
-    """Largest principal sigma at poses Q (n, nq), from the numeric sensitivity and NumPy."""
-    out = []
-    for q in np.atleast_2d(Q):
-        A = mech.sensitivity(q, check_limits=False)[:3]
-        out.append(math.sqrt(max(np.linalg.eigvalsh((A * (eps**2 / c)) @ A.T)[-1], 0.0)))
-    return np.array(out)
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +56,7 @@ def test_base_rotation_proof_matches_the_numbers(models, name, rotation):
     Q = lo + (hi - lo) * rng.random((20, len(lo)))
     Q2 = Q.copy()
     Q2[:, 0] = lo[0] + (hi[0] - lo[0]) * rng.random(20)
-    s1, s2 = _sigma(m, Q, eps), _sigma(m, Q2, eps)
+    s1, s2 = sigma_max(m, Q, eps), sigma_max(m, Q2, eps)
     if rotation is not None:
         for q, q2 in zip(Q[:3], Q2[:3]):
             t = q2[0] - q[0]
@@ -85,7 +77,7 @@ def test_rotation_proof_refuses_an_error_before_the_first_joint():
     assert structure(off).rotation is None and structure(plain).rotation == 0
     eps = np.full(off.n, 0.05)
     q1, q2 = np.radians([[10.0, 60.0], [100.0, 60.0]])
-    assert abs(_sigma(off, q1, eps)[0] - _sigma(off, q2, eps)[0]) > 1e-6
+    assert abs(sigma_max(off, q1, eps)[0] - sigma_max(off, q2, eps)[0]) > 1e-6
 
 
 def test_dropped_columns_and_joints_have_no_effect(models):
@@ -221,7 +213,7 @@ def test_sigma_bounds_are_sound_on_random_boxes(models, name, polygon):
         for j, v in held.items():
             Q[:, j] = v
         Q[:, free] = X.reshape(-1, len(free))
-        ref = _sigma(m, Q, eps).reshape(n, 60).max(axis=1)
+        ref = sigma_max(m, Q, eps).reshape(n, 60).max(axis=1)
         assert np.all(ub >= ref * (1 - 1e-12))
         if h == 0.005:
             assert np.max((ub - ref) / ref) < 0.03  # and tight on small boxes (excess ~ width^2)
@@ -334,54 +326,12 @@ def test_planar_2r_against_the_closed_form(models):
     assert abs(c.best_value - ref) <= 1e-6 * ref
 
 
-def _dense_then_local(m, eps, n, seed, fixed=None):
-    """Largest sigma_1: n random feasible poses, the best 5 refined by SLSQP inside the limits and
-    the joint constraints (numeric sensitivity, NumPy eigenvalues)."""
-    from scipy.optimize import minimize
-
-    from tolsynth.kinematics.joint_space import _feasible
-
-    lo, hi = _limits(m)
-    rng = np.random.default_rng(seed)
-    Q = lo + (hi - lo) * rng.random((n, len(lo)))
-    if fixed:
-        for j, v in fixed.items():
-            Q[:, j] = v
-    Q = Q[_feasible(m, Q.T)]
-    vals = _sigma(m, Q, eps)
-    names = list(m.joint_names)
-    cons = []
-    for c in m.spec.joint_constraints:
-        a = np.zeros(len(lo))
-        for jn, coef in c.terms.items():
-            a[names.index(jn)] = coef
-        cons += [
-            {"type": "ineq", "fun": lambda q, a=a, u=c.upper: u - a @ q},
-            {"type": "ineq", "fun": lambda q, a=a, l_=c.lower: a @ q - l_},
-        ]
-    best = vals.max()
-    for q0 in Q[np.argsort(vals)[-5:]]:
-        r = minimize(
-            lambda q: -_sigma(m, q, eps)[0],
-            q0,
-            bounds=list(zip(lo, hi)),
-            constraints=cons,
-            method="SLSQP",
-            options={"ftol": 1e-14, "maxiter": 300},
-        )
-        if r.success or r.status in (8, 9):
-            q = np.clip(r.x, lo, hi)
-            if _feasible(m, q[:, None])[0]:
-                best = max(best, _sigma(m, q, eps)[0])
-    return best
-
-
 @pytest.mark.slow  # 10-17 s
 def test_paper_robot_certified_against_a_dense_search(models):
     m = models["xu_zhang_1988"]
     eps = m.tolerances("figure3")
     c = certify_worst_pose(m, eps, "uniform", progress=False, rtol=1e-4)
-    ref = _dense_then_local(m, eps, 20000, 10, fixed={0: 0.0, 4: 0.0})
+    ref = dense_then_local(m, eps, 20000, 10, fixed={0: 0.0, 4: 0.0})
     assert c.certified
     assert ref <= c.upper_bound and (c.upper_bound - ref) / ref <= 1e-4 + 1e-9
     assert c.held.keys() == {"theta1", "theta5"}
@@ -394,7 +344,7 @@ def test_six_joint_arms_bound_a_dense_search(models, name):
     m = models[name]
     eps = m.tolerances("fine")
     c = certify_worst_pose(m, eps, "uniform", progress=False, max_boxes=20000)
-    ref = _dense_then_local(m, eps, 20000, 11)
+    ref = dense_then_local(m, eps, 20000, 11)
     assert ref <= c.upper_bound
     assert c.best_value <= ref * (1 + 1e-9) or c.best_value >= ref * (1 - 1e-3)
 
@@ -413,7 +363,7 @@ def test_interference_corner_found_where_the_sampled_exchange_missed_it(models):
     assert c.upper_bound * z / R - found <= 2e-5
     gamma = c.q[1] - c.q[2]
     assert min(abs(gamma - math.radians(50)), abs(gamma - math.radians(130))) < 1e-6  # on the interference limit
-    assert found == pytest.approx(_sigma(m, c.q, w.result.x)[0] * z / R, rel=1e-12)
+    assert found == pytest.approx(sigma_max(m, c.q, w.result.x)[0] * z / R, rel=1e-12)
 
 
 def test_bad_inputs_raise_typed_errors(models):
@@ -478,7 +428,7 @@ def test_certificate_keeps_its_boxes_and_the_gap_closing(models):
     inside = (X[:, None] >= lo[None] - 1e-12).all(axis=2) & (X[:, None] <= hi[None] + 1e-12).all(axis=2)
     assert inside.any(axis=1).all()
     bound_at = np.where(inside, ub[None], -np.inf).max(axis=1)
-    assert np.all(_sigma(m, Q, eps) <= bound_at * (1 + 1e-12))
+    assert np.all(sigma_max(m, Q, eps) <= bound_at * (1 + 1e-12))
     H = np.array(c.history)
     assert np.all(np.diff(H[:, 2]) >= 0) and np.all(np.diff(H[np.isfinite(H[:, 1]), 1]) <= 1e-15)
     assert H[-1, 1] == pytest.approx(c.upper_bound) and H[-1, 2] == pytest.approx(c.best_value)
@@ -502,7 +452,7 @@ def test_certified_map_bounds_random_poses_in_each_cell(models):
     Q = Q[_feasible(m, Q.T)][:400]
     ka = np.clip(np.searchsorted(cm.edges[0], Q[:, names.index("theta2")]) - 1, 0, 5)
     kb = np.clip(np.searchsorted(cm.edges[1], Q[:, names.index("thetap2")]) - 1, 0, 5)
-    assert np.all(_sigma(m, Q, eps) <= cm.upper[kb, ka] * (1 + 1e-12))
+    assert np.all(sigma_max(m, Q, eps) <= cm.upper[kb, ka] * (1 + 1e-12))
     assert np.isnan(cm.upper).any() and np.all(np.isnan(cm.sampled)[np.isnan(cm.upper)])
     assert np.nanmax(cm.upper) >= certify_worst_pose(m, eps, "uniform", progress=False).best_value
     with pytest.raises(tolsynth.errors.UnknownNameError):
@@ -520,7 +470,7 @@ def test_worst_pose_components_certified_with_a_probability_bound(models):
     )
     assert w.certified and w.boxes > 0
     assert w.probability_lower_bound == pytest.approx(math.erf(R / (math.sqrt(2) * w.upper_bound)), abs=1e-14)
-    sig = _sigma(m, w.q, m.tolerances("figure3"))[0]
+    sig = sigma_max(m, w.q, m.tolerances("figure3"))[0]
     assert w.probability_lower_bound <= math.erf(R / (math.sqrt(2) * sig)) == pytest.approx(w.value, rel=1e-9)
     with pytest.raises(InputError, match="components"):
         tolsynth.worst_pose(m, "figure3", criterion="probability", R=R, certify=True)

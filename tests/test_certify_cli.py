@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import tolsynth
+from independent import sigma_max
 from tolsynth.kinematics.joint_space import _feasible, _limits
 from tolsynth.probability.stats import z_of_p
 
@@ -31,14 +32,6 @@ def _run(*argv: str) -> tuple[int, dict | None, str]:
     return proc.returncode, out, proc.stderr
 
 
-def _sigma(mech, Q, eps, c=3.0):
-    out = []
-    for q in np.atleast_2d(Q):
-        A = mech.sensitivity(q, check_limits=False)[:3]
-        out.append(math.sqrt(max(np.linalg.eigvalsh((A * (eps**2 / c)) @ A.T)[-1], 0.0)))
-    return np.array(out)
-
-
 @pytest.mark.parametrize("workers", [None, "1", "2"])
 def test_worst_pose_certify_json_holds_its_proof(workers):
     rc, out, _ = _run(
@@ -46,7 +39,7 @@ def test_worst_pose_certify_json_holds_its_proof(workers):
     )
     assert rc == 0
     m = tolsynth.load_model("planar_2r")
-    sig = _sigma(m, np.array(out["q"]), np.array(list(out["tolerances"].values())))[0]
+    sig = sigma_max(m, np.array(out["q"]), np.array(list(out["tolerances"].values())))[0]
     assert out["certified"] is True and out["boxes"] > 0
     assert sig == pytest.approx(out["value"], rel=1e-9)
     assert out["value"] <= out["upper_bound"] <= out["value"] * (1 + 5e-4)
@@ -69,7 +62,7 @@ def test_worst_pose_certify_components_gives_a_probability_bound():
     )
     assert rc == 0 and out["certified"] is True
     m = tolsynth.load_model("planar_2r")
-    sig = _sigma(m, np.array(out["q"]), np.array(list(out["tolerances"].values())))[0]
+    sig = sigma_max(m, np.array(out["q"]), np.array(list(out["tolerances"].values())))[0]
     p_there = math.erf(0.1 / (math.sqrt(2.0) * sig))
     assert out["probability_lower_bound"] <= p_there == pytest.approx(out["value"], rel=1e-9)
     assert out["probability_lower_bound"] == pytest.approx(
@@ -141,11 +134,11 @@ def test_time_limit_is_not_proven_with_the_bound_so_far():
     assert out["certified"] is False and out["certificate"]["reason"] == "time limit reached"
     m = tolsynth.load_model("puma560")
     eps = np.array(list(out["tolerances"].values()))
-    assert m.distribution == "uniform"  # variance eps^2 / 3, as _sigma takes it
-    assert _sigma(m, np.array(out["q"]), eps)[0] == pytest.approx(out["value"], rel=1e-9)
+    assert m.distribution == "uniform"  # variance eps^2 / 3, as sigma_max takes it
+    assert sigma_max(m, np.array(out["q"]), eps)[0] == pytest.approx(out["value"], rel=1e-9)
     lo, hi = _limits(m)
     Q = lo + (hi - lo) * np.random.default_rng(3).random((2000, len(lo)))
-    assert _sigma(m, Q, eps).max() <= out["upper_bound"] and out["value"] < out["upper_bound"]
+    assert sigma_max(m, Q, eps).max() <= out["upper_bound"] and out["value"] < out["upper_bound"]
 
 
 @pytest.mark.slow
@@ -178,7 +171,7 @@ def test_round_limit_is_not_converged_with_the_bound_so_far():
     assert len(out["rounds"]) == 2 and out["rounds"][-1]["boxes"] > 0
     m = tolsynth.load_model("xu_zhang_1988")
     eps = np.array([out["tolerances"][n] for n in m.error_parameters])
-    worst = _sigma(m, np.array(out["rounds"][-1]["worst_q"]), eps)[0] * z_of_p(0.99) / 0.5
+    worst = sigma_max(m, np.array(out["rounds"][-1]["worst_q"]), eps)[0] * z_of_p(0.99) / 0.5
     assert worst == pytest.approx(out["worst_value"], rel=1e-9)
     assert out["worst_value"] <= out["upper_bound"] and out["upper_bound"] > 1.001
 
@@ -197,7 +190,7 @@ def test_everywhere_certify_time_limit_is_not_converged():
     assert out["converged"] is False and out["certified"] is False and "time limit reached" in out["reason"]
     m = tolsynth.load_model("xu_zhang_1988")
     eps = np.array([out["tolerances"][n] for n in m.error_parameters])
-    worst = _sigma(m, np.array(out["rounds"][-1]["worst_q"]), eps)[0] * z_of_p(0.99) / 0.5
+    worst = sigma_max(m, np.array(out["rounds"][-1]["worst_q"]), eps)[0] * z_of_p(0.99) / 0.5
     assert worst == pytest.approx(out["worst_value"], rel=1e-9) and out["worst_value"] <= float(out["upper_bound"])
     rc, _, err = _run(*argv, "--everywhere", "--certify-time-limit", "1")
     assert rc == 2 and "--certify-time-limit" in err
@@ -256,7 +249,7 @@ def test_sampled_exchange_round_limit_says_why_with_progress():
         progress=lambda done, total: calls.append((done, total)),
     )
     assert not w.converged and w.certified is None and calls == [(1, 2), (2, 2)]
-    worst = _sigma(m, w.rounds[-1]["worst_q"], w.result.x)[0] * z_of_p(0.99) / 0.5
+    worst = sigma_max(m, w.rounds[-1]["worst_q"], w.result.x)[0] * z_of_p(0.99) / 0.5
     assert worst == pytest.approx(w.worst_value, rel=1e-9)
     assert (
         w.reason

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import tolsynth
-from independent import fft_at_edge
+from independent import dense_then_local, fft_at_edge, sigma_max
 from tolsynth.analysis import certify_parallel
 from tolsynth.analysis.certify import certify_worst_pose
 from tolsynth.errors import InputError
@@ -42,15 +42,6 @@ def dealt(monkeypatch):
 
     monkeypatch.setattr(certify_parallel, "fan_out", spy)
     return calls
-
-
-def _sigma(mech, Q, eps, c=3.0):
-    """Largest principal sigma at poses Q (n, nq): numeric sensitivity and NumPy's eigensolver."""
-    out = []
-    for q in np.atleast_2d(Q):
-        A = mech.sensitivity(q, check_limits=False)[:3]
-        out.append(math.sqrt(max(np.linalg.eigvalsh((A * (eps**2 / c)) @ A.T)[-1], 0.0)))
-    return np.array(out)
 
 
 def test_sigma_on_two_workers_matches_the_closed_form(dealt):
@@ -90,7 +81,6 @@ def test_sigma_on_two_workers_bounds_an_independent_search_on_the_paper_robot(de
     """The paper's robot, 'figure3' tolerances, rtol 1e-4: serial and two workers certify bounds
     within the tolerance of each other, above random poses refined by SLSQP inside the joint
     constraints, and the progress callback follows the workers' boxes."""
-    from scipy.optimize import minimize
 
     m = tolsynth.load_model("xu_zhang_1988")
     eps = m.tolerances("figure3")
@@ -100,32 +90,11 @@ def test_sigma_on_two_workers_bounds_an_independent_search_on_the_paper_robot(de
     assert one.certified and two.certified
     assert abs(one.upper_bound - two.upper_bound) <= 1e-4 * one.best_value
     assert two.best_value <= two.upper_bound <= two.best_value * (1 + 1e-4)
-    assert two.best_value == pytest.approx(_sigma(m, two.q, eps)[0], rel=1e-12)
+    assert two.best_value == pytest.approx(sigma_max(m, two.q, eps)[0], rel=1e-12)
     n = [h[0] for h in two.history]
     assert len(n) > 1 and n == sorted(n) and n[-1] <= two.boxes
     # the independent search: theta1 and theta5 are proven not to matter (held at 0)
-    lo, hi = _limits(m)
-    lo[[0, 4]] = hi[[0, 4]] = 0.0
-    rng = np.random.default_rng(3)
-    Q = lo + (hi - lo) * rng.random((3000, len(lo)))
-    Q = Q[_feasible(m, Q.T)]
-    vals = _sigma(m, Q, eps)
-    names = list(m.joint_names)
-    cons = []
-    for c in m.spec.joint_constraints:
-        a = np.zeros(len(lo))
-        for jn, coef in c.terms.items():
-            a[names.index(jn)] = coef
-        cons += [
-            {"type": "ineq", "fun": lambda q, a=a, u=c.upper: u - a @ q},
-            {"type": "ineq", "fun": lambda q, a=a, l_=c.lower: a @ q - l_},
-        ]
-    ref = vals.max()
-    for q0 in Q[np.argsort(vals)[-3:]]:
-        r = minimize(lambda q: -_sigma(m, q, eps)[0], q0, bounds=list(zip(lo, hi)), constraints=cons, method="SLSQP")
-        q = np.clip(r.x, lo, hi)
-        if _feasible(m, q[:, None])[0]:
-            ref = max(ref, _sigma(m, q, eps)[0])
+    ref = dense_then_local(m, eps, 3000, 3, fixed={0: 0.0, 4: 0.0}, refine=3)
     for c in (one, two):
         assert ref <= c.upper_bound
         assert c.best_value >= ref * (1 - 1e-4)  # the search found the maximum the reference found
@@ -170,7 +139,7 @@ def test_stop_levels_still_end_the_search_on_workers(dealt):
     eps = m.tolerances("figure3")
     c = certify_worst_pose(m, eps, "uniform", progress=False, rtol=1e-4, workers=2, stop_at=0.36)
     assert not c.certified and c.reason.startswith("a point above 0.36")
-    assert _sigma(m, c.q, eps)[0] > 0.36
+    assert sigma_max(m, c.q, eps)[0] > 0.36
     m2 = tolsynth.load_model("planar_2r")
     eps2 = m2.tolerances("coarse")
     kw = dict(criterion="components", R=0.1, probability="exact", progress=False, workers=2)
@@ -194,8 +163,8 @@ def test_time_limit_still_ends_the_search_on_workers(dealt):
     assert c.best_value <= c.upper_bound and c.open_boxes > 0
     lo, hi = _limits(m)
     Q = lo + (hi - lo) * np.random.default_rng(5).random((200, len(lo)))
-    assert _sigma(m, Q, eps).max() <= c.upper_bound
-    assert c.best_value == pytest.approx(_sigma(m, c.q, eps)[0], rel=1e-12)
+    assert sigma_max(m, Q, eps).max() <= c.upper_bound
+    assert c.best_value == pytest.approx(sigma_max(m, c.q, eps)[0], rel=1e-12)
 
 
 def test_worker_count_is_checked():
@@ -269,7 +238,7 @@ def test_boxes_kept_on_workers_cover_the_joint_space_with_sound_bounds(dealt):
     inside = (X[:, None] >= lo[None] - 1e-12).all(axis=2) & (X[:, None] <= hi[None] + 1e-12).all(axis=2)
     assert inside.any(axis=1).all()
     bound_at = np.where(inside, ub[None], -np.inf).max(axis=1)
-    assert np.all(_sigma(m, Q, eps) <= bound_at * (1 + 1e-12))
+    assert np.all(sigma_max(m, Q, eps) <= bound_at * (1 + 1e-12))
     assert ub.max() == pytest.approx(c.upper_bound, rel=1e-12)
     H = np.array(c.history)
     assert np.all(np.diff(H[:, 0]) >= 0) and np.all(np.diff(H[:, 2]) >= 0)
@@ -304,4 +273,4 @@ def test_box_limit_still_ends_the_search_on_workers(dealt):
     assert 600 <= c.boxes <= 600 + 2 * 2 * 2 * 512  # a round per worker may pass it: two halves a box
     full = certify_worst_pose(m, eps, "uniform", progress=False, rtol=1e-4, workers=1)
     assert full.certified
-    assert _sigma(m, full.q, eps)[0] <= c.upper_bound
+    assert sigma_max(m, full.q, eps)[0] <= c.upper_bound
