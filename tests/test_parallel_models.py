@@ -145,6 +145,28 @@ def test_workspace_design_holds_over_the_actuator_box():
     assert worst * z_of_p(0.99) / 0.1 <= 1 + 2e-3
 
 
+def test_workspace_design_without_a_worst_configuration():
+    """The 3-RRR has no ``worst`` configuration: synthesize_workspace with its default start (the
+    model's reference pose, else the search's worst pose) runs, and the design meets sigma z / R <=
+    1 + tol on a brute-force grid over the actuator box (NumPy eigenvalues per pose, reachable ones)."""
+    m = tolsynth.load_model("planar_3rrr")
+    assert "worst" not in m.configurations
+    ws = tolsynth.synthesize_workspace(m, R=0.1, p=0.99, tol=1e-3, probability="gaussian")
+    assert ws.success
+    lo, hi = (np.array([getattr(j, k) for j in m.spec.joints]) for k in ("lower", "upper"))
+    g = np.linspace(0, 1, 9)
+    worst, reached = 0.0, 0
+    for u in np.array(np.meshgrid(g, g, g)).reshape(3, -1).T:
+        q = lo + (hi - lo) * u
+        try:
+            worst = max(worst, _sigma(m, q, ws.result.x))
+            reached += 1
+        except tolsynth.TolsynthError:  # outside the reachable set
+            continue
+    assert reached > 50
+    assert worst * z_of_p(0.99) / 0.1 <= 1 + 2e-3
+
+
 def test_contributions_of_anchors_and_leg_offsets():
     """Each parameter's share of the total variance tr V at the optimum is its term
     eps_i^2 |a_i|^2 / 3 over the sum (NumPy from the sensitivity matrix); anchors and leg offsets

@@ -12,6 +12,7 @@ import numpy as np
 
 from tolsynth.checks import check_count, check_mapping, check_positive
 from tolsynth.errors import InputError
+from tolsynth.kinematics.joint_space import MODEL_REFERENCE, model_reference
 from tolsynth.probability.stats import z_of_p
 from tolsynth.problem.result import SynthesisResult
 from tolsynth.synthesis.single import COARSE_STEP_TOL, synthesize
@@ -147,7 +148,7 @@ def synthesize_workspace(
     distribution=None,
     alpha=0.7,
     *,
-    pose="worst",
+    pose=MODEL_REFERENCE,
     tol: float = 1e-3,
     max_rounds: int = 20,
     search: dict | None = None,
@@ -181,9 +182,9 @@ def synthesize_workspace(
     rounds, 3.1 % more, and the optimum at the paper's pose misses p elsewhere by a factor 1.91
     in ``(1 - P) / (1 - p)``.
 
-    ``pose`` is where the exchange starts (a configuration name or joint values, rad); None starts
-    from the worst pose the search finds at tolerances in the middle of the bounds, so that a model
-    without a ``worst`` configuration works too.
+    ``pose`` is where the exchange starts (a configuration name or joint values, rad); by default
+    the model's reference pose (its ``worst`` configuration), and for a model without one, as for
+    None, the worst pose the search finds at tolerances in the middle of the bounds.
 
     With ``certify=True`` the sampled search is replaced by the certified one
     (:func:`tolsynth.analysis.certify.certify_worst_pose`): after each solve a branch and bound over
@@ -202,6 +203,8 @@ def synthesize_workspace(
     from tolsynth.kinematics.mechanism import as_mechanism
 
     mechanism = as_mechanism(mechanism)
+    if pose is MODEL_REFERENCE:
+        pose = model_reference(mechanism)
     R = check_positive(R, "R", "mm")  # a number in mm or a string with its unit, as synthesize reads it
     z = z_of_p(p)
     tol = check_positive(tol, "tol", "relative", upper=1.0)
