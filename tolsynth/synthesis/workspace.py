@@ -51,6 +51,12 @@ class WorkspaceSynthesis(Tabular):
         The last certified search (:class:`tolsynth.analysis.certify.Certificate`).
     reason : str
         Why not converged ("" when converged).
+    margin : float
+        The design margin of a certified exchange (``certify_options["margin"]``): the designs were
+        solved at ``R / (1 + margin)``, the proof made at ``R``.  0 without one.
+    bound_at_R : float or None
+        With a margin: the dual bound of a solve at ``R`` itself at the final poses, a lower bound
+        on the cost of any tolerances meeting the specification everywhere (:attr:`lower_bound`).
     """
 
     result: SynthesisResult
@@ -62,6 +68,8 @@ class WorkspaceSynthesis(Tabular):
     probability_lower_bound: float | None = None
     certificate: object = None
     reason: str = ""
+    margin: float = 0.0
+    bound_at_R: float | None = None
 
     @property
     def success(self) -> bool:
@@ -72,13 +80,15 @@ class WorkspaceSynthesis(Tabular):
     def lower_bound(self) -> float:
         """Certified lower bound on the cost of *any* tolerances meeting the specification at every
         pose: the dual bound of the last solve, whose poses are a subset of the workspace (a
-        relaxation), so it bounds the semi-infinite problem too."""
-        return self.result.lower_bound
+        relaxation), so it bounds the semi-infinite problem too.  With a design margin, the same
+        bound from a solve at ``R`` itself (the last solve's is at ``R / (1 + margin)``)."""
+        return self.bound_at_R if self.bound_at_R is not None else self.result.lower_bound
 
     @property
     def gap(self) -> float:
-        """``cost - lower_bound`` of the last solve."""
-        return self.result.gap
+        """``cost - lower_bound``: the last solve's own gap, and with a design margin also what the
+        margin cost."""
+        return self.result.gap if self.bound_at_R is None else self.result.cost - self.bound_at_R
 
     @property
     def worst_value(self) -> float:
@@ -113,6 +123,11 @@ class WorkspaceSynthesis(Tabular):
         else:
             what = "no bound"
         state = "the specification is proven to hold" if self.certified else "NOT proven: " + self.reason
+        if self.margin:
+            state += (
+                f"; designed with a margin of {self.margin:g} on R, the cost is within "
+                f"{self.gap / self.result.cost:.2%} of the cheapest design that meets R everywhere"
+            )
         return f"certificate over the whole joint space: {what} ({state})"
 
     def summary(self) -> str:
@@ -194,7 +209,13 @@ def synthesize_workspace(
     probability to ``p - 1e-6``); then ``certified`` is True.  When the round limit is reached, or
     the search cannot close its gap within its box limit, the result says so (``converged`` False,
     ``reason``) with the bound reached.  ``certify_options``: ``rtol``, ``tol``, ``max_boxes``,
-    ``time_limit`` and ``workers`` (processes; default the cores) of each certified search.  ``progress``: a progress bar on stderr, of the
+    ``time_limit`` and ``workers`` (processes; default the cores) of each certified search, and
+    ``margin`` (relative, default 0): design at ``R / (1 + margin)`` and prove at ``R``.  The proof
+    needs room between the design's largest error and ``1 + tol``; an exchange's design is nearly
+    flat (on a six-joint arm within 1e-3 of its maximum over a few percent of the joint space), so
+    without a margin that room is at most ``tol`` and the proof takes hundreds of thousands of
+    boxes.  A margin buys room for cost: ``lower_bound`` then comes from a solve at ``R`` at the
+    final poses, so ``gap`` shows what the margin cost (Puma 560: a margin of 3e-3, +0.2 %).  ``progress``: a progress bar on stderr, of the
     exchange's rounds (with ``certify``: of each certified search's boxes); None shows it on a
     terminal for runs over a couple of seconds.  The sphere criterion
     is not certified.
@@ -230,7 +251,7 @@ def synthesize_workspace(
     converged = False
     res = None
 
-    def search_at(eps, opts):
+    def search_at(eps, opts, R=R):
         if sphere:  # the worst pose is the one of lowest P(|dr| <= R)
             w = worst_pose(mechanism, eps, criterion="probability", R=R, distribution=distribution, **opts)
             g = (1.0 - w.value) / (1.0 - p)
@@ -273,7 +294,7 @@ def synthesize_workspace(
             progress,
             sphere,
             kwargs,
-            lambda eps, fine=False: search_at(eps, full if fine else coarse),
+            lambda eps, radius, fine=False: search_at(eps, full if fine else coarse, radius),
         )
     from tolsynth.progress import Progress
 
@@ -318,8 +339,8 @@ def _certified_exchange(
 ) -> WorkspaceSynthesis:
     """The exchange of :func:`synthesize_workspace` with the certified search deciding (its docstring).
 
-    A round whose sampled search (``sampled(eps, fine=False) -> (WorstPose, value)``, cheap; ``fine``
-    the full search rather than the coarse one) finds the specification missed adds that pose, as
+    A round whose sampled search (``sampled(eps, radius, fine=False) -> (WorstPose, value)``, cheap;
+    ``fine`` the full search rather than the coarse one; the value relative to ``radius``) finds the specification missed adds that pose, as
     the uncertified exchange does; only when it finds none does the certified search run, which
     either proves the specification met or returns the worst pose it found (within its tolerance of
     the worst anywhere), to be added in turn."""
@@ -332,10 +353,14 @@ def _certified_exchange(
             "the sphere criterion has no certified search",
             "criterion 'components' (the default) with certify=True",
         )
-    options = check_mapping(options, "certify_options", "keyword arguments of the certified search") or {}
+    options = dict(check_mapping(options, "certify_options", "keyword arguments of the certified search") or {})
+    keys = ("rtol", "tol", "max_boxes", "time_limit", "workers", "margin")
     for key in options:
-        if key not in ("rtol", "tol", "max_boxes", "time_limit", "workers"):
-            raise InputError("certify_options", f"unknown key {key!r}", "rtol, tol, max_boxes, time_limit, workers")
+        if key not in keys:
+            raise InputError("certify_options", f"unknown key {key!r}", ", ".join(keys))
+    margin = options.pop("margin", 0.0)
+    margin = 0.0 if margin == 0 else check_positive(margin, "certify_options['margin']", "relative", upper=0.5)
+    Rd = R / (1.0 + margin)  # the radius designed for; the proof is made at R
     probability = kwargs.get("probability") or DEFAULT_PROBABILITY
     exact = probability == "exact"
     rounds, res, cert = [], None, None
@@ -346,13 +371,13 @@ def _certified_exchange(
     # a second, one found by the certified search a full search
     missed = 1.0 + (EXACT_SLACK / (2.0 * (1.0 - p)) if exact else tol)
     for k in range(max_rounds):
-        res = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
+        res = synthesize(mechanism, Rd, p, distribution, alpha, poses=poses, **kwargs)
         if not res.success:
             reason = f"the solve at {len(poses)} pose(s) did not succeed: {res.message}"
             break
-        w, g = sampled(res.x)
+        w, g = sampled(res.x, Rd)
         if g <= missed:  # the coarse search found no miss: the full one decides whether to prove
-            w, g = sampled(res.x, True)
+            w, g = sampled(res.x, Rd, True)
         if g > missed and k < max_rounds - 1:  # missed at a sampled pose: no proof needed to go on
             rounds.append(
                 {
@@ -396,7 +421,7 @@ def _certified_exchange(
         else:
             ub_ratio = cert.upper_bound * z / R
             p_lb = cert.probability_lower_bound
-            worst = cert.best_value * z / R
+            worst = cert.best_value * z / Rd  # the rounds' values are relative to the radius designed for
             meets, violated = ub_ratio <= 1 + tol, worst > 1 + tol / 2
         rounds.append(
             {
@@ -416,12 +441,18 @@ def _certified_exchange(
             break
         if not violated:
             reason = f"the certified search did not close its gap ({cert.reason or 'bound above the specification'})"
+            if not margin:
+                reason += "; a design margin (certify_options 'margin', e.g. 3 tol) gives the proof room"
             break
         poses = poses + [q]
+    bound_at_R = None
     if converged and res is not None:
         # the proof over the whole joint space supersedes the quick sampled check a design carries
         # (and its 300 poses' exact probabilities, half a second on the paper's robot)
         object.__setattr__(res, "workspace", None)
+        if margin:  # the cheapest cost at R is bounded by a solve at R (a relaxation: finitely many poses)
+            at_R = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
+            bound_at_R = at_R.lower_bound if at_R.success else float("nan")
     return WorkspaceSynthesis(
         res,
         poses,
@@ -432,4 +463,6 @@ def _certified_exchange(
         probability_lower_bound=p_lb,
         certificate=cert,
         reason=reason,
+        margin=margin,
+        bound_at_R=bound_at_R,
     )

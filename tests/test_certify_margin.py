@@ -1,0 +1,91 @@
+"""A design margin in the certified exchange: the designs at ``R / (1 + margin)``, the proof at ``R``,
+and the cost's lower bound from a solve at ``R`` itself."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tolsynth
+from convex_reference import clarabel
+from independent import dense_then_local, sigma_max
+from tolsynth.errors import InputError, OutOfRangeError
+from tolsynth.probability.stats import z_of_p
+from tolsynth.problem.specification import make_specification
+
+R, P, MARGIN, TOL = 0.5, 0.99, 3e-3, 1e-3
+
+
+@pytest.fixture(scope="module")
+def margin_design(xz):
+    return tolsynth.synthesize_workspace(
+        xz,
+        R,
+        P,
+        "uniform",
+        0.7,
+        probability="gaussian",
+        tol=TOL,
+        certify=True,
+        certify_options={"margin": MARGIN},
+        progress=False,
+    )
+
+
+def test_the_design_meets_the_smaller_radius_at_its_poses(xz, margin_design):
+    """NumPy eigenvalues at the imposed poses: z sigma_1 <= R / (1 + margin), binding at some."""
+    w = margin_design
+    assert w.certified and w.converged and w.success and w.margin == MARGIN
+    ratio = sigma_max(xz, np.array(w.poses), w.result.x) * z_of_p(P) * (1 + MARGIN) / R
+    assert ratio.max() <= 1 + 1e-6 and ratio.max() >= 1 - 1e-6
+
+
+def test_the_proof_at_R_holds_against_a_dense_search(xz, margin_design):
+    """The largest sigma an independent search finds (20 000 poses and SLSQP) lies below the proven
+    bound, which meets 1 + tol at R; the margin leaves the design below R there."""
+    w = margin_design
+    z = z_of_p(P)
+    ref = dense_then_local(xz, w.result.x, 20000, 12, fixed={0: 0.0, 4: 0.0}) * z / R
+    assert ref <= w.upper_bound <= 1 + TOL
+    assert ref <= (1 + TOL) / (1 + MARGIN) + 1e-9
+
+
+def test_the_lower_bound_is_the_optimum_at_R_by_clarabel(xz, margin_design):
+    """``lower_bound`` is the cheapest cost at R at the final poses (cvxpy + Clarabel, an SDP sharing
+    nothing with the NLP), and the design's own cost the cheapest at R / (1 + margin): the gap is
+    what the margin costs."""
+    pytest.importorskip("cvxpy")
+    w = margin_design
+    at_R = clarabel(make_specification(xz, R, P, "uniform", 0.7, poses=w.poses))
+    at_Rd = clarabel(make_specification(xz, R / (1 + MARGIN), P, "uniform", 0.7, poses=w.poses))
+    assert at_R is not None and at_Rd is not None
+    assert w.lower_bound == pytest.approx(at_R, rel=1e-6) and w.lower_bound <= at_R * (1 + 1e-9)
+    assert w.result.cost == pytest.approx(at_Rd, rel=1e-6)
+    assert w.gap == pytest.approx(at_Rd - at_R, rel=1e-3)
+    assert "within 0.2" in w.certificate_line() and "margin of 0.003" in w.certificate_line()
+
+
+def test_without_a_margin_the_reason_names_it(xz):
+    """A proof that cannot close in its box budget, and finds no pose past the goal, says that a
+    margin gives it room (a budget of 50 boxes is far too few for the paper's robot)."""
+    w = tolsynth.synthesize_workspace(
+        xz,
+        R,
+        P,
+        "uniform",
+        0.7,
+        probability="gaussian",
+        certify=True,
+        certify_options={"max_boxes": 50, "workers": 1},
+        progress=False,
+    )
+    assert not w.certified and not w.converged
+    assert "margin" in w.reason and w.upper_bound > 1 + TOL
+
+
+@pytest.mark.parametrize("bad", [-1e-3, 0.6, float("nan"), "much"])
+def test_a_bad_margin_is_a_typed_error_naming_it(xz, bad):
+    with pytest.raises((OutOfRangeError, InputError), match="margin"):
+        tolsynth.synthesize_workspace(
+            xz, R, P, probability="gaussian", certify=True, certify_options={"margin": bad}, progress=False
+        )
