@@ -98,6 +98,26 @@ def test_worst_pose_certify_components_gives_a_probability_bound():
         (["worst-pose", "--model", "planar_2r", "--certify", "--workers", "0"], "integer >= 1"),
         (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--everywhere", "--workers", "2"], "--certify"),
         (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--workers", "2"], "--everywhere"),
+        (
+            ["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--everywhere", "--margin", "3e-3"],
+            "--certify",
+        ),
+        (
+            [
+                "solve",
+                "--model",
+                "planar_2r",
+                "--R",
+                "0.1",
+                "--p",
+                "0.99",
+                "--everywhere",
+                "--certify",
+                "--margin",
+                "1",
+            ],
+            "from 0 to 0.5",
+        ),
     ],
     ids=[
         "sphere-probability",
@@ -110,6 +130,8 @@ def test_worst_pose_certify_components_gives_a_probability_bound():
         "workers-zero",
         "workers-without-certify",
         "workers-without-everywhere",
+        "margin-without-certify",
+        "margin-too-large",
     ],
 )
 def test_certify_usage_errors_exit_2_naming_the_choice(argv, says, capsys):
@@ -230,6 +252,26 @@ def test_everywhere_certified_on_the_paper_robot():
     V = np.einsum("nij,j,nkj->nik", A, eps**2 / 3.0, A)
     ratio = np.sqrt(np.linalg.eigvalsh(V)[:, -1]) * z_of_p(0.99) / 0.5
     assert ratio.max() <= out["upper_bound"]
+
+
+@pytest.mark.slow  # 5 s: a child process
+def test_everywhere_certified_with_a_margin_reports_the_bound_at_R():
+    """``--margin``: certified at R, the design's cost the optimum at R / (1 + margin) and the
+    lower bound the optimum at R at the same poses, both by cvxpy + Clarabel."""
+    pytest.importorskip("cvxpy")
+    from convex_reference import clarabel
+    from tolsynth.problem.specification import make_specification
+
+    argv = ["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--probability", "gaussian"]
+    rc, out, _ = _run(*argv, "--everywhere", "--certify", "--margin", "3e-3", "--json")
+    assert rc == 0 and out["certified"] is True and out["margin"] == 3e-3 and out["upper_bound"] <= 1.001
+    m = tolsynth.load_model("xu_zhang_1988")
+    poses = [np.array(q) for q in out["poses"]]
+    at_R = clarabel(make_specification(m, 0.5, 0.99, "uniform", 0.7, poses=poses))
+    at_Rd = clarabel(make_specification(m, 0.5 / 1.003, 0.99, "uniform", 0.7, poses=poses))
+    assert out["lower_bound"] == pytest.approx(at_R, rel=1e-6)
+    assert out["cost"] == pytest.approx(at_Rd, rel=1e-6)
+    assert out["gap"] == pytest.approx(at_Rd - at_R, rel=1e-3)
 
 
 def test_sampled_exchange_round_limit_says_why_with_progress():

@@ -74,3 +74,28 @@ def test_no_certificate_section_without_a_certified_search():
     assert certificate_blocks(rep) == [] and rep.workspace is w
     md, _ = rep.to_markdown()
     assert "Certificate over the whole joint space" not in md
+
+
+def test_report_shows_the_design_margin_and_the_bound_at_R():
+    """With a margin the report's certificate names it, with the cost and the lower bound at R; the
+    design stays below R on a 121 x 121 grid (NumPy eigenvalues), as the margin leaves it."""
+    mech = tolsynth.load_model("planar_2r")
+    w = synthesize_workspace(
+        mech,
+        R,
+        P,
+        "uniform",
+        0.7,
+        probability="gaussian",
+        certify=True,
+        certify_options={"margin": 3e-3},
+        progress=False,
+    )
+    assert w.certified and w.margin == 3e-3
+    assert _grid_ratio(mech, np.asarray(w.result.x)) <= (1 + 1e-3) / (1 + 3e-3)
+    rep = report(w, mc_samples=0, map_n=0, worst_grid=0)
+    row = _rows(certificate_blocks(rep), "workspace design")[
+        "design margin on R (the designs at R / (1 + margin), the proof at R)"
+    ]
+    assert row == f"0.003: cost {w.result.cost:.8g}, lower bound at R {w.lower_bound:.8g}"
+    assert w.lower_bound < w.result.cost

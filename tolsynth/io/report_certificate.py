@@ -80,6 +80,13 @@ def certificate_blocks(rep) -> list[tuple]:
             ]
         )
         rows.append(["poses imposed (binding)", f"{len(ws.poses)} ({len(ws.binding_poses)})"])
+        if getattr(ws, "margin", 0.0):
+            rows.append(
+                [
+                    "design margin on R (the designs at R / (1 + margin), the proof at R)",
+                    f"{ws.margin:g}: cost {ws.result.cost:.8g}, lower bound at R {ws.lower_bound:.8g}",
+                ]
+            )
         B.append(("table", ["workspace design", ""], rows, [False, True], ws.certificate_line() + "."))
         if ws.certified:
             B.append(
