@@ -441,7 +441,12 @@ def _certified_exchange(
             break
         if not violated:
             reason = f"the certified search did not close its gap ({cert.reason or 'bound above the specification'})"
-            if not margin:
+            if exact and len(cert.searched) >= 5:  # the exact bounds are Taylor corners there
+                reason += (
+                    f"; the exact reading's proof does not close on {len(cert.searched)} searched joints: "
+                    "probability='gaussian' with a design margin (certify_options 'margin') closes on six-joint arms"
+                )
+            elif not margin:
                 reason += "; a design margin (certify_options 'margin', e.g. 3 tol) gives the proof room"
             break
         poses = poses + [q]
