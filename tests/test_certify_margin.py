@@ -83,6 +83,26 @@ def test_without_a_margin_the_reason_names_it(xz):
     assert "margin" in w.reason and w.upper_bound > 1 + TOL
 
 
+def test_not_converged_with_a_margin_still_bounds_the_cost_at_R(xz):
+    """A proof stopped by its box budget: not certified, and ``lower_bound`` is still the optimum at
+    R at the poses imposed (cvxpy + Clarabel), not the last solve's own bound at R / (1 + margin)."""
+    pytest.importorskip("cvxpy")
+    w = tolsynth.synthesize_workspace(
+        xz,
+        R,
+        P,
+        "uniform",
+        0.7,
+        probability="gaussian",
+        certify=True,
+        certify_options={"margin": MARGIN, "max_boxes": 50, "workers": 1},
+        progress=False,
+    )
+    assert not w.certified and not w.converged
+    at_R = clarabel(make_specification(xz, R, P, "uniform", 0.7, poses=w.poses))
+    assert w.lower_bound == pytest.approx(at_R, rel=1e-6) and w.lower_bound < w.result.cost
+
+
 @pytest.mark.parametrize("bad", [-1e-3, 0.6, float("nan"), "much"])
 def test_a_bad_margin_is_a_typed_error_naming_it(xz, bad):
     with pytest.raises((OutOfRangeError, InputError), match="margin"):

@@ -455,9 +455,12 @@ def _certified_exchange(
         # the proof over the whole joint space supersedes the quick sampled check a design carries
         # (and its 300 poses' exact probabilities, half a second on the paper's robot)
         object.__setattr__(res, "workspace", None)
-        if margin:  # the cheapest cost at R is bounded by a solve at R (a relaxation: finitely many poses)
-            at_R = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
-            bound_at_R = at_R.lower_bound if at_R.success else float("nan")
+    if margin and res is not None:
+        # the last solve's dual bound is one at R / (1 + margin), above the cheapest cost at R; a
+        # solve at R at the poses imposed (finitely many: a relaxation) bounds that cost, converged
+        # or not
+        at_R = synthesize(mechanism, R, p, distribution, alpha, poses=poses, **kwargs)
+        bound_at_R = at_R.lower_bound if at_R.success else float("nan")
     return WorkspaceSynthesis(
         res,
         poses,
