@@ -109,3 +109,19 @@ def test_a_bad_margin_is_a_typed_error_naming_it(xz, bad):
         tolsynth.synthesize_workspace(
             xz, R, P, probability="gaussian", certify=True, certify_options={"margin": bad}, progress=False
         )
+
+
+@pytest.mark.long  # 1-2 min per arm on 2 cores
+@pytest.mark.parametrize("name", ["puma560", "ur5"])
+def test_six_joint_exchange_certified_with_a_margin(name):
+    """The Gaussian certified exchange on a six-joint arm closes with a margin of 3 tol: the bound
+    at R meets 1 + tol and lies above the largest sigma an independent search finds (random poses
+    and SLSQP); the cost is within the margin's price of the bound at R."""
+    m = tolsynth.load_model(name)
+    w = tolsynth.synthesize_workspace(
+        m, R, P, probability="gaussian", certify=True, certify_options={"margin": MARGIN}, progress=False
+    )
+    assert w.certified and w.upper_bound <= 1 + TOL
+    ref = dense_then_local(m, w.result.x, 20000, 13) * z_of_p(P) / R
+    assert ref <= w.upper_bound
+    assert 0 < w.gap <= 0.005 * w.result.cost
