@@ -125,3 +125,41 @@ def test_six_joint_exchange_certified_with_a_margin(name):
     ref = dense_then_local(m, w.result.x, 20000, 13) * z_of_p(P) / R
     assert ref <= w.upper_bound
     assert 0 < w.gap <= 0.005 * w.result.cost
+
+
+def test_with_a_blind_sampled_stage_the_proofs_find_the_poses_past_the_designed_radius(xz):
+    """With the sampled search replaced by one that never finds a miss, every pose comes from the
+    certified search: each proof that does not close finds a pose past 1 + tol / 2 at R / (1 +
+    margin), and the last design, binding at R / (1 + margin) at its poses (NumPy eigenvalues), is
+    proven at R, above a dense search."""
+    from types import SimpleNamespace
+
+    from tolsynth.synthesis.workspace import _certified_exchange
+
+    z = z_of_p(P)
+    start = xz.joints("worst")
+    w = _certified_exchange(
+        xz,
+        R,
+        P,
+        z,
+        "uniform",
+        0.7,
+        [start],
+        TOL,
+        20,
+        {"margin": MARGIN, "workers": 1},
+        False,
+        False,
+        {"probability": "gaussian"},
+        lambda eps, radius, fine=False: (SimpleNamespace(q=start, position=np.zeros(3)), 0.0),
+    )
+    assert w.certified and w.upper_bound <= 1 + TOL
+    found = w.rounds[:-1]
+    assert found and all(not r["certified"] for r in found)
+    assert all(r["worst_value"] > 1 + TOL / 2 for r in found)
+    Rd = R / (1 + MARGIN)
+    last = sigma_max(xz, np.array(w.poses), w.result.x) * z / Rd
+    assert last.max() == pytest.approx(1.0, abs=1e-6)
+    ref = dense_then_local(xz, w.result.x, 20000, 14, fixed={0: 0.0, 4: 0.0}) * z / R
+    assert ref <= w.upper_bound

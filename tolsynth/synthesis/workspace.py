@@ -407,8 +407,9 @@ def _certified_exchange(
             x0=np.array(poses + [w.q]),
             progress=progress,
             target=goal,
-            # a pose found past the goal joins the imposed poses at once, as a sampled one does; the
-            # last round searches on, for the bound reached to be reported
+            # a pose found past the goal joins the imposed poses at once, as a sampled one does (with a
+            # margin too: a design above R / (1 + margin) but proven at R is certified, and cheaper);
+            # the last round searches on, for the bound reached to be reported
             stop_at=goal if k < max_rounds - 1 else None,
             search=False,  # the full sampled search of this round has just run from the same poses
             **options,
