@@ -158,6 +158,19 @@ def test_every_bundled_model_default_pose():
         assert res.gap <= 1e-6 * res.cost
 
 
+def test_default_pose_on_a_model_without_a_worst_configuration():
+    """The 3-RRR has no 'worst' configuration: the worst-case solve takes the pose the statistical
+    solve takes by default (the pose search's), and its design meets R there over every sign
+    pattern (brute force)."""
+    m = tolsynth.load_model("planar_3rrr")
+    assert "worst" not in m.configurations
+    res = tolsynth.synthesize(m, R=0.5, probability="worst_case")
+    stat = tolsynth.synthesize(m, R=0.5, p=0.99, probability="gaussian")
+    assert res.success and res.gap <= 1e-6 * res.cost
+    np.testing.assert_array_equal(res.spec.blocks[0].A, stat.spec.blocks[0].A)
+    assert brute_force(res.spec.blocks[0].A * res.x) <= 0.5 * (1 + 1e-6)
+
+
 def test_bad_inputs_are_typed():
     with pytest.raises(InputError, match="solver"):
         tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case", solver="sumt")

@@ -217,6 +217,9 @@ def synthesize(
         )
         return synthesize(mechanism, **args)
     if probability == "worst_case":  # every error anywhere in its band: no p or distribution needed
+        mechanism = as_mechanism(mechanism)
+        if poses is None and isinstance(pose, str) and pose == "worst" and "worst" not in mechanism.configurations:
+            pose, _ = _default_pose(mechanism)  # as the statistical solve below chooses it
         return _worst_case(
             mechanism,
             R,
