@@ -9,13 +9,14 @@ proof's cost is set by the room between the design's true maximum and the goal, 
 targets shows how it grows as the room closes.  ``--pieces`` sets the arc polygons' tangent pieces
 (tolsynth.analysis.certify_polygon.POLYGON_PIECES; default: as many as keep a box's tuples within
 POLYGON_TUPLES).  ``--exchange`` also times the full certified
-exchange, ``synthesize_workspace(..., certify=True)``.
+exchange, ``synthesize_workspace(..., certify=True)``, with ``--margin`` its design margin
+(``certify_options["margin"]``: designs at ``R / (1 + margin)``, the proof at R).
 
 CPU time (``time.process_time``) stands next to wall time: on a shared machine the wall time
 mostly measures the other processes.
 
     python benchmarks/bench_certify.py [--models xu_zhang_1988 puma560 ur5 panda] [--repeat 1]
-        [--time-limit 120] [--target 1.001 1.01] [--pieces 4] [--exchange]
+        [--time-limit 120] [--target 1.001 1.01] [--pieces 4] [--exchange [--margin 3e-3]]
 """
 
 from __future__ import annotations
@@ -72,6 +73,7 @@ def main() -> None:
     ap.add_argument("--target", type=float, nargs="+", default=None)
     ap.add_argument("--pieces", type=int, default=None)
     ap.add_argument("--exchange", action="store_true")
+    ap.add_argument("--margin", type=float, default=0.0)
     args = ap.parse_args()
     if args.pieces is not None:
         certify_polygon.POLYGON_PIECES = args.pieces
@@ -100,7 +102,7 @@ def main() -> None:
                 probability="gaussian",
                 tol=args.tol,
                 certify=True,
-                certify_options={"time_limit": args.time_limit},
+                certify_options={"time_limit": args.time_limit, "margin": args.margin},
                 progress=False,
                 max_rounds=30,
             )
@@ -108,7 +110,8 @@ def main() -> None:
             print(
                 f"{name:14} certified exchange: {'certified' if ws.certified else 'NOT certified'}, "
                 f"bound {ws.upper_bound}, {len(ws.rounds)} rounds, {boxes} boxes, "
-                f"{time.process_time() - t:.1f} s CPU, {time.perf_counter() - w:.1f} s wall; {ws.reason}",
+                f"{time.process_time() - t:.1f} s CPU, {time.perf_counter() - w:.1f} s wall; cost "
+                f"{ws.result.cost:.6f}, lower bound {ws.lower_bound:.6f}; {ws.reason}",
                 flush=True,
             )
 

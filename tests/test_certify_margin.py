@@ -163,3 +163,8 @@ def test_with_a_blind_sampled_stage_the_proofs_find_the_poses_past_the_designed_
     assert last.max() == pytest.approx(1.0, abs=1e-6)
     ref = dense_then_local(xz, w.result.x, 20000, 14, fixed={0: 0.0, 4: 0.0}) * z / R
     assert ref <= w.upper_bound
+
+
+def test_certify_options_without_certify_is_a_typed_error(xz):
+    with pytest.raises(InputError, match="certify_options"):
+        tolsynth.synthesize_workspace(xz, R, P, probability="gaussian", certify_options={"margin": MARGIN})

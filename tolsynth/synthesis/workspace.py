@@ -231,6 +231,8 @@ def synthesize_workspace(
     tol = check_positive(tol, "tol", "relative", upper=1.0)
     max_rounds = check_count(max_rounds, "max_rounds", lower=1, upper=1000)
     search = check_mapping(search, "search", "keyword arguments of tolsynth.worst_pose")
+    if certify_options and not certify:  # options of a search that would not run
+        raise InputError("certify_options", "given without certify=True", "certify=True, or no certify_options")
     allowed = ("grid", "reference", "fixed", "starts", "step_tol", "max_grid_points", "seed")
     for key in search or {}:  # the search's own arguments; the others are set here
         if key not in allowed:
