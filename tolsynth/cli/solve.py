@@ -261,9 +261,10 @@ def cmd_solve(args) -> int:
                     f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.6g}, worst {measure} over the "
                     f"workspace {r['worst_value']:.5f} at hand {_fmt(r['worst_position'])} mm"
                 )
+            at = f" at R' = R/(1+{w.margin:g})" if w.margin else ""
             print(
                 f"  certificate: lower bound {w.lower_bound:.8g} (valid at every pose), gap {w.gap:.2e}; "
-                f"afterwards the largest value found anywhere is {w.worst_value:.6f} "
+                f"afterwards the largest value found anywhere{at} is {w.worst_value:.6f} "
                 f"(violation {w.max_violation:.2e})"
             )
             if w.certified is not None:  # the certified search's proof (or why there is none)

@@ -136,6 +136,7 @@ class WorkspaceSynthesis(Tabular):
         lines = [
             f"workspace exchange: {'converged' if self.converged else 'NOT converged'} after "
             f"{len(self.rounds)} round(s), {len(self.poses)} pose(s) imposed"
+            + (f"; designed at R' = R/(1+{self.margin:g}), the values below relative to R'" if self.margin else "")
         ]
         for k, r in enumerate(self.rounds):
             pos = ", ".join(f"{v:.1f}" for v in np.asarray(r["worst_position"], dtype=float))
