@@ -40,6 +40,7 @@ def test_the_design_meets_the_smaller_radius_at_its_poses(xz, margin_design):
     assert ratio.max() <= 1 + 1e-6 and ratio.max() >= 1 - 1e-6
 
 
+@pytest.mark.slow  # 5-6 s
 def test_the_proof_at_R_holds_against_a_dense_search(xz, margin_design):
     """The largest sigma an independent search finds (20 000 poses and SLSQP) lies below the proven
     bound, which meets 1 + tol at R; the margin leaves the design below R there."""
@@ -127,6 +128,7 @@ def test_six_joint_exchange_certified_with_a_margin(name):
     assert 0 < w.gap <= 0.005 * w.result.cost
 
 
+@pytest.mark.slow  # 5-6 s
 def test_with_a_blind_sampled_stage_the_proofs_find_the_poses_past_the_designed_radius(xz):
     """With the sampled search replaced by one that never finds a miss, every pose comes from the
     certified search: each proof that does not close finds a pose past 1 + tol / 2 at R / (1 +
