@@ -21,6 +21,10 @@ from tolsynth.probability.stats import z_of_p
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+#: a solve of the planar 2R, the start of the usage errors' command lines
+SOLVE_2R = ("solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99")
+
+
 def _run(*argv: str) -> tuple[int, dict | None, str]:
     proc = subprocess.run(
         [sys.executable, "-m", "tolsynth", *argv], capture_output=True, text=True, cwd=ROOT, timeout=900
@@ -98,26 +102,8 @@ def test_worst_pose_certify_components_gives_a_probability_bound():
         (["worst-pose", "--model", "planar_2r", "--certify", "--workers", "0"], "integer >= 1"),
         (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--everywhere", "--workers", "2"], "--certify"),
         (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--workers", "2"], "--everywhere"),
-        (
-            ["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--everywhere", "--margin", "3e-3"],
-            "--certify",
-        ),
-        (
-            [
-                "solve",
-                "--model",
-                "planar_2r",
-                "--R",
-                "0.1",
-                "--p",
-                "0.99",
-                "--everywhere",
-                "--certify",
-                "--margin",
-                "1",
-            ],
-            "from 0 to 0.5",
-        ),
+        ([*SOLVE_2R, "--everywhere", "--margin", "3e-3"], "--certify"),
+        ([*SOLVE_2R, "--everywhere", "--certify", "--margin", "1"], "from 0 to 0.5"),
     ],
     ids=[
         "sphere-probability",

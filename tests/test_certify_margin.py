@@ -16,10 +16,11 @@ from tolsynth.problem.specification import make_specification
 R, P, MARGIN, TOL = 0.5, 0.99, 3e-3, 1e-3
 
 
-@pytest.fixture(scope="module")
-def margin_design(xz):
+def _exchange(mech, **options):
+    """The Gaussian certified exchange at R, P, tol, uniform errors, alpha 0.7, with these
+    ``certify_options``."""
     return tolsynth.synthesize_workspace(
-        xz,
+        mech,
         R,
         P,
         "uniform",
@@ -27,9 +28,14 @@ def margin_design(xz):
         probability="gaussian",
         tol=TOL,
         certify=True,
-        certify_options={"margin": MARGIN},
+        certify_options=options,
         progress=False,
     )
+
+
+@pytest.fixture(scope="module")
+def margin_design(xz):
+    return _exchange(xz, margin=MARGIN)
 
 
 def test_the_design_meets_the_smaller_radius_at_its_poses(xz, margin_design):
@@ -69,17 +75,7 @@ def test_the_lower_bound_is_the_optimum_at_R_by_clarabel(xz, margin_design):
 def test_without_a_margin_the_reason_names_it(xz):
     """A proof that cannot close in its box budget, and finds no pose past the goal, says that a
     margin gives it room (a budget of 50 boxes is far too few for the paper's robot)."""
-    w = tolsynth.synthesize_workspace(
-        xz,
-        R,
-        P,
-        "uniform",
-        0.7,
-        probability="gaussian",
-        certify=True,
-        certify_options={"max_boxes": 50, "workers": 1},
-        progress=False,
-    )
+    w = _exchange(xz, max_boxes=50, workers=1)
     assert not w.certified and not w.converged
     assert "margin" in w.reason and w.upper_bound > 1 + TOL
 
@@ -88,17 +84,7 @@ def test_not_converged_with_a_margin_still_bounds_the_cost_at_R(xz):
     """A proof stopped by its box budget: not certified, and ``lower_bound`` is still the optimum at
     R at the poses imposed (cvxpy + Clarabel), not the last solve's own bound at R / (1 + margin)."""
     pytest.importorskip("cvxpy")
-    w = tolsynth.synthesize_workspace(
-        xz,
-        R,
-        P,
-        "uniform",
-        0.7,
-        probability="gaussian",
-        certify=True,
-        certify_options={"margin": MARGIN, "max_boxes": 50, "workers": 1},
-        progress=False,
-    )
+    w = _exchange(xz, margin=MARGIN, max_boxes=50, workers=1)
     assert not w.certified and not w.converged
     at_R = clarabel(make_specification(xz, R, P, "uniform", 0.7, poses=w.poses))
     assert w.lower_bound == pytest.approx(at_R, rel=1e-6) and w.lower_bound < w.result.cost
@@ -119,9 +105,7 @@ def test_six_joint_exchange_certified_with_a_margin(name):
     at R meets 1 + tol and lies above the largest sigma an independent search finds (random poses
     and SLSQP); the cost is within the margin's price of the bound at R."""
     m = tolsynth.load_model(name)
-    w = tolsynth.synthesize_workspace(
-        m, R, P, probability="gaussian", certify=True, certify_options={"margin": MARGIN}, progress=False
-    )
+    w = _exchange(m, margin=MARGIN)
     assert w.certified and w.upper_bound <= 1 + TOL
     ref = dense_then_local(m, w.result.x, 20000, 13) * z_of_p(P) / R
     assert ref <= w.upper_bound

@@ -343,10 +343,10 @@ def _certified_exchange(
     """The exchange of :func:`synthesize_workspace` with the certified search deciding (its docstring).
 
     A round whose sampled search (``sampled(eps, radius, fine=False) -> (WorstPose, value)``, cheap;
-    ``fine`` the full search rather than the coarse one; the value relative to ``radius``) finds the specification missed adds that pose, as
-    the uncertified exchange does; only when it finds none does the certified search run, which
-    either proves the specification met or returns the worst pose it found (within its tolerance of
-    the worst anywhere), to be added in turn."""
+    ``fine`` the full search rather than the coarse one; the value relative to ``radius``) finds
+    the specification missed adds that pose, as the uncertified exchange does; only when it finds
+    none does the certified search run, which either proves the specification met or returns the
+    worst pose it found (within its tolerance of the worst anywhere), to be added in turn."""
     from tolsynth.analysis.certify import certify_worst_pose
     from tolsynth.synthesis.single import DEFAULT_PROBABILITY
 
