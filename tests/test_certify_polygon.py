@@ -1,7 +1,9 @@
 """Arc polygons with more tangent pieces: their hull holds the arc (SciPy's convex hull of the
 points, checked at dense points of the arc), the polygons nest (more pieces, a smaller hull, so a
 bound no larger), and the Puma 560's bound holds at dense random poses of random boxes
-(sigma_1 from ``Mechanism.sensitivity`` and NumPy's eigensolver)."""
+(sigma_1 from ``Mechanism.sensitivity`` and NumPy's eigensolver).  Every polygon point lies within
+the radius the tuples' error bound assumes, and the sensitivity and its derivatives at the boxes'
+centres (which choose the joint to halve) match the CasADi graph and its central differences."""
 
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ import pytest
 from scipy.spatial import ConvexHull
 
 import tolsynth
-from tolsynth.analysis.certify_polygon import PolygonSigmaBounds, arc_polygons
+from tolsynth.analysis.certify_polygon import POINT_RADIUS, PolygonSigmaBounds, arc_polygons
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 
 
@@ -67,3 +69,45 @@ def test_puma_bounds_hold_and_tighten_with_pieces():
         # a box's bound is no lower than the largest value found in it, nor far above it on small boxes
         if h[i].max() < 0.1:
             assert ub4[i] <= max(s1) * 1.01
+
+
+@pytest.mark.parametrize("pieces", [2, 3, 4, 6])
+def test_polygon_points_within_the_assumed_radius(pieces):
+    # the tangents' crossings of arcs up to a quarter turn lie at 1 / cos(step / 2) <= 1 / cos(pi / 8)
+    assert 1.0 / np.cos(np.pi / 8) < POINT_RADIUS < 1.0 / np.cos(np.pi / 8) + 1e-3
+    rng = np.random.default_rng(10 + pieces)
+    a = rng.uniform(-50.0, 50.0, 400)
+    wid = np.concatenate(
+        [rng.uniform(1e-9, np.pi / 2, 300), np.pi / 2 * (1 - rng.uniform(0, 1e-12, 50)), rng.uniform(2, 7, 50)]
+    )
+    P, rad = arc_polygons(a, a + wid, pieces)
+    assert (np.abs(P) + rad <= POINT_RADIUS).all()
+    # the quarter turns' crossings reach the radius of the closed form
+    assert np.hypot(P[..., 0], P[..., 1]).max() > 1.0 / np.cos(np.pi / (4 * pieces)) - 1e-9
+
+
+@pytest.mark.parametrize("model", ["puma560", "panda"])
+def test_jet_matches_the_graph_and_central_differences(model):
+    mech = tolsynth.load_model(model)
+    st = structure(mech)
+    free = [j for j in st.joints if j != st.rotation]
+    cols = list(st.columns)
+    poly = trig_polynomial(st, free, st.rotation)
+    b = PolygonSigmaBounds(poly, free, np.ones(len(cols)))
+    rng = np.random.default_rng(3)
+    X = rng.uniform(-3, 3, (5, len(free)))
+    A, dA = b.jet(X)
+
+    def sens(x):
+        q = np.zeros(len(mech.joint_names))
+        q[free] = x
+        return mech.sensitivity(q, check_limits=False)[:3][:, cols]
+
+    d = 1e-6
+    for i in range(5):
+        assert np.allclose(A[i], sens(X[i]), atol=1e-12)
+        for j in range(len(free)):
+            e = np.zeros(len(free))
+            e[j] = d
+            fd = (sens(X[i] + e) - sens(X[i] - e)) / (2 * d)
+            assert np.allclose(dA[i, j], fd, atol=1e-6)

@@ -168,6 +168,9 @@ POLYGON_TUPLES = 8192
 #: at its centre (a wider excess is rarely decided by the finer bound, at four times the cost)
 REFINE = 0.1
 TUPLES_PER_CHUNK = 1 << 18  # tuples bounded in one pass: the eigenvalue bound's work arrays stay small
+#: a bound of every coordinate of an arc polygon's points, their rounding included: the tangents'
+#: crossings lie at 1 / cos(step / 2) <= 1 / cos(pi / 8) = 1.08239..., the rectangles' corners at 1
+POINT_RADIUS = 1.0825
 
 
 def arc_polygons(a: np.ndarray, b: np.ndarray, pieces: int = 2):
@@ -259,6 +262,15 @@ class PolygonSigmaBounds:
         # rounding of T (half an ulp each), of the products and sums above (m + 2k + 8 roundings)
         self.gamma_abs = np.stack(gabs).reshape(6, 6**k) * (1.0 + (m + 2 * k + 12) * 2.0 * _U)
         self.gamma_err = self.gamma_abs * ((m + 2 * k + 12) * 2.0 * _U)
+        # one error bound of the tuples' entries for every box: Gamma's own, the points' (64 u
+        # relative per coordinate, two per monomial) and the contraction's (two roundings per
+        # joint), at the largest monomials any polygon point has (|x|, |y| <= POINT_RADIUS)
+        r = POINT_RADIUS
+        top = np.array([1.0, r, r, r * r, r * r, r * r])
+        e = (self.gamma_err + self.gamma_abs * ((130.0 + 4.0) * (k + 1) * _U)).reshape((6,) + (6,) * k)
+        for _ in range(k):
+            e = e @ top
+        self.err = _up(e * (1.0 + 8.0 * (k + 1) * _U))
 
     def _fold(self, P: np.ndarray) -> np.ndarray:
         """(3^k, 3^k) coefficients of ``b_alpha(t) b_beta(t)`` -> (6,)*k of the monomials per joint."""
@@ -303,6 +315,34 @@ class PolygonSigmaBounds:
             X = np.einsum("bais,ni->nas", X, b) if X.shape[0] == 1 else np.einsum("nais,ni->nas", X, b)
         return _mat(X.reshape(len(t), self.na), self.m)
 
+    def jet(self, Q: np.ndarray):
+        """``A`` and its derivative along each searched joint at joint values Q (n, k): shapes
+        (n, 3, m) and (n, k, 3, m) (floating point), one pass over the joints from the first."""
+        t = np.atleast_2d(Q) + self.offsets
+        n, k = t.shape
+        A, dA = np.empty((n, self.na)), np.empty((n, k, self.na))
+        for s in range(0, n, 64):  # the first joint's partial sums are n x na x 3^(k-1)
+            tt = t[s : s + 64]
+            val, grads = self.T.reshape(1, self.na, 3**k), None
+            for j in range(k):
+                c, sn = np.cos(tt[:, j]), np.sin(tt[:, j])
+                b = np.stack([np.ones(len(tt)), c, sn], axis=1)
+                db = np.stack([np.zeros(len(tt)), -sn, c], axis=1)
+                X = val.reshape(val.shape[0], self.na, 3, -1)
+                cc, ss = c[:, None, None], sn[:, None, None]
+                if grads is not None:
+                    G = grads.reshape(grads.shape[:3] + (3, -1))
+                    grads = G[:, :, :, 0] + G[:, :, :, 1] * cc[:, None] + G[:, :, :, 2] * ss[:, None]
+                if X.shape[0] == 1:  # the first joint: one matrix product over every box
+                    both = np.tensordot(np.concatenate([b, db]), X[0], axes=([1], [1]))
+                    new, d = both[: len(tt)], both[len(tt) :]
+                else:
+                    new, d = X[:, :, 0] + X[:, :, 1] * cc + X[:, :, 2] * ss, X[:, :, 2] * cc - X[:, :, 1] * ss
+                grads = d[:, None] if grads is None else np.concatenate([grads, d[:, None]], axis=1)
+                val = new
+            A[s : s + 64], dA[s : s + 64] = val[..., 0], grads[..., 0]
+        return _mat(A, self.m), _mat(dA, self.m)
+
     def point(self, Q: np.ndarray) -> np.ndarray:
         """``sigma_1`` at points (n, k) (floating point: the best value found, not a bound)."""
         M = self.values(Q) * self.sw
@@ -321,22 +361,18 @@ class PolygonSigmaBounds:
             else [np.flatnonzero((wide == w).all(axis=1)) for w in np.unique(wide, axis=0)]
         )
         for rows in groups:
-            V, Vabs = [], []
+            V = []
             for j in range(k):
                 P, rad = arc_polygons(a[rows, j], b[rows, j], 2 if pieces == 2 or wide[rows[0], j] else pieces)
-                x, y = P[..., 0], P[..., 1]
-                V.append(self._monomials(x, y))
-                Vabs.append(self._monomials(np.abs(x) + rad[..., 0], np.abs(y) + rad[..., 1]))
+                if not np.all(np.abs(P) + rad <= POINT_RADIUS):  # self.err assumes it
+                    raise RuntimeError("an arc polygon's point lies beyond POINT_RADIUS")
+                V.append(self._monomials(P[..., 0], P[..., 1]))
             chunk = max(1, TUPLES_PER_CHUNK // int(np.prod([v.shape[1] for v in V])))
             for s in range(0, len(rows), chunk):
                 part = slice(s, min(len(rows), s + chunk))
                 g = self._contract(self.gamma, [v[part] for v in V])  # (n, 6, tuples)
-                # error: Gamma's own, the points' (64 u relative per coordinate, two per monomial),
-                # and the contraction's (two roundings per joint)
-                # (one bound for every tuple of a box, from each joint's largest monomials: the terms
-                # are products of nonnegative numbers, so the largest factors bound each tuple's sum)
-                Vmax = [v[part].max(axis=1, keepdims=True) for v in Vabs]
-                err = self._contract(self.gamma_err + self.gamma_abs * ((130.0 + 4.0) * (k + 1) * _U), Vmax)
+                # the entries' error: self.err, for every tuple of every box
+                err = np.broadcast_to(self.err[None, :, None], (len(g), 6, 1))
                 lam, ok = np.empty(len(g)), np.zeros(len(g), dtype=bool)
                 compiled = lambda_max(g, err[:, :, 0])  # the same bound box after box (None: no compiler)
                 if compiled is not None:
@@ -359,21 +395,20 @@ class PolygonSigmaBounds:
         used = np.full(nb, 2)
         with np.errstate(all="ignore"):
             ub = self._bound(a, b, 2)
+            A, dA = self.jet(0.5 * (L + H))
+            M = A * self.sw
             if self.pieces > 2 and nb:
-                centre = self.point(0.5 * (L + H))
+                centre = np.sqrt(np.maximum(np.linalg.eigvalsh(M @ np.swapaxes(M, -1, -2))[:, -1], 0.0))
                 again = np.flatnonzero(np.isfinite(ub) & (ub - centre <= REFINE * centre))
                 if len(again):
                     ub[again] = np.fmin(ub[again], self._bound(a[again], b[again], self.pieces))
                     used[again] = self.pieces
-            # where to halve: each joint's derivative of V at the centre times the scaling it allows
-            c = 0.5 * (a + b)
-            cx, sx = np.cos(c), np.sin(c)
+            # where to halve: each joint's derivative of V = A W A^T at the centre (its six distinct
+            # entries) times the scaling it allows
             split = np.empty((nb, k))
             for j in range(k):
-                Vc = [self._monomials(cx[:, i], sx[:, i])[:, None, :] for i in range(k)]
-                x, y = cx[:, j], sx[:, j]
-                Vc[j] = np.stack([np.zeros(nb), -y, x, -2 * x * y, x * x - y * y, 2 * x * y], axis=1)[:, None, :]
-                dV = self._contract(self.gamma, Vc)[:, :, 0]
+                D = (dA[:, j] * self.sw) @ np.swapaxes(M, -1, -2)
+                dV = np.stack([D[:, r, c] + D[:, c, r] for r, c in _SYM], axis=1)
                 h = 0.5 * (b[:, j] - a[:, j])
                 grow = np.where(h <= np.pi / 4, 1.0 / np.cos(np.minimum(h, np.pi / 4) / used) - 1.0, 1.0 + h)
                 split[:, j] = grow * np.sqrt((dV**2).sum(axis=1))
