@@ -12,7 +12,7 @@ import pytest
 from scipy.spatial import ConvexHull
 
 import tolsynth
-from tolsynth.analysis.certify_polygon import POINT_RADIUS, PolygonSigmaBounds, arc_polygons
+from tolsynth.analysis.certify_polygon import POINT_RADIUS, PolygonSigmaBounds, _halves, arc_polygons
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 
 
@@ -111,3 +111,39 @@ def test_jet_matches_the_graph_and_central_differences(model):
             e[j] = d
             fd = (sens(X[i] + e) - sens(X[i] - e)) / (2 * d)
             assert np.allclose(dA[i, j], fd, atol=1e-6)
+
+
+def test_halves_of_a_box_bounded_together_hold():
+    # the branch and bound's batch: the lower halves of boxes, then their upper halves; the halves
+    # share one contraction over their other joints.  Each half's bound holds at dense random poses
+    # (sigma_1 from Mechanism.sensitivity) and equals the bound of that half alone
+    mech = tolsynth.load_model("ur5")
+    st = structure(mech)
+    free = [j for j in st.joints if j != st.rotation]
+    eps = mech.tolerances(list(mech.tolerance_sets)[0])
+    w = (eps**2 / 3.0)[list(st.columns)]
+    b = PolygonSigmaBounds(trig_polynomial(st, free, st.rotation), free, w)
+    rng = np.random.default_rng(11)
+    n, k = 6, len(free)
+    c = rng.uniform(-3, 3, (n, k))
+    h = rng.uniform(0.01, 0.3, (n, k))
+    j = rng.integers(0, k, n)
+    r = np.arange(n)
+    lo, hi = c - h, c + h
+    A_hi, B_lo = hi.copy(), lo.copy()
+    A_hi[r, j] = c[r, j]
+    B_lo[r, j] = c[r, j]
+    L, H = np.concatenate([lo, B_lo]), np.concatenate([A_hi, hi])
+    assert len(_halves(L + b.offsets, H + b.offsets)[0]) == n  # every pair found
+    ub, _ = b.bound(L, H)
+    alone = np.array([b.bound(L[i : i + 1], H[i : i + 1])[0][0] for i in range(2 * n)])
+    assert np.allclose(ub, alone, rtol=1e-9, atol=0)
+    for i in range(2 * n):
+        X = L[i] + (H[i] - L[i]) * rng.random((150, k))
+        q = np.zeros((150, len(mech.joint_names)))
+        q[:, free] = X
+        s1 = [
+            np.sqrt(max(np.linalg.eigvalsh((A * (eps**2 / 3.0)) @ A.T)[-1], 0.0))
+            for A in (mech.sensitivity(x, check_limits=False)[:3] for x in q)
+        ]
+        assert max(s1) <= ub[i] <= max(s1) * 1.05

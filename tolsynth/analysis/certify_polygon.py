@@ -211,6 +211,21 @@ def arc_polygons(a: np.ndarray, b: np.ndarray, pieces: int = 2):
     return P, rad
 
 
+def _halves(a: np.ndarray, b: np.ndarray):
+    """Rows ``i`` and ``i + n/2`` that are the two halves of one box along one joint (the branch and
+    bound bounds both halves of each box it splits in one call, the lower halves first): their
+    indices and that joint; any other batch has none."""
+    nb, k = a.shape
+    h = nb // 2
+    if nb < 2 or nb % 2:
+        return np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros(0, dtype=int)
+    same = (a[:h] == a[h:]) & (b[:h] == b[h:])
+    j = np.argmin(same, axis=1)
+    r = np.arange(h)
+    ok = (same.sum(axis=1) == k - 1) & (b[r, j] == a[h + r, j])
+    return r[ok], r[ok] + h, j[ok]
+
+
 #: per joint, the products of two factors (1, cos, sin) as the monomials (1, c, s, c^2, cs, s^2)
 _FOLD = np.zeros((3, 3, 6))
 for _a, _b, _mu in [(0, 0, 0), (0, 1, 1), (1, 0, 1), (0, 2, 2), (2, 0, 2), (1, 1, 3), (1, 2, 4), (2, 1, 4), (2, 2, 5)]:
@@ -351,7 +366,9 @@ class PolygonSigmaBounds:
     def _bound(self, a: np.ndarray, b: np.ndarray, pieces: int) -> np.ndarray:
         """Upper bounds of sigma_1 on the arcs ``[a, b]`` (n, k), ``pieces`` tangent pieces on each
         arc up to a quarter turn (a wider one has its rectangle's four corners: more would repeat
-        them), the boxes grouped by which of their arcs are wide."""
+        them), the boxes grouped by which of their arcs are wide.  The two halves of one box
+        (:func:`_halves`) share their other joints' points: their tuples come from one contraction
+        over those joints, the halved joint's monomials left free, and a small product each."""
         nb, k = a.shape
         ub = np.empty(nb)
         wide = 0.5 * (b - a) > np.pi / 4
@@ -360,6 +377,7 @@ class PolygonSigmaBounds:
             if pieces == 2
             else [np.flatnonzero((wide == w).all(axis=1)) for w in np.unique(wide, axis=0)]
         )
+        lo_half, hi_half, joint = _halves(a, b)
         for rows in groups:
             V = []
             for j in range(k):
@@ -367,22 +385,54 @@ class PolygonSigmaBounds:
                 if not np.all(np.abs(P) + rad <= POINT_RADIUS):  # self.err assumes it
                     raise RuntimeError("an arc polygon's point lies beyond POINT_RADIUS")
                 V.append(self._monomials(P[..., 0], P[..., 1]))
+            at = np.full(nb, -1)
+            at[rows] = np.arange(len(rows))
+            paired = (at[lo_half] >= 0) & (at[hi_half] >= 0)
+            single = np.ones(len(rows), dtype=bool)
+            for j in range(k):
+                sel = paired & (joint == j)
+                if not sel.any():
+                    continue
+                i1, i2 = at[lo_half[sel]], at[hi_half[sel]]
+                single[i1] = single[i2] = False
+                rest = [i for i in range(k) if i != j]
+                free = np.broadcast_to(np.eye(6), (len(i1), 6, 6))  # the halved joint's monomials, left free
+                chunk = max(1, TUPLES_PER_CHUNK // (6 * int(np.prod([V[i].shape[1] for i in rest]))))
+                for s in range(0, len(i1), chunk):
+                    part = slice(s, min(len(i1), s + chunk))
+                    X = self._contract(self._first(j), [free[part]] + [V[i][i1[part]] for i in rest])
+                    X = np.swapaxes(X.reshape(X.shape[0], 6, 6, -1), 2, 3)  # (n, entry, tuple, monomial)
+                    for idx in (i1[part], i2[part]):
+                        g = np.matmul(X, np.swapaxes(V[j][idx], 1, 2)[:, None]).reshape(len(idx), 6, -1)
+                        ub[rows[idx]] = self._largest(g)
+            idx = np.flatnonzero(single)
             chunk = max(1, TUPLES_PER_CHUNK // int(np.prod([v.shape[1] for v in V])))
-            for s in range(0, len(rows), chunk):
-                part = slice(s, min(len(rows), s + chunk))
-                g = self._contract(self.gamma, [v[part] for v in V])  # (n, 6, tuples)
-                # the entries' error: self.err, for every tuple of every box
-                err = np.broadcast_to(self.err[None, :, None], (len(g), 6, 1))
-                lam, ok = np.empty(len(g)), np.zeros(len(g), dtype=bool)
-                compiled = lambda_max(g, err[:, :, 0])  # the same bound box after box (None: no compiler)
-                if compiled is not None:
-                    lam, ok = _up(compiled[0]), compiled[1]
-                if not ok.all():
-                    lam[~ok] = lambda_max_bound_entries(
-                        tuple(g[~ok, i, :] for i in range(6)), np.moveaxis(err[~ok], 1, 2), reduce_last=True
-                    )
-                ub[rows[part]] = _up(np.sqrt(np.maximum(lam, 0.0)))
+            for s in range(0, len(idx), chunk):
+                part = idx[s : s + chunk]
+                ub[rows[part]] = self._largest(self._contract(self.gamma, [v[part] for v in V]))
         return ub
+
+    def _first(self, j: int) -> np.ndarray:
+        """The coefficients with joint ``j``'s axis first (the others in order), built once."""
+        cache = self.__dict__.setdefault("_firsts", {})
+        if j not in cache:
+            G = self.gamma.reshape((6,) + (6,) * self.k)
+            cache[j] = np.ascontiguousarray(np.moveaxis(G, 1 + j, 1).reshape(6, -1))
+        return cache[j]
+
+    def _largest(self, g: np.ndarray) -> np.ndarray:
+        """Upper bounds of sigma_1 over each box's tuples ``g`` (n, 6, tuples), their entries within
+        ``self.err``: compiled box after box, else (or where a tuple proved nothing) by NumPy."""
+        err = np.broadcast_to(self.err[None, :], (len(g), 6))
+        lam, ok = np.empty(len(g)), np.zeros(len(g), dtype=bool)
+        compiled = lambda_max(g, err)  # None: no compiler
+        if compiled is not None:
+            lam, ok = _up(compiled[0]), compiled[1]
+        if not ok.all():
+            lam[~ok] = lambda_max_bound_entries(
+                tuple(g[~ok, i, :] for i in range(6)), err[~ok][:, None, :], reduce_last=True
+            )
+        return _up(np.sqrt(np.maximum(lam, 0.0)))
 
     def bound(self, L: np.ndarray, H: np.ndarray):
         """``(ub, split)`` as :meth:`SigmaBounds.bound`.  Every box is bounded with four points a
