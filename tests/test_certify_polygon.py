@@ -147,3 +147,50 @@ def test_halves_of_a_box_bounded_together_hold():
             for A in (mech.sensitivity(x, check_limits=False)[:3] for x in q)
         ]
         assert max(s1) <= ub[i] <= max(s1) * 1.05
+
+
+def test_bounds_with_a_level_hold_and_refine_the_undecided():
+    # given the level a box must be proven below, the boxes above it are bounded again with more
+    # points: each bound still holds at dense poses (Mechanism.sensitivity), none is above the
+    # four-point bound, and some undecided boxes are brought below the level
+    mech = tolsynth.load_model("puma560")
+    st = structure(mech)
+    free = [j for j in st.joints if j != st.rotation]
+    eps = mech.tolerances(list(mech.tolerance_sets)[0])
+    w = (eps**2 / 3.0)[list(st.columns)]
+    b = PolygonSigmaBounds(trig_polynomial(st, free, st.rotation), free, w)
+    rng = np.random.default_rng(5)
+    c = rng.uniform(-2.5, 2.5, len(free)) + rng.uniform(-0.05, 0.05, (40, len(free)))  # near one pose
+    h = rng.uniform(0.02, 0.15, (40, len(free)))
+    four, _ = PolygonSigmaBounds(trig_polynomial(st, free, st.rotation), free, w, pieces=2).bound(c - h, c + h)
+    centre = b.point(c)
+    level = float(np.median(0.5 * (four + centre)))  # between the centres and the four-point bounds
+    ub, _ = b.bound(c - h, c + h, level)
+    assert (ub <= four * (1 + 1e-12)).all()
+    assert ((four > level) & (ub <= level)).any()
+    for i in range(40):
+        X = c[i] - h[i] + 2 * h[i] * rng.random((80, len(free)))
+        q = np.zeros((80, len(mech.joint_names)))
+        q[:, free] = X
+        s1 = [
+            np.sqrt(max(np.linalg.eigvalsh((A * (eps**2 / 3.0)) @ A.T)[-1], 0.0))
+            for A in (mech.sensitivity(x, check_limits=False)[:3] for x in q)
+        ]
+        assert max(s1) <= ub[i]
+
+
+def test_maximize_gives_the_level_to_a_level_aware_bound():
+    from tolsynth.analysis.branch_bound import maximize
+
+    seen = []
+
+    def bound(lo, hi, level=None):  # minus the squared distance from (0.3, 0.3) to the box, loosened
+        seen.append(level)
+        return -((np.clip(0.3, lo, hi) - 0.3) ** 2).sum(axis=1) + 0.2 * (hi - lo).max(axis=1)
+
+    r = maximize(
+        bound, lambda x: -((x - 0.3) ** 2).sum(axis=1), [-1.0, -1.0], [2.0, 3.0], tol=1e-9, target=0.5, level_aware=True
+    )
+    # the maximum 0 is proven below the target 0.5 once the boxes are narrow: the halves were
+    # bounded against it (the root, before any level, without one)
+    assert r.certified and r.upper_bound <= 0.5 and seen[0] is None and set(seen[1:]) == {0.5}

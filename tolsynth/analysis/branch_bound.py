@@ -285,6 +285,7 @@ def maximize(
     stop_above: float | None = None,
     leaves: list | None = None,
     workers: int = 1,
+    level_aware: bool = False,
 ) -> MaximizeResult:
     """Certified maximum of an objective over the box ``lo <= x <= hi`` (and ``g(x) <= 0``).
 
@@ -345,6 +346,10 @@ def maximize(
         Processes: past :data:`~tolsynth.analysis.certify_parallel.SERIAL_SECONDS` of serial search
         the open boxes are dealt to this many workers sharing the best value
         (:mod:`tolsynth.analysis.certify_parallel`); 1: serial throughout.
+    level_aware : bool
+        ``bound_fn(lo, hi, level)`` is called with the value its boxes must be proven below to be
+        set aside (when there is one), so that it may spend more work on the boxes that work can
+        decide.  Speed only: any rigorous bound is as valid.
 
     Returns
     -------
@@ -399,7 +404,8 @@ def maximize(
         B_lo[rows, k] = mid
         C_lo, C_hi = np.concatenate([P_lo, B_lo]), np.concatenate([A_hi, P_hi])
         C_feas = np.concatenate([P_feas, P_feas])
-        ub, g_lo, g_hi, split = _bounds(bound_fn, C_lo, C_hi)
+        fn = (lambda lo, hi: bound_fn(lo, hi, float(thr))) if level_aware and np.isfinite(thr) else bound_fn
+        ub, g_lo, g_hi, split = _bounds(fn, C_lo, C_hi)
         ub = np.minimum(ub, np.concatenate([P_ub, P_ub]))  # a parent's bound holds on its halves
         s.processed += len(C_lo)
         keep = np.ones(len(C_lo), dtype=bool)
@@ -411,7 +417,7 @@ def maximize(
         if g_lo is not None:
             C_lo, C_hi, red = _monotone_faces(C_lo, C_hi, g_lo, g_hi, keep & C_feas)
             if len(red):  # bound the shrunken boxes again: a thinner box has a tighter bound
-                ub2, g_lo[red], g_hi[red], split2 = _bounds(bound_fn, C_lo[red], C_hi[red])
+                ub2, g_lo[red], g_hi[red], split2 = _bounds(fn, C_lo[red], C_hi[red])
                 if split is not None and split2 is not None:
                     split[red] = split2
                 ub[red] = np.minimum(ub[red], ub2)

@@ -316,8 +316,11 @@ def certify_worst_pose(
                     "given with the Gaussian per-component probability",
                     "criterion='sigma' with a target in mm",
                 )
+            polygons = isinstance(bounds, PolygonSigmaBounds)
             r = maximize(
-                lambda L, H: _with_split(bounds.bound(L, H)),
+                (lambda L, H, level=None: _with_split(bounds.bound(L, H, level)))
+                if polygons
+                else (lambda L, H: _with_split(bounds.bound(L, H))),
                 bounds.point,
                 sdom.lo,
                 sdom.hi,
@@ -333,6 +336,7 @@ def certify_worst_pose(
                 stop_above=stop_at,
                 leaves=leaves,
                 workers=workers,
+                level_aware=polygons,
             )
             if not np.isfinite(r.best_value):
                 raise OutOfRangeError(
