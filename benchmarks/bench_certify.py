@@ -6,9 +6,9 @@ Per model (medians over ``--repeat`` runs of the certified search): boxes bounde
 boxes per CPU second, the bound reached and the worst value found (both as ``z sigma_1 / R``),
 certified or not.  ``--target`` sets the decision's goal (default ``1 + tol``, tol 1e-3): the
 proof's cost is set by the room between the design's true maximum and the goal, so a sweep of
-targets shows how it grows as the room closes.  ``--pieces`` sets the arc polygons' tangent pieces
-(tolsynth.analysis.certify_polygon.POLYGON_PIECES; default: as many as keep a box's tuples within
-POLYGON_TUPLES).  ``--exchange`` also times the full certified
+targets shows how it grows as the room closes.  ``--pieces`` sets the most tangent pieces a box
+is bounded again with (tolsynth.analysis.certify_polygon.POLYGON_PIECES; default: as many as keep
+a box's tuples within POLYGON_TUPLES).  ``--exchange`` also times the full certified
 exchange, ``synthesize_workspace(..., certify=True)``, with ``--margin`` its design margin
 (``certify_options["margin"]``: designs at ``R / (1 + margin)``, the proof at R).
 
