@@ -27,6 +27,23 @@ def test_contraction_against_einsum():
         assert np.allclose(out[b], ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
 
 
+def test_numpy_contraction_in_the_compiled_order(monkeypatch):
+    # without a compiler the tuples come in the same order (the first joint's point most
+    # significant): the halves of a box read that joint's index off it
+    monkeypatch.setenv("TOLSYNTH_NO_COMPILE", "1")
+    rng = np.random.default_rng(1)
+    k, n = 4, 5
+    g = rng.normal(size=(6, 6**k))
+    V = [rng.normal(size=(n, p, 6)) for p in (3, 1, 6, 2)]
+    B = PolygonSigmaBounds.__new__(PolygonSigmaBounds)
+    B.k = k
+    out = B._contract(g, V)
+    T = g.reshape((6,) * (k + 1))
+    for b in range(n):
+        ref = np.einsum("eabcd,ia,jb,kc,ld->eijkl", T, *[v[b] for v in V]).reshape(6, -1)
+        assert np.allclose(out[b], ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+
+
 def test_compiled_eigenvalue_bound_holds():
     # per box the largest eigenvalue over its tuples: never below LAPACK's (to its own error),
     # within 1e-6 of it, also where the top two nearly meet (an isotropic error ellipsoid: the closed

@@ -304,10 +304,11 @@ class PolygonSigmaBounds:
 
     def _contract(self, g, V):
         """``g`` (6, 6^k) contracted per joint with ``V[j]`` (n, p_j, 6): shape (n, 6, prod p_j), the
-        tuples of points in a fixed order (only their largest bound is used): compiled
-        (:mod:`tolsynth.analysis.certify_kernels`), the first joint's point most significant;
-        else by NumPy, (p_k, ..., p_1): the last joint first, so that the index summed (six terms
-        each time, as a plain sum) is always the last axis, one batched matrix product per joint."""
+        tuples with the first joint's point most significant (the halves of a box read that
+        joint's index off it): compiled (:mod:`tolsynth.analysis.certify_kernels`); else by NumPy,
+        the last joint first, so that the index summed (six terms each time, as a plain sum) is
+        always the last axis, one batched matrix product per joint, the tuples' axes reversed at
+        the end."""
         n, k = V[0].shape[0], self.k
         out = contract(g, V)  # compiled: box after box in cache (None without a compiler)
         if out is not None:
@@ -319,7 +320,9 @@ class PolygonSigmaBounds:
             X = np.swapaxes(X.reshape(n, rest, 6, done), 2, 3).reshape(n, rest * done, 6)
             X = np.matmul(X, np.swapaxes(V[j], 1, 2)).reshape(n, rest, done * V[j].shape[1])
             done *= V[j].shape[1]
-        return X.reshape(n, 6, -1)
+        p = [v.shape[1] for v in V]
+        X = X.reshape((n, 6) + tuple(reversed(p)))  # (p_k, ..., p_1): reversed to (p_1, ..., p_k)
+        return np.ascontiguousarray(X.transpose((0, 1) + tuple(range(k + 1, 1, -1)))).reshape(n, 6, -1)
 
     @staticmethod
     def _monomials(x, y):
