@@ -12,8 +12,26 @@ import pytest
 from scipy.spatial import ConvexHull
 
 import tolsynth
+from independent import sigma_max
 from tolsynth.analysis.certify_polygon import POINT_RADIUS, PolygonSigmaBounds, _halves, arc_polygons
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
+
+
+def _arm(name):
+    """A model, its searched joints, its first tolerance set, the polynomial of ``A`` and the
+    variances of its kept columns (uniform errors)."""
+    mech = tolsynth.load_model(name)
+    st = structure(mech)
+    free = [j for j in st.joints if j != st.rotation]
+    eps = mech.tolerances(list(mech.tolerance_sets)[0])
+    return mech, free, eps, trig_polynomial(st, free, st.rotation), (eps**2 / 3.0)[list(st.columns)]
+
+
+def _largest_found(mech, free, eps, lo, hi, n, rng):
+    """The largest sigma_1 at n random poses of the box (the other joints at 0): ``sigma_max``."""
+    q = np.zeros((n, len(mech.joint_names)))
+    q[:, free] = lo + (hi - lo) * rng.random((n, len(free)))
+    return sigma_max(mech, q, eps).max()
 
 
 @pytest.mark.parametrize("pieces", [2, 3, 4, 6])
@@ -44,12 +62,7 @@ def test_more_pieces_a_smaller_polygon():
 
 
 def test_puma_bounds_hold_and_tighten_with_pieces():
-    mech = tolsynth.load_model("puma560")
-    st = structure(mech)
-    free = [j for j in st.joints if j != st.rotation]
-    eps = mech.tolerances(list(mech.tolerance_sets)[0])
-    w = (eps**2 / 3.0)[list(st.columns)]
-    poly = trig_polynomial(st, free, st.rotation)
+    mech, free, eps, poly, w = _arm("puma560")
     rng = np.random.default_rng(7)
     c = rng.uniform(-3, 3, (12, len(free)))
     h = rng.uniform(0.01, 0.5, (12, len(free)))
@@ -58,17 +71,11 @@ def test_puma_bounds_hold_and_tighten_with_pieces():
     assert (ub4 <= ub2 * (1 + 1e-12)).all() and (ub4 < ub2).any()
     assert np.isfinite(split).all() and (split >= 0).all()
     for i in range(12):
-        X = c[i] - h[i] + 2 * h[i] * rng.random((120, len(free)))
-        q = np.zeros((120, len(mech.joint_names)))
-        q[:, free] = X
-        s1 = [
-            np.sqrt(max(np.linalg.eigvalsh((A * (eps**2 / 3.0)) @ A.T)[-1], 0.0))
-            for A in (mech.sensitivity(x, check_limits=False)[:3] for x in q)
-        ]
-        assert max(s1) <= ub4[i]
+        found = _largest_found(mech, free, eps, c[i] - h[i], c[i] + h[i], 120, rng)
+        assert found <= ub4[i]
         # a box's bound is no lower than the largest value found in it, nor far above it on small boxes
         if h[i].max() < 0.1:
-            assert ub4[i] <= max(s1) * 1.01
+            assert ub4[i] <= found * 1.01
 
 
 @pytest.mark.parametrize("pieces", [2, 3, 4, 6])
@@ -88,12 +95,9 @@ def test_polygon_points_within_the_assumed_radius(pieces):
 
 @pytest.mark.parametrize("model", ["puma560", "panda"])
 def test_jet_matches_the_graph_and_central_differences(model):
-    mech = tolsynth.load_model(model)
-    st = structure(mech)
-    free = [j for j in st.joints if j != st.rotation]
-    cols = list(st.columns)
-    poly = trig_polynomial(st, free, st.rotation)
-    b = PolygonSigmaBounds(poly, free, np.ones(len(cols)))
+    mech, free, _, poly, w = _arm(model)
+    cols = list(structure(mech).columns)
+    b = PolygonSigmaBounds(poly, free, w)
     rng = np.random.default_rng(3)
     X = rng.uniform(-3, 3, (5, len(free)))
     A, dA = b.jet(X)
@@ -116,13 +120,9 @@ def test_jet_matches_the_graph_and_central_differences(model):
 def test_halves_of_a_box_bounded_together_hold():
     # the branch and bound's batch: the lower halves of boxes, then their upper halves; the halves
     # share one contraction over their other joints.  Each half's bound holds at dense random poses
-    # (sigma_1 from Mechanism.sensitivity) and equals the bound of that half alone
-    mech = tolsynth.load_model("ur5")
-    st = structure(mech)
-    free = [j for j in st.joints if j != st.rotation]
-    eps = mech.tolerances(list(mech.tolerance_sets)[0])
-    w = (eps**2 / 3.0)[list(st.columns)]
-    b = PolygonSigmaBounds(trig_polynomial(st, free, st.rotation), free, w)
+    # (sigma_max: Mechanism.sensitivity) and equals the bound of that half alone
+    mech, free, eps, poly, w = _arm("ur5")
+    b = PolygonSigmaBounds(poly, free, w)
     rng = np.random.default_rng(11)
     n, k = 6, len(free)
     c = rng.uniform(-3, 3, (n, k))
@@ -139,44 +139,27 @@ def test_halves_of_a_box_bounded_together_hold():
     alone = np.array([b.bound(L[i : i + 1], H[i : i + 1])[0][0] for i in range(2 * n)])
     assert np.allclose(ub, alone, rtol=1e-9, atol=0)
     for i in range(2 * n):
-        X = L[i] + (H[i] - L[i]) * rng.random((150, k))
-        q = np.zeros((150, len(mech.joint_names)))
-        q[:, free] = X
-        s1 = [
-            np.sqrt(max(np.linalg.eigvalsh((A * (eps**2 / 3.0)) @ A.T)[-1], 0.0))
-            for A in (mech.sensitivity(x, check_limits=False)[:3] for x in q)
-        ]
-        assert max(s1) <= ub[i] <= max(s1) * 1.05
+        found = _largest_found(mech, free, eps, L[i], H[i], 150, rng)
+        assert found <= ub[i] <= found * 1.05
 
 
 def test_bounds_with_a_level_hold_and_refine_the_undecided():
     # given the level a box must be proven below, the boxes above it are bounded again with more
-    # points: each bound still holds at dense poses (Mechanism.sensitivity), none is above the
-    # four-point bound, and some undecided boxes are brought below the level
-    mech = tolsynth.load_model("puma560")
-    st = structure(mech)
-    free = [j for j in st.joints if j != st.rotation]
-    eps = mech.tolerances(list(mech.tolerance_sets)[0])
-    w = (eps**2 / 3.0)[list(st.columns)]
-    b = PolygonSigmaBounds(trig_polynomial(st, free, st.rotation), free, w)
+    # points: each bound still holds at dense poses (sigma_max), none is above the four-point
+    # bound, and some undecided boxes are brought below the level
+    mech, free, eps, poly, w = _arm("puma560")
+    b = PolygonSigmaBounds(poly, free, w)
     rng = np.random.default_rng(5)
     c = rng.uniform(-2.5, 2.5, len(free)) + rng.uniform(-0.05, 0.05, (40, len(free)))  # near one pose
     h = rng.uniform(0.02, 0.15, (40, len(free)))
-    four, _ = PolygonSigmaBounds(trig_polynomial(st, free, st.rotation), free, w, pieces=2).bound(c - h, c + h)
+    four, _ = PolygonSigmaBounds(poly, free, w, pieces=2).bound(c - h, c + h)
     centre = b.point(c)
     level = float(np.median(0.5 * (four + centre)))  # between the centres and the four-point bounds
     ub, _ = b.bound(c - h, c + h, level)
     assert (ub <= four * (1 + 1e-12)).all()
     assert ((four > level) & (ub <= level)).any()
     for i in range(40):
-        X = c[i] - h[i] + 2 * h[i] * rng.random((80, len(free)))
-        q = np.zeros((80, len(mech.joint_names)))
-        q[:, free] = X
-        s1 = [
-            np.sqrt(max(np.linalg.eigvalsh((A * (eps**2 / 3.0)) @ A.T)[-1], 0.0))
-            for A in (mech.sensitivity(x, check_limits=False)[:3] for x in q)
-        ]
-        assert max(s1) <= ub[i]
+        assert _largest_found(mech, free, eps, c[i] - h[i], c[i] + h[i], 80, rng) <= ub[i]
 
 
 def test_maximize_gives_the_level_to_a_level_aware_bound():

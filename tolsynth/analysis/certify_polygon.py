@@ -216,6 +216,11 @@ def arc_polygons(a: np.ndarray, b: np.ndarray, pieces: int = 2):
     return P, rad
 
 
+def _sigma(M: np.ndarray) -> np.ndarray:
+    """The largest singular value of each matrix ``M`` (n, 3, m), floating point (a value, not a bound)."""
+    return np.sqrt(np.maximum(np.linalg.eigvalsh(M @ np.swapaxes(M, -1, -2))[:, -1], 0.0))
+
+
 def _halves(a: np.ndarray, b: np.ndarray):
     """Rows ``i`` and ``i + n/2`` that are the two halves of one box along one joint (the branch and
     bound bounds both halves of each box it splits in one call, the lower halves first): their
@@ -330,20 +335,15 @@ class PolygonSigmaBounds:
 
     def values(self, Q: np.ndarray) -> np.ndarray:
         """``A`` at joint values Q (n, k) of the searched joints, shape (n, 3, m) (floating point)."""
-        t = np.atleast_2d(Q) + self.offsets
-        X = self.T.reshape(1, self.na, 3**self.k)
-        for j in range(self.k):
-            b = np.stack([np.ones(len(t)), np.cos(t[:, j]), np.sin(t[:, j])], axis=1)  # (n, 3)
-            X = X.reshape(X.shape[0], self.na, 3, -1)
-            X = np.einsum("bais,ni->nas", X, b) if X.shape[0] == 1 else np.einsum("nais,ni->nas", X, b)
-        return _mat(X.reshape(len(t), self.na), self.m)
+        return self.jet(Q, derivatives=False)[0]
 
-    def jet(self, Q: np.ndarray):
+    def jet(self, Q: np.ndarray, derivatives: bool = True):
         """``A`` and its derivative along each searched joint at joint values Q (n, k): shapes
-        (n, 3, m) and (n, k, 3, m) (floating point), one pass over the joints from the first."""
+        (n, 3, m) and (n, k, 3, m) (floating point; None without ``derivatives``), one pass over
+        the joints from the first."""
         t = np.atleast_2d(Q) + self.offsets
         n, k = t.shape
-        A, dA = np.empty((n, self.na)), np.empty((n, k, self.na))
+        A, dA = np.empty((n, self.na)), np.empty((n, k, self.na)) if derivatives else None
         for s in range(0, n, 64):  # the first joint's partial sums are n x na x 3^(k-1)
             tt = t[s : s + 64]
             val, grads = self.T.reshape(1, self.na, 3**k), None
@@ -361,15 +361,17 @@ class PolygonSigmaBounds:
                     new, d = both[: len(tt)], both[len(tt) :]
                 else:
                     new, d = X[:, :, 0] + X[:, :, 1] * cc + X[:, :, 2] * ss, X[:, :, 2] * cc - X[:, :, 1] * ss
-                grads = d[:, None] if grads is None else np.concatenate([grads, d[:, None]], axis=1)
+                if derivatives:
+                    grads = d[:, None] if grads is None else np.concatenate([grads, d[:, None]], axis=1)
                 val = new
-            A[s : s + 64], dA[s : s + 64] = val[..., 0], grads[..., 0]
-        return _mat(A, self.m), _mat(dA, self.m)
+            A[s : s + 64] = val[..., 0]
+            if derivatives:
+                dA[s : s + 64] = grads[..., 0]
+        return _mat(A, self.m), None if dA is None else _mat(dA, self.m)
 
     def point(self, Q: np.ndarray) -> np.ndarray:
         """``sigma_1`` at points (n, k) (floating point: the best value found, not a bound)."""
-        M = self.values(Q) * self.sw
-        return np.sqrt(np.maximum(np.linalg.eigvalsh(M @ np.swapaxes(M, -1, -2))[:, -1], 0.0))
+        return _sigma(self.values(Q) * self.sw)
 
     def _bound(self, a: np.ndarray, b: np.ndarray, pieces: int) -> np.ndarray:
         """Upper bounds of sigma_1 on the arcs ``[a, b]`` (n, k), ``pieces`` tangent pieces on each
@@ -460,7 +462,7 @@ class PolygonSigmaBounds:
             A, dA = self.jet(0.5 * (L + H))
             M = A * self.sw
             if self.pieces > 2 and nb:
-                centre = np.sqrt(np.maximum(np.linalg.eigvalsh(M @ np.swapaxes(M, -1, -2))[:, -1], 0.0))
+                centre = _sigma(M)
                 if level is not None and np.isfinite(level):
                     need = 2.0 * np.sqrt((ub - centre) / (REFINE_SPARE * (level - centre)))
                     pieces = np.maximum(3, np.ceil(need))
