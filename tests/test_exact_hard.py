@@ -298,6 +298,22 @@ def test_planar_sphere_and_cone_against_monte_carlo(rng):
     assert lo <= Pc <= hi
 
 
+def test_planar_rule_with_many_terms_against_monte_carlo(rng):
+    """The 3-RRR's 21 uniform terms (its error planar): the rule splits its radial integral only at
+    the signed sums of the four largest half-widths (the smaller ones' kinks are smoothed by the
+    convolution with the rest, and the Gauss-Legendre pair's difference sees what is left), against
+    2M-sample Monte Carlo of the same linear model, at two radii."""
+    m = tolsynth.load_model("planar_3rrr")
+    A, eps = m.sensitivity("home")[:3], m.tolerances("coarse")
+    n = 2_000_000
+    Y = rng.uniform(-1.0, 1.0, (n, A.shape[1])) * eps
+    r = np.linalg.norm(Y @ A.T, axis=1)
+    for R in (0.03, 0.05):
+        P, err = ball_probability(A, eps, ["uniform"] * A.shape[1], R, tol=1e-6, return_error=True)
+        lo, hi = wilson(np.count_nonzero(r <= R), n)
+        assert err <= 1e-6 and lo <= P <= hi, (R, P, lo, hi)
+
+
 def test_planar_rule_agrees_with_the_hemisphere_rule(rng):
     """A full-rank error with many terms, and the same error squeezed into a plane by a third row
     1e-3 of the others: the hemisphere rule on the near-planar error, the planar rule on the

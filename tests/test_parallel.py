@@ -251,9 +251,7 @@ def test_singular_pose_is_a_typed_error_and_conditioning_grows(models):
         tolsynth.monte_carlo(m, q_s, "coarse", R=0.1, n=100, check_limits=False, progress=False)
 
 
-@pytest.mark.parametrize(
-    "name, R", [("delta", 0.3), ("stewart_gough", 0.05), pytest.param("planar_3rrr", 0.03, marks=pytest.mark.slow)]
-)
+@pytest.mark.parametrize("name, R", [("delta", 0.3), ("stewart_gough", 0.05), ("planar_3rrr", 0.03)])
 def test_monte_carlo_through_the_nonlinear_fk_matches_the_exact_probability(models, name, R):
     """P(|dr| <= R) by Monte Carlo through Newton's forward kinematics against the exact
     probability of the linear model (FFT-free series of tolsynth.probability.exact)."""

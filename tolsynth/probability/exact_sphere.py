@@ -45,6 +45,10 @@ __all__ = ["ball_probability", "cone_probability"]
 PLANAR = 1e-12
 #: the azimuths of the planar rule start at this many
 AZIMUTHS = 16
+#: the radial integral is split at the signed sums of this many largest half-widths: beyond four
+#: terms their kinks are smoothed by the convolution with the rest (the planar 3-RRR's 21 terms:
+#: the same probability to 1e-14 with one edge as with ten, in 0.4 s instead of 140 s)
+EDGES = 4
 _GL = {n: np.polynomial.legendre.leggauss(n) for n in (12, 24)}
 
 
@@ -65,7 +69,7 @@ def _edges(b: np.ndarray, parts) -> list[float]:
     for x, p in zip(b, parts):
         if x > 0 and p.bounded:
             out += [0.5 * x, 0.5 * x] if p.kind == "triangular" else [x]
-    return sorted(out, reverse=True)[:10]  # beyond 10 edges the density is smooth enough
+    return sorted(out, reverse=True)[:EDGES]
 
 
 def _breaks(b, parts, R, reach) -> np.ndarray:
