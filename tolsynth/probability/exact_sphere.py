@@ -18,7 +18,8 @@ the cone).  Along ``v = (sin(theta) e_phi, cos(theta))`` every coefficient scale
     P(|t| <= R) = (1/pi) int_0^pi dphi int_0^inf Q_phi(R cosh t) sech^2(t) dt,
 
 ``Q_phi = 1`` beyond the reach of ``e_phi . t``.  The inner integral is split where ``Q_phi`` may
-be non-smooth (``R cosh t`` equal to a sum of the bounded terms' half-widths with signs) and
+be non-smooth (``R cosh t`` equal to a sum of the largest bounded terms' half-widths with signs:
+the smaller ones' kinks are smoothed by the convolution with the rest) and
 taken by 12- and 24-node Gauss-Legendre on each piece (their difference is the error estimate);
 the azimuth by the midpoint rule, doubled until two levels agree.  A 3-D error within
 ``delta = sum_i |u_3 . M_i|`` of a plane (``u_3`` its normal) changes the sphere's probability by
