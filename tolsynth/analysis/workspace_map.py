@@ -129,14 +129,31 @@ def _yaw_joint(mech, ref_q: np.ndarray, rng) -> int | None:
     return None
 
 
+def _motion_plane(mech, lo, hi, rng) -> tuple[str, float | None]:
+    """The base-frame plane the hand point moves in and its offset, where it moves in one (the
+    spread of one coordinate over 200 random joint values below 1e-9 of the others'); else
+    ``("xz", None)``."""
+    Q = lo[:, None] + (hi - lo)[:, None] * rng.random((len(lo), 200))
+    P = _evaluator(mech, "position")([Q, np.zeros(mech.n)])[0]
+    P = P[:, np.all(np.isfinite(P), axis=0)]  # a parallel robot's platform is not assembled everywhere
+    if P.shape[1] < 3:
+        return "xz", None
+    spread = np.ptp(P, axis=1)
+    normal = int(np.argmin(spread))
+    if spread[normal] > 1e-9 * max(float(spread.max()), 1e-300):
+        return "xz", None
+    plane = next(name for name, (_, _, n) in PLANES.items() if n == normal)
+    return plane, float(np.mean(P[normal]))
+
+
 def probability_map(
     mechanism,
     tolerances="figure3",
     R: float = 0.2,
     distribution=None,
     n: int = 100,
-    plane: str = "xz",
-    offset: float = 0.0,
+    plane: str | None = None,
+    offset: float | None = None,
     hand_axis: Sequence[float] | None = (0.0, 0.0, 1.0),
     fixed: Mapping[str, float] | None = None,
     extent: Sequence[float] | None = None,
@@ -173,8 +190,10 @@ def probability_map(
         As :func:`tolsynth.synthesize` (default: the model file's, else uniform).
     n : int
         Grid points per axis (n x n), >= 5.
-    plane : {"xz", "xy", "yz"}
-        Base-frame plane; ``offset`` (mm) along its normal.
+    plane : {"xz", "xy", "yz"} or None
+        Base-frame plane; ``offset`` (mm) along its normal.  Default: for a mechanism whose hand
+        point moves in one base-frame plane (a planar arm or a planar parallel robot, found at
+        random joint values), that plane at its offset; else ``"xz"`` at offset 0.
     hand_axis : 3 floats or None
         Hand z axis imposed (base frame; normalised), None for none.  Default: vertical, up, as
         in the paper's worst pose.
@@ -206,15 +225,16 @@ def probability_map(
 
     distribution = resolve(distribution, mechanism)
     n = check_count(n, "n", 5, 2000)  # grid points per axis
-    offset = check_real(offset, "offset", "mm")
+    if offset is not None:
+        offset = check_real(offset, "offset", "mm")
     seeds = check_count(seeds, "seeds", 1, 1000)
     check_points = check_count(check_points, "check_points", 0, 10**6)
     if fixed is not None:
         fixed = check_mapping(fixed, "fixed", "a dict joint name -> value (rad)")
     if extent is not None:
         extent = tuple(check_vector(extent, "extent", 4, "mm"))
-    if not isinstance(plane, str) or plane not in PLANES:
-        raise OutOfRangeError("plane", f"got {plane!r}", "one of " + ", ".join(PLANES))
+    if plane is not None and (not isinstance(plane, str) or plane not in PLANES):
+        raise OutOfRangeError("plane", f"got {plane!r}", "one of " + ", ".join(PLANES) + ", or None (the default)")
     eps = mechanism.tolerances(tolerances)
     label = tolerances if isinstance(tolerances, str) else "given"
     axis = None
@@ -230,6 +250,10 @@ def probability_map(
     if ref_q is None:
         ref_q = np.clip(np.zeros(nq), lo, hi)
     rng = np.random.default_rng(0)
+    if plane is None:
+        plane, moved = _motion_plane(mechanism, lo, hi, np.random.default_rng(1))
+        offset = moved if offset is None else offset
+    offset = 0.0 if offset is None else offset
 
     # joints held fixed
     held: dict[int, tuple[float, str]] = {}

@@ -127,7 +127,12 @@ def register(sub) -> None:
         default=30,
         help="points per axis of the workspace map (0: no map)",
     )
-    p.add_argument("--plane", choices=["xy", "xz", "yz"], default="xz", help="base-frame plane of the map")
+    p.add_argument(
+        "--plane",
+        choices=["xy", "xz", "yz"],
+        default=None,
+        help="base-frame plane of the map; default: the plane a planar mechanism's hand moves in, else xz",
+    )
     p.add_argument(
         "--hand-axis", default="0,0,1", help="hand z axis of the map in the base frame (3 numbers), or 'free'"
     )

@@ -114,8 +114,8 @@ def _cmd_map(args) -> int:
         tolerances=pm.tolerances,
         distribution=args.dist,
         R_mm=args.R,
-        plane=args.plane,
-        offset_mm=args.offset,
+        plane=pm.plane,
+        offset_mm=pm.offset,
         hand_axis=axis,
         extent_mm=extent,
         reference=pm.reference,
@@ -130,7 +130,8 @@ def _cmd_map(args) -> int:
         emit_json(out)
     else:
         rch = pm.reachable
-        print(f"map          {mech.name}, plane {pm.plane}, {args.n} x {args.n} points, {int(rch.sum())} reachable")
+        at = f" at {'XYZ'[PLANES[pm.plane][2]]}0 = {pm.offset:g} mm" if pm.offset else ""
+        print(f"map          {mech.name}, plane {pm.plane}{at}, {args.n} x {args.n} points, {int(rch.sum())} reachable")
         print(f"tolerances   {label}")
         print(f"extent       {pm.u[0]:.1f} .. {pm.u[-1]:.1f} x {pm.v[0]:.1f} .. {pm.v[-1]:.1f} mm")
         if rch.any():
@@ -213,12 +214,18 @@ def register(sub) -> None:
         "--R", type=length_mm("--R"), default=0.2, help="radius of the accuracy sphere, mm (suffixes allowed)"
     )
     p.add_argument("--n", type=number("--n", "an integer >= 5", integer=True), default=100, help="grid points per axis")
-    p.add_argument("--plane", choices=sorted(PLANES), default="xz", help="base-frame plane of the map")
+    p.add_argument(
+        "--plane",
+        choices=sorted(PLANES),
+        default=None,
+        help="base-frame plane of the map; default: the plane a planar mechanism's hand moves in, else xz",
+    )
     p.add_argument(
         "--offset",
         type=length_mm("--offset"),
-        default=0.0,
-        help="offset of the plane along its normal, mm (suffixes allowed)",
+        default=None,
+        help="offset of the plane along its normal, mm (suffixes allowed); default: the planar "
+        "mechanism's plane's, else 0",
     )
     p.add_argument(
         "--hand-axis",

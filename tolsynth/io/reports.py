@@ -190,7 +190,7 @@ def report(
     seed: int = 0,
     confidence: float = 0.95,
     map_n: int = 30,
-    map_plane: str = "xz",
+    map_plane: str | None = None,
     map_hand_axis=(0.0, 0.0, 1.0),
     worst_grid: int | None = None,
     certify: bool = False,
@@ -370,7 +370,7 @@ def report(
             )
             if not pmap.reachable.any():
                 skipped["map"] = (
-                    f"no point of the {map_plane} plane is reachable with the hand axis {settings['map_hand_axis']}"
+                    f"no point of the {pmap.plane} plane is reachable with the hand axis {settings['map_hand_axis']}"
                 )
                 pmap = None
         except TolsynthError as exc:  # a model the map cannot be drawn for: said in the report
