@@ -33,3 +33,21 @@ def test_planar_3rrr_map_defaults_to_its_plane():
     assert pm.plane == "xy" and pm.offset == 0.0 and pm.reachable.sum() > 20
     # a spatial arm keeps the paper's plane
     assert tolsynth.probability_map(tolsynth.load_model("xu_zhang_1988"), n=11, progress=False).plane == "xz"
+
+
+def test_a_plane_reached_nowhere_is_a_one_line_error(capsys):
+    """The planar 2R's xz plane touches its reachable set along the x axis only: no grid point is
+    reached (an even grid has no line at y = 0), which the CLI says in one line (exit 2) and the plotting function as a typed error."""
+    import pytest
+
+    from tolsynth.analysis.plot import plot_map
+    from tolsynth.cli import main
+    from tolsynth.errors import InputError
+
+    assert main(["map", "--model", "planar_2r", "--R", "0.5", "--plane", "xz", "--n", "10"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--plane" in err[0] and "reachable" in err[0], err
+    pm = tolsynth.probability_map(tolsynth.load_model("planar_2r"), "coarse", plane="xz", n=10, progress=False)
+    assert not pm.reachable.any()
+    with pytest.raises(InputError, match="nothing to draw"):
+        plot_map(pm)

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from tolsynth.errors import InputError
 from tolsynth.kinematics.ik import PLANES
 
 __all__ = ["plot_map"]
@@ -45,6 +46,12 @@ def plot_map(pmap, path=None, ax=None, levels=None):
         fig = ax.figure
     P = pmap.P
     reach = np.isfinite(P)
+    if not reach.any():
+        raise InputError(
+            "pmap",
+            f"no point of the {pmap.plane} plane's grid is reachable: nothing to draw",
+            "a map with reachable points",
+        )
     if levels is None:
         lo_p, hi_p = np.nanmin(P), np.nanmax(P)
         span = hi_p - lo_p

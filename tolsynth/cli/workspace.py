@@ -103,6 +103,13 @@ def _cmd_map(args) -> int:
         progress=False if args.quiet else None,
     )
     pm = ProbabilityMap(**{**pm.__dict__, "tolerance_label": label})
+    if not pm.reachable.any():  # (a plane that only touches the reachable set along a line)
+        raise InputError(
+            "--plane",
+            f"no point of the {pm.plane} plane's {args.n} x {args.n} grid at offset {pm.offset:g} mm is reachable "
+            "with this hand axis",
+            "a plane the hand reaches with that axis (by default a planar mechanism's own plane)",
+        )
     if args.out:
         import matplotlib
 
