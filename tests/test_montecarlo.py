@@ -370,3 +370,23 @@ def test_cli_montecarlo_json(capsys):
     rc = main(["montecarlo", "--model", "xu_zhang_1988", "--tolerances", "figure3", "--R", "0.2", "--n", "0"])
     assert rc == 2
     assert "n:" in capsys.readouterr().err
+
+
+def test_planar_arm_has_no_error_normal_to_its_plane():
+    """The planar 2R's z error is identically 0: no kurtosis to judge there (NaN, shown as '-' and
+    'no error along it', not 'nan not Gaussian'); in the plane, at the stretched pose, w1 = y is
+    the sum of two uniform angular terms, whose excess kurtosis has the closed form
+    -1.2 (a^4 + b^4) / (a^2 + b^2)^2 (a, b their half-widths' lever arms)."""
+    import tolsynth
+
+    m = tolsynth.load_model("planar_2r")
+    eps = m.tolerances("coarse")
+    r = monte_carlo(m, "stretched", "coarse", "uniform", R=0.5, n=400_000, seed=2, progress=False)
+    assert r.principal_std[2] == 0.0 and np.isnan(r.kurtosis[2])
+    line = [ln for ln in r.report().splitlines() if ln.startswith("w3")][0]
+    assert "no error along it" in line and "nan" not in line
+    i1, i2 = m.error_parameters.index("o1"), m.error_parameters.index("o2")
+    a, b = 800.0 * eps[i1] * 1e-3, 300.0 * eps[i2] * 1e-3  # mrad -> rad: y = 800 o1 + 300 o2 (mm)
+    j = int(np.argmax(np.abs(r.principal_directions[1])))  # the principal direction along y
+    assert abs(r.principal_directions[1, j]) > 0.999
+    assert r.kurtosis[j] == pytest.approx(-1.2 * (a**4 + b**4) / (a**2 + b**2) ** 2, abs=5 * r.kurtosis_se)

@@ -176,10 +176,14 @@ class MonteCarloResult(Tabular):
         )
         for j in range(3):
             d = self.principal_directions[:, j]
-            note = "" if abs(self.kurtosis[j]) <= 4 * self.kurtosis_se + 0.1 else "  not Gaussian"
+            kurt = self.kurtosis[j]
+            if np.isfinite(kurt):
+                shown, note = f"{kurt:+17.3f}", "" if abs(kurt) <= 4 * self.kurtosis_se + 0.1 else "  not Gaussian"
+            else:  # no spread along w_j (a planar mechanism's normal): no shape to judge
+                shown, note = f"{'-':>17}", "  no error along it" if self.principal_std[j] == 0 else ""
             lines.append(
                 f"w{j + 1} ({d[0]:+.3f},{d[1]:+.3f},{d[2]:+.3f}) {self.principal_std[j]:9.5f}"
-                f"{self.principal_std_analytic[j]:12.5f}{self.kurtosis[j]:+17.3f}{note}"
+                f"{self.principal_std_analytic[j]:12.5f}{shown}{note}"
             )
         if self.Phi is not None:
             lines.append("")
