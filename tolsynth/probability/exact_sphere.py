@@ -48,7 +48,7 @@ PLANAR = 1e-12
 AZIMUTHS = 16
 #: the radial integral is split at the signed sums of this many largest half-widths: beyond four
 #: terms their kinks are smoothed by the convolution with the rest (the planar 3-RRR's 21 terms:
-#: the same probability to 1e-14 with one edge as with ten, in 0.4 s instead of 140 s)
+#: the same probability to 1e-14 with one edge as with ten, in 1 s instead of 140 s)
 EDGES = 4
 _GL = {n: np.polynomial.legendre.leggauss(n) for n in (12, 24)}
 
