@@ -121,3 +121,29 @@ def test_exact_certified_minimum_on_the_paper_robot_against_an_independent_searc
         A = m.sensitivity(np.radians([0.0, t2, tp2, t4, 0.0]))[:3]
         lowest = min(lowest, independent_worst(A * eps, 0.5)[0])
     assert lowest >= c.probability_lower_bound - 2e-7
+
+
+@pytest.mark.slow
+def test_exact_proof_on_five_searched_joints_is_announced_at_once():
+    """The Puma 560 searches five joints (its waist turns the error rigidly): the certified exact
+    exchange warns in its first round that this proof has not been seen to close, and the result
+    says it did not; the paper's robot (three searched joints) gets no such warning."""
+    import warnings
+
+    from tolsynth.errors import CertificationWarning
+
+    with pytest.warns(CertificationWarning, match="5 searched joints"):
+        ws = synthesize_workspace(
+            tolsynth.load_model("puma560"), 0.5, 0.99, certify=True, max_rounds=1, certify_options={"time_limit": 1}
+        )
+    assert not ws.certified and ws.reason
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CertificationWarning)
+        synthesize_workspace(
+            tolsynth.load_model("xu_zhang_1988"),
+            0.5,
+            0.99,
+            certify=True,
+            max_rounds=1,
+            certify_options={"time_limit": 1},
+        )

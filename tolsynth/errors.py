@@ -21,6 +21,7 @@ __all__ = [
     "UnsupportedJointError",
     "TimeLimitError",
     "WorkspaceWarning",
+    "CertificationWarning",
 ]
 
 
@@ -152,3 +153,9 @@ class WorkspaceWarning(UserWarning):
     """A design made for some poses is over its specification elsewhere in the workspace (by a
     quick sampled check, :class:`tolsynth.analysis.validation.WorkspaceCheck`); the message points
     to :func:`tolsynth.synthesize_workspace`, which designs for every pose."""
+
+
+class CertificationWarning(UserWarning):
+    """A certified search was asked for where its proof has not been seen to close in minutes (the
+    exact reading over five or more searched joints); the search runs, and its result says whether
+    it closed."""
