@@ -385,7 +385,7 @@ def _certified_exchange(
             warnings.warn(
                 CertificationWarning(
                     f"the exact reading's proof has not been seen to close on {searched} searched joints "
-                    "(on the Puma 560's five it is not certified in ten minutes); the exchange goes on and says "
+                    "(the Puma 560's five: not certified by a run of 20 rounds, 7.5 min); the exchange goes on and says "
                     "whether it closed. The Gaussian reading with a design margin certifies six-joint arms in "
                     "about a minute: probability='gaussian', certify_options={'margin': 3e-3} "
                     "(CLI: --probability gaussian --margin 3e-3)"
