@@ -88,6 +88,7 @@ def test_not_converged_with_a_margin_still_bounds_the_cost_at_R(xz):
     assert not w.certified and not w.converged
     at_R = clarabel(make_specification(xz, R, P, "uniform", 0.7, poses=w.poses))
     assert w.lower_bound == pytest.approx(at_R, rel=1e-6) and w.lower_bound < w.result.cost
+    assert f"a larger design margin than {MARGIN:g}" in w.reason
 
 
 @pytest.mark.parametrize("bad", [-1e-3, 0.6, float("nan"), "much"])
@@ -98,18 +99,19 @@ def test_a_bad_margin_is_a_typed_error_naming_it(xz, bad):
         )
 
 
-@pytest.mark.long  # 1-2 min per arm on 2 cores
-@pytest.mark.parametrize("name", ["puma560", "ur5"])
-def test_six_joint_exchange_certified_with_a_margin(name):
-    """The Gaussian certified exchange on a six-joint arm closes with a margin of 3 tol: the bound
-    at R meets 1 + tol and lies above the largest sigma an independent search finds (random poses
-    and SLSQP); the cost is within the margin's price of the bound at R."""
+@pytest.mark.long  # 1-2 min per six-joint arm on 2 cores, 3-4 min the Panda
+@pytest.mark.parametrize(("name", "margin"), [("puma560", MARGIN), ("ur5", MARGIN), ("panda", 1e-2)])
+def test_six_joint_exchange_certified_with_a_margin(name, margin):
+    """The Gaussian certified exchange on a six- or seven-joint arm closes with a margin (3 tol; the
+    Panda's flatter design needs 1e-2): the bound at R meets 1 + tol and lies above the largest sigma
+    an independent search finds (random poses and SLSQP); the cost is within the margin's price of
+    the bound at R (about the margin's share of the cost)."""
     m = tolsynth.load_model(name)
-    w = _exchange(m, margin=MARGIN)
+    w = _exchange(m, margin=margin)
     assert w.certified and w.upper_bound <= 1 + TOL
     ref = dense_then_local(m, w.result.x, 20000, 13) * z_of_p(P) / R
     assert ref <= w.upper_bound
-    assert 0 < w.gap <= 0.005 * w.result.cost
+    assert 0 < w.gap <= margin * w.result.cost
 
 
 @pytest.mark.slow  # 5-6 s
