@@ -110,6 +110,29 @@ def test_irwin_hall(n, R):
     assert abs(P - ref) <= 1e-9
 
 
+@pytest.mark.parametrize(
+    "n,p,value", [(3, 0.99, 0.996820), (10, 0.99, 0.991454), (30, 0.99, 0.990462), (2, 0.9, 0.892093)]
+)
+def test_equal_uniform_terms_at_the_gaussian_radius(n, p, value):
+    """The values docs/certified.md quotes for the Gaussian reading against the exact one: n equal
+    uniform terms, R = z sigma with the Gaussian's z (SciPy) and the sum's own sigma; the Irwin-Hall
+    CDF in exact rational arithmetic, and the evaluator to 1e-9 of it.  Above p at p = 0.99, below
+    it at p = 0.9."""
+    from fractions import Fraction
+
+    from scipy.stats import norm
+
+    R = norm.ppf((1 + p) / 2) * math.sqrt(n / 3)
+
+    def F(x):  # Irwin-Hall CDF of n uniforms on [0, 1]
+        return sum((-1) ** k * comb(n, k) * (x - k) ** n for k in range(int(math.floor(x)) + 1)) / factorial(n)
+
+    ref = float(F((n + Fraction(R)) / 2) - F((n - Fraction(R)) / 2))
+    assert abs(ref - value) <= 5e-7
+    assert (ref > p) == (p == 0.99)
+    assert abs(direction_probability(np.ones(n), ["uniform"] * n, R, tol=1e-12) - ref) <= 1e-9
+
+
 def test_normals_give_the_gaussian_values():
     b = np.array([1.0, 2.0, 0.5])
     s = math.sqrt(np.sum((b / 3) ** 2))
