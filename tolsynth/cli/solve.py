@@ -265,7 +265,8 @@ def cmd_solve(args) -> int:
             print(
                 f"  certificate: lower bound {w.lower_bound:.8g} (valid at every pose), gap {w.gap:.2e}; "
                 f"afterwards the largest value found anywhere{at} is {w.worst_value:.6f} "
-                f"(violation {w.max_violation:.2e})"
+                f"(violation {w.max_violation:.2e}"
+                + (" of R', the radius designed for; the proof below is at R)" if w.margin else ")")
             )
             if w.certified is not None:  # the certified search's proof (or why there is none)
                 print("  " + w.certificate_line())
