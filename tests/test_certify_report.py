@@ -99,3 +99,60 @@ def test_report_shows_the_design_margin_and_the_bound_at_R():
     ]
     assert row == f"0.003: cost {w.result.cost:.8g}, lower bound at R {w.lower_bound:.8g}"
     assert w.lower_bound < w.result.cost
+
+
+def test_report_everywhere_certify_on_the_command_line(tmp_path, capsys):
+    """``tolsynth report --everywhere --certify``: the certified exchange's design reported, its
+    proven bound in the report and in the JSON, at or above the dense grid's largest sigma of the
+    reported tolerances and within 1 + tol."""
+    import json
+
+    from tolsynth.cli import main
+
+    out = tmp_path / "ws.md"
+    argv = ["report", "--model", "planar_2r", "--R", str(R), "--p", str(P), "--probability", "gaussian"]
+    argv += ["--everywhere", "--certify", "--mc-samples", "0", "--map-n", "0", "--worst-grid", "0"]
+    assert main([*argv, "--out", str(out), "--json"]) == 0
+    js = json.loads(capsys.readouterr().out)
+    assert js["certified"] is True and js["converged"] is True
+    eps = np.array(list(js["tolerances"].values()))
+    assert _grid_ratio(tolsynth.load_model("planar_2r"), eps) <= js["upper_bound"] <= 1 + 1e-3
+    assert f"| max sigma z / R over the joint space, proven upper bound | {js['upper_bound']:.6f} |" in out.read_text()
+
+
+@pytest.mark.parametrize(
+    ("extra", "says"),
+    [
+        (["--margin", "3e-3"], "--everywhere"),
+        (["--max-rounds", "3"], "--everywhere"),
+        (["--reference", "none"], "--everywhere"),
+        (["--everywhere", "--workers", "2"], "--certify"),
+        (["--everywhere", "--processes"], "--processes"),
+    ],
+    ids=["margin-alone", "max-rounds-alone", "reference-alone", "workers-without-certify", "processes-everywhere"],
+)
+def test_report_exchange_options_misused_exit_2_naming_them(tmp_path, extra, says, capsys):
+    from tolsynth.cli import main
+
+    argv = ["report", "--model", "planar_2r", "--R", str(R), "--p", str(P), "--out", str(tmp_path / "r.md")]
+    try:
+        rc = main([*argv, *extra])
+    except SystemExit as exc:
+        rc = exc.code
+    err = capsys.readouterr().err
+    assert rc == 2 and says in err and "Traceback" not in err
+    assert not (tmp_path / "r.md").exists()
+
+
+def test_report_everywhere_not_converged_exits_1_and_says_so(tmp_path, capsys):
+    """One round cannot settle the planar 2R's exchange (its first pose is not the worst): exit status
+    1 with one line on stderr, and the report written, saying the exchange did not converge."""
+    from tolsynth.cli import main
+
+    out = tmp_path / "ws.md"
+    argv = ["report", "--model", "planar_2r", "--R", str(R), "--p", str(P), "--probability", "gaussian"]
+    argv += ["--everywhere", "--certify", "--max-rounds", "1", "--mc-samples", "0", "--map-n", "0"]
+    assert main([*argv, "--worst-grid", "0", "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no convergence over the workspace" in err[0]
+    assert "| exchange | NOT converged, 1 round(s) |" in out.read_text()

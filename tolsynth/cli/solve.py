@@ -15,12 +15,11 @@ from tolsynth.cli.args import (  # noqa: I001
     dist_label,
     emit_json,
     inputs_record,
-    number,
     parse_poses,
-    parse_reference,
     pose_label,
     write_out,
 )
+from tolsynth.cli.everywhere import add_everywhere_arguments, exchange_options, reject_exchange_flags
 from tolsynth.cli.params import parse_bounds, parse_per_parameter
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
@@ -184,33 +183,9 @@ def cmd_solve(args) -> int:
         kw["locks"] = _parse_locks(mech, args.lock)
         record["locks"] = kw["locks"]
     if args.everywhere:
-        from tolsynth.kinematics.joint_space import _reference
         from tolsynth.synthesis.workspace import synthesize_workspace
 
-        if args.solver == "both":
-            raise InputError("--solver", "'both' does not combine with --everywhere", "auto, ipopt or sumt")
-        if args.pose and len(args.pose) > 1:
-            raise InputError("--pose", "given more than once with --everywhere", "one starting pose, or --reference")
-        if args.pose:
-            start = parse_poses(mech, args.pose)[0]
-        else:
-            name, q = _reference(mech, parse_reference(mech, args.reference))
-            start = name if (name is not None and name != "given") else q  # None: the search's worst pose
-        ex = {
-            k: v
-            for k, v in (("certify", args.certify or None), ("max_rounds", args.max_rounds), ("tol", args.tol))
-            if v is not None
-        }
-        for flag, value in (
-            ("--certify-time-limit", args.certify_time_limit),
-            ("--workers", args.workers),
-            ("--margin", args.margin),
-        ):
-            if value is not None and not args.certify:
-                raise InputError(flag, "only used with --certify", f"--certify {flag} VALUE")
-        options = {"time_limit": args.certify_time_limit, "workers": args.workers, "margin": args.margin}
-        if any(v is not None for v in options.values()):
-            ex["certify_options"] = {k: v for k, v in options.items() if v is not None}
+        start, ex = exchange_options(args, mech)
         with Working(
             "tolsynth solve: the design for every reachable pose (exchange rounds with the worst-pose search)"
         ):
@@ -287,22 +262,7 @@ def cmd_solve(args) -> int:
             )
             return 1
         return 0
-    for flag, given in (
-        ("--certify", args.certify),
-        ("--max-rounds", args.max_rounds is not None),
-        ("--tol", args.tol is not None),
-        ("--certify-time-limit", args.certify_time_limit is not None),
-        ("--workers", args.workers is not None),
-        ("--margin", args.margin is not None),
-    ):
-        if given:
-            raise InputError(flag, "only used with --everywhere", "--everywhere " + flag)
-    if args.reference is not None:
-        raise InputError(
-            "--reference",
-            "only used with --everywhere (the pose the search starts from)",
-            "--pose for the poses of a single solve",
-        )
+    reject_exchange_flags(args, certify_alone=False)
     poses = parse_poses(mech, args.pose)
     kw["poses"] = poses
     record["poses"] = [pose_label(q) for q in poses]
@@ -413,58 +373,12 @@ def register(sub) -> None:
         "at one or more poses, or at every reachable pose (--everywhere).",
     )
     add_specification_arguments(p, ("auto", "ipopt", "sumt", "both"), worst_case=True)
-    p.add_argument(
-        "--everywhere",
-        action="store_true",
-        help="impose the constraint at every reachable pose (exchange method with the worst-pose search)",
-    )
-    p.add_argument(
-        "--reference",
-        default=None,
-        help="with --everywhere: the pose the exchange method starts from: NAME, none (the search's "
-        "worst pose at mid-bound tolerances), or joint values in deg; default: the model's "
-        "reference pose (its 'worst' configuration if it has one, else none)",
-    )
+    add_everywhere_arguments(p)
     p.add_argument(
         "--certify",
         action="store_true",
         help="with --everywhere: prove the specification at every pose of the continuous joint space "
         "(branch and bound) instead of a sampled search; not proven: exit status 1",
-    )
-    p.add_argument(
-        "--max-rounds",
-        type=number("--max-rounds", "an integer >= 1", lambda v: v >= 1, integer=True),
-        default=None,
-        help="with --everywhere: exchange rounds before giving up (default 20); reached: not converged",
-    )
-    p.add_argument(
-        "--tol",
-        type=number("--tol", "a number in (0, 1]", lambda v: 0 < v <= 1),
-        default=None,
-        help="with --everywhere: relative tolerance on the specification (default 1e-3)",
-    )
-    p.add_argument(
-        "--certify-time-limit",
-        dest="certify_time_limit",
-        type=number("--certify-time-limit", "a number of seconds > 0", lambda v: v > 0),
-        default=None,
-        help="with --everywhere --certify: seconds for each certified search; reached: not converged (exit "
-        "status 1), with the bound reached",
-    )
-    p.add_argument(
-        "--workers",
-        type=number("--workers", "an integer >= 1", lambda v: v >= 1, integer=True),
-        default=None,
-        help="with --everywhere --certify: processes of each certified search (default: the cores this "
-        "process may use; 1: one)",
-    )
-    p.add_argument(
-        "--margin",
-        type=number("--margin", "a number from 0 to 0.5", lambda v: 0 <= v <= 0.5),
-        default=None,
-        help="with --everywhere --certify: design at R / (1 + MARGIN) and prove at R, which gives the proof "
-        "room on an arm whose design is nearly flat (e.g. 3e-3 on a six-joint arm, +0.2 %% cost; 1e-2 on the Panda, +0.7 %%); the "
-        "lower bound is then a solve's at R (default 0)",
     )
     p.add_argument(
         "--contributions",
