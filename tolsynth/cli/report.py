@@ -118,7 +118,7 @@ def _cmd_report(args) -> int:
             f"time         {rep.elapsed_s:.2f} s"
             + (f" (before it, the exchange: {exchange_s:.2f} s)" if ws is not None else "")
         )
-    if ws is not None and not ws.success:
+    if ws is not None and not ws.success and not (ws.converged and res.feasible):
         print(
             f"tolsynth report: no convergence over the workspace ({ws.reason or 'the last solve failed'}); the "
             "report says so, and its numbers are not an optimum",
