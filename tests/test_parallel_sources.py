@@ -362,6 +362,22 @@ def test_certified_search_refuses_a_parallel_robot_with_the_reason(delta):
         tolsynth.synthesize_workspace(delta, R=0.3, p=0.99, pose="home", certify=True, max_rounds=2)
 
 
+def test_certified_exchange_refuses_a_parallel_robot_before_any_round():
+    """The hexapod's six joints would draw the exact proof's warning after a round of solves; the
+    refusal comes first (the warning, made an error here, never fires), and no solve runs."""
+    import warnings
+
+    from tolsynth.errors import CertificationWarning
+    from tolsynth.synthesis import workspace
+
+    hexapod = tolsynth.load_model("stewart_gough")
+    with warnings.catch_warnings(), pytest.MonkeyPatch.context() as mp:
+        warnings.simplefilter("error", CertificationWarning)
+        mp.setattr(workspace, "synthesize", lambda *a, **k: pytest.fail("a solve ran before the refusal"))
+        with pytest.raises(InputError, match="parallel robot"):
+            tolsynth.synthesize_workspace(hexapod, R=0.5, p=0.99, certify=True, max_rounds=2, progress=False)
+
+
 def test_worst_pose_reports_strut_limits_in_mm():
     """A hexapod's active strut limits are lengths: shown in mm, not as angles."""
     m = tolsynth.load_model("stewart_gough")

@@ -45,7 +45,7 @@ from tolsynth.analysis.interval_ops import BINARY, UNARY
 from tolsynth.errors import InputError
 from tolsynth.model.parallel import is_parallel
 
-__all__ = ["Structure", "structure", "position_sensitivity"]
+__all__ = ["Structure", "check_certifiable", "structure", "position_sensitivity"]
 
 
 @dataclass(frozen=True)
@@ -79,9 +79,9 @@ class Structure:
 _CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
-def position_sensitivity(mech) -> ca.Function:
-    """``A(q)``, the rows dx, dy, dz of the mechanism's sensitivity graph at zero error, as an SX
-    Function of the joints (constant folding removes what the zero errors switch off)."""
+def check_certifiable(mech) -> None:
+    """Raise :class:`InputError` for a mechanism the certified search cannot bound (a parallel
+    robot), before any work is spent on it."""
     if is_parallel(mech.spec):
         # the interval extension of the unrolled Newton steps and their assembly test is not finite,
         # even on a box 1e-6 rad wide: the branch and bound would split until its box limit
@@ -92,6 +92,12 @@ def position_sensitivity(mech) -> ca.Function:
             "search cannot prove anything",
             "certify=False (the sampled worst-pose search)",
         )
+
+
+def position_sensitivity(mech) -> ca.Function:
+    """``A(q)``, the rows dx, dy, dz of the mechanism's sensitivity graph at zero error, as an SX
+    Function of the joints (constant folding removes what the zero errors switch off)."""
+    check_certifiable(mech)
     S = mech.graphs.sensitivity
     if not isinstance(S, ca.Function):
         raise InputError("mechanism", f"{mech.name}: no sensitivity graph", "a model with CasADi graphs")

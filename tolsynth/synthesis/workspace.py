@@ -349,6 +349,7 @@ def _certified_exchange(
     none does the certified search run, which either proves the specification met or returns the
     worst pose it found (within its tolerance of the worst anywhere), to be added in turn."""
     from tolsynth.analysis.certify import certify_worst_pose
+    from tolsynth.analysis.certify_structure import check_certifiable
     from tolsynth.synthesis.single import DEFAULT_PROBABILITY
 
     if sphere:
@@ -357,6 +358,7 @@ def _certified_exchange(
             "the sphere criterion has no certified search",
             "criterion 'components' (the default) with certify=True",
         )
+    check_certifiable(mechanism)  # at once, not after rounds of solves (and a warning about the proof)
     options = dict(check_mapping(options, "certify_options", "keyword arguments of the certified search") or {})
     keys = ("rtol", "tol", "max_boxes", "time_limit", "workers", "margin")
     for key in options:
