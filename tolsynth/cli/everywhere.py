@@ -34,7 +34,8 @@ def add_everywhere_arguments(p) -> None:
         "--max-rounds",
         type=number("--max-rounds", "an integer >= 1", lambda v: v >= 1, integer=True),
         default=None,
-        help="with --everywhere: exchange rounds before giving up (default 20); reached: not converged",
+        help="with --everywhere: exchange rounds before giving up (default 20; 30 with --certify, the Gaussian "
+        "reading and no --margin); reached: not converged",
     )
     p.add_argument(
         "--tol",
