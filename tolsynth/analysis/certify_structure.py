@@ -90,7 +90,7 @@ def check_certifiable(mech) -> None:
             f"{mech.name} is a parallel robot: its sensitivities come from Newton's method "
             "unrolled from the home pose, which interval arithmetic cannot bound, so the certified "
             "search cannot prove anything",
-            "certify=False (the sampled worst-pose search)",
+            "certify=False, the sampled worst-pose search (on the command line: without --certify)",
         )
 
 
