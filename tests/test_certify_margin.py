@@ -114,6 +114,20 @@ def test_six_joint_exchange_certified_with_a_margin(name, margin):
     assert 0 < w.gap <= margin * w.result.cost
 
 
+@pytest.mark.long  # 2-3 min per arm on 2 cores
+@pytest.mark.parametrize("name", ["puma560", "ur5", "kr6r900sixx"])
+def test_six_joint_exchange_certified_without_a_margin(name):
+    """Without a margin the sampled stage goes on to a tenth of tol, and the proof closes in the
+    room that leaves: certified, the bound at or above an independent search's largest sigma
+    (random poses and SLSQP), and the cost at its own dual bound (no margin's premium)."""
+    m = tolsynth.load_model(name)
+    w = _exchange(m)
+    assert w.certified and w.upper_bound <= 1 + TOL and w.margin == 0
+    ref = dense_then_local(m, w.result.x, 20000, 13) * z_of_p(P) / R
+    assert ref <= w.upper_bound
+    assert abs(w.gap) <= 1e-6 * w.result.cost
+
+
 @pytest.mark.slow  # 5-6 s
 def test_with_a_blind_sampled_stage_the_proofs_find_the_poses_past_the_designed_radius(xz):
     """With the sampled search replaced by one that never finds a miss, every pose comes from the
