@@ -218,13 +218,13 @@ def synthesize_workspace(
     ``margin`` (relative, default 0): design at ``R / (1 + margin)`` and prove at ``R``.  The proof
     needs room between the design's largest error and ``1 + tol``; an exchange's design is nearly
     flat (on a six-joint arm within 1e-3 of its maximum over a few percent of the joint space), so
-    without a margin that room is at most ``tol`` and the proof takes hundreds of thousands of
-    boxes (the Gaussian reading's sampled stage then goes on until the worst pose it finds is
-    within a tenth of ``tol``, which leaves the proof most of the room).  A margin buys room for cost: ``lower_bound`` then comes from a solve at ``R`` at the
-    final poses, so ``gap`` shows what the margin cost (Puma 560: a margin of 3e-3, +0.2 %).  ``progress``: a progress bar on stderr, of the
-    exchange's rounds (with ``certify``: of each certified search's boxes); None shows it on a
-    terminal for runs over a couple of seconds.  The sphere criterion
-    is not certified.
+    without a margin that room is at most ``tol``: the Gaussian reading's sampled stage then goes
+    on until the worst pose it finds is within a tenth of ``tol``, and the proof takes 140 000 to
+    200 000 boxes, 2-3 min, on a six-joint arm.  A margin buys room for cost: ``lower_bound`` then
+    comes from a solve at ``R`` at the final poses, so ``gap`` shows what the margin cost (Puma
+    560: a margin of 3e-3, +0.2 %, in half a minute).  ``progress``: a progress bar on stderr, of
+    the exchange's rounds (with ``certify``: of each certified search's boxes); None shows it on a
+    terminal for runs over a couple of seconds.  The sphere criterion is not certified.
     """
     from tolsynth.analysis.pose_search import worst_pose
     from tolsynth.kinematics.mechanism import as_mechanism
