@@ -12,8 +12,9 @@ time limit stops it first, the bound reached so far and ``certified = False``.
 Before splitting, facts proven on the graph shrink the search
 (:mod:`tolsynth.analysis.certify_structure`): error parameters without effect are dropped, joints
 without effect held, a joint that turns the error distribution rigidly about the base z axis held,
-and a joint range beyond one turn cut to one period where the joint enters only through sine and
-cosine.  The bounds are those of :mod:`tolsynth.analysis.certify_bounds` (Gaussian reading: the
+a joint range beyond one turn cut to one period where the joint enters only through sine and
+cosine, and beyond half a turn to half a turn where that changes no column of ``A`` but its sign.
+The bounds are those of :mod:`tolsynth.analysis.certify_bounds` (Gaussian reading: the
 largest principal standard deviation) and :mod:`tolsynth.analysis.certify_exact` (the exact
 per-direction probability).  Units: mm and rad.
 """

@@ -47,7 +47,10 @@ class Domain:
         return Q if self.M is None else np.linalg.solve(self.M, Q.T).T
 
 
-def domain(mech, st, base_q: np.ndarray) -> Domain:
+def domain(mech, st, base_q: np.ndarray, half_turns: bool = True) -> Domain:
+    """The searched joints, their box and constraints.  ``half_turns``: a joint whose half turn
+    changes nothing searched (``st.half_turn``) is searched over half a turn; False for a map,
+    which shows the whole range."""
     lo_q, hi_q = _limits(mech)
     nq = len(lo_q)
     names = list(mech.joint_names)
@@ -64,6 +67,8 @@ def domain(mech, st, base_q: np.ndarray) -> Domain:
     for i, j in enumerate(free):
         if j in st.periodic and j not in constrained and hi[i] - lo[i] > 2 * math.pi:
             hi[i] = lo[i] + 2 * math.pi  # one period: the joint enters only through sin and cos
+        if half_turns and j in st.half_turn and j not in constrained and hi[i] - lo[i] > math.pi:
+            hi[i] = lo[i] + math.pi  # every pose past it is one inside turned by half a turn
     linear = tuple(_rows(mech, free))
     return Domain(free, held, why, lo, hi, constraints(mech, free, held, linear), linear)
 

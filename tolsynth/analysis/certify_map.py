@@ -108,7 +108,7 @@ def certified_map(
     if base_q is None:
         _, ref = _reference(mech, MODEL_REFERENCE)
         base_q = ref if ref is not None else np.zeros(nq)
-    dom = _domain(mech, st, np.asarray(base_q, dtype=float))
+    dom = _domain(mech, st, np.asarray(base_q, dtype=float), half_turns=False)
     searched = [names[j] for j in dom.free]
     if joints is None:
         if len(searched) < 2:

@@ -2,7 +2,7 @@
 
 The search bounds functions of the position sensitivity at zero error, ``A(q)`` (3 x n, mm per
 tolerance unit; the rows dx, dy, dz of the ``sensitivity`` graph at ``delta = 0``).  Before it
-splits a single box it reads four facts off that graph:
+splits a single box it reads five facts off that graph:
 
 * **error parameters without effect**: columns of ``A`` that are structurally zero (CasADi's
   sparsity, no numbers involved), e.g. a roll angle of the last frame that turns the hand point
@@ -12,6 +12,11 @@ splits a single box it reads four facts off that graph:
 * **periodic joints**: a joint that enters ``A`` only through sine and cosine of itself plus
   constants changes nothing over a full turn, so a range wider than 2 pi is searched over one
   period.
+* **half-turn joints**: a periodic joint such that every kept column of ``A``, read as an exact
+  polynomial (below), has monomials of one parity in that joint's cosines and sines.  Half a turn
+  negates each of them, so each column keeps or flips its sign: ``A W A^T`` and every probability
+  (the errors are symmetric) are unchanged, and a range wider than pi is searched over half a turn
+  (the hand roll of the Puma 560, the UR5 and the KR 6 R900, whose last link's offsets turn with it).
 * **a joint that turns the error distribution rigidly about the base z axis** (the waist of the
   paper's robot and of most arms): ``A(q) = Rz(q_j + k) A(q with Rz = I)`` for every pose.  Then
   every principal standard deviation and every per-direction probability is the same at every
@@ -64,6 +69,8 @@ class Structure:
         The joint proven to turn the error distribution rigidly about the base z axis.
     periodic : tuple of int
         Joints entering ``A`` only through sin and cos of the joint plus constants.
+    half_turn : tuple of int
+        Periodic joints whose half turn changes no column of ``A`` but its sign (proven).
     notes : tuple of str
         What was proven and what could not be, in words.
     """
@@ -74,6 +81,7 @@ class Structure:
     rotation: int | None
     periodic: tuple
     notes: tuple
+    half_turn: tuple = ()
 
 
 _CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -143,7 +151,9 @@ def structure(mech) -> Structure:
             break
         if why:
             notes.append(f"{names[j]}: {why}")
-    out = Structure(A, columns, joints, rotation, periodic, tuple(notes))
+    half_turn = _half_turn(A, periodic, columns)
+    notes += [f"{names[j]}: half a turn changes no column of A but its sign (proven)" for j in half_turn]
+    out = Structure(A, columns, joints, rotation, periodic, tuple(notes), half_turn)
     _CACHE[mech] = out
     return out
 
@@ -218,6 +228,29 @@ def _periodic(f: ca.Function, j: int) -> bool:
 
 class _NoProof(Exception):
     pass
+
+
+def _half_turn(f: ca.Function, periodic, columns) -> tuple:
+    """The periodic joints whose half turn changes no column of ``A`` but its sign: read as exact
+    polynomials (:class:`_PolyWalk`), every monomial of a column's three entries has the same parity
+    of degree in that joint's cosines and sines, which half a turn negates.  None where the graph is
+    not a polynomial in sines and cosines."""
+    try:
+        pw = _PolyWalk(f, None, atoms=False)
+    except _NoProof:
+        return ()
+    out = []
+    for j in periodic:
+        if any(d[0] == "q" and d[1] == j for d in pw.vars):
+            continue  # the joint enters other than through sin and cos of itself
+        own = {i for key, pair in pw.pairs.items() if key[0] == j for i in pair}
+        parities = (
+            {sum(power for v, power in mono if v in own) % 2 for r in range(3) for mono in (pw.outputs[3 * c + r] or {})}
+            for c in columns
+        )
+        if own and all(len(par) <= 1 for par in parities):
+            out.append(j)
+    return tuple(out)
 
 
 #: largest number of terms of one expanded node
