@@ -245,7 +245,11 @@ def _half_turn(f: ca.Function, periodic, columns) -> tuple:
             continue  # the joint enters other than through sin and cos of itself
         own = {i for key, pair in pw.pairs.items() if key[0] == j for i in pair}
         parities = (
-            {sum(power for v, power in mono if v in own) % 2 for r in range(3) for mono in (pw.outputs[3 * c + r] or {})}
+            {
+                sum(power for v, power in mono if v in own) % 2
+                for r in range(3)
+                for mono in (pw.outputs[3 * c + r] or {})
+            }
             for c in columns
         )
         if own and all(len(par) <= 1 for par in parities):
