@@ -114,7 +114,7 @@ def test_six_joint_exchange_certified_with_a_margin(name, margin):
     assert 0 < w.gap <= margin * w.result.cost
 
 
-@pytest.mark.long  # 2-3 min per arm on 2 cores
+@pytest.mark.long  # 1.5-2 min per arm on 2 cores
 @pytest.mark.parametrize("name", ["puma560", "ur5", "kr6r900sixx"])
 def test_six_joint_exchange_certified_without_a_margin(name):
     """Without a margin the sampled stage goes on to a tenth of tol, and the proof closes in the

@@ -219,10 +219,10 @@ def synthesize_workspace(
     needs room between the design's largest error and ``1 + tol``; an exchange's design is nearly
     flat (on a six-joint arm within 1e-3 of its maximum over a few percent of the joint space), so
     without a margin that room is at most ``tol``: the Gaussian reading's sampled stage then goes
-    on until the worst pose it finds is within a tenth of ``tol``, and the proof takes 140 000 to
-    200 000 boxes, 2-3 min, on a six-joint arm.  A margin buys room for cost: ``lower_bound`` then
+    on until the worst pose it finds is within a tenth of ``tol``, and the proof takes 70 000 to
+    100 000 boxes, 1.3-2 min, on a six-joint arm.  A margin buys room for cost: ``lower_bound`` then
     comes from a solve at ``R`` at the final poses, so ``gap`` shows what the margin cost (Puma
-    560: a margin of 3e-3, +0.2 %, in half a minute).  ``progress``: a progress bar on stderr, of
+    560: a margin of 3e-3, +0.2 %, in 20 s).  ``progress``: a progress bar on stderr, of
     the exchange's rounds (with ``certify``: of each certified search's boxes); None shows it on a
     terminal for runs over a couple of seconds.  The sphere criterion is not certified.
     """
@@ -345,7 +345,7 @@ EXACT_SLACK = 1e-6
 #: the share of ``tol`` by which a sampled pose may exceed the specification, in the certified
 #: exchange's Gaussian reading without a design margin, before it is imposed: the proof's room is
 #: what the design's worst pose leaves below ``1 + tol``, and its boxes grow steeply as the room
-#: closes (the Puma 560 at the full tol: 470 s; at a tenth: 178 s, in 18 rounds)
+#: closes (the Puma 560's proof, q6 over a whole turn: 282 223 boxes at the full tol, 195 811 at a tenth)
 SAMPLED_SHARE = 0.1
 #: the exchange's default round limits: 20, and with that share 30 (the KR 6 R900 took 20 rounds)
 ROUNDS, SHARE_ROUNDS = 20, 30
@@ -404,8 +404,8 @@ def _certified_exchange(
                 CertificationWarning(
                     f"the exact reading's proof has not been seen to close on {searched} searched joints "
                     "(the Puma 560's five: not certified by a run of 20 rounds, 7.5 min); the exchange goes on and says "
-                    "whether it closed. The Gaussian reading certifies six-joint arms in 2-3 min, and with a "
-                    "design margin in about a minute: probability='gaussian', certify_options={'margin': 3e-3} "
+                    "whether it closed. The Gaussian reading certifies six-joint arms in under 2 min, and with a "
+                    "design margin in under a minute: probability='gaussian', certify_options={'margin': 3e-3} "
                     "(CLI: --probability gaussian --margin 3e-3); the Panda, whose design is flatter, "
                     "with a margin of 1e-2 in about 3 min"
                 ),
