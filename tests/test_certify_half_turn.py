@@ -72,3 +72,13 @@ def test_the_bound_over_half_a_turn_holds_over_the_whole_range():
     s = np.sqrt(np.linalg.eigvalsh(np.einsum("nij,j,nkj->nik", A, eps**2 / 3.0, A))[:, -1])
     assert s.max() <= c.upper_bound
     assert c.q[5] <= cut + 1e-12  # the pose found lies in the half searched
+
+
+def test_the_certificate_says_which_joints_it_searched_over_half_a_turn():
+    """The certificate names the joints halved, in its summary too; the planar 2R's one half-turn
+    joint is its base rotation, held, so it halves nothing."""
+    c = certify_worst_pose(tolsynth.load_model("puma560"), "fine", "uniform", progress=False, max_boxes=2000)
+    assert c.half_turn == ("q6",)
+    assert "half a turn" in c.summary() and "q6" in c.summary().split("half a turn")[1]
+    c2 = certify_worst_pose(tolsynth.load_model("planar_2r"), "coarse", progress=False)
+    assert c2.half_turn == ()  # its half-turn joint q1 is held as the base rotation

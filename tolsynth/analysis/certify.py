@@ -78,6 +78,9 @@ class Certificate:
         Why not certified ("" when certified).
     held : dict
         Joint name -> why it was held (it cannot change the criterion).
+    half_turn : tuple of str
+        Searched joints covered over half a turn only: half a turn of each changes no column of the
+        sensitivity but its sign (proven), so the other half holds the same values.
     searched : tuple of str
         The joints searched.
     dropped : tuple of str
@@ -110,6 +113,7 @@ class Certificate:
     reason: str
     rtol: float
     held: dict = field(default_factory=dict)
+    half_turn: tuple = ()
     searched: tuple = ()
     dropped: tuple = ()
     method: str = ""
@@ -149,6 +153,8 @@ class Certificate:
         )
         if self.held:
             lines.append("  held: " + "; ".join(f"{k} ({v})" for k, v in self.held.items()))
+        if self.half_turn:
+            lines.append("  searched over half a turn (the other half the same, proven): " + ", ".join(self.half_turn))
         if self.dropped:
             lines.append("  no effect on the hand position: " + ", ".join(self.dropped))
         return "\n".join(lines)
@@ -405,6 +411,7 @@ def certify_worst_pose(
         rtol=rtol,
         held={names[j]: f"{math.degrees(v):g} deg, {dom.why[j]}" for j, v in dom.held.items()},
         searched=tuple(names[j] for j in dom.free),
+        half_turn=tuple(names[j] for j in dom.halved),
         dropped=tuple(mech.error_parameters[i] for i in range(mech.n) if i not in st.columns),
         method=method,
         history=tuple(history),

@@ -35,6 +35,7 @@ class Domain:
     constraint_fn: object
     linear: tuple  # (a, lower, upper) of each linear constraint, a over the coordinates
     M: np.ndarray | None = None  # the searched joints are M @ coordinates; None: the coordinates themselves
+    halved: tuple = ()  # joints searched over half a turn of a wider range (Structure.half_turn)
 
     def joints(self, X: np.ndarray) -> np.ndarray:
         """Searched joints (n, k) at coordinates X (n, k)."""
@@ -64,13 +65,15 @@ def domain(mech, st, base_q: np.ndarray, half_turns: bool = True) -> Domain:
             why[j] = "the hand position's sensitivity does not depend on it"
     held = {j: float(np.clip(base_q[j], lo_q[j], hi_q[j])) for j in range(nq) if j not in free}
     lo, hi = lo_q[free].copy(), hi_q[free].copy()
+    halved = []
     for i, j in enumerate(free):
         if j in st.periodic and j not in constrained and hi[i] - lo[i] > 2 * math.pi:
             hi[i] = lo[i] + 2 * math.pi  # one period: the joint enters only through sin and cos
         if half_turns and j in st.half_turn and j not in constrained and hi[i] - lo[i] > math.pi:
             hi[i] = lo[i] + math.pi  # every pose past it is one inside turned by half a turn
+            halved.append(j)
     linear = tuple(_rows(mech, free))
-    return Domain(free, held, why, lo, hi, constraints(mech, free, held, linear), linear)
+    return Domain(free, held, why, lo, hi, constraints(mech, free, held, linear), linear, halved=tuple(halved))
 
 
 def _rows(mech, free):
@@ -180,5 +183,6 @@ def sheared(mech, dom: Domain) -> Domain:
             constraints(mech, dom.free, dom.held, rows, M),
             tuple(rows),
             M,
+            dom.halved,
         )
     return dom
