@@ -480,7 +480,8 @@ def _certified_exchange(
             if exact and len(cert.searched) >= 5:  # the exact bounds are Taylor corners there
                 reason += (
                     f"; the exact reading's proof does not close on {len(cert.searched)} searched joints: "
-                    "probability='gaussian' with a design margin (certify_options 'margin') closes on six-joint arms"
+                    "probability='gaussian' closes on six-joint arms (the Panda with a design margin, certify_options "
+                    "'margin': 1e-2)"
                 )
             elif not margin:
                 reason += "; a design margin (certify_options 'margin', e.g. 3 tol) gives the proof room"
