@@ -82,3 +82,23 @@ def test_the_certificate_says_which_joints_it_searched_over_half_a_turn():
     assert "half a turn" in c.summary() and "q6" in c.summary().split("half a turn")[1]
     c2 = certify_worst_pose(tolsynth.load_model("planar_2r"), "coarse", progress=False)
     assert c2.half_turn == ()  # its half-turn joint q1 is held as the base rotation
+
+
+def test_a_seed_in_the_half_not_searched_is_folded_in_with_its_value():
+    """A pose with q6 past the half turn searched (and q4 past one period) moves by whole periods
+    into the search's box: inside it, sigma_1 unchanged (NumPy eigenvalues), not clipped to an end."""
+    m = tolsynth.load_model("ur5")
+    st = structure(m)
+    dom = domain(m, st, np.zeros(6))
+    eps = m.tolerances("fine")
+    q = np.radians([0.0, -60.0, 80.0, 200.0, 40.0, 150.0])  # q6 = 150 deg: past [-360, -180] deg
+    x = dom.fold(q[dom.free][None])[0]
+    assert np.all((dom.lo <= x) & (x <= dom.hi)) and np.all(x < dom.hi - 1e-3)
+
+    def sigma(qv):
+        A = m.sensitivity(qv, check_limits=False)[:3]
+        return np.sqrt(np.linalg.eigvalsh(A @ np.diag(eps**2 / 3.0) @ A.T)[-1])
+
+    q2 = q.copy()
+    q2[dom.free] = x
+    assert sigma(q2) == pytest.approx(sigma(q), rel=1e-12)

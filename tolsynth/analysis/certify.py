@@ -287,7 +287,7 @@ def certify_worst_pose(
         X0 = np.atleast_2d(np.asarray(x0, dtype=float))
         if X0.shape[1] != nq:
             raise InputError("x0", f"shape {X0.shape}", f"poses of {nq} joint values (rad)")
-        seeds = X0[:, dom.free]
+        seeds = dom.fold(X0[:, dom.free])
     deadline = time.monotonic() + (check_positive(time_limit, "time_limit", "s") if time_limit else math.inf)
 
     def stop():

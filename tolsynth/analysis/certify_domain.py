@@ -36,6 +36,15 @@ class Domain:
     linear: tuple  # (a, lower, upper) of each linear constraint, a over the coordinates
     M: np.ndarray | None = None  # the searched joints are M @ coordinates; None: the coordinates themselves
     halved: tuple = ()  # joints searched over half a turn of a wider range (Structure.half_turn)
+    periods: dict = None  # searched joint's index -> its period (2 pi, or pi when halved) where its range was cut
+
+    def fold(self, Q: np.ndarray) -> np.ndarray:
+        """Searched joints Q (n, k) with each cut joint moved by whole periods into its range: the
+        same sensitivities up to sign, so a seed keeps its value instead of being clipped."""
+        Q = np.array(Q, dtype=float)
+        for i, period in (self.periods or {}).items():
+            Q[:, i] = self.lo[i] + np.mod(Q[:, i] - self.lo[i], period)
+        return np.minimum(np.maximum(Q, self.lo), self.hi)  # a rounding past the end
 
     def joints(self, X: np.ndarray) -> np.ndarray:
         """Searched joints (n, k) at coordinates X (n, k)."""
@@ -65,15 +74,17 @@ def domain(mech, st, base_q: np.ndarray, half_turns: bool = True) -> Domain:
             why[j] = "the hand position's sensitivity does not depend on it"
     held = {j: float(np.clip(base_q[j], lo_q[j], hi_q[j])) for j in range(nq) if j not in free}
     lo, hi = lo_q[free].copy(), hi_q[free].copy()
-    halved = []
+    halved, periods = [], {}
     for i, j in enumerate(free):
         if j in st.periodic and j not in constrained and hi[i] - lo[i] > 2 * math.pi:
             hi[i] = lo[i] + 2 * math.pi  # one period: the joint enters only through sin and cos
+            periods[i] = 2 * math.pi
         if half_turns and j in st.half_turn and j not in constrained and hi[i] - lo[i] > math.pi:
             hi[i] = lo[i] + math.pi  # every pose past it is one inside turned by half a turn
             halved.append(j)
+            periods[i] = math.pi
     linear = tuple(_rows(mech, free))
-    return Domain(free, held, why, lo, hi, constraints(mech, free, held, linear), linear, halved=tuple(halved))
+    return Domain(free, held, why, lo, hi, constraints(mech, free, held, linear), linear, None, tuple(halved), periods)
 
 
 def _rows(mech, free):
@@ -184,5 +195,6 @@ def sheared(mech, dom: Domain) -> Domain:
             tuple(rows),
             M,
             dom.halved,
+            dom.periods,
         )
     return dom

@@ -233,7 +233,7 @@ class _NoProof(Exception):
 def _half_turn(f: ca.Function, periodic, columns) -> tuple:
     """The periodic joints whose half turn changes no column of ``A`` but its sign: read as exact
     polynomials (:class:`_PolyWalk`), every monomial of a column's three entries has the same parity
-    of degree in that joint's cosines and sines, which half a turn negates.  None where the graph is
+    of degree in that joint's cosines and sines, which half a turn negates.  Empty where the graph is
     not a polynomial in sines and cosines."""
     try:
         pw = _PolyWalk(f, None, atoms=False)
