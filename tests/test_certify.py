@@ -357,7 +357,9 @@ def test_interference_corner_found_where_the_sampled_exchange_missed_it(models):
     R, p = 0.5, 0.99
     w = tolsynth.synthesize_workspace(m, R, p, "uniform", 0.7, probability="gaussian")
     z = z_of_p(p)
-    c = certify_worst_pose(m, w.result.x, "uniform", progress=False, rtol=1e-5)
+    # one process: with workers the pose found depends on their timing (its value does not, to the
+    # search's tolerance), and a pose a few microradians off the limit meets that tolerance too
+    c = certify_worst_pose(m, w.result.x, "uniform", progress=False, rtol=1e-5, workers=1)
     found = c.best_value * z / R
     assert found > w.worst_value + 1e-4  # the sampled search stopped short of it
     assert c.upper_bound * z / R - found <= 2e-5
