@@ -164,7 +164,7 @@ plt.show()
 # proves at `R`; `lower_bound` then comes from a solve at `R` at the final poses, so `gap` says what
 # the margin cost. Measured on the 2-core machine with the Gaussian reading and `m = 3e-3`: the
 # Puma 560 certified in 20 s, the UR5 in 42 s, the KR 6 R900 in 21 s, each at +0.21 % cost
-# (without a margin in 77-115 s, each design at its own lower bound). On the paper's robot:
+# (without a margin in 77-124 s, each design at its own lower bound). On the paper's robot:
 
 # %%
 t0 = time.perf_counter()
