@@ -57,13 +57,13 @@ def test_the_search_covers_half_a_turn_and_a_map_the_whole_range():
     assert whole.hi[i] - whole.lo[i] == pytest.approx(2 * math.pi)  # one period of its 532 deg
 
 
-@pytest.mark.slow  # 10-15 s
+@pytest.mark.slow  # 5 s
 def test_the_bound_over_half_a_turn_holds_over_the_whole_range():
     """The certified search over q6 in half a turn bounds sigma_1 at random poses over all of q6's
     range (NumPy eigenvalues), poses in the half not searched among them."""
     m = tolsynth.load_model("ur5")
     eps = m.tolerances("fine")
-    c = certify_worst_pose(m, eps, "uniform", progress=False, time_limit=10.0)
+    c = certify_worst_pose(m, eps, "uniform", progress=False, time_limit=3.0)  # proven or not, a bound
     lo, hi = _limits(m)
     Q = lo + (hi - lo) * np.random.default_rng(7).random((4000, 6))
     cut = lo[5] + math.pi
