@@ -105,3 +105,12 @@ def test_a_seed_in_the_half_not_searched_is_folded_in_with_its_value():
     q2 = q.copy()
     q2[dom.free] = x
     assert sigma(q2) == pytest.approx(sigma(q), rel=1e-12)
+
+
+def test_the_report_table_names_the_half_turn_joints():
+    from tolsynth.io.report_certificate import _search_rows
+
+    c = certify_worst_pose(tolsynth.load_model("puma560"), "fine", "uniform", progress=False, max_boxes=100, workers=1)
+    rows = dict((r[0], r[1]) for r in _search_rows(c, 2.5758, 0.5))
+    assert rows["searched over half a turn (the other half the same, proven)"] == "q6"
+    assert rows["joints searched"] == "q2, q3, q4, q5, q6"

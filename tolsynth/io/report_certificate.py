@@ -39,7 +39,7 @@ def _search_rows(cert, z: float, R: float) -> list:
         rows.append(["joints held (proven without effect)", "; ".join(f"{k}: {v}" for k, v in cert.held.items())])
     if cert.searched:
         rows.append(["joints searched", ", ".join(cert.searched)])
-    if getattr(cert, "half_turn", ()):
+    if cert.half_turn:
         rows.append(["searched over half a turn (the other half the same, proven)", ", ".join(cert.half_turn)])
     return rows
 
