@@ -35,6 +35,7 @@ from tolsynth.analysis.certify_domain import sheared
 from tolsynth.analysis.certify_parallel import worker_count
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 from tolsynth.analysis.interval_ops import round_down as _dn
+from tolsynth.analysis.interval_ops import round_up as _up
 from tolsynth.checks import check_count, check_positive
 from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.progress import Progress, remaining
@@ -81,6 +82,12 @@ class Certificate:
     half_turn : tuple of str
         Searched joints covered over half a turn only: half a turn of each changes no column of the
         sensitivity but its sign (proven), so the other half holds the same values.
+    flip : tuple of str
+        A wrist flip that cut the first of its joints searched to half a turn (empty if none):
+        the two joints turned by half a turn, the one mirrored between them; the poses past the
+        cut are flips of poses inside, with the same columns of the sensitivity up to sign and a
+        residual from the twists' rounded constants, added to ``upper_bound`` (about 1e-13 mm).
+        The Gaussian reading only: the exact search covers the whole range.
     searched : tuple of str
         The joints searched.
     dropped : tuple of str
@@ -114,6 +121,7 @@ class Certificate:
     rtol: float
     held: dict = field(default_factory=dict)
     half_turn: tuple = ()
+    flip: tuple = ()
     searched: tuple = ()
     dropped: tuple = ()
     method: str = ""
@@ -155,6 +163,11 @@ class Certificate:
             lines.append("  held: " + "; ".join(f"{k} ({v})" for k, v in self.held.items()))
         if self.half_turn:
             lines.append("  searched over half a turn (the other half the same, proven): " + ", ".join(self.half_turn))
+        if self.flip:
+            lines.append(
+                f"  wrist flip ({self.flip[0]}, {self.flip[2]} half a turn, {self.flip[1]} mirrored; proven): "
+                "searched over half a turn of one of them"
+            )
         if self.dropped:
             lines.append("  no effect on the hand position: " + ", ".join(self.dropped))
         return "\n".join(lines)
@@ -280,7 +293,10 @@ def certify_worst_pose(
         _, ref = _reference(mech, MODEL_REFERENCE)
         base_q = ref if ref is not None else np.zeros(nq)
     base_q = np.asarray(base_q, dtype=float)
-    dom = _domain(mech, st, base_q)
+    # a wrist flip's residual is bounded for sigma_1 (Domain.flip_excess); the exact search has no
+    # such term, so it covers the flip's other half itself
+    gaussian = criterion == "sigma" or probability == "gaussian"
+    dom = _domain(mech, st, base_q, flips=gaussian)
     cols = list(st.columns)
     seeds = None
     if x0 is not None:
@@ -309,14 +325,16 @@ def certify_worst_pose(
     direction = None
     leaves = [] if keep_boxes else None
     try:
-        if criterion == "sigma" or probability == "gaussian":
+        if gaussian:
             sdom = dom
-            bounds, method = _sigma_bounds(st, sdom, nq, (eps**2 / c)[cols])
+            w = (eps**2 / c)[cols]
+            excess = dom.flip_excess(w)  # sigma_1 past the flip's cut is at most excess above its value inside
+            bounds, method = _sigma_bounds(st, sdom, nq, w)
             if leaves is None and not isinstance(bounds, PolygonSigmaBounds):
                 # a joint constraint as a coordinate (kept boxes are reported in joints)
                 sdom = sheared(mech, dom)
                 if sdom is not dom:
-                    bounds, method = _sigma_bounds(st, sdom, nq, (eps**2 / c)[cols])
+                    bounds, method = _sigma_bounds(st, sdom, nq, w)
             if criterion == "components" and (target is not None or stop_at is not None):
                 raise InputError(
                     "target",
@@ -339,7 +357,7 @@ def certify_worst_pose(
                 callback=callback,
                 stop=stop,
                 batch=512,
-                target=target,
+                target=None if target is None else target - excess,
                 stop_above=stop_at,
                 leaves=leaves,
                 workers=workers,
@@ -351,7 +369,7 @@ def certify_worst_pose(
                     "no pose satisfies every joint limit and constraint",
                     "a non-empty feasible joint space",
                 )
-            ub = float(r.upper_bound)
+            ub = float(_up(r.upper_bound + excess)) if excess else float(r.upper_bound)
             q = _full(sdom, r.best_x, nq)
             best = float(r.best_value)
             p_lb = None
@@ -412,6 +430,7 @@ def certify_worst_pose(
         held={names[j]: f"{math.degrees(v):g} deg, {dom.why[j]}" for j, v in dom.held.items()},
         searched=tuple(names[j] for j in dom.free),
         half_turn=tuple(names[j] for j in dom.halved),
+        flip=() if dom.flip is None else tuple(names[j] for j in dom.flip[:3]),
         dropped=tuple(mech.error_parameters[i] for i in range(mech.n) if i not in st.columns),
         method=method,
         history=tuple(history),

@@ -37,14 +37,36 @@ class Domain:
     M: np.ndarray | None = None  # the searched joints are M @ coordinates; None: the coordinates themselves
     halved: tuple = ()  # joints searched over half a turn of a wider range (Structure.half_turn)
     periods: dict = None  # searched joint's index -> its period (2 pi, or pi when halved) where its range was cut
+    # a wrist flip used to cut a joint to half a turn: (a, b, c, residual) of Structure.flips and the
+    # searched indices of the joint cut, the one mirrored and the other one turned (None where held)
+    flip: tuple | None = None
+    flip_index: tuple | None = None
 
     def fold(self, Q: np.ndarray) -> np.ndarray:
-        """Searched joints Q (n, k) with each cut joint moved by whole periods into its range: the
-        same sensitivities up to sign, so a seed keeps its value instead of being clipped."""
+        """Searched joints Q (n, k) moved into the box by the symmetries that cut it: each cut joint
+        by whole periods, and past a flip's half turn by the flip: the same sensitivities up to sign
+        (and the flip's residual), so a seed keeps its value instead of being clipped."""
         Q = np.array(Q, dtype=float)
+        if self.flip_index is not None:
+            i, mirror, other = self.flip_index
+            Q[:, i] = self.lo[i] + np.mod(Q[:, i] - self.lo[i], 2 * math.pi)
+            past = Q[:, i] > self.hi[i]
+            Q[past, i] -= math.pi
+            if mirror is not None:
+                Q[past, mirror] = -Q[past, mirror]
+            if other is not None:
+                Q[past, other] += math.pi
         for i, period in (self.periods or {}).items():
             Q[:, i] = self.lo[i] + np.mod(Q[:, i] - self.lo[i], period)
         return np.minimum(np.maximum(Q, self.lo), self.hi)  # a rounding past the end
+
+    def flip_excess(self, w: np.ndarray) -> float:
+        """What the flip's residual can add to sigma_1 beyond the box (mm), with ``w`` the kept
+        columns' variance weights: ``||Delta W^1/2||_2 <= ||Delta W^1/2||_F``, rounded up."""
+        if self.flip is None:
+            return 0.0
+        r = np.asarray(self.flip[3], dtype=float)
+        return float(_up(math.sqrt(_up(float(np.sum(_up(r * r) * np.asarray(w, dtype=float)) * (1 + 1e-12))))))
 
     def joints(self, X: np.ndarray) -> np.ndarray:
         """Searched joints (n, k) at coordinates X (n, k)."""
@@ -57,10 +79,12 @@ class Domain:
         return Q if self.M is None else np.linalg.solve(self.M, Q.T).T
 
 
-def domain(mech, st, base_q: np.ndarray, half_turns: bool = True) -> Domain:
+def domain(mech, st, base_q: np.ndarray, half_turns: bool = True, flips: bool | None = None) -> Domain:
     """The searched joints, their box and constraints.  ``half_turns``: a joint whose half turn
     changes nothing searched (``st.half_turn``) is searched over half a turn; False for a map,
-    which shows the whole range."""
+    which shows the whole range.  ``flips`` (default: as ``half_turns``): a joint of a wrist flip
+    (``st.flips``) is searched over half a turn where the flip maps the rest of its range into
+    the box (:func:`_flip_cut`)."""
     lo_q, hi_q = _limits(mech)
     nq = len(lo_q)
     names = list(mech.joint_names)
@@ -83,8 +107,53 @@ def domain(mech, st, base_q: np.ndarray, half_turns: bool = True) -> Domain:
             hi[i] = lo[i] + math.pi  # every pose past it is one inside turned by half a turn
             halved.append(j)
             periods[i] = math.pi
+    flip = flip_index = None
+    if half_turns if flips is None else flips:
+        flip, flip_index = _flip_cut(st, free, constrained, lo, hi, periods)
     linear = tuple(_rows(mech, free))
-    return Domain(free, held, why, lo, hi, constraints(mech, free, held, linear), linear, None, tuple(halved), periods)
+    return Domain(
+        free,
+        held,
+        why,
+        lo,
+        hi,
+        constraints(mech, free, held, linear),
+        linear,
+        None,
+        tuple(halved),
+        periods,
+        flip,
+        flip_index,
+    )
+
+
+def _flip_cut(st, free, constrained, lo, hi, periods):
+    """Cut one joint of a wrist flip ``(a, b, c)`` to half a turn (``lo`` and ``hi`` in place): a
+    pose past it is the flip of one inside, which has the same columns of ``A`` up to sign and the
+    residual.  The joint cut (a or c, the wider) spans more than half a turn and at most a period;
+    the other of a and c is held (its value changes nothing) or searched over a whole period or
+    half a turn (``periods``), so half a turn more stays inside; b is held or its range is
+    symmetric about 0.  None of them in a joint constraint.  One flip at most: the fold applies it
+    once.  Returns (the flip, (cut, mirrored, other) as searched indices or None) or (None, None)."""
+    best = (None, None)
+    width = 0.0
+    for flip in st.flips:
+        a, b, c, _ = flip
+        if {a, b, c} & constrained:
+            continue
+        if b in free and lo[free.index(b)] != -hi[free.index(b)]:
+            continue
+        for cut, other in ((a, c), (c, a)):
+            if cut not in free or other in free and free.index(other) not in periods:
+                continue
+            i = free.index(cut)
+            if hi[i] - lo[i] > math.pi and hi[i] - lo[i] > width:
+                width = hi[i] - lo[i]
+                best = (flip, (i, free.index(b) if b in free else None, free.index(other) if other in free else None))
+    if best[0] is not None:
+        i = best[1][0]
+        hi[i] = lo[i] + math.pi
+    return best
 
 
 def _rows(mech, free):
@@ -196,5 +265,7 @@ def sheared(mech, dom: Domain) -> Domain:
             M,
             dom.halved,
             dom.periods,
+            dom.flip,
+            dom.flip_index,
         )
     return dom

@@ -2,7 +2,7 @@
 
 The search bounds functions of the position sensitivity at zero error, ``A(q)`` (3 x n, mm per
 tolerance unit; the rows dx, dy, dz of the ``sensitivity`` graph at ``delta = 0``).  Before it
-splits a single box it reads five facts off that graph:
+splits a single box it reads six facts off that graph:
 
 * **error parameters without effect**: columns of ``A`` that are structurally zero (CasADi's
   sparsity, no numbers involved), e.g. a roll angle of the last frame that turns the hand point
@@ -17,6 +17,14 @@ splits a single box it reads five facts off that graph:
   negates each of them, so each column keeps or flips its sign: ``A W A^T`` and every probability
   (the errors are symmetric) are unchanged, and a range wider than pi is searched over half a turn
   (the hand roll of the Puma 560, the UR5 and the KR 6 R900, whose last link's offsets turn with it).
+* **wrist flips**: three consecutive periodic joints a, b, c such that turning a and c by half a
+  turn and mirroring b (``q_b -> -q_b``) changes every kept column of ``A`` only by its sign: the
+  two solutions of a spherical wrist (the Puma 560's and the KR 6 R900's q4, q5, q6), and of a
+  shoulder whose first joint is the base rotation (the Panda's q1, q2, q3).  The twists' constants
+  are rounded (``cos(fl(pi/2)) = 6e-17``), so the identity holds only to about 1e-16 of each
+  column: the proof reads the exact polynomial, takes each column's sign from most of its
+  coefficients and bounds the rest (the residual), which the search adds to its bound.  A joint of
+  the flip is then searched over half a turn (:func:`tolsynth.analysis.certify_domain.domain`).
 * **a joint that turns the error distribution rigidly about the base z axis** (the waist of the
   paper's robot and of most arms): ``A(q) = Rz(q_j + k) A(q with Rz = I)`` for every pose.  Then
   every principal standard deviation and every per-direction probability is the same at every
@@ -71,6 +79,10 @@ class Structure:
         Joints entering ``A`` only through sin and cos of the joint plus constants.
     half_turn : tuple of int
         Periodic joints whose half turn changes no column of ``A`` but its sign (proven).
+    flips : tuple of (int, int, int, tuple)
+        Wrist flips ``(a, b, c, residual)``: turning joints a and c by half a turn and mirroring
+        joint b changes every kept column of ``A`` only by its sign, up to ``residual`` (the 3 x
+        kept-columns bounds, mm per tolerance unit, of what the twists' rounded constants leave).
     notes : tuple of str
         What was proven and what could not be, in words.
     """
@@ -82,6 +94,7 @@ class Structure:
     periodic: tuple
     notes: tuple
     half_turn: tuple = ()
+    flips: tuple = ()
 
 
 _CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -151,9 +164,19 @@ def structure(mech) -> Structure:
             break
         if why:
             notes.append(f"{names[j]}: {why}")
-    half_turn = _half_turn(A, periodic, columns)
+    try:
+        pw = _PolyWalk(A, None, atoms=False)
+    except _NoProof:
+        pw = None
+    half_turn = _half_turn(pw, periodic, columns)
     notes += [f"{names[j]}: half a turn changes no column of A but its sign (proven)" for j in half_turn]
-    out = Structure(A, columns, joints, rotation, periodic, tuple(notes), half_turn)
+    flips = _flips(A, pw, periodic, columns)
+    notes += [
+        f"{names[a]} and {names[c]} turned by half a turn with {names[b]} mirrored change no column of A "
+        "but its sign, to the rounding of the twists (proven, the rest bounded)"
+        for a, b, c, _ in flips
+    ]
+    out = Structure(A, columns, joints, rotation, periodic, tuple(notes), half_turn, flips)
     _CACHE[mech] = out
     return out
 
@@ -230,14 +253,12 @@ class _NoProof(Exception):
     pass
 
 
-def _half_turn(f: ca.Function, periodic, columns) -> tuple:
+def _half_turn(pw, periodic, columns) -> tuple:
     """The periodic joints whose half turn changes no column of ``A`` but its sign: read as exact
-    polynomials (:class:`_PolyWalk`), every monomial of a column's three entries has the same parity
-    of degree in that joint's cosines and sines, which half a turn negates.  Empty where the graph is
-    not a polynomial in sines and cosines."""
-    try:
-        pw = _PolyWalk(f, None, atoms=False)
-    except _NoProof:
+    polynomials (``pw``, a :class:`_PolyWalk`), every monomial of a column's three entries has the
+    same parity of degree in that joint's cosines and sines, which half a turn negates.  Empty where
+    the graph is not a polynomial in sines and cosines (``pw`` None)."""
+    if pw is None:
         return ()
     out = []
     for j in periodic:
@@ -255,6 +276,88 @@ def _half_turn(f: ca.Function, periodic, columns) -> tuple:
         if own and all(len(par) <= 1 for par in parities):
             out.append(j)
     return tuple(out)
+
+
+#: a flip is used where what breaks it is at most this share of each column's coefficients: the
+#: twists' rounded constants (cos(fl(pi/2)) = 6e-17) leave 1e-16, a joint that is no flip O(1)
+FLIP_RESIDUAL = 1e-12
+
+
+def _flips(f: ca.Function, pw, periodic, columns) -> tuple:
+    """Wrist flips ``(a, b, c, residual)`` of consecutive periodic joints: ``q_a + pi, -q_b, q_c + pi``
+    keeps the hand frame of a spherical wrist, and of a shoulder whose first joint is the base
+    rotation.  Proven on the exact polynomials ``pw``: the flip negates the cosine and sine of a
+    and c (any offset) and the sine of b (offset 0 only), so each monomial keeps or flips its sign;
+    in each column the sign of most weight is the column's, and the monomials of the other sign,
+    at most their coefficients' sum as every cosine and sine is at most 1 in size, form twice the
+    residual.  Screened first at a few poses (NumPy) so that only plausible flips are expanded."""
+    if pw is None or any(d[0] == "q" for d in pw.vars):
+        return ()  # a joint value outside sine and cosine: no bound of a monomial by 1
+    out = []
+    for a in periodic:
+        b, c = a + 1, a + 2
+        if b not in periodic or c not in periodic or not _looks_like_flip(f, a):
+            continue
+        sign = {}
+        for (j, off), (ci, si) in pw.pairs.items():
+            if j in (a, c):
+                sign[ci], sign[si] = -1, -1
+            elif j == b:
+                if off != 0:
+                    break  # cos(-q + k) is no multiple of cos(q + k)
+                sign[ci], sign[si] = 1, -1
+        else:
+            residual = np.zeros((3, len(columns)))
+            for n, col in enumerate(columns):
+                mass = {1: Fraction(0), -1: Fraction(0)}
+                terms = []
+                for r in range(3):
+                    for mono, coef in (pw.outputs[3 * col + r] or {}).items():
+                        s_m = 1
+                        for v, power in mono:
+                            if power % 2:
+                                s_m *= sign.get(v, 1)
+                        mass[s_m] += abs(coef)
+                        terms.append((r, s_m, abs(coef)))
+                keep = 1 if mass[1] >= mass[-1] else -1
+                bad = [Fraction(0)] * 3
+                for r, s_m, coef in terms:
+                    if s_m != keep:
+                        bad[r] += coef
+                if sum(bad) > FLIP_RESIDUAL * mass[keep]:
+                    break
+                residual[:, n] = [_up_fraction(2 * x) for x in bad]
+            else:
+                out.append((a, b, c, tuple(map(tuple, residual))))
+    return tuple(out)
+
+
+def _up_fraction(x: Fraction) -> float:
+    """The smallest float at or above the rational x."""
+    v = float(x)
+    return v if Fraction(v) >= x else float(np.nextafter(v, np.inf))
+
+
+def _looks_like_flip(f: ca.Function, a: int) -> bool:
+    """A cheap screen before the proof: at a few poses the flip at joints a, a+1, a+2 changes each
+    column of A only by its sign (to rounding)."""
+    rng = np.random.default_rng(0)
+    nq = f.nnz_in(0)
+    if a + 2 >= nq:
+        return False
+    for _ in range(3):
+        q = rng.uniform(-3.0, 3.0, nq)
+        q2 = q.copy()
+        q2[a] += np.pi
+        q2[a + 1] = -q2[a + 1]
+        q2[a + 2] += np.pi
+        x, y = np.array(f(q)), np.array(f(q2))
+        if not np.all(np.isfinite(x)):
+            return False
+        change = np.minimum(np.abs(x - y).max(axis=0), np.abs(x + y).max(axis=0))
+        if change.max() > 1e-9 * (1.0 + np.abs(x).max()):
+            return False
+    return True
 
 
 #: largest number of terms of one expanded node

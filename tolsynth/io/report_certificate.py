@@ -41,6 +41,9 @@ def _search_rows(cert, z: float, R: float) -> list:
         rows.append(["joints searched", ", ".join(cert.searched)])
     if cert.half_turn:
         rows.append(["searched over half a turn (the other half the same, proven)", ", ".join(cert.half_turn)])
+    if cert.flip:
+        a, b, c = cert.flip
+        rows.append(["wrist flip (proven; its residual added to the bound)", f"{a}, {c} half a turn, {b} mirrored"])
     return rows
 
 
