@@ -219,10 +219,10 @@ def synthesize_workspace(
     needs room between the design's largest error and ``1 + tol``; an exchange's design is nearly
     flat (on a six-joint arm within 1e-3 of its maximum over a few percent of the joint space), so
     without a margin that room is at most ``tol``: the Gaussian reading's sampled stage then goes
-    on until the worst pose it finds is within a tenth of ``tol``, and the proof takes 70 000 to
-    100 000 boxes, 1.3-2 min, on a six-joint arm.  A margin buys room for cost: ``lower_bound`` then
+    on until the worst pose it finds is within a tenth of ``tol``, and the proof takes 35 000 to
+    100 000 boxes, 0.7-1.6 min, on a six-joint arm.  A margin buys room for cost: ``lower_bound`` then
     comes from a solve at ``R`` at the final poses, so ``gap`` shows what the margin cost (Puma
-    560: a margin of 3e-3, +0.2 %, in 20 s).  ``progress``: a progress bar on stderr, of
+    560: a margin of 3e-3, +0.2 %, in 16 s).  ``progress``: a progress bar on stderr, of
     the exchange's rounds (with ``certify``: of each certified search's boxes); None shows it on a
     terminal for runs over a couple of seconds.  The sphere criterion is not certified.
     """
