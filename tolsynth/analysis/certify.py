@@ -82,12 +82,12 @@ class Certificate:
     half_turn : tuple of str
         Searched joints covered over half a turn only: half a turn of each changes no column of the
         sensitivity but its sign (proven), so the other half holds the same values.
-    flip : tuple of str
-        A wrist flip that cut the first of its joints searched to half a turn (empty if none):
-        the two joints turned by half a turn, the one mirrored between them; the poses past the
-        cut are flips of poses inside, with the same columns of the sensitivity up to sign and a
-        residual from the twists' rounded constants, added to ``upper_bound`` (about 1e-13 mm).
-        The Gaussian reading only: the exact search covers the whole range.
+    symmetries : tuple of (str, str)
+        The symmetries that cut a searched joint to half its range, as (the map, the joint cut),
+        e.g. ``("q4 + pi, -q5", "q4")``: a pose past the cut is the map's image of one inside, with
+        the same columns of the sensitivity up to sign and a residual from the twists' rounded
+        constants, added to ``upper_bound`` (about 1e-13 mm).  The Gaussian reading only: the exact
+        search covers the whole range.
     searched : tuple of str
         The joints searched.
     dropped : tuple of str
@@ -121,7 +121,7 @@ class Certificate:
     rtol: float
     held: dict = field(default_factory=dict)
     half_turn: tuple = ()
-    flip: tuple = ()
+    symmetries: tuple = ()
     searched: tuple = ()
     dropped: tuple = ()
     method: str = ""
@@ -163,11 +163,8 @@ class Certificate:
             lines.append("  held: " + "; ".join(f"{k} ({v})" for k, v in self.held.items()))
         if self.half_turn:
             lines.append("  searched over half a turn (the other half the same, proven): " + ", ".join(self.half_turn))
-        if self.flip:
-            lines.append(
-                f"  wrist flip ({self.flip[0]}, {self.flip[2]} half a turn, {self.flip[1]} mirrored; proven): "
-                "searched over half a turn of one of them"
-            )
+        for sym, joint in self.symmetries:
+            lines.append(f"  {joint} searched over half its range: the rest is the image of it under {sym} (proven)")
         if self.dropped:
             lines.append("  no effect on the hand position: " + ", ".join(self.dropped))
         return "\n".join(lines)
@@ -293,10 +290,10 @@ def certify_worst_pose(
         _, ref = _reference(mech, MODEL_REFERENCE)
         base_q = ref if ref is not None else np.zeros(nq)
     base_q = np.asarray(base_q, dtype=float)
-    # a wrist flip's residual is bounded for sigma_1 (Domain.flip_excess); the exact search has no
-    # such term, so it covers the flip's other half itself
+    # a symmetry's residual is bounded for sigma_1 (Domain.symmetry_excess); the exact search has no
+    # such term, so it covers the whole range itself
     gaussian = criterion == "sigma" or probability == "gaussian"
-    dom = _domain(mech, st, base_q, flips=gaussian)
+    dom = _domain(mech, st, base_q, symmetries=gaussian)
     cols = list(st.columns)
     seeds = None
     if x0 is not None:
@@ -328,7 +325,7 @@ def certify_worst_pose(
         if gaussian:
             sdom = dom
             w = (eps**2 / c)[cols]
-            excess = dom.flip_excess(w)  # sigma_1 past the flip's cut is at most excess above its value inside
+            excess = dom.symmetry_excess(w)  # sigma_1 past a cut is at most excess above its value inside
             bounds, method = _sigma_bounds(st, sdom, nq, w)
             if leaves is None and not isinstance(bounds, PolygonSigmaBounds):
                 # a joint constraint as a coordinate (kept boxes are reported in joints)
@@ -430,7 +427,7 @@ def certify_worst_pose(
         held={names[j]: f"{math.degrees(v):g} deg, {dom.why[j]}" for j, v in dom.held.items()},
         searched=tuple(names[j] for j in dom.free),
         half_turn=tuple(names[j] for j in dom.halved),
-        flip=() if dom.flip is None else tuple(names[j] for j in dom.flip[:3]),
+        symmetries=tuple((sym.describe(names), names[dom.free[i]]) for sym, i in dom.cuts),
         dropped=tuple(mech.error_parameters[i] for i in range(mech.n) if i not in st.columns),
         method=method,
         history=tuple(history),

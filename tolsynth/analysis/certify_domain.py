@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from tolsynth.analysis.certify_structure import KEEP, MIRROR, MIRROR_TURN, TURN
 from tolsynth.analysis.interval_ops import round_down as _dn
 from tolsynth.analysis.interval_ops import round_up as _up
 from tolsynth.analysis.intervals import IntervalFunction
@@ -37,36 +38,48 @@ class Domain:
     M: np.ndarray | None = None  # the searched joints are M @ coordinates; None: the coordinates themselves
     halved: tuple = ()  # joints searched over half a turn of a wider range (Structure.half_turn)
     periods: dict = None  # searched joint's index -> its period (2 pi, or pi when halved) where its range was cut
-    # a wrist flip used to cut a joint to half a turn: (a, b, c, residual) of Structure.flips and the
-    # searched indices of the joint cut, the one mirrored and the other one turned (None where held)
-    flip: tuple | None = None
-    flip_index: tuple | None = None
+    # the symmetries that cut joints to half their range, in the order the fold applies them: each
+    # (Structure's Symmetry, searched index of the joint cut); every later one keeps the joints cut before
+    cuts: tuple = ()
 
     def fold(self, Q: np.ndarray) -> np.ndarray:
-        """Searched joints Q (n, k) moved into the box by the symmetries that cut it: each cut joint
-        by whole periods, and past a flip's half turn by the flip: the same sensitivities up to sign
-        (and the flip's residual), so a seed keeps its value instead of being clipped."""
+        """Searched joints Q (n, k) moved into the box by the symmetries that cut it: a pose past a
+        symmetry's cut by the symmetry (each cut in turn), each cut joint by whole periods: the
+        same sensitivities up to sign (and the symmetries' residuals), so a seed keeps its value
+        instead of being clipped."""
         Q = np.array(Q, dtype=float)
-        if self.flip_index is not None:
-            i, mirror, other = self.flip_index
-            Q[:, i] = self.lo[i] + np.mod(Q[:, i] - self.lo[i], 2 * math.pi)
-            past = Q[:, i] > self.hi[i]
-            Q[past, i] -= math.pi
-            if mirror is not None:
-                Q[past, mirror] = -Q[past, mirror]
-            if other is not None:
-                Q[past, other] += math.pi
+        for sym, i in self.cuts:
+            op = sym.ops[self.free[i]]
+            if i in (self.periods or {}):  # a whole period: the half kept, or its mirror image
+                Q[:, i] = self.lo[i] + np.mod(Q[:, i] - self.lo[i], 2 * math.pi)
+            past = Q[:, i] > self.hi[i] if op == TURN else Q[:, i] > self.hi[i]
+            if op == MIRROR and i not in (self.periods or {}):
+                past = Q[:, i] < self.lo[i]  # a range symmetric about 0, cut to [0, hi]
+            for o, j in enumerate(self.free):
+                op_o = sym.ops[j]
+                if op_o == TURN:
+                    Q[past, o] += -math.pi if o == i else math.pi
+                elif op_o == MIRROR:
+                    Q[past, o] = -Q[past, o]
+                elif op_o == MIRROR_TURN:
+                    Q[past, o] = math.pi - Q[past, o]
+            for o, period in (self.periods or {}).items():
+                Q[:, o] = self.lo[o] + np.mod(Q[:, o] - self.lo[o], period)
         for i, period in (self.periods or {}).items():
             Q[:, i] = self.lo[i] + np.mod(Q[:, i] - self.lo[i], period)
         return np.minimum(np.maximum(Q, self.lo), self.hi)  # a rounding past the end
 
-    def flip_excess(self, w: np.ndarray) -> float:
-        """What the flip's residual can add to sigma_1 beyond the box (mm), with ``w`` the kept
-        columns' variance weights: ``||Delta W^1/2||_2 <= ||Delta W^1/2||_F``, rounded up."""
-        if self.flip is None:
-            return 0.0
-        r = np.asarray(self.flip[3], dtype=float)
-        return float(_up(math.sqrt(_up(float(np.sum(_up(r * r) * np.asarray(w, dtype=float)) * (1 + 1e-12))))))
+    def symmetry_excess(self, w: np.ndarray) -> float:
+        """What the cutting symmetries' residuals can add to sigma_1 beyond the box (mm), with ``w``
+        the kept columns' variance weights: each one at most ``||Delta W^1/2||_2 <=
+        ||Delta W^1/2||_F``, summed over the cuts a pose may pass, rounded up."""
+        total = 0.0
+        for sym, _ in self.cuts:
+            r = np.asarray(sym.residual, dtype=float)
+            total = _up(
+                total + _up(math.sqrt(_up(float(np.sum(_up(r * r) * np.asarray(w, dtype=float)) * (1 + 1e-12)))))
+            )
+        return float(total)
 
     def joints(self, X: np.ndarray) -> np.ndarray:
         """Searched joints (n, k) at coordinates X (n, k)."""
@@ -79,12 +92,12 @@ class Domain:
         return Q if self.M is None else np.linalg.solve(self.M, Q.T).T
 
 
-def domain(mech, st, base_q: np.ndarray, half_turns: bool = True, flips: bool | None = None) -> Domain:
+def domain(mech, st, base_q: np.ndarray, half_turns: bool = True, symmetries: bool | None = None) -> Domain:
     """The searched joints, their box and constraints.  ``half_turns``: a joint whose half turn
     changes nothing searched (``st.half_turn``) is searched over half a turn; False for a map,
-    which shows the whole range.  ``flips`` (default: as ``half_turns``): a joint of a wrist flip
-    (``st.flips``) is searched over half a turn where the flip maps the rest of its range into
-    the box (:func:`_flip_cut`)."""
+    which shows the whole range.  ``symmetries`` (default: as ``half_turns``): joints are cut to
+    half their range where a symmetry of ``A`` (``st.symmetries``) maps the rest into the box
+    (:func:`_symmetry_cuts`)."""
     lo_q, hi_q = _limits(mech)
     nq = len(lo_q)
     names = list(mech.joint_names)
@@ -107,9 +120,9 @@ def domain(mech, st, base_q: np.ndarray, half_turns: bool = True, flips: bool | 
             hi[i] = lo[i] + math.pi  # every pose past it is one inside turned by half a turn
             halved.append(j)
             periods[i] = math.pi
-    flip = flip_index = None
-    if half_turns if flips is None else flips:
-        flip, flip_index = _flip_cut(st, free, constrained, lo, hi, periods)
+    cuts = ()
+    if half_turns if symmetries is None else symmetries:
+        cuts = _symmetry_cuts(st, free, constrained, lo, hi, periods)
     linear = tuple(_rows(mech, free))
     return Domain(
         free,
@@ -122,38 +135,59 @@ def domain(mech, st, base_q: np.ndarray, half_turns: bool = True, flips: bool | 
         None,
         tuple(halved),
         periods,
-        flip,
-        flip_index,
+        cuts,
     )
 
 
-def _flip_cut(st, free, constrained, lo, hi, periods):
-    """Cut one joint of a wrist flip ``(a, b, c)`` to half a turn (``lo`` and ``hi`` in place): a
-    pose past it is the flip of one inside, which has the same columns of ``A`` up to sign and the
-    residual.  The joint cut (a or c, the wider) spans more than half a turn and at most a period;
-    the other of a and c is held (its value changes nothing) or searched over a whole period or
-    half a turn (``periods``), so half a turn more stays inside; b is held or its range is
-    symmetric about 0.  None of them in a joint constraint.  One flip at most: the fold applies it
-    once.  Returns (the flip, (cut, mirrored, other) as searched indices or None) or (None, None)."""
-    best = (None, None)
-    width = 0.0
-    for flip in st.flips:
-        a, b, c, _ = flip
-        if {a, b, c} & constrained:
-            continue
-        if b in free and lo[free.index(b)] != -hi[free.index(b)]:
-            continue
-        for cut, other in ((a, c), (c, a)):
-            if cut not in free or other in free and free.index(other) not in periods:
+def _symmetry_cuts(st, free, constrained, lo, hi, periods) -> tuple:
+    """Cut joints to half their range by symmetries of ``A`` (``lo``, ``hi`` in place), greedily by
+    the range removed: a joint the symmetry turns by half a turn, spanning more than half a turn
+    and at most a whole one, to ``[lo, lo + pi]``; a joint it mirrors, of a range symmetric about
+    0, to ``[0, hi]``, or over a whole period, to the half congruent to ``[0, pi]`` or ``[pi, 2 pi]``.
+    A pose past the cut is the symmetry's image of one inside when every other joint the symmetry
+    moves stays in its range: held (its value changes nothing), over a whole period or half a turn,
+    or, mirrored, of a range symmetric about 0 (about pi / 2 for ``pi - q``).  A later cut keeps
+    every joint cut before it, and no joint of a joint constraint moves.  Returns the cuts as
+    ``(symmetry, searched index)`` in the order the fold applies them."""
+    cuts: list = []
+    done: set = set()
+    while True:
+        best, gain = None, 1e-9
+        for sym in st.symmetries:
+            ops = sym.ops
+            if any(ops[j] for j in constrained) or any(ops[free[i]] for i in done):
                 continue
-            i = free.index(cut)
-            if hi[i] - lo[i] > math.pi and hi[i] - lo[i] > width:
-                width = hi[i] - lo[i]
-                best = (flip, (i, free.index(b) if b in free else None, free.index(other) if other in free else None))
-    if best[0] is not None:
-        i = best[1][0]
-        hi[i] = lo[i] + math.pi
-    return best
+            for i, j in enumerate(free):
+                new = _half(ops[j], lo[i], hi[i], periods.get(i))
+                if new is None or (hi[i] - lo[i]) - (new[1] - new[0]) <= gain:
+                    continue
+                if all(_stays(ops[jo], lo[o], hi[o], periods.get(o)) for o, jo in enumerate(free) if o != i):
+                    best, gain = (sym, i, new), (hi[i] - lo[i]) - (new[1] - new[0])
+        if best is None:
+            return tuple(cuts)
+        sym, i, (lo[i], hi[i]) = best
+        cuts.append((sym, i))
+        done.add(i)
+
+
+def _half(op, lo, hi, period):
+    """The half of a joint's range ``[lo, hi]`` a symmetry's ``op`` maps the rest onto, or None."""
+    if op == TURN and math.pi < hi - lo <= 2 * math.pi and period != math.pi:
+        return lo, lo + math.pi
+    if op == MIRROR and period == 2 * math.pi:
+        c = 2 * math.pi * math.ceil(lo / (2 * math.pi))  # a multiple of 2 pi in [lo, lo + 2 pi]
+        return (c, c + math.pi) if c - lo <= math.pi else (c - math.pi, c)
+    if op == MIRROR and period is None and lo == -hi and hi > 0:
+        return 0.0, hi
+    return None
+
+
+def _stays(op, lo, hi, period) -> bool:
+    """Whether a joint moved by ``op`` stays in ``[lo, hi]`` up to its period (``period``: the
+    joint's period where its range was cut to it, else None)."""
+    if op == KEEP or period is not None:
+        return True
+    return (op == MIRROR and lo == -hi) or (op == MIRROR_TURN and lo + hi == math.pi)
 
 
 def _rows(mech, free):
@@ -265,7 +299,6 @@ def sheared(mech, dom: Domain) -> Domain:
             M,
             dom.halved,
             dom.periods,
-            dom.flip,
-            dom.flip_index,
+            dom.cuts,
         )
     return dom

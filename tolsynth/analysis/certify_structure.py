@@ -17,14 +17,16 @@ splits a single box it reads six facts off that graph:
   negates each of them, so each column keeps or flips its sign: ``A W A^T`` and every probability
   (the errors are symmetric) are unchanged, and a range wider than pi is searched over half a turn
   (the hand roll of the Puma 560, the UR5 and the KR 6 R900, whose last link's offsets turn with it).
-* **wrist flips**: three consecutive periodic joints a, b, c such that turning a and c by half a
-  turn and mirroring b (``q_b -> -q_b``) changes every kept column of ``A`` only by its sign: the
-  two solutions of a spherical wrist (the Puma 560's and the KR 6 R900's q4, q5, q6), and of a
-  shoulder whose first joint is the base rotation (the Panda's q1, q2, q3).  The twists' constants
-  are rounded (``cos(fl(pi/2)) = 6e-17``), so the identity holds only to about 1e-16 of each
-  column: the proof reads the exact polynomial, takes each column's sign from most of its
-  coefficients and bounds the rest (the residual), which the search adds to its bound.  A joint of
-  the flip is then searched over half a turn (:func:`tolsynth.analysis.certify_domain.domain`).
+* **symmetries**: maps of the joints, each kept, turned by half a turn (``q + pi``) or mirrored
+  (``-q``, ``pi - q``), that change every kept column of ``A`` only by its sign, ``A`` itself
+  possibly turned by half a turn about the base z axis (which changes no principal sigma and no
+  smallest probability over directions): the two solutions of a spherical wrist (the Puma 560's
+  and the KR 6 R900's ``q4 + pi, -q5``), a mirrored shoulder (the Panda's ``-q2, q3 + pi``), the
+  whole arm mirrored (the UR5's ``-q2, -q3, pi - q4, -q5, -q6``).  The twists' constants are rounded
+  (``cos(fl(pi/2)) = 6e-17``), so such an identity holds only to about 1e-16 of each column: the
+  proof reads the exact polynomial, takes each column's sign from most of its coefficients and
+  bounds the rest (the residual), which the search adds to its bound.  A joint the map turns or
+  mirrors is then searched over half its range (:func:`tolsynth.analysis.certify_domain.domain`).
 * **a joint that turns the error distribution rigidly about the base z axis** (the waist of the
   paper's robot and of most arms): ``A(q) = Rz(q_j + k) A(q with Rz = I)`` for every pose.  Then
   every principal standard deviation and every per-direction probability is the same at every
@@ -50,6 +52,7 @@ from __future__ import annotations
 import weakref
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -79,10 +82,9 @@ class Structure:
         Joints entering ``A`` only through sin and cos of the joint plus constants.
     half_turn : tuple of int
         Periodic joints whose half turn changes no column of ``A`` but its sign (proven).
-    flips : tuple of (int, int, int, tuple)
-        Wrist flips ``(a, b, c, residual)``: turning joints a and c by half a turn and mirroring
-        joint b changes every kept column of ``A`` only by its sign, up to ``residual`` (the 3 x
-        kept-columns bounds, mm per tolerance unit, of what the twists' rounded constants leave).
+    symmetries : tuple of Symmetry
+        Maps of the joints (each kept, turned by half a turn or mirrored) that change every kept
+        column of ``A`` only by its sign, proven up to a bounded residual (:class:`Symmetry`).
     notes : tuple of str
         What was proven and what could not be, in words.
     """
@@ -94,7 +96,7 @@ class Structure:
     periodic: tuple
     notes: tuple
     half_turn: tuple = ()
-    flips: tuple = ()
+    symmetries: tuple = ()
 
 
 _CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -170,13 +172,13 @@ def structure(mech) -> Structure:
         pw = None
     half_turn = _half_turn(pw, periodic, columns)
     notes += [f"{names[j]}: half a turn changes no column of A but its sign (proven)" for j in half_turn]
-    flips = _flips(A, pw, periodic, columns)
+    symmetries = _symmetries(A, pw, periodic, joints, rotation, half_turn, columns)
     notes += [
-        f"{names[a]} and {names[c]} turned by half a turn with {names[b]} mirrored change no column of A "
-        "but its sign, to the rounding of the twists (proven, the rest bounded)"
-        for a, b, c, _ in flips
+        f"{sym.describe(names)} changes no column of A but its sign, to the rounding of the twists "
+        "(proven, the rest bounded)"
+        for sym in symmetries
     ]
-    out = Structure(A, columns, joints, rotation, periodic, tuple(notes), half_turn, flips)
+    out = Structure(A, columns, joints, rotation, periodic, tuple(notes), half_turn, symmetries)
     _CACHE[mech] = out
     return out
 
@@ -278,42 +280,61 @@ def _half_turn(pw, periodic, columns) -> tuple:
     return tuple(out)
 
 
-#: a flip is used where what breaks it is at most this share of each column's coefficients: the
-#: twists' rounded constants (cos(fl(pi/2)) = 6e-17) leave 1e-16, a joint that is no flip O(1)
-FLIP_RESIDUAL = 1e-12
+#: a symmetry is used where what breaks it is at most this share of each column's coefficients: the
+#: twists' rounded constants (cos(fl(pi/2)) = 6e-17) leave 1e-16, a map that is no symmetry O(1)
+SYMMETRY_RESIDUAL = 1e-12
+#: what a symmetry does to one joint: unchanged, turned by half a turn, mirrored, mirrored about pi / 2
+KEEP, TURN, MIRROR, MIRROR_TURN = 0, 1, 2, 3
+OP_NAMES = {TURN: "{} + pi", MIRROR: "-{}", MIRROR_TURN: "pi - {}"}
 
 
-def _flips(f: ca.Function, pw, periodic, columns) -> tuple:
-    """Wrist flips ``(a, b, c, residual)`` of consecutive periodic joints: ``q_a + pi, -q_b, q_c + pi``
-    keeps the hand frame of a spherical wrist, and of a shoulder whose first joint is the base
-    rotation.  Proven on the exact polynomials ``pw``: the flip negates the cosine and sine of a
-    and c (any offset) and the sine of b (offset 0 only), so each monomial keeps or flips its sign;
-    in each column the sign of most weight is the column's, and the monomials of the other sign,
-    at most their coefficients' sum as every cosine and sine is at most 1 in size, form twice the
-    residual.  Screened first at a few poses (NumPy) so that only plausible flips are expanded."""
+class Symmetry(NamedTuple):
+    """A map of the joints that changes every kept column of ``A`` only by its sign (and, with
+    ``turn``, turns ``A`` by half a turn about the base z axis), up to ``residual``: the 3 x
+    kept-columns bounds (mm per tolerance unit) of what the twists' rounded constants leave."""
+
+    ops: tuple  # per joint: KEEP, TURN (q + pi), MIRROR (-q) or MIRROR_TURN (pi - q)
+    turn: bool
+    residual: tuple
+
+    def describe(self, names) -> str:
+        parts = [OP_NAMES[op].format(names[j]) for j, op in enumerate(self.ops) if op]
+        return ", ".join(parts) + ("; A turned by half a turn about z" if self.turn else "")
+
+
+def _symmetries(f: ca.Function, pw, periodic, joints, rotation, half_turn, columns) -> tuple:
+    """Maps of the joints, each joint kept, turned by half a turn, mirrored or mirrored about pi/2,
+    that change every column of ``A`` only by its sign, ``A`` itself possibly turned by half a turn
+    about the base z axis (which changes no principal sigma and no smallest probability over
+    directions): the two solutions of a spherical wrist (``q4 + pi, -q5, q6 + pi``), a shoulder
+    mirrored (the Panda's ``-q2, q3 + pi``), a whole arm mirrored (the UR5's ``-q2 .. -q6``).
+    Screened at three poses over every such map (NumPy), then proven on the exact polynomials
+    ``pw``: the map negates cosines and sines by joint (mirroring needs the offset 0), so each
+    monomial keeps or flips its sign; in each column the sign of most weight is the column's, and
+    the monomials of the other sign, at most their coefficients' sum as every cosine and sine is at
+    most 1 in size, form twice the residual."""
     if pw is None or any(d[0] == "q" for d in pw.vars):
         return ()  # a joint value outside sine and cosine: no bound of a monomial by 1
     out = []
-    for a in periodic:
-        b, c = a + 1, a + 2
-        if b not in periodic or c not in periodic or not _looks_like_flip(f, a):
-            continue
-        sign = {}
+    for ops, turn in _screen(f, periodic, joints, rotation, half_turn):
+        sign: dict = {}
         for (j, off), (ci, si) in pw.pairs.items():
-            if j in (a, c):
+            op = ops[j]
+            if op == TURN:
                 sign[ci], sign[si] = -1, -1
-            elif j == b:
+            elif op in (MIRROR, MIRROR_TURN):
                 if off != 0:
                     break  # cos(-q + k) is no multiple of cos(q + k)
-                sign[ci], sign[si] = 1, -1
+                sign[ci], sign[si] = (1, -1) if op == MIRROR else (-1, 1)
         else:
+            rho = (-1, -1, 1) if turn else (1, 1, 1)
             residual = np.zeros((3, len(columns)))
             for n, col in enumerate(columns):
                 mass = {1: Fraction(0), -1: Fraction(0)}
                 terms = []
                 for r in range(3):
                     for mono, coef in (pw.outputs[3 * col + r] or {}).items():
-                        s_m = 1
+                        s_m = rho[r]
                         for v, power in mono:
                             if power % 2:
                                 s_m *= sign.get(v, 1)
@@ -324,11 +345,11 @@ def _flips(f: ca.Function, pw, periodic, columns) -> tuple:
                 for r, s_m, coef in terms:
                     if s_m != keep:
                         bad[r] += coef
-                if sum(bad) > FLIP_RESIDUAL * mass[keep]:
+                if sum(bad) > SYMMETRY_RESIDUAL * mass[keep]:
                     break
                 residual[:, n] = [_up_fraction(2 * x) for x in bad]
             else:
-                out.append((a, b, c, tuple(map(tuple, residual))))
+                out.append(Symmetry(tuple(ops), bool(turn), tuple(map(tuple, residual))))
     return tuple(out)
 
 
@@ -338,26 +359,39 @@ def _up_fraction(x: Fraction) -> float:
     return v if Fraction(v) >= x else float(np.nextafter(v, np.inf))
 
 
-def _looks_like_flip(f: ca.Function, a: int) -> bool:
-    """A cheap screen before the proof: at a few poses the flip at joints a, a+1, a+2 changes each
-    column of A only by its sign (to rounding)."""
-    rng = np.random.default_rng(0)
+def _screen(f: ca.Function, periodic, joints, rotation, half_turn) -> list:
+    """The maps (ops, turn) that change each column of A only by its sign at three random poses,
+    to rounding: a cheap screen before the proof.  The base rotation is kept (turning it is the
+    ``turn``); a half-turn joint is not turned (that changes nothing); a map that only mirrors
+    half-turn joints is left out (it cuts nothing a half turn has not)."""
+    import itertools
+
     nq = f.nnz_in(0)
-    if a + 2 >= nq:
-        return False
-    for _ in range(3):
-        q = rng.uniform(-3.0, 3.0, nq)
-        q2 = q.copy()
-        q2[a] += np.pi
-        q2[a + 1] = -q2[a + 1]
-        q2[a + 2] += np.pi
-        x, y = np.array(f(q)), np.array(f(q2))
-        if not np.all(np.isfinite(x)):
-            return False
-        change = np.minimum(np.abs(x - y).max(axis=0), np.abs(x + y).max(axis=0))
-        if change.max() > 1e-9 * (1.0 + np.abs(x).max()):
-            return False
-    return True
+    choices = []
+    for j in range(nq):
+        if j not in periodic or j not in joints or j == rotation:
+            choices.append((KEEP,))
+        elif j in half_turn:
+            choices.append((KEEP, MIRROR))
+        else:
+            choices.append((KEEP, TURN, MIRROR, MIRROR_TURN))
+    pats = [p for p in itertools.product(*choices) if any(op and j not in half_turn for j, op in enumerate(p))]
+    if not pats:
+        return []
+    P = np.array(pats)
+    rng = np.random.default_rng(0)
+    Q = rng.uniform(-3.0, 3.0, (3, nq))
+    A0 = [np.array(f(q)) for q in Q]
+    keep = {False: np.ones(len(P), bool), True: np.ones(len(P), bool)}
+    for q, A in zip(Q, A0):
+        X = np.where(P == TURN, q + np.pi, np.where(P == MIRROR, -q, np.where(P == MIRROR_TURN, np.pi - q, q)))
+        B = np.stack(np.hsplit(np.array(f.map(len(P))(X.T)), len(P)))  # (pattern, 3, n)
+        scale = 1e-9 * (1.0 + np.abs(A).max())
+        for turn in (False, True):
+            C = B * (np.array([-1.0, -1.0, 1.0])[None, :, None] if turn else 1.0)
+            change = np.minimum(np.abs(C - A).max(axis=1), np.abs(C + A).max(axis=1)).max(axis=1)
+            keep[turn] &= np.isfinite(change) & (change <= scale)
+    return [(tuple(int(v) for v in P[i]), turn) for turn in (False, True) for i in np.flatnonzero(keep[turn])]
 
 
 #: largest number of terms of one expanded node

@@ -41,9 +41,8 @@ def _search_rows(cert, z: float, R: float) -> list:
         rows.append(["joints searched", ", ".join(cert.searched)])
     if cert.half_turn:
         rows.append(["searched over half a turn (the other half the same, proven)", ", ".join(cert.half_turn)])
-    if cert.flip:
-        a, b, c = cert.flip
-        rows.append(["wrist flip (proven; its residual added to the bound)", f"{a}, {c} half a turn, {b} mirrored"])
+    for sym, joint in cert.symmetries:
+        rows.append([f"{joint} searched over half its range (a symmetry, proven)", sym])
     return rows
 
 
