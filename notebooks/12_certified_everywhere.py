@@ -163,8 +163,8 @@ plt.show()
 # of thousands of boxes. `certify_options={"margin": m}` solves every round at `R / (1 + m)` and
 # proves at `R`; `lower_bound` then comes from a solve at `R` at the final poses, so `gap` says what
 # the margin cost. Measured on the 2-core machine with the Gaussian reading and `m = 3e-3`: the
-# Puma 560 certified in 16 s, the UR5 in 42 s, the KR 6 R900 in 12 s, each at +0.21 % cost
-# (without a margin in 40-98 s, each design at its own lower bound). On the paper's robot:
+# Puma 560 certified in 17 s, the UR5 in 25 s, the KR 6 R900 in 12 s, each at +0.21 % cost
+# (without a margin in 40-67 s, each design at its own lower bound). On the paper's robot:
 
 # %%
 t0 = time.perf_counter()

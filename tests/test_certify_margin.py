@@ -99,7 +99,7 @@ def test_a_bad_margin_is_a_typed_error_naming_it(xz, bad):
         )
 
 
-@pytest.mark.long  # 1-2 min per six-joint arm on 2 cores, 3-4 min the Panda
+@pytest.mark.long  # 20-30 s per six-joint arm on 2 cores, 1.5 min the Panda
 @pytest.mark.parametrize(("name", "margin"), [("puma560", MARGIN), ("ur5", MARGIN), ("panda", 1e-2)])
 def test_six_joint_exchange_certified_with_a_margin(name, margin):
     """The Gaussian certified exchange on a six- or seven-joint arm closes with a margin (3 tol; the
@@ -114,7 +114,7 @@ def test_six_joint_exchange_certified_with_a_margin(name, margin):
     assert 0 < w.gap <= margin * w.result.cost
 
 
-@pytest.mark.long  # 1.5-2 min per arm on 2 cores
+@pytest.mark.long  # 50-80 s per arm on 2 cores
 @pytest.mark.parametrize("name", ["puma560", "ur5", "kr6r900sixx"])
 def test_six_joint_exchange_certified_without_a_margin(name):
     """Without a margin the sampled stage goes on to a tenth of tol, and the proof closes in the

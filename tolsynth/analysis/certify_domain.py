@@ -52,9 +52,8 @@ class Domain:
             op = sym.ops[self.free[i]]
             if i in (self.periods or {}):  # a whole period: the half kept, or its mirror image
                 Q[:, i] = self.lo[i] + np.mod(Q[:, i] - self.lo[i], 2 * math.pi)
-            past = Q[:, i] > self.hi[i] if op == TURN else Q[:, i] > self.hi[i]
-            if op == MIRROR and i not in (self.periods or {}):
-                past = Q[:, i] < self.lo[i]  # a range symmetric about 0, cut to [0, hi]
+            # past the cut: above it, or for a range symmetric about 0 cut to [0, hi], below it
+            past = Q[:, i] < self.lo[i] if op == MIRROR and i not in (self.periods or {}) else Q[:, i] > self.hi[i]
             for o, j in enumerate(self.free):
                 op_o = sym.ops[j]
                 if op_o == TURN:

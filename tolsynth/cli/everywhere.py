@@ -63,8 +63,8 @@ def add_everywhere_arguments(p) -> None:
         type=number("--margin", "a number from 0 to 0.5", lambda v: 0 <= v <= 0.5),
         default=None,
         help="with --everywhere --certify: design at R / (1 + MARGIN) and prove at R, which gives the proof "
-        "room on an arm whose design is nearly flat (e.g. 3e-3 on a six-joint arm, +0.2 %% cost; 1e-2 on "
-        "the Panda, +0.7 %%); the lower bound is then a solve's at R (default 0)",
+        "room on an arm whose design is nearly flat (e.g. 3e-3 on a six- or seven-joint arm, +0.2 %% cost, "
+        "the Panda then in 4 min rather than 12); the lower bound is then a solve's at R (default 0)",
     )
 
 
