@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from tolsynth.analysis.certify_structure import KEEP, MIRROR, MIRROR_TURN, TURN
+from tolsynth.analysis.certify_symmetry import KEEP, MIRROR, MIRROR_TURN, TURN
 from tolsynth.analysis.interval_ops import round_down as _dn
 from tolsynth.analysis.interval_ops import round_up as _up
 from tolsynth.analysis.intervals import IntervalFunction
