@@ -100,7 +100,9 @@ class Certificate:
         With ``keep_boxes=True``: ``(lo, hi, bound)``, the boxes of the searched joints (rad) the
         search set aside with the bound proven on each (shapes (m, k), (m, k), (m,)); with the
         boxes proven infeasible they cover the searched joint space, so the largest bound of
-        the boxes meeting a region bounds the criterion there (a certified map).
+        the boxes meeting a region bounds the criterion there (a certified map).  That space is
+        cut where ``half_turn`` and ``symmetries`` say (the rest is its image);
+        :mod:`tolsynth.analysis.certify_map` covers the whole joint ranges.
     """
 
     model: str
