@@ -62,8 +62,6 @@ class Domain:
                     Q[past, o] = -Q[past, o]
                 elif op_o == MIRROR_TURN:
                     Q[past, o] = math.pi - Q[past, o]
-            for o, period in (self.periods or {}).items():
-                Q[:, o] = self.lo[o] + np.mod(Q[:, o] - self.lo[o], period)
         for i, period in (self.periods or {}).items():
             Q[:, i] = self.lo[i] + np.mod(Q[:, i] - self.lo[i], period)
         return np.minimum(np.maximum(Q, self.lo), self.hi)  # a rounding past the end
