@@ -13,18 +13,27 @@ from tolsynth.analysis.certify_polygon import PolygonSigmaBounds
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 
 
-def test_contraction_against_einsum():
+# two joints (contracted whole), four (blocked by the first two), six with six points each (the
+# search's usual shape) and more points than monomials on a joint
+@pytest.mark.parametrize("points", [(3, 5), (4, 1, 3, 4), (6, 6, 6, 6, 6, 6), (2, 8, 1, 3, 7)])
+def test_contraction_against_einsum(points):
     rng = np.random.default_rng(0)
-    k, n = 4, 7
+    k, n = len(points), 3
     g = rng.normal(size=(6, 6**k))
-    V = [rng.normal(size=(n, p, 6)) for p in (4, 1, 3, 4)]
+    V = [rng.normal(size=(n, p, 6)) for p in points]
     out = contract(g, V)
     if out is None:
         pytest.skip("no C compiler (or TOLSYNTH_NO_COMPILE set)")
     T = g.reshape((6,) * (k + 1))
+    letters = "abcdefgh"[:k]
+    spec = "z" + letters + "," + ",".join(f"{c.upper()}{c}" for c in letters) + "->z" + letters.upper()
     for b in range(n):
-        ref = np.einsum("eabcd,ia,jb,kc,ld->eijkl", T, *[v[b] for v in V]).reshape(6, -1)
-        assert np.allclose(out[b], ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+        ref = np.einsum(spec, T, *[v[b] for v in V], optimize=True).reshape(6, -1)
+        # within the rounding of sums of six products per joint, at the sums of absolute values
+        mag = np.einsum(spec, np.abs(T), *[np.abs(v[b]) for v in V], optimize=True).reshape(6, -1)
+        assert (np.abs(out[b] - ref) <= 16 * (k + 1) * 2.0**-53 * mag).all()
+        # a box's tuples do not depend on the boxes contracted with it: bit for bit alone
+        assert np.array_equal(contract(g, [v[b : b + 1] for v in V])[0], out[b])
 
 
 def test_numpy_contraction_in_the_compiled_order(monkeypatch):
