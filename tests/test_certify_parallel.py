@@ -111,6 +111,7 @@ def _fft_worst_2r(m, eps, R):
     return float(fft_at_edge(X, R, 1 << 11).min())
 
 
+@pytest.mark.slow  # 4-15 s: the default run stays under 4 minutes
 def test_exact_search_on_two_workers_bounds_a_brute_force_grid(dealt):
     """Planar 2R, 'coarse', R 0.1 mm, exact probabilities: serial and two workers prove bounds within
     the search's tolerance (2e-7) of each other, below every FFT probability of a pose and direction
@@ -150,6 +151,7 @@ def test_stop_levels_still_end_the_search_on_workers(dealt):
     assert dealt
 
 
+@pytest.mark.slow  # 4-15 s: the default run stays under 4 minutes
 def test_time_limit_still_ends_the_search_on_workers(dealt):
     """A 6-joint arm under a short time limit: not certified, the time limit the reason, on time,
     and the bound reached still above sigma at random poses (numeric sensitivity)."""

@@ -76,6 +76,7 @@ def test_no_certificate_section_without_a_certified_search():
     assert "Certificate over the whole joint space" not in md
 
 
+@pytest.mark.slow  # 4-15 s: the default run stays under 4 minutes
 def test_report_shows_the_design_margin_and_the_bound_at_R():
     """With a margin the report's certificate names it, with the cost and the lower bound at R; the
     design stays below R on a 121 x 121 grid (NumPy eigenvalues), as the margin leaves it."""
@@ -101,6 +102,7 @@ def test_report_shows_the_design_margin_and_the_bound_at_R():
     assert w.lower_bound < w.result.cost
 
 
+@pytest.mark.slow  # 4-15 s: the default run stays under 4 minutes
 def test_report_everywhere_certify_on_the_command_line(tmp_path, capsys):
     """``tolsynth report --everywhere --certify``: the certified exchange's design reported, its
     proven bound in the report and in the JSON, at or above the dense grid's largest sigma of the

@@ -244,6 +244,7 @@ def test_solve_worst_case_without_p(capsys):
     assert "--p" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # 4-15 s: the default run stays under 4 minutes
 def test_grades_command(capsys, tmp_path):
     """``tolsynth grades``: lengths rounded to ISO 286 grades at 300 mm, whose half widths are the
     standard's table typed here (250-315 mm: IT11 320 um, IT12 520 um, IT10 210 um, IT13 810 um),

@@ -127,6 +127,7 @@ def _cli(*args):
     return out.stdout
 
 
+@pytest.mark.slow  # 4-15 s: the default run stays under 4 minutes
 def test_cli_defaults_to_exact_and_opts_out(designs):
     d = json.loads(_cli("solve", "--model", XZ, "--R", "0.5", "--p", "0.9", "--json"))
     assert d["probability"] == "exact" and d["inputs"]["probability"] == "exact"

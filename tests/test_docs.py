@@ -57,6 +57,7 @@ def test_index_block_runs():
     assert res.gap <= 1e-6 * res.cost
 
 
+@pytest.mark.slow  # 4-15 s: the default run stays under 4 minutes
 def test_guide_runs_and_its_comments_hold():
     ns = run_blocks("guide.md")
     m, res, base, wide = ns["m"], ns["res"], ns["base"], ns["wide"]

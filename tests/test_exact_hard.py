@@ -298,6 +298,7 @@ def test_planar_sphere_and_cone_against_monte_carlo(rng):
     assert lo <= Pc <= hi
 
 
+@pytest.mark.slow  # 4-15 s: the default run stays under 4 minutes
 def test_planar_rule_with_many_terms_against_monte_carlo(rng):
     """The 3-RRR's 21 uniform terms (its error planar): the rule splits its radial integral only at
     the signed sums of the four largest half-widths (the smaller ones' kinks are smoothed by the

@@ -214,6 +214,7 @@ def test_exact_probability_designs_are_certified(name):
             assert P >= 0.99 - 4 * np.sqrt(0.99 * 0.01 / n), (name, P)
 
 
+@pytest.mark.slow  # 4-15 s: the default run stays under 4 minutes
 def test_exact_probability_design_on_the_hexapod_with_the_default_solver():
     """The 42-error hexapod's exact design (its barrier path stalls once and is re-centred): certified,
     the cost IPOPT's Gaussian start leads to as well, and p met along each principal direction by

@@ -102,6 +102,7 @@ def test_sweep_on_dask_local_cluster(xz):
         _check_against_synthesize(df2, xz)
 
 
+@pytest.mark.slow  # 4-15 s: the default run stays under 4 minutes
 def test_sweep_on_dask_worker_processes(xz):
     """Two worker processes (the model is scattered to each), both solvers."""
     distributed = pytest.importorskip("distributed")

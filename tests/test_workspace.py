@@ -367,6 +367,7 @@ def _check_workspace_result(w, mech, fk, name, n_samples, R=0.5, p=0.99):
     assert f"{w.worst_value:.6f}" in text
 
 
+@pytest.mark.slow  # 4-15 s: the default run stays under 4 minutes
 def test_synthesize_workspace_reports_rounds_certificate_and_violation(xz, capsys):
     from test_kinematics import xu_fk
 

@@ -158,6 +158,7 @@ def test_every_bundled_model_default_pose():
         assert res.gap <= 1e-6 * res.cost
 
 
+@pytest.mark.slow  # 4-15 s: the default run stays under 4 minutes
 def test_default_pose_on_a_model_without_a_worst_configuration():
     """The 3-RRR has no 'worst' configuration: the worst-case solve takes the pose the statistical
     solve takes by default (the pose search's), and its design meets R there over every sign
