@@ -112,7 +112,7 @@ def test_default_bounds_grid_where_upper_bounds_become_active(solver):
     _grid(tolsynth.bundled_models(), [0.5, 10.0], [0.5, 0.9999], [0.3, 3.0], solver)
 
 
-@pytest.mark.slow
+@pytest.mark.long  # 24 s; test_default_bounds_grid_where_upper_bounds_become_active is its smaller grid
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_default_bounds_grid_full(solver):
     _grid(
