@@ -13,8 +13,8 @@ from tolsynth.analysis.certify_polygon import PolygonSigmaBounds
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 
 
-# two joints (contracted whole), four (blocked by the first two), six with six points each (the
-# search's usual shape) and more points than monomials on a joint
+# two joints, four, six with six points each (the search's usual shape), and more points than
+# monomials on a joint
 @pytest.mark.parametrize("points", [(3, 5), (4, 1, 3, 4), (6, 6, 6, 6, 6, 6), (2, 8, 1, 3, 7)])
 def test_contraction_against_einsum(points):
     rng = np.random.default_rng(0)
