@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth.analysis.certify_kernels import contract, lambda_max
+from tolsynth.analysis.certify_kernels import contract, jet, lambda_max
 from tolsynth.analysis.certify_polygon import PolygonSigmaBounds
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 
@@ -101,3 +101,36 @@ def test_polygon_bounds_compiled_equal_numpy_and_hold(name, monkeypatch):
             A = mech.sensitivity(q, check_limits=False)[:3]
             s1 = np.sqrt(max(np.linalg.eigvalsh((A * (eps**2 / 3.0)) @ A.T)[-1], 0.0))
             assert s1 <= ub[i]
+
+
+@pytest.mark.parametrize("name", ["puma560", "panda"])
+def test_compiled_jet_against_the_sensitivity_and_central_differences(name, monkeypatch):
+    # the centre's A from the trigonometric polynomial (compiled, and NumPy's path) equals the
+    # CasADi graph's sensitivity; its derivatives equal central differences of that graph
+    mech = tolsynth.load_model(name)
+    st = structure(mech)
+    free = [j for j in st.joints if j != st.rotation]
+    eps = mech.tolerances(list(mech.tolerance_sets)[0])
+    B = PolygonSigmaBounds(trig_polynomial(st, free, st.rotation), free, (eps**2 / 3.0)[list(st.columns)])
+    rng = np.random.default_rng(7)
+    Q = rng.uniform(-3, 3, (70, len(free)))  # more than one of the NumPy path's chunks of 64
+    A, dA = B.jet(Q)
+    if jet(B.T.reshape(B.na, -1), Q[:1] + B.offsets) is None:
+        pytest.skip("no C compiler (or TOLSYNTH_NO_COMPILE set)")
+    monkeypatch.setenv("TOLSYNTH_NO_COMPILE", "1")
+    A0, dA0 = B.jet(Q)
+    scale = np.abs(A0).max()
+    np.testing.assert_allclose(A, A0, rtol=0, atol=1e-13 * scale)
+    np.testing.assert_allclose(dA, dA0, rtol=0, atol=1e-13 * scale)
+    assert B.jet(Q, derivatives=False)[1] is None
+    cols, h = list(st.columns), 1e-6
+    for i in range(0, 70, 7):
+        q = np.zeros(len(mech.joint_names))
+        q[free] = Q[i]
+        S = mech.sensitivity(q, check_limits=False)[:3][:, cols]
+        np.testing.assert_allclose(A[i], S, rtol=0, atol=1e-10 * np.abs(S).max())
+        for jj, j in enumerate(free):
+            dq = np.zeros_like(q)
+            dq[j] = h
+            up, down = (mech.sensitivity(q + s * dq, check_limits=False)[:3][:, cols] for s in (1, -1))
+            np.testing.assert_allclose(dA[i, jj], (up - down) / (2 * h), rtol=0, atol=1e-6 * np.abs(S).max())

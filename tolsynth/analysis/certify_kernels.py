@@ -7,8 +7,10 @@ batched matrix product per joint and a transposed copy between them, over interm
 ``6^k * 4`` numbers a box (a quarter of a megabyte for six joints), so the search was bound by
 memory traffic.  Here one C function contracts box after box in a cache-sized work area, the last
 joint first, each output a plain sum of six products in a fixed order: the same sums, rounded as a
-dot product of six terms is, which the bound's error term covers (any summation order).  Without
-a compiler (or with ``TOLSYNTH_NO_COMPILE=1``) the NumPy path runs.
+dot product of six terms is, which the bound's error term covers (any summation order).  The
+boxes' centres (the value found and the direction to halve) read ``A`` and its derivatives from
+its own polynomial, compiled likewise (NumPy's broadcast products took a quarter of the Panda's
+search).  Without a compiler (or with ``TOLSYNTH_NO_COMPILE=1``) the NumPy path runs.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 
 from tolsynth.cbuild import disabled, find_compiler, load_library
 
-__all__ = ["contract", "lambda_max"]
+__all__ = ["contract", "jet", "lambda_max"]
 
 _SOURCE = r"""
 /* the loops over the tuples vectorised (each sum still its six products in order: the same bits) */
@@ -163,6 +165,57 @@ void ts_lambda_max(int n, int T, const double *g, const double *err, double *out
         ok[b] = good;
     }
 }
+/* The trigonometric polynomial A(t) (na entries, each a polynomial of degree one in every joint's
+   (1, cos, sin), the first joint's index most significant in T's (na, 3^k) layout) at n points,
+   cs[b, j] = (cos t_j, sin t_j), and its derivative along every joint (deriv != 0): forward mode,
+   the last joint first, every step in place (output r reads its inputs 3r..3r+2).  A (n, na),
+   dA (n, k, na).  Floating point: the centre's value and the direction to halve, not a bound. */
+int ts_jet(int n, int k, int na, const double *T, const double *cs, int deriv, double *A, double *dA) {
+    size_t top = (size_t)na;
+    for (int j = 0; j < k - 1; j++) top *= 3;  /* na * 3^(k-1): after the last joint */
+    double *buf = malloc(sizeof(double) * top * (size_t)(deriv ? k + 1 : 1));
+    if (!buf) return -1;
+    double *val = buf;
+    for (int b = 0; b < n; b++) {
+        const double *c = cs + (size_t)b * 2 * k;
+        size_t len = top;  /* the entries left after the joint being contracted */
+        double cj = c[2 * (k - 1)], sj = c[2 * (k - 1) + 1];
+        double *g0 = deriv ? buf + top * (size_t)k : NULL;  /* the last joint's derivative */
+        for (size_t r = 0; r < len; r++) {
+            const double *x = T + 3 * r;
+            val[r] = x[0] + x[1] * cj + x[2] * sj;
+            if (deriv) g0[r] = x[2] * cj - x[1] * sj;
+        }
+        for (int j = k - 2; j >= 0; j--) {
+            cj = c[2 * j];
+            sj = c[2 * j + 1];
+            len /= 3;
+            if (deriv) {
+                double *gj = buf + top * (size_t)(j + 1);
+                for (size_t r = 0; r < len; r++) {
+                    const double *x = val + 3 * r;
+                    gj[r] = x[2] * cj - x[1] * sj;
+                }
+                for (int i = j + 1; i < k; i++) {
+                    double *gi = buf + top * (size_t)(i + 1);
+                    for (size_t r = 0; r < len; r++) {
+                        const double *x = gi + 3 * r;
+                        gi[r] = x[0] + x[1] * cj + x[2] * sj;
+                    }
+                }
+            }
+            for (size_t r = 0; r < len; r++) {
+                const double *x = val + 3 * r;
+                val[r] = x[0] + x[1] * cj + x[2] * sj;
+            }
+        }
+        memcpy(A + (size_t)b * na, val, sizeof(double) * na);
+        if (deriv)
+            for (int j = 0; j < k; j++) memcpy(dA + ((size_t)b * k + j) * na, buf + top * (size_t)(j + 1), sizeof(double) * na);
+    }
+    free(buf);
+    return 0;
+}
 """
 
 _state: dict = {}
@@ -176,7 +229,7 @@ def _library():
         return None
     if cc not in _state:
         try:
-            lib, _ = load_library(_SOURCE, "tolsynth_polygon", cc, ("ts_contract", "ts_lambda_max"))
+            lib, _ = load_library(_SOURCE, "tolsynth_polygon", cc, ("ts_contract", "ts_lambda_max", "ts_jet"))
             fn = lib.ts_contract
             f64 = np.ctypeslib.ndpointer(np.float64, flags="C_CONTIGUOUS")
             i32 = np.ctypeslib.ndpointer(np.int32, flags="C_CONTIGUOUS")
@@ -185,7 +238,10 @@ def _library():
             lm = lib.ts_lambda_max
             lm.argtypes = [ctypes.c_int, ctypes.c_int, f64, f64, f64, i32]
             lm.restype = None
-            _state[cc] = (fn, lm)
+            jt = lib.ts_jet
+            jt.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int, f64, f64, ctypes.c_int, f64, f64]
+            jt.restype = ctypes.c_int
+            _state[cc] = (fn, lm, jt)
         except (OSError, AttributeError, RuntimeError):
             _state[cc] = None
     return _state[cc]
@@ -224,3 +280,20 @@ def lambda_max(g: np.ndarray, err: np.ndarray):
     if n:
         lib[1](n, T, np.ascontiguousarray(g, dtype=np.float64), np.ascontiguousarray(err, dtype=np.float64), out, ok)
     return out, ok.astype(bool)
+
+
+def jet(T: np.ndarray, t: np.ndarray, derivatives: bool = True):
+    """``A`` (n, na) at the angles ``t`` (n, k) of the polynomial ``T`` (na, 3^k, each joint's
+    (1, cos, sin), the first joint's index most significant) and, with ``derivatives``, its
+    derivative along each joint (n, k, na), else None; or None without the compiled kernel."""
+    lib = _library()
+    if lib is None:
+        return None
+    n, k = t.shape
+    na = T.shape[0]
+    cs = np.ascontiguousarray(np.stack([np.cos(t), np.sin(t)], axis=-1))
+    A = np.empty((n, na))
+    dA = np.empty((n, k, na)) if derivatives else np.empty(0)
+    if n and lib[2](n, k, na, np.ascontiguousarray(T, dtype=np.float64), cs, int(derivatives), A, dA) != 0:
+        raise MemoryError("the polynomial's evaluation could not allocate its work area")
+    return A, dA if derivatives else None

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tolsynth.analysis.certify_kernels import contract, lambda_max
+from tolsynth.analysis.certify_kernels import contract, jet, lambda_max
 from tolsynth.analysis.interval_ops import round_up as _up
 
 __all__ = ["PolygonSigmaBounds", "arc_polygons", "lambda_max_bound", "POLYGON_PIECES", "POLYGON_TUPLES", "REFINE"]
@@ -342,6 +342,10 @@ class PolygonSigmaBounds:
         (n, 3, m) and (n, k, 3, m) (floating point; None without ``derivatives``), one pass over
         the joints from the first."""
         t = np.atleast_2d(Q) + self.offsets
+        compiled = jet(self.T.reshape(self.na, -1), t, derivatives)  # None: no compiler
+        if compiled is not None:
+            A, dA = compiled
+            return _mat(A, self.m), None if dA is None else _mat(dA, self.m)
         n, k = t.shape
         A, dA = np.empty((n, self.na)), np.empty((n, k, self.na)) if derivatives else None
         for s in range(0, n, 64):  # the first joint's partial sums are n x na x 3^(k-1)
