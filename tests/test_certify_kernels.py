@@ -36,6 +36,28 @@ def test_contraction_against_einsum(points):
         assert np.array_equal(contract(g, [v[b : b + 1] for v in V])[0], out[b])
 
 
+@pytest.mark.parametrize("points", [(4, 4, 4, 4, 4, 4), (3, 5, 2)])
+def test_contraction_of_boxes_sharing_points(points):
+    # boxes drawn from two or three point sets a joint, in no order: the part the kernel keeps
+    # between boxes that share their last joints' points changes no bit of any box's tuples
+    rng = np.random.default_rng(2)
+    k, n = len(points), 40
+    g = rng.normal(size=(6, 6**k))
+    choices = [rng.normal(size=(int(rng.integers(2, 4)), p, 6)) for p in points]
+    V = [c[rng.integers(0, len(c), n)] for c in choices]
+    out = contract(g, V)
+    if out is None:
+        pytest.skip("no C compiler (or TOLSYNTH_NO_COMPILE set)")
+    T = g.reshape((6,) * (k + 1))
+    letters = "abcdefgh"[:k]
+    spec = "z" + letters + "," + ",".join(f"{c.upper()}{c}" for c in letters) + "->z" + letters.upper()
+    for b in range(n):
+        assert np.array_equal(contract(g, [v[b : b + 1] for v in V])[0], out[b])
+        ref = np.einsum(spec, T, *[v[b] for v in V], optimize=True).reshape(6, -1)
+        mag = np.einsum(spec, np.abs(T), *[np.abs(v[b]) for v in V], optimize=True).reshape(6, -1)
+        assert (np.abs(out[b] - ref) <= 16 * (k + 1) * 2.0**-53 * mag).all()
+
+
 def test_numpy_contraction_in_the_compiled_order(monkeypatch):
     # without a compiler the tuples come in the same order (the first joint's point most
     # significant): the halves of a box read that joint's index off it

@@ -31,26 +31,47 @@ _SOURCE = r"""
 
 /* out[b, e, tuple] = sum over monomials of g[e, m_1, ..., m_k] prod_j V_j[b, p_j, m_j], the tuple's
    flat index with the first joint's point most significant.  V holds, per box, the k joints'
-   (p_j, 6) blocks one after the other. */
-int ts_contract(int n, int k, const int *p, const double *g, const double *V, double *out) {
-    size_t g_size = 6, big = 6, vstride = 0, P = 1;
+   (p_j, 6) blocks one after the other.  The boxes are taken in `order` (NULL: as given); the
+   tensor left after contracting the last joints is kept while the next box has the same points on
+   them (a batch of a thousand boxes has a dozen arcs a joint), and every number is computed by the
+   same loop, in the same order, as it would be for that box alone: the same bits. */
+int ts_contract(int n, int k, const int *p, const double *g, const double *V, const int *order, double *out) {
+    if (k < 1 || k > 16) return -2;
+    size_t g_size = 6, vstride = 0, P = 1, offs[16], size = 1;
     for (int j = 0; j < k; j++) {
         g_size *= 6;
-        big *= (size_t)(p[j] > 6 ? p[j] : 6);
+        offs[j] = vstride;
         vstride += (size_t)p[j] * 6;
         P *= (size_t)p[j];
     }
-    double *b1 = malloc(sizeof(double) * big), *b2 = malloc(sizeof(double) * big);
-    if (!b1 || !b2) { free(b1); free(b2); return -1; }
-    for (int b = 0; b < n; b++) {
-        const double *src = g;
-        size_t R = g_size / 6, Q = 1;      /* src: (R, 6, Q) */
-        size_t voff = vstride;
-        for (int j = k - 1; j >= 0; j--) {
+    double *lv[16] = {0};  /* lv[j]: the tensor after contracting joints k-1 .. j (j >= 1) */
+    size_t Rj = g_size / 6, Qj = 1;
+    for (int j = k - 1; j >= 1; j--) {
+        size = Rj * (size_t)p[j] * Qj;
+        lv[j] = malloc(sizeof(double) * size);
+        if (!lv[j]) { for (int i = j + 1; i < k; i++) free(lv[i]); return -1; }
+        Qj *= (size_t)p[j];
+        Rj /= 6;
+    }
+    int prev = -1;
+    for (int i = 0; i < n; i++) {
+        int b = order ? order[i] : i;
+        int from = k - 1;  /* the first joint (from the last) whose points differ from the previous box's */
+        if (prev >= 0)
+            while (from >= 1 && memcmp(V + (size_t)b * vstride + offs[from], V + (size_t)prev * vstride + offs[from],
+                                       sizeof(double) * 6 * (size_t)p[from]) == 0)
+                from--;
+        prev = b;
+        size_t R = g_size / 6, Q = 1;  /* before joint j: src (R, 6, Q) */
+        for (int j = k - 1; j > from; j--) {
+            Q *= (size_t)p[j];
+            R /= 6;
+        }
+        for (int j = from; j >= 0; j--) {
             int pj = p[j];
-            voff -= (size_t)pj * 6;
-            const double *Vj = V + (size_t)b * vstride + voff;
-            double *dst = (j == 0) ? out + (size_t)b * 6 * P : (src == b1 ? b2 : b1);
+            const double *Vj = V + (size_t)b * vstride + offs[j];
+            const double *src = (j == k - 1) ? g : lv[j + 1];
+            double *dst = (j == 0) ? out + (size_t)b * 6 * P : lv[j];
             if (Q == 1 && pj <= 64) {  /* the first joint: across its points, each sum in the same order */
                 double Vt[6][64];
                 for (int q = 0; q < pj; q++)
@@ -62,7 +83,6 @@ int ts_contract(int n, int k, const int *p, const double *g, const double *V, do
                     for (int m = 1; m < 6; m++)
                         for (int q = 0; q < pj; q++) d[q] += s0[m] * Vt[m][q];
                 }
-                src = dst;
                 Q *= (size_t)pj;
                 R /= 6;
                 continue;
@@ -84,12 +104,11 @@ int ts_contract(int n, int k, const int *p, const double *g, const double *V, do
                     }
                 }
             }
-            src = dst;
             Q *= (size_t)pj;
             R /= 6;
         }
     }
-    free(b1); free(b2);
+    for (int j = 1; j < k; j++) free(lv[j]);
     return 0;
 }
 
@@ -233,7 +252,7 @@ def _library():
             fn = lib.ts_contract
             f64 = np.ctypeslib.ndpointer(np.float64, flags="C_CONTIGUOUS")
             i32 = np.ctypeslib.ndpointer(np.int32, flags="C_CONTIGUOUS")
-            fn.argtypes = [ctypes.c_int, ctypes.c_int, i32, f64, f64, f64]
+            fn.argtypes = [ctypes.c_int, ctypes.c_int, i32, f64, f64, i32, f64]
             fn.restype = ctypes.c_int
             lm = lib.ts_lambda_max
             lm.argtypes = [ctypes.c_int, ctypes.c_int, f64, f64, f64, i32]
@@ -260,7 +279,11 @@ def contract(g: np.ndarray, V: list):
     p = np.array([v.shape[1] for v in V], dtype=np.int32)
     Vc = np.ascontiguousarray(np.concatenate([v.reshape(n, -1) for v in V], axis=1), dtype=np.float64)
     out = np.empty((n, 6, int(np.prod(p))))
-    if n and fn(n, k, p, np.ascontiguousarray(g, dtype=np.float64), Vc, out) != 0:
+    # boxes with the same points on the last joints next to each other (the kernel contracts the
+    # last joint first and keeps what they share): sorted by each joint's points, the last first
+    keys = [np.unique(v.reshape(n, -1), axis=0, return_inverse=True)[1].reshape(n) for v in V]
+    order = np.ascontiguousarray(np.lexsort(keys), dtype=np.int32)
+    if n and fn(n, k, p, np.ascontiguousarray(g, dtype=np.float64), Vc, order, out) != 0:
         raise MemoryError("the polygon contraction could not allocate its work area")
     return out
 
