@@ -280,8 +280,9 @@ def contract(g: np.ndarray, V: list):
     Vc = np.ascontiguousarray(np.concatenate([v.reshape(n, -1) for v in V], axis=1), dtype=np.float64)
     out = np.empty((n, 6, int(np.prod(p))))
     # boxes with the same points on the last joints next to each other (the kernel contracts the
-    # last joint first and keeps what they share): sorted by each joint's points, the last first
-    keys = [np.unique(v.reshape(n, -1), axis=0, return_inverse=True)[1].reshape(n) for v in V]
+    # last joint first and keeps what they share, where every point is the same bits): sorted by
+    # each joint's first and last point, the last joint first
+    keys = [x for v in V for x in (v[:, 0, 1], v[:, 0, 2], v[:, -1, 1], v[:, -1, 2])]
     order = np.ascontiguousarray(np.lexsort(keys), dtype=np.int32)
     if n and fn(n, k, p, np.ascontiguousarray(g, dtype=np.float64), Vc, order, out) != 0:
         raise MemoryError("the polygon contraction could not allocate its work area")
