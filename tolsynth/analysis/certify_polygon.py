@@ -339,8 +339,9 @@ class PolygonSigmaBounds:
 
     def jet(self, Q: np.ndarray, derivatives: bool = True):
         """``A`` and its derivative along each searched joint at joint values Q (n, k): shapes
-        (n, 3, m) and (n, k, 3, m) (floating point; None without ``derivatives``), one pass over
-        the joints from the first."""
+        (n, 3, m) and (n, k, 3, m) (floating point; None without ``derivatives``): compiled
+        (:func:`tolsynth.analysis.certify_kernels.jet`), else by NumPy, one pass over the joints
+        from the first."""
         t = np.atleast_2d(Q) + self.offsets
         compiled = jet(self.T.reshape(self.na, -1), t, derivatives)  # None: no compiler
         if compiled is not None:

@@ -220,7 +220,7 @@ def synthesize_workspace(
     flat (on a six-joint arm within 1e-3 of its maximum over a few percent of the joint space), so
     without a margin that room is at most ``tol``: the Gaussian reading's sampled stage then goes
     on until the worst pose it finds is within a tenth of ``tol``, and the proof takes 35 000 to
-    50 000 boxes, 40-70 s, on a six-joint arm (the Panda's 290 000, 8 min).  A margin buys room for cost: ``lower_bound`` then
+    50 000 boxes, 30-60 s, on a six-joint arm (the Panda's 290 000, 8 min).  A margin buys room for cost: ``lower_bound`` then
     comes from a solve at ``R`` at the final poses, so ``gap`` shows what the margin cost (Puma
     560: a margin of 3e-3, +0.2 %, in 16 s).  ``progress``: a progress bar on stderr, of
     the exchange's rounds (with ``certify``: of each certified search's boxes); None shows it on a
