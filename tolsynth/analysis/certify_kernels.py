@@ -21,7 +21,7 @@ import numpy as np
 
 from tolsynth.cbuild import disabled, find_compiler, load_library
 
-__all__ = ["contract", "jet", "lambda_max"]
+__all__ = ["contract", "jet", "lambda_max", "share_order"]
 
 _SOURCE = r"""
 /* the loops over the tuples vectorised (each sum still its six products in order: the same bits) */
@@ -266,6 +266,14 @@ def _library():
     return _state[cc]
 
 
+def share_order(V: list) -> np.ndarray:
+    """An order of the boxes (``V[j]`` (n, p_j, 6), each joint's monomials at its points) that puts
+    boxes with the same points on the last joints next to each other: the contraction takes the
+    last joint first and keeps what consecutive boxes share (where every point is the same bits).
+    Sorted by each joint's first and last point, the last joint first."""
+    return np.lexsort([x for v in V for x in (v[:, 0, 1], v[:, 0, 2], v[:, -1, 1], v[:, -1, 2])])
+
+
 def contract(g: np.ndarray, V: list):
     """``g`` (6, 6^k) contracted with each joint's monomials ``V[j]`` (n, p_j, 6): shape
     (n, 6, prod p_j), the tuples with the first joint's point most significant; None when the
@@ -279,11 +287,7 @@ def contract(g: np.ndarray, V: list):
     p = np.array([v.shape[1] for v in V], dtype=np.int32)
     Vc = np.ascontiguousarray(np.concatenate([v.reshape(n, -1) for v in V], axis=1), dtype=np.float64)
     out = np.empty((n, 6, int(np.prod(p))))
-    # boxes with the same points on the last joints next to each other (the kernel contracts the
-    # last joint first and keeps what they share, where every point is the same bits): sorted by
-    # each joint's first and last point, the last joint first
-    keys = [x for v in V for x in (v[:, 0, 1], v[:, 0, 2], v[:, -1, 1], v[:, -1, 2])]
-    order = np.ascontiguousarray(np.lexsort(keys), dtype=np.int32)
+    order = np.ascontiguousarray(share_order(V), dtype=np.int32)
     if n and fn(n, k, p, np.ascontiguousarray(g, dtype=np.float64), Vc, order, out) != 0:
         raise MemoryError("the polygon contraction could not allocate its work area")
     return out
