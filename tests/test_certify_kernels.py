@@ -13,27 +13,32 @@ from tolsynth.analysis.certify_polygon import PolygonSigmaBounds
 from tolsynth.analysis.certify_structure import structure, trig_polynomial
 
 
+def _check_boxes(g, V, out):
+    """Each box's tuples against a direct einsum, within the rounding of sums of six products per
+    joint at the sums of absolute values, and bit for bit against the box contracted alone (a
+    box's tuples do not depend on the boxes contracted with it)."""
+    k = len(V)
+    T = g.reshape((6,) * (k + 1))
+    letters = "abcdefgh"[:k]
+    spec = "z" + letters + "," + ",".join(f"{c.upper()}{c}" for c in letters) + "->z" + letters.upper()
+    for b in range(len(out)):
+        ref = np.einsum(spec, T, *[v[b] for v in V], optimize=True).reshape(6, -1)
+        mag = np.einsum(spec, np.abs(T), *[np.abs(v[b]) for v in V], optimize=True).reshape(6, -1)
+        assert (np.abs(out[b] - ref) <= 16 * (k + 1) * 2.0**-53 * mag).all()
+        assert np.array_equal(contract(g, [v[b : b + 1] for v in V])[0], out[b])
+
+
 # two joints, four, six with six points each (the search's usual shape), and more points than
 # monomials on a joint
 @pytest.mark.parametrize("points", [(3, 5), (4, 1, 3, 4), (6, 6, 6, 6, 6, 6), (2, 8, 1, 3, 7)])
 def test_contraction_against_einsum(points):
     rng = np.random.default_rng(0)
-    k, n = len(points), 3
-    g = rng.normal(size=(6, 6**k))
-    V = [rng.normal(size=(n, p, 6)) for p in points]
+    g = rng.normal(size=(6, 6 ** len(points)))
+    V = [rng.normal(size=(3, p, 6)) for p in points]
     out = contract(g, V)
     if out is None:
         pytest.skip("no C compiler (or TOLSYNTH_NO_COMPILE set)")
-    T = g.reshape((6,) * (k + 1))
-    letters = "abcdefgh"[:k]
-    spec = "z" + letters + "," + ",".join(f"{c.upper()}{c}" for c in letters) + "->z" + letters.upper()
-    for b in range(n):
-        ref = np.einsum(spec, T, *[v[b] for v in V], optimize=True).reshape(6, -1)
-        # within the rounding of sums of six products per joint, at the sums of absolute values
-        mag = np.einsum(spec, np.abs(T), *[np.abs(v[b]) for v in V], optimize=True).reshape(6, -1)
-        assert (np.abs(out[b] - ref) <= 16 * (k + 1) * 2.0**-53 * mag).all()
-        # a box's tuples do not depend on the boxes contracted with it: bit for bit alone
-        assert np.array_equal(contract(g, [v[b : b + 1] for v in V])[0], out[b])
+    _check_boxes(g, V, out)
 
 
 @pytest.mark.parametrize("points", [(4, 4, 4, 4, 4, 4), (3, 5, 2)])
@@ -41,21 +46,13 @@ def test_contraction_of_boxes_sharing_points(points):
     # boxes drawn from two or three point sets a joint, in no order: the part the kernel keeps
     # between boxes that share their last joints' points changes no bit of any box's tuples
     rng = np.random.default_rng(2)
-    k, n = len(points), 40
-    g = rng.normal(size=(6, 6**k))
+    g = rng.normal(size=(6, 6 ** len(points)))
     choices = [rng.normal(size=(int(rng.integers(2, 4)), p, 6)) for p in points]
-    V = [c[rng.integers(0, len(c), n)] for c in choices]
+    V = [c[rng.integers(0, len(c), 40)] for c in choices]
     out = contract(g, V)
     if out is None:
         pytest.skip("no C compiler (or TOLSYNTH_NO_COMPILE set)")
-    T = g.reshape((6,) * (k + 1))
-    letters = "abcdefgh"[:k]
-    spec = "z" + letters + "," + ",".join(f"{c.upper()}{c}" for c in letters) + "->z" + letters.upper()
-    for b in range(n):
-        assert np.array_equal(contract(g, [v[b : b + 1] for v in V])[0], out[b])
-        ref = np.einsum(spec, T, *[v[b] for v in V], optimize=True).reshape(6, -1)
-        mag = np.einsum(spec, np.abs(T), *[np.abs(v[b]) for v in V], optimize=True).reshape(6, -1)
-        assert (np.abs(out[b] - ref) <= 16 * (k + 1) * 2.0**-53 * mag).all()
+    _check_boxes(g, V, out)
 
 
 def test_numpy_contraction_in_the_compiled_order(monkeypatch):
