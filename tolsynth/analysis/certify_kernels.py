@@ -266,11 +266,14 @@ def _library():
     return _state[cc]
 
 
-def share_order(V: list) -> np.ndarray:
+def share_order(V: list, n: int) -> np.ndarray:
     """An order of the boxes (``V[j]`` (n, p_j, 6), each joint's monomials at its points) that puts
     boxes with the same points on the last joints next to each other: the contraction takes the
     last joint first and keeps what consecutive boxes share (where every point is the same bits).
-    Sorted by each joint's first and last point, the last joint first."""
+    Sorted by each joint's first and last point, the last joint first; ``n`` boxes as given when
+    there are no joints (a box halved on its only joint)."""
+    if not V:
+        return np.arange(n)
     return np.lexsort([x for v in V for x in (v[:, 0, 1], v[:, 0, 2], v[:, -1, 1], v[:, -1, 2])])
 
 
@@ -287,7 +290,7 @@ def contract(g: np.ndarray, V: list):
     p = np.array([v.shape[1] for v in V], dtype=np.int32)
     Vc = np.ascontiguousarray(np.concatenate([v.reshape(n, -1) for v in V], axis=1), dtype=np.float64)
     out = np.empty((n, 6, int(np.prod(p))))
-    order = np.ascontiguousarray(share_order(V), dtype=np.int32)
+    order = np.ascontiguousarray(share_order(V, n), dtype=np.int32)
     if n and fn(n, k, p, np.ascontiguousarray(g, dtype=np.float64), Vc, order, out) != 0:
         raise MemoryError("the polygon contraction could not allocate its work area")
     return out

@@ -412,7 +412,7 @@ class PolygonSigmaBounds:
                 single[i1] = single[i2] = False
                 rest = [i for i in range(k) if i != j]
                 # the chunks below in the order that lets the contraction share the most
-                o = share_order([V[i][i1] for i in rest])
+                o = share_order([V[i][i1] for i in rest], len(i1))
                 i1, i2 = i1[o], i2[o]
                 free = np.broadcast_to(np.eye(6), (len(i1), 6, 6))  # the halved joint's monomials, left free
                 chunk = max(1, TUPLES_PER_CHUNK // (6 * int(np.prod([V[i].shape[1] for i in rest]))))
@@ -424,7 +424,7 @@ class PolygonSigmaBounds:
                         g = np.matmul(X, np.swapaxes(V[j][idx], 1, 2)[:, None]).reshape(len(idx), 6, -1)
                         ub[rows[idx]] = self._largest(g)
             idx = np.flatnonzero(single)
-            idx = idx[share_order([v[idx] for v in V])]
+            idx = idx[share_order([v[idx] for v in V], len(idx))]
             chunk = max(1, TUPLES_PER_CHUNK // int(np.prod([v.shape[1] for v in V])))
             for s in range(0, len(idx), chunk):
                 part = idx[s : s + chunk]
