@@ -72,12 +72,14 @@ def test_numpy_contraction_in_the_compiled_order(monkeypatch):
         assert np.allclose(out[b], ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
 
 
-def test_compiled_eigenvalue_bound_holds():
+@pytest.mark.parametrize("T", [300, 1100])  # within one chunk of the kernel's passes, and across two
+def test_compiled_eigenvalue_bound_holds(T):
     # per box the largest eigenvalue over its tuples: never below LAPACK's (to its own error),
-    # within 1e-6 of it, also where the top two nearly meet (an isotropic error ellipsoid: the closed
-    # form the candidate comes from loses half its digits there, and the candidate is raised)
+    # within 1e-5 of it, also where the top two nearly meet (an isotropic error ellipsoid: the closed
+    # form the candidate comes from loses half its digits there, and the candidate is raised: the
+    # more tuples, the more raised candidates, 3e-7 above LAPACK's at 300 tuples, 2.4e-6 at 1 100)
     rng = np.random.default_rng(3)
-    n, T = 40, 300
+    n = 40
     Q = np.linalg.qr(rng.normal(size=(n, T, 3, 3)))[0]
     lam = rng.uniform(0.01, 0.04, (n, T, 3))
     lam[:20, :, 1] = lam[:20, :, 2] * (1 - rng.uniform(0, 1e-9, (20, T)))  # near-degenerate
@@ -89,7 +91,7 @@ def test_compiled_eigenvalue_bound_holds():
     out, ok = res
     ref = np.linalg.eigvalsh(G)[..., -1].max(axis=1)
     assert ok.all()
-    assert (out >= ref * (1 - 1e-14)).all() and (out <= ref * (1 + 1e-6)).all()
+    assert (out >= ref * (1 - 1e-14)).all() and (out <= ref * (1 + 1e-5)).all()
 
 
 @pytest.mark.parametrize("name", ["puma560", pytest.param("panda", marks=pytest.mark.slow)])  # panda: 3-7 s
@@ -153,3 +155,30 @@ def test_compiled_jet_against_the_sensitivity_and_central_differences(name, monk
             dq[j] = h
             up, down = (mech.sensitivity(q + s * dq, check_limits=False)[:3][:, cols] for s in (1, -1))
             np.testing.assert_allclose(dA[i, jj], (up - down) / (2 * h), rtol=0, atol=1e-6 * np.abs(S).max())
+
+
+def test_the_kernels_built_for_this_processor_give_the_bits_of_the_plain_build(monkeypatch):
+    # wider vectors, the same IEEE operations in the same order: every output bit equal
+    import tolsynth.analysis.certify_kernels as K
+    import tolsynth.cbuild as cbuild
+
+    rng = np.random.default_rng(11)
+    g = rng.normal(size=(6, 6**3))
+    V = [rng.normal(size=(30, p, 6)) for p in (3, 4, 5)]
+    G = rng.normal(size=(20, 3, 1100, 3))
+    G = G @ np.swapaxes(G, -1, -2)
+    e = np.stack([G[:, :, r, c] for r, c in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))], axis=1)
+    t = rng.uniform(-3, 3, (25, 3))
+    T = rng.normal(size=(9, 27))
+    runs = []
+    for flags in (cbuild.NATIVE_FLAGS, []):
+        monkeypatch.setattr(cbuild, "NATIVE_FLAGS", flags)
+        monkeypatch.setattr(K, "_state", {})
+        out = K.contract(g, V), K.lambda_max(e, np.full((20, 6), 1e-16)), K.jet(T, t)
+        if out[0] is None:
+            pytest.skip("no C compiler (or TOLSYNTH_NO_COMPILE set)")
+        runs.append(out)
+    (c1, (l1, o1), (a1, d1)), (c2, (l2, o2), (a2, d2)) = runs
+    assert o1.all() and (o1 == o2).all()
+    for x, y in ((c1, c2), (l1, l2), (a1, a2), (d1, d2)):
+        assert x.tobytes() == y.tobytes()

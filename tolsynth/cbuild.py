@@ -5,7 +5,7 @@ Levenberg-Marquardt of the map's inverse kinematics (:mod:`tolsynth.kinematics.i
 one C file (CasADi's generated code for its graph and a hand-written driver) and loads it here.
 
 The library is cached on disk, keyed by a hash of the C source, the compiler, its flags and the
-CasADi version: ``$TOLSYNTH_CACHE_DIR``, else ``$XDG_CACHE_HOME/tolsynth``, else
+CasADi version (and the processor, for a library built for its vector units): ``$TOLSYNTH_CACHE_DIR``, else ``$XDG_CACHE_HOME/tolsynth``, else
 ``~/.cache/tolsynth`` (a temporary directory if none is writable).  ``TOLSYNTH_NO_COMPILE=1``
 turns compilation off (the callers then use their Python paths); ``TOLSYNTH_CC`` (or ``CC``)
 names the compiler, by default ``cc``, ``gcc`` or ``clang`` on the PATH.
@@ -25,11 +25,15 @@ from typing import Any, Callable
 
 import casadi as ca
 
-__all__ = ["CFLAGS", "cache_dir", "find_compiler", "disabled", "load_library", "GraphLibraries"]
+__all__ = ["CFLAGS", "NATIVE_FLAGS", "cache_dir", "find_compiler", "disabled", "load_library", "GraphLibraries"]
 
 #: -ffp-contract=off: no fused multiply-adds, so the compiled arithmetic is the IEEE arithmetic of
 #: the Python/CasADi paths operation for operation
 CFLAGS = ["-O2", "-fPIC", "-shared", "-ffp-contract=off"]
+
+#: added for the libraries built for this machine's vector units (the certified search's kernels):
+#: wider vectors, the same IEEE operations (no contraction, no reassociation), so the same bits
+NATIVE_FLAGS = ["-march=native"]
 
 #: the C library headers every driver may use (written before it)
 C_INCLUDES = "#include <float.h>\n#include <math.h>\n#include <stdlib.h>\n#include <string.h>\n"
@@ -77,7 +81,21 @@ def _writable_dir() -> Path:
     raise OSError("no writable cache directory")
 
 
-def _build(source: str, name: str, cc: str) -> Path:
+def _cpu() -> str:
+    """What a library built with NATIVE_FLAGS depends on: the machine and its processor's feature
+    flags (so that a cache shared between machines never hands one a library for another)."""
+    import platform
+
+    flags = ""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            flags = next((line for line in fh if line.startswith(("flags", "Features"))), "")
+    except OSError:
+        pass
+    return f"{platform.machine()} {platform.processor()} {flags}"
+
+
+def _build(source: str, name: str, cc: str, flags: list[str]) -> Path:
     """Compile ``source`` into ``<cache>/<name>.so`` unless it is there (atomic: a temporary name,
     then a rename, so concurrent processes never load a half-written library)."""
     d = _writable_dir()
@@ -89,7 +107,7 @@ def _build(source: str, name: str, cc: str) -> Path:
         fh.write(source)
     tmp_so = c_path[:-2] + ".so"
     try:
-        proc = subprocess.run([cc, *CFLAGS, "-o", tmp_so, c_path, "-lm"], capture_output=True, text=True, timeout=300)
+        proc = subprocess.run([cc, *flags, "-o", tmp_so, c_path, "-lm"], capture_output=True, text=True, timeout=300)
         if proc.returncode != 0:
             raise RuntimeError(proc.stderr.strip()[-2000:] or f"{cc} exited {proc.returncode}")
         os.replace(tmp_so, target)
@@ -104,23 +122,36 @@ def _build(source: str, name: str, cc: str) -> Path:
     return target
 
 
-def load_library(source: str, prefix: str, cc: str, symbols: tuple[str, ...]) -> tuple[ctypes.CDLL, Path]:
+def load_library(
+    source: str, prefix: str, cc: str, symbols: tuple[str, ...], native: bool = False
+) -> tuple[ctypes.CDLL, Path]:
     """The shared library compiled from ``source`` by ``cc`` (built on first use, then loaded from
-    the cache; once per process), with each of ``symbols`` present.  Raises OSError,
-    AttributeError or RuntimeError (the compiler's message) when it cannot be built or loaded."""
-    key = hashlib.sha256("\0".join([source, cc, " ".join(CFLAGS), ca.__version__]).encode()).hexdigest()[:24]
+    the cache; once per process), with each of ``symbols`` present; with ``native``, built for
+    this machine's processor (NATIVE_FLAGS; without them where the compiler refuses them).  Raises
+    OSError, AttributeError or RuntimeError (the compiler's message) when it cannot be built or
+    loaded."""
+    if native:
+        try:
+            return _load(source, prefix, cc, symbols, CFLAGS + NATIVE_FLAGS, _cpu())
+        except RuntimeError:
+            pass
+    return _load(source, prefix, cc, symbols, CFLAGS, "")
+
+
+def _load(source, prefix, cc, symbols, flags, cpu):
+    key = hashlib.sha256("\0".join([source, cc, " ".join(flags), cpu, ca.__version__]).encode()).hexdigest()[:24]
     name = f"{prefix}_{key}"
     with _lock:
         if name in _loaded:
             return _loaded[name]
         try:
-            path = _build(source, name, cc)
+            path = _build(source, name, cc, flags)
             lib = ctypes.CDLL(str(path))
             for sym in symbols:
                 getattr(lib, sym)
         except (OSError, AttributeError):  # a damaged file in the cache: build it again, once
             (_writable_dir() / f"{name}.so").unlink(missing_ok=True)
-            path = _build(source, name, cc)
+            path = _build(source, name, cc, flags)
             lib = ctypes.CDLL(str(path))
             for sym in symbols:
                 getattr(lib, sym)

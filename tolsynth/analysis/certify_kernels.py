@@ -25,7 +25,7 @@ __all__ = ["contract", "jet", "lambda_max", "share_order"]
 
 _SOURCE = r"""
 /* the loops over the tuples vectorised (each sum still its six products in order: the same bits) */
-#pragma GCC optimize("O3")
+#pragma GCC optimize("O3", "no-trapping-math")
 #include <stdlib.h>
 #include <string.h>
 
@@ -142,43 +142,95 @@ static double estimate(double g00, double g11, double g22, double g01, double g0
     r = r < -1.0 ? -1.0 : (r > 1.0 ? 1.0 : r);
     return q + 2.0 * p * cos(acos(r) / 3.0);
 }
+static double candidate(double L, double s) {
+    double r = L / s;
+    return (r > 0.0 ? r : 0.0) * (1.0 + 1e-12) + 1e-13;
+}
+/* above() without its branches, for the loops the compiler vectorises: the same three comparisons */
+static int above_all(double lam, double a1, double a2, double a3) {
+    double aa1 = fabs(a1), aa2 = fabs(a2), aa3 = fabs(a3);
+    double mag = ((lam + aa1) * lam + aa2) * lam + aa3;
+    double p = ((lam - a1) * lam + a2) * lam - a3;
+    double dp = (3.0 * lam - 2.0 * a1) * lam + a2;
+    double ddp = 3.0 * lam - a1;
+    return (p > 16 * U_ * mag) & (dp > 16 * U_ * (3.0 * lam * lam + 2.0 * aa1 * lam + aa2))
+        & (ddp > 16 * U_ * (3.0 * lam + aa1));
+}
+#define LM_CHUNK 512
+#define LM_BLOCK 32
 void ts_lambda_max(int n, int T, const double *g, const double *err, double *out, int *ok) {
+    /* Each chunk of tuples in two passes: first every tuple's scaled coefficients (independent
+       of one another: vectorised), then the candidate checked block by block at the running L,
+       which only changes where a tuple does not prove it; a block where every tuple proves it
+       (the common case) is checked as one vector loop and its largest value taken, else the block
+       is gone through tuple by tuple as before.  The values and their order of use are those of
+       the plain loop: the same bits. */
+    double S[LM_CHUNK], A1[LM_CHUNK], A2[LM_CHUNK], A3[LM_CHUNK], Vb[LM_BLOCK];
+    int Fb[LM_BLOCK];
     for (int b = 0; b < n; b++) {
         const double *G = g + (size_t)b * 6 * T, *e = err + (size_t)b * 6;
         double frob = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + 2.0 * (e[3] * e[3] + e[4] * e[4] + e[5] * e[5]));
         double L = -INFINITY, best = -INFINITY;
         int good = 1;
-        for (int t = 0; t < T && good; t++) {
-            double g00 = G[t], g11 = G[T + t], g22 = G[2 * T + t], g01 = G[3 * T + t], g02 = G[4 * T + t], g12 = G[5 * T + t];
-            double c1 = (g00 + g11 + g22) * (1.0 + 8.0 * U_);
-            double p0 = g00 * g11, p1 = g01 * g01, p2 = g00 * g22, p3 = g02 * g02, p4 = g11 * g22, p5 = g12 * g12;
-            double c2 = p0 - p1 + p2 - p3 + p4 - p5;
-            double s2 = 0.0 + fabs(p0);
-            s2 = s2 + fabs(p1); s2 = s2 + fabs(p2); s2 = s2 + fabs(p3); s2 = s2 + fabs(p4); s2 = s2 + fabs(p5);
-            c2 = c2 - 8.0 * U_ * s2;
-            double r0 = g00 * (g11 * g22), r1 = g00 * (g12 * g12), r2 = g01 * (g01 * g22), r3 = g01 * (g12 * g02),
-                   r4 = g02 * (g01 * g12), r5 = g02 * (g11 * g02);
-            double c3 = r0 - r1 - r2 + r3 + r4 - r5;
-            double s3 = 0.0 + fabs(r0);
-            s3 = s3 + fabs(r1); s3 = s3 + fabs(r2); s3 = s3 + fabs(r3); s3 = s3 + fabs(r4); s3 = s3 + fabs(r5);
-            c3 = c3 + 12.0 * U_ * s3;
-            double s = fabs(c1) > 1e-100 ? fabs(c1) : 1.0;
-            double a1 = c1 / s, a2 = c2 / (s * s), a3 = c3 / (s * s * s);
-            double x = (L / s > 0.0 ? L / s : 0.0) * (1.0 + 1e-12) + 1e-13;
-            if (!above(x, a1, a2, a3)) {
-                double lam = estimate(g00, g11, g22, g01, g02, g12);
-                if (!(lam <= INFINITY)) { good = 0; break; }
-                if (lam > L) L = lam;
-                x = (L / s > 0.0 ? L / s : 0.0) * (1.0 + 1e-12) + 1e-13;
-                /* the closed form loses digits where the top eigenvalues nearly meet (a nearly
-                   isotropic V): raised a little at a time, as the NumPy path's last resort does */
-                for (int r = 0; r < 14 && !above(x, a1, a2, a3); r++) x = x * (1.0 + 1e-12 * (double)(1L << (3 * r))) + 1e-300;
-                if (!above(x, a1, a2, a3)) { good = 0; break; }
-                if (x * s > L) L = x * s;
+        for (int t0 = 0; t0 < T && good; t0 += LM_CHUNK) {
+            int m = T - t0 < LM_CHUNK ? T - t0 : LM_CHUNK;
+            const double *G0 = G + t0, *G1 = G + T + t0, *G2 = G + 2 * T + t0, *G3 = G + 3 * T + t0,
+                         *G4 = G + 4 * T + t0, *G5 = G + 5 * T + t0;
+            for (int i = 0; i < m; i++) {
+                double g00 = G0[i], g11 = G1[i], g22 = G2[i], g01 = G3[i], g02 = G4[i], g12 = G5[i];
+                double c1 = (g00 + g11 + g22) * (1.0 + 8.0 * U_);
+                double p0 = g00 * g11, p1 = g01 * g01, p2 = g00 * g22, p3 = g02 * g02, p4 = g11 * g22, p5 = g12 * g12;
+                double c2 = p0 - p1 + p2 - p3 + p4 - p5;
+                double s2 = 0.0 + fabs(p0);
+                s2 = s2 + fabs(p1); s2 = s2 + fabs(p2); s2 = s2 + fabs(p3); s2 = s2 + fabs(p4); s2 = s2 + fabs(p5);
+                c2 = c2 - 8.0 * U_ * s2;
+                double r0 = g00 * (g11 * g22), r1 = g00 * (g12 * g12), r2 = g01 * (g01 * g22), r3 = g01 * (g12 * g02),
+                       r4 = g02 * (g01 * g12), r5 = g02 * (g11 * g02);
+                double c3 = r0 - r1 - r2 + r3 + r4 - r5;
+                double s3 = 0.0 + fabs(r0);
+                s3 = s3 + fabs(r1); s3 = s3 + fabs(r2); s3 = s3 + fabs(r3); s3 = s3 + fabs(r4); s3 = s3 + fabs(r5);
+                c3 = c3 + 12.0 * U_ * s3;
+                double s = fabs(c1) > 1e-100 ? fabs(c1) : 1.0;
+                S[i] = s;
+                A1[i] = c1 / s;
+                A2[i] = c2 / (s * s);
+                A3[i] = c3 / (s * s * s);
             }
-            double v = x * s * (1.0 + 8.0 * U_) + frob * (1.0 + 8.0 * U_);
-            if (!(v <= INFINITY)) { good = 0; break; }
-            if (v > best) best = v;
+            for (int i0 = 0; i0 < m && good; i0 += LM_BLOCK) {
+                int nb = m - i0 < LM_BLOCK ? m - i0 : LM_BLOCK;
+                for (int i = 0; i < nb; i++) {
+                    double s = S[i0 + i], x = candidate(L, s);
+                    double v = x * s * (1.0 + 8.0 * U_) + frob * (1.0 + 8.0 * U_);
+                    Fb[i] = above_all(x, A1[i0 + i], A2[i0 + i], A3[i0 + i]) & (v <= INFINITY);
+                    Vb[i] = v;
+                }
+                int all = 1;
+                for (int i = 0; i < nb; i++) all &= Fb[i];
+                if (all) {
+                    for (int i = 0; i < nb; i++)
+                        if (Vb[i] > best) best = Vb[i];
+                    continue;
+                }
+                for (int i = i0; i < i0 + nb; i++) {
+                    double s = S[i], a1 = A1[i], a2 = A2[i], a3 = A3[i];
+                    double x = candidate(L, s);
+                    if (!above(x, a1, a2, a3)) {
+                        int t = t0 + i;
+                        double lam = estimate(G[t], G[T + t], G[2 * T + t], G[3 * T + t], G[4 * T + t], G[5 * T + t]);
+                        if (!(lam <= INFINITY)) { good = 0; break; }
+                        if (lam > L) L = lam;
+                        x = candidate(L, s);
+                        /* the closed form loses digits where the top eigenvalues nearly meet (a nearly
+                           isotropic V): raised a little at a time, as the NumPy path's last resort does */
+                        for (int r = 0; r < 14 && !above(x, a1, a2, a3); r++) x = x * (1.0 + 1e-12 * (double)(1L << (3 * r))) + 1e-300;
+                        if (!above(x, a1, a2, a3)) { good = 0; break; }
+                        if (x * s > L) L = x * s;
+                    }
+                    double v = x * s * (1.0 + 8.0 * U_) + frob * (1.0 + 8.0 * U_);
+                    if (!(v <= INFINITY)) { good = 0; break; }
+                    if (v > best) best = v;
+                }
+            }
         }
         out[b] = best;
         ok[b] = good;
@@ -248,7 +300,9 @@ def _library():
         return None
     if cc not in _state:
         try:
-            lib, _ = load_library(_SOURCE, "tolsynth_polygon", cc, ("ts_contract", "ts_lambda_max", "ts_jet"))
+            lib, _ = load_library(
+                _SOURCE, "tolsynth_polygon", cc, ("ts_contract", "ts_lambda_max", "ts_jet"), native=True
+            )
             fn = lib.ts_contract
             f64 = np.ctypeslib.ndpointer(np.float64, flags="C_CONTIGUOUS")
             i32 = np.ctypeslib.ndpointer(np.int32, flags="C_CONTIGUOUS")
