@@ -147,3 +147,35 @@ def test_exact_proof_on_five_searched_joints_is_announced_at_once():
             max_rounds=1,
             certify_options={"time_limit": 1},
         )
+
+
+@pytest.mark.slow  # about 20 s: two certified searches and five independent worst directions
+def test_exact_minimum_on_five_searched_joints_settled_from_the_sigma_bound(monkeypatch):
+    """The Puma 560 (five searched joints) at its 'fine' tolerances and R 0.5 mm: the certified
+    sigma_1 is below R / 3.03, where Eaton's tail bound proves every direction's probability, so the
+    exact search settles its joint boxes whole and is certified in a few hundred boxes; without
+    that bound the vertex pairs alone are far from it after 1 500.  The proven bound is below the
+    probability by FFT convolution at the worst pose found and at random poses (worst direction
+    by Fibonacci caps)."""
+    from independent import fft_at_edge, independent_worst
+    from tolsynth.analysis import certify_exact
+    from tolsynth.analysis.certify import certify_worst_pose
+    from tolsynth.probability.tail_bound import z_for
+
+    m = tolsynth.load_model("puma560")
+    eps = m.tolerances("fine")
+    s = certify_worst_pose(m, "fine", "uniform", "sigma", 0.5, progress=False)
+    assert s.certified and s.upper_bound < 0.5 / z_for(1e-7)
+    c = certify_worst_pose(m, "fine", "uniform", "components", 0.5, "exact", progress=False, max_boxes=3000, workers=1)
+    assert c.certified and c.boxes < 1000 and "sigma_1" in c.method
+    assert c.probability_lower_bound >= 1 - 1e-7
+    M = m.sensitivity(c.q, check_limits=False)[:3] * eps
+    assert fft_at_edge((c.direction @ M)[None], 0.5, 1 << 14)[0] >= c.probability_lower_bound - 1e-9
+    rng = np.random.default_rng(5)
+    lo, hi = _limits(m)
+    for q in lo + (hi - lo) * rng.random((4, len(lo))):
+        A = m.sensitivity(q, check_limits=False)[:3]
+        assert independent_worst(A * eps, 0.5)[0] >= c.probability_lower_bound - 1e-9
+    monkeypatch.setattr(certify_exact, "covered", lambda shapes: False)
+    c0 = certify_worst_pose(m, "fine", "uniform", "components", 0.5, "exact", progress=False, max_boxes=1500, workers=1)
+    assert not c0.certified and c0.probability_lower_bound < 0.9 and "sigma_1" not in c0.method

@@ -28,12 +28,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tolsynth.analysis.branch_bound import maximize
-from tolsynth.analysis.certify_bounds import PolygonSigmaBounds, SigmaBounds, joint_graphs
+from tolsynth.analysis.certify_bounds import PolygonSigmaBounds, sigma_bounds
 from tolsynth.analysis.certify_domain import domain as _domain
 from tolsynth.analysis.certify_domain import full as _full
 from tolsynth.analysis.certify_domain import sheared
 from tolsynth.analysis.certify_parallel import worker_count
-from tolsynth.analysis.certify_structure import structure, trig_polynomial
+from tolsynth.analysis.certify_structure import structure
 from tolsynth.analysis.interval_ops import round_down as _dn
 from tolsynth.analysis.interval_ops import round_up as _up
 from tolsynth.checks import check_count, check_positive
@@ -328,12 +328,12 @@ def certify_worst_pose(
             sdom = dom
             w = (eps**2 / c)[cols]
             excess = dom.symmetry_excess(w)  # sigma_1 past a cut is at most excess above its value inside
-            bounds, method = _sigma_bounds(st, sdom, nq, w)
+            bounds, method = sigma_bounds(st, sdom, nq, w)
             if leaves is None and not isinstance(bounds, PolygonSigmaBounds):
                 # a joint constraint as a coordinate (kept boxes are reported in joints)
                 sdom = sheared(mech, dom)
                 if sdom is not dom:
-                    bounds, method = _sigma_bounds(st, sdom, nq, w)
+                    bounds, method = sigma_bounds(st, sdom, nq, w)
             if criterion == "components" and (target is not None or stop_at is not None):
                 raise InputError(
                     "target",
@@ -447,20 +447,6 @@ def _leaves(leaves, k, sign):
     lo = np.array([b[0][:k] for b in leaves])
     hi = np.array([b[1][:k] for b in leaves])
     return lo, hi, sign * np.array([b[2] for b in leaves])
-
-
-def _sigma_bounds(st, dom, nq, w):
-    """The bounds of sigma_1 on boxes of the searched joints (variance weights ``w`` of the kept
-    columns), and the method's name: arc polygons where the sensitivity is a trigonometric
-    polynomial of the searched joints, Taylor corners elsewhere."""
-    poly = trig_polynomial(st, dom.free, st.rotation) if st.rotation is None or st.rotation in dom.held else None
-    if poly is not None and all(j in st.joints for j in dom.free) and dom.M is None:
-        return PolygonSigmaBounds(poly, dom.free, w), "arc polygons of the exact trigonometric polynomial"
-    held_zero = dict(dom.held)
-    if st.rotation is not None:
-        held_zero[st.rotation] = 0.0
-    bounds = SigmaBounds(joint_graphs(st, nq, dom.free, held_zero, M=dom.M), w, dom.linear)
-    return bounds, "second-order Taylor corners" if bounds.g.use_hessian else "Taylor corners (interval Jacobian)"
 
 
 def _with_split(res):

@@ -44,10 +44,12 @@ from tolsynth.analysis.certify_polygon import (  # noqa: F401
     arc_polygons,
     lambda_max_bound,
 )
+from tolsynth.analysis.certify_structure import trig_polynomial
 from tolsynth.analysis.interval_ops import round_up as _up
 from tolsynth.analysis.intervals import IntervalFunction
 
 __all__ = [
+    "sigma_bounds",
     "JointGraphs",
     "joint_graphs",
     "SigmaBounds",
@@ -367,3 +369,17 @@ class SigmaBounds:
             natural(~ok & ~np.isfinite(nat))
             split = np.sqrt(np.einsum("bnk,n->bk", share**2, np.repeat(self.sw**2, 3)))
         return np.fmin(nat, cor), np.where(ok[:, None], split, np.nan)
+
+
+def sigma_bounds(st, dom, nq, w):
+    """The bounds of sigma_1 on boxes of the searched joints (variance weights ``w`` of the kept
+    columns), and the method's name: arc polygons where the sensitivity is a trigonometric
+    polynomial of the searched joints, Taylor corners elsewhere."""
+    poly = trig_polynomial(st, dom.free, st.rotation) if st.rotation is None or st.rotation in dom.held else None
+    if poly is not None and all(j in st.joints for j in dom.free) and dom.M is None:
+        return PolygonSigmaBounds(poly, dom.free, w), "arc polygons of the exact trigonometric polynomial"
+    held_zero = dict(dom.held)
+    if st.rotation is not None:
+        held_zero[st.rotation] = 0.0
+    bounds = SigmaBounds(joint_graphs(st, nq, dom.free, held_zero, M=dom.M), w, dom.linear)
+    return bounds, "second-order Taylor corners" if bounds.g.use_hessian else "Taylor corners (interval Jacobian)"

@@ -29,6 +29,12 @@ the lift ``1 / (n . v) - 1`` (the patch's width squared).  A patch is split whil
 larger part, the joint box where the remainder is: only patches near the worst direction of the
 poses near the worst pose are ever split fine.  Every probability comes from the compiled series
 (:func:`tolsynth.solvers.exact_series.probability`) with its rigorous error bound subtracted.
+
+Where every shape is uniform, triangular or normal, a joint box is first bounded as a whole from
+its bound of ``sigma_1`` (arc polygons for serial chains, :func:`tolsynth.analysis.certify_bounds.sigma_bounds`):
+every direction's deviation is at most ``sigma_1``, and :mod:`tolsynth.probability.tail_bound`
+turns that into a probability.  It needs ``R / sigma_1`` about 3 at p = 0.99, so it settles the
+wide boxes far from the binding poses, which the vertex pairs cannot; the pairs settle those near.
 """
 
 from __future__ import annotations
@@ -40,12 +46,13 @@ import time
 
 import numpy as np
 
-from tolsynth.analysis.certify_bounds import joint_graphs, taylor_enclosure
+from tolsynth.analysis.certify_bounds import PolygonSigmaBounds, joint_graphs, sigma_bounds, taylor_enclosure
 from tolsynth.analysis.certify_domain import full, sheared
 from tolsynth.analysis.certify_exact_bounds import ExactBounds, children, patch_normals, start_patches
 from tolsynth.analysis.certify_parallel import Background, run
 from tolsynth.analysis.exact_pose_search import worst_exact_pose
 from tolsynth.errors import OutOfRangeError
+from tolsynth.probability.tail_bound import covered, probability_lower, z_for
 
 __all__ = ["certify_components_exact", "EXACT_TOL"]
 
@@ -84,8 +91,9 @@ class _Search:
 
     sense = -1.0  # a minimum
 
-    def __init__(self, bounds: ExactBounds, lo, hi, constraint_fn, tol, target, kept):
+    def __init__(self, bounds: ExactBounds, lo, hi, constraint_fn, tol, target, kept, sigma=None):
         self.b = bounds
+        self.sigma = sigma  # bounds of sigma_1 on joint boxes, where the shapes allow the tail bound
         self.lo, self.hi = lo, hi
         self.scale = np.where(hi > lo, hi - lo, 1.0)
         self.constraint_fn = constraint_fn
@@ -179,6 +187,15 @@ class _Search:
             np.concatenate([getattr(b, a) for b in boxes]) for a in ("face", "s0", "t0", "h", "plb")
         )
         proven = np.array([b.proven for b in boxes])
+        if self.sigma is not None:
+            # every direction of a joint box at once, from sigma_1's bound (tail_bound): it settles
+            # the boxes far from the binding poses, which the vertex pairs cannot while they are wide
+            plb = self.sigma_lower(L, H, thr)
+            whole = plb >= thr
+            proven[whole] = np.minimum(proven[whole], plb[whole])
+            fall = np.maximum(fall, plb[bi])
+            rest = ~whole[bi]
+            bi, face, s0, t0, h, fall = (x[rest] for x in (bi, face, s0, t0, h, fall))
         kept = []
         for _ in range(PATCH_ROUNDS):
             if bi.size == 0:
@@ -215,6 +232,16 @@ class _Search:
                 b.side = tuple(np.flatnonzero(wi >= SPLIT_SHARE * wi.max()))
             else:
                 b.side = (int(np.argmax(b.H - b.L)),)
+
+    def sigma_lower(self, L, H, thr) -> np.ndarray:
+        """Lower bounds of the probability on joint boxes from the bounds of sigma_1 on them
+        (:func:`tolsynth.probability.tail_bound.probability_lower`); the polygons refine a box
+        toward the deviation at which the threshold would be proven."""
+        if isinstance(self.sigma, PolygonSigmaBounds):
+            ub = self.sigma.bound(L, H, self.b.R / z_for(1.0 - thr))[0]
+        else:
+            ub = self.sigma.bound(L, H)[0]
+        return probability_lower(self.b.R, ub)
 
     def set_aside(self, b, bound) -> None:
         if self.kept is not None:
@@ -349,7 +376,10 @@ def certify_components_exact(
     enc = joint_graphs(st, nq, dom.free, held, third=True, M=dom.M)
     bounds = ExactBounds(enc, np.asarray(eps, dtype=float)[cols], tuple(shapes[i] for i in cols), R, dom.linear)
     lo, hi = np.asarray(dom.lo, dtype=float), np.asarray(dom.hi, dtype=float)
-    s = _Search(bounds, lo, hi, dom.constraint_fn, tol, target, [] if leaves is not None else None)
+    sigma = None
+    if covered(bounds.shapes):
+        sigma, _ = sigma_bounds(st, dom, nq, np.asarray(eps, dtype=float)[cols] ** 2 * bounds.var)
+    s = _Search(bounds, lo, hi, dom.constraint_fn, tol, target, [] if leaves is not None else None, sigma)
     starts = [0.5 * (lo + hi)] + ([] if seeds is None else list(np.clip(np.atleast_2d(seeds), lo, hi)))
     if not search and seeds is not None:
         starts = starts[-1:]  # the caller's sampled search ended at its last seed
@@ -416,5 +446,6 @@ def certify_components_exact(
         boxes=processed,
         open_boxes=n_open,
         reason=reason,
-        method="exact probabilities at the vertex pairs of joint boxes and lifted direction patches",
+        method="exact probabilities at the vertex pairs of joint boxes and lifted direction patches"
+        + ("; whole joint boxes from their bound of sigma_1 (Eaton's tail bound)" if sigma is not None else ""),
     )

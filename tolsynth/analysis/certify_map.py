@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tolsynth.analysis.certify import _sigma_bounds
+from tolsynth.analysis.certify_bounds import sigma_bounds
 from tolsynth.analysis.certify_domain import domain as _domain
 from tolsynth.analysis.certify_structure import structure
 from tolsynth.checks import check_count
@@ -132,7 +132,7 @@ def certified_map(
             "n, slices", f"{n}**2 * {slices}**{len(others)} = {total} boxes", f"at most {MAX_MAP_BOXES} boxes"
         )
     c = np.broadcast_to(np.asarray(variance_divisor(distribution, mech), dtype=float), (mech.n,))
-    bounds, _ = _sigma_bounds(st, dom, nq, (eps**2 / c)[list(st.columns)])
+    bounds, _ = sigma_bounds(st, dom, nq, (eps**2 / c)[list(st.columns)])
     edges = [np.linspace(dom.lo[i], dom.hi[i], (n if i in (ia, ib) else slices) + 1) for i in range(len(searched))]
     index = np.array(list(itertools.product(*[range(len(e) - 1) for e in edges])))  # (boxes, k)
     upper = np.full(n * n, -np.inf)
