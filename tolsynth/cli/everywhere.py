@@ -64,7 +64,7 @@ def add_everywhere_arguments(p) -> None:
         default=None,
         help="with --everywhere --certify: design at R / (1 + MARGIN) and prove at R, which gives the proof "
         "room on an arm whose design is nearly flat (e.g. 3e-3 on a six- or seven-joint arm, +0.2 %% cost, "
-        "the Panda then in 2 min rather than 5); the lower bound is then a solve's at R (default 0)",
+        "the Panda then in 1.5 min rather than 4); the lower bound is then a solve's at R (default 0)",
     )
 
 

@@ -220,7 +220,7 @@ def synthesize_workspace(
     flat (on a six-joint arm within 1e-3 of its maximum over a few percent of the joint space), so
     without a margin that room is at most ``tol``: the Gaussian reading's sampled stage then goes
     on until the worst pose it finds is within a tenth of ``tol``, and the proof takes 35 000 to
-    50 000 boxes, 30-60 s, on a six-joint arm (the Panda's 290 000, 5.3 min).  A margin buys room for cost: ``lower_bound`` then
+    50 000 boxes, 20-40 s, on a six-joint arm (the Panda's 290 000, 4.2 min).  A margin buys room for cost: ``lower_bound`` then
     comes from a solve at ``R`` at the final poses, so ``gap`` shows what the margin cost (Puma
     560: a margin of 3e-3, +0.2 %, in 16 s).  ``progress``: a progress bar on stderr, of
     the exchange's rounds (with ``certify``: of each certified search's boxes); None shows it on a
@@ -404,10 +404,10 @@ def _certified_exchange(
                 CertificationWarning(
                     f"the exact reading's proof has not been seen to close on {searched} searched joints "
                     "(the Puma 560's five: not certified by a run of 20 rounds, 7.5 min); the exchange goes on and says "
-                    "whether it closed. The Gaussian reading certifies six-joint arms in under 70 s, and with a "
+                    "whether it closed. The Gaussian reading certifies six-joint arms in under 40 s, and with a "
                     "design margin in under 30 s: probability='gaussian', certify_options={'margin': 3e-3} "
                     "(CLI: --probability gaussian --margin 3e-3); the Panda, whose design is flatter, "
-                    "in 5.3 min, and with that margin in under 2 min"
+                    "in 4.2 min, and with that margin in 1.5 min"
                 ),
                 stacklevel=3,
             )
@@ -485,7 +485,7 @@ def _certified_exchange(
                 )
             elif not margin:
                 reason += "; a design margin (certify_options 'margin', e.g. 3 tol) gives the proof room"
-            else:  # the boxes needed fall steeply with the room (the Panda: none 5.3 min, 3e-3 110 s)
+            else:  # the boxes needed fall steeply with the room (the Panda: none 4.2 min, 3e-3 89 s)
                 reason += f"; a larger design margin than {margin:g} gives the proof more room"
             break
         poses = poses + [q]
