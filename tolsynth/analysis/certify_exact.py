@@ -238,7 +238,8 @@ class _Search:
         (:func:`tolsynth.probability.tail_bound.probability_lower`); the polygons refine a box
         toward the deviation at which the threshold would be proven."""
         if isinstance(self.sigma, PolygonSigmaBounds):
-            ub = self.sigma.bound(L, H, self.b.R / z_for(1.0 - thr))[0]
+            z = z_for(1.0 - thr)  # 0 where any deviation would do (a threshold of 0 or below)
+            ub = self.sigma.bound(L, H, self.b.R / z if z > 0.0 else math.inf)[0]
         else:
             ub = self.sigma.bound(L, H)[0]
         return probability_lower(self.b.R, ub)
