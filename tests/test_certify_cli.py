@@ -104,6 +104,8 @@ def test_worst_pose_certify_components_gives_a_probability_bound():
         (["solve", "--model", "planar_2r", "--R", "0.1", "--p", "0.99", "--workers", "2"], "--everywhere"),
         ([*SOLVE_2R, "--everywhere", "--margin", "3e-3"], "--certify"),
         ([*SOLVE_2R, "--everywhere", "--certify", "--margin", "1"], "from 0 to 0.5"),
+        ([*SOLVE_2R, "--everywhere", "--through-sigma"], "--certify --through-sigma"),
+        ([*SOLVE_2R, "--probability", "gaussian", "--everywhere", "--certify", "--through-sigma"], "exact reading"),
     ],
     ids=[
         "sphere-probability",
@@ -118,6 +120,8 @@ def test_worst_pose_certify_components_gives_a_probability_bound():
         "workers-without-everywhere",
         "margin-without-certify",
         "margin-too-large",
+        "through-sigma-without-certify",
+        "through-sigma-gaussian",
     ],
 )
 def test_certify_usage_errors_exit_2_naming_the_choice(argv, says, capsys):
@@ -258,6 +262,26 @@ def test_everywhere_certified_with_a_margin_reports_the_bound_at_R():
     assert out["lower_bound"] == pytest.approx(at_R, rel=1e-6)
     assert out["cost"] == pytest.approx(at_Rd, rel=1e-6)
     assert out["gap"] == pytest.approx(at_Rd - at_R, rel=1e-3)
+
+
+@pytest.mark.slow  # 4-12 s: a child process, a certified exchange of the paper's robot
+def test_everywhere_exact_reading_proven_through_sigma():
+    """``--through-sigma``: the exact reading's design proven through sigma_1; the design is the
+    Gaussian reading's optimum at z' = 3.0272 at its poses, the lower bound the exact reading's
+    there; the first by cvxpy + Clarabel."""
+    pytest.importorskip("cvxpy")
+    from convex_reference import clarabel
+    from tolsynth.problem.specification import make_specification
+
+    argv = ["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--everywhere", "--certify"]
+    rc, out, _ = _run(*argv, "--through-sigma", "--json")
+    assert rc == 0 and out["certified"] is True and out["probability_lower_bound"] >= 0.99 - 1e-6
+    assert out["through"] == pytest.approx(3.0272, abs=1e-3) and out["upper_bound"] is None
+    m = tolsynth.load_model("xu_zhang_1988")
+    poses = [np.array(q) for q in out["poses"]]
+    pg = math.erf(out["through"] / math.sqrt(2.0))
+    assert out["cost"] == pytest.approx(clarabel(make_specification(m, 0.5, pg, "uniform", 0.7, poses=poses)), rel=1e-6)
+    assert out["lower_bound"] < out["cost"] and out["gap"] == pytest.approx(out["cost"] - out["lower_bound"], rel=1e-9)
 
 
 @pytest.mark.slow  # 4 s

@@ -179,3 +179,44 @@ def test_exact_minimum_on_five_searched_joints_settled_from_the_sigma_bound(monk
     monkeypatch.setattr(certify_exact, "covered", lambda shapes: False)
     c0 = certify_worst_pose(m, "fine", "uniform", "components", 0.5, "exact", progress=False, max_boxes=1500, workers=1)
     assert not c0.certified and c0.probability_lower_bound < 0.9 and "sigma_1" not in c0.method
+
+
+def test_exact_reading_proven_through_sigma_on_the_paper_robot():
+    """``certify_options={"through": "sigma"}``: the Gaussian reading's certified exchange at the
+    z where Eaton's bound proves p - 1e-6 (3.027 at p 0.99, tol 1e-3); the proven sigma_1 then
+    bounds every direction's exact probability.  Checked independently: at the Gaussian
+    certificate's worst pose and at the binding poses the exact probability by FFT convolution
+    (worst direction by Fibonacci caps) is above p (there it is about 0.998: what the proof this way
+    gives away), and the cost premium over the exact reading's solve at the same poses is what
+    the result reports as its gap."""
+    from independent import independent_worst
+
+    m = tolsynth.load_model("xu_zhang_1988")
+    w = synthesize_workspace(m, 0.5, P, progress=False, certify=True, certify_options={"through": "sigma"})
+    assert w.converged and w.certified and w.probability_lower_bound >= P - 1e-6
+    assert w.through == pytest.approx(3.0272, abs=1e-3) and w.upper_bound is None
+    assert w.certificate.upper_bound <= 1 + 1e-3  # the Gaussian proof it rests on
+    eps = np.asarray(w.result.x)
+    lowest = min(
+        independent_worst(m.sensitivity(q, check_limits=False)[:3] * eps, 0.5)[0] for q in w.poses + [w.certificate.q]
+    )
+    assert P < lowest < 0.9995
+    exact = tolsynth.synthesize(m, 0.5, P, poses=w.poses)
+    assert exact.probability_kind == "exact" and w.lower_bound == pytest.approx(exact.lower_bound, rel=1e-9)
+    assert 0.05 < w.gap / w.result.cost < 0.25
+    assert "Eaton" in w.certificate_line()
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(certify_options={"through": "taylor"}), "'sigma'"),
+        (dict(probability="gaussian", certify_options={"through": "sigma"}), "exact reading"),
+        (dict(distribution="truncnormal", certify_options={"through": "sigma"}), "uniform, triangular, normal"),
+    ],
+)
+def test_proof_through_sigma_refuses_what_it_cannot_prove(kwargs, match):
+    from tolsynth.errors import InputError
+
+    with pytest.raises(InputError, match=match):
+        synthesize_workspace(tolsynth.load_model("planar_2r"), R, P, certify=True, progress=False, **kwargs)

@@ -215,6 +215,7 @@ def cmd_solve(args) -> int:
                 probability_lower_bound=w.probability_lower_bound,
                 reason=w.reason,
                 margin=w.margin,
+                through=w.through,
                 lower_bound=w.lower_bound,
                 gap=w.gap,
             )
@@ -229,6 +230,8 @@ def cmd_solve(args) -> int:
             # what the exchange ranks poses by: the Gaussian sigma ratio, else the probability's margin
             gauss = w.result.probability_kind == "gaussian" and args.criterion != "sphere"
             measure = "sigma z/R" if gauss else f"{w.result.probability_kind} (1-P)/(1-p)"
+            if w.through:  # the Gaussian reading at the z Eaton's bound needs
+                measure = f"sigma z'/R (z' = {w.through:.4f})"
             if w.margin:  # the rounds are judged at the radius designed for
                 measure += f" at R' = R/(1+{w.margin:g})"
             for k, r in enumerate(w.rounds):
