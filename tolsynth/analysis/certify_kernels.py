@@ -128,8 +128,9 @@ static int above(double lam, double a1, double a2, double a3) {
     double p = ((lam - a1) * lam + a2) * lam - a3;
     double dp = (3.0 * lam - 2.0 * a1) * lam + a2;
     double ddp = 3.0 * lam - a1;
-    return (p > 16 * U_ * mag) && (dp > 16 * U_ * (3.0 * lam * lam + 2.0 * aa1 * lam + aa2))
-        && (ddp > 16 * U_ * (3.0 * lam + aa1));
+    /* & rather than &&: no branches, so the loops that call it vectorise */
+    return (p > 16 * U_ * mag) & (dp > 16 * U_ * (3.0 * lam * lam + 2.0 * aa1 * lam + aa2))
+        & (ddp > 16 * U_ * (3.0 * lam + aa1));
 }
 static double estimate(double g00, double g11, double g22, double g01, double g02, double g12) {
     double q = (g00 + g11 + g22) / 3.0;
@@ -145,16 +146,6 @@ static double estimate(double g00, double g11, double g22, double g01, double g0
 static double candidate(double L, double s) {
     double r = L / s;
     return (r > 0.0 ? r : 0.0) * (1.0 + 1e-12) + 1e-13;
-}
-/* above() without its branches, for the loops the compiler vectorises: the same three comparisons */
-static int above_all(double lam, double a1, double a2, double a3) {
-    double aa1 = fabs(a1), aa2 = fabs(a2), aa3 = fabs(a3);
-    double mag = ((lam + aa1) * lam + aa2) * lam + aa3;
-    double p = ((lam - a1) * lam + a2) * lam - a3;
-    double dp = (3.0 * lam - 2.0 * a1) * lam + a2;
-    double ddp = 3.0 * lam - a1;
-    return (p > 16 * U_ * mag) & (dp > 16 * U_ * (3.0 * lam * lam + 2.0 * aa1 * lam + aa2))
-        & (ddp > 16 * U_ * (3.0 * lam + aa1));
 }
 #define LM_CHUNK 512
 #define LM_BLOCK 32
@@ -201,7 +192,7 @@ void ts_lambda_max(int n, int T, const double *g, const double *err, double *out
                 for (int i = 0; i < nb; i++) {
                     double s = S[i0 + i], x = candidate(L, s);
                     double v = x * s * (1.0 + 8.0 * U_) + frob * (1.0 + 8.0 * U_);
-                    Fb[i] = above_all(x, A1[i0 + i], A2[i0 + i], A3[i0 + i]) & (v <= INFINITY);
+                    Fb[i] = above(x, A1[i0 + i], A2[i0 + i], A3[i0 + i]) & (v <= INFINITY);
                     Vb[i] = v;
                 }
                 int all = 1;

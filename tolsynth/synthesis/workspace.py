@@ -475,7 +475,7 @@ def _certified_exchange(
                     "(CLI: --probability gaussian --margin 3e-3); the Panda, whose design is flatter, "
                     "in 4.2 min, and with that margin in 1.5 min. Or the exact reading proven through sigma_1, at a "
                     "cost premium of about 12 %: certify_options={'through': 'sigma'} (CLI: --through-sigma; "
-                    "six-joint arms in 20-40 s)"
+                    "six-joint arms in 20-40 s, the Panda in 4 min)"
                 ),
                 stacklevel=3,
             )
