@@ -372,10 +372,9 @@ def _through_sigma(mechanism, R, p, distribution, alpha, pose, tol, max_rounds, 
     if options.pop("through") != "sigma":
         raise InputError("certify_options['through']", "an unknown way", "'sigma'")
     if kwargs["probability"] != "exact" or kwargs.get("criterion", "components") != "components":
+        what = "the sphere criterion" if kwargs["probability"] == "exact" else f"the {kwargs['probability']} reading"
         raise InputError(
-            "certify_options['through']",
-            f"given with the {kwargs['probability']} reading",
-            "the exact reading of the per-component probability (the default)",
+            "certify_options['through']", f"given with {what}", "the exact reading of the per-component probability"
         )
     dist = resolve(distribution, mechanism)
     if not covered(shapes_of(dist, mechanism.error_parameters, mechanism.index)):
