@@ -226,8 +226,14 @@ def cmd_solve(args) -> int:
             )
             emit_json(out)
         else:
-            through = f" (proven through sigma_1: the design is the Gaussian reading's at z' = {w.through:.4f})"
-            print(f"{head}, every pose" + (through if w.through else ""))
+            print(
+                f"{head}, every pose"
+                + (
+                    f" (proven through sigma_1: the design is the Gaussian reading's at z' = {w.through:.4f})"
+                    if w.through
+                    else ""
+                )
+            )
             # what the exchange ranks poses by: the Gaussian sigma ratio, else the probability's margin
             gauss = w.result.probability_kind == "gaussian" and args.criterion != "sphere"
             measure = "sigma z/R" if gauss else f"{w.result.probability_kind} (1-P)/(1-p)"
