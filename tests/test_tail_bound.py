@@ -40,10 +40,17 @@ def test_the_uniform_lies_below_the_normal_of_its_variance_in_the_cubic_order():
 
 
 def test_outside_the_support_the_order_holds_by_the_moments():
-    # below -1, E (U - h)^3 = -h^3 - h, the normal's E (G / sqrt 3 - h)^3, which its positive part exceeds
+    # below -1, E (U - h)_+^3 = E (U - h)^3 = -h^3 - h (Monte Carlo here), the normal's E (G / sqrt 3 - h)^3,
+    # which its positive part exceeds (arb); above 1 the uniform's is 0
+    flint.ctx.prec = 80
+    s = flint.arb(3).sqrt()
+    rng = np.random.default_rng(0)
     for h in (-1.0, -1.5, -3.0):
-        u = np.mean((np.random.default_rng(0).uniform(-1, 1, 2_000_000) - h) ** 3)
+        u = np.mean(np.maximum(rng.uniform(-1, 1, 2_000_000) - h, 0.0) ** 3)
         assert u == pytest.approx(-(h**3) - h, rel=2e-3)
+        g = _gauss_e3(flint.arb(h) * s) / (s * s * s)
+        assert g.lower() > -(h**3) - h
+    assert _gauss_e3(flint.arb(1) * s).lower() > 0
 
 
 def test_the_bound_against_the_normal_tail_and_its_known_thresholds():

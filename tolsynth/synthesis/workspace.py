@@ -369,8 +369,9 @@ def _through_sigma(mechanism, R, p, distribution, alpha, pose, tol, max_rounds, 
     from tolsynth.probability.tail_bound import COVERED, covered, tail_upper, z_for
 
     options = dict(options)
-    if options.pop("through") != "sigma":
-        raise InputError("certify_options['through']", "an unknown way", "'sigma'")
+    way = options.pop("through")
+    if way != "sigma":
+        raise InputError("certify_options['through']", f"got {way!r}", "'sigma'")
     if kwargs["probability"] != "exact" or kwargs.get("criterion", "components") != "components":
         what = "the sphere criterion" if kwargs["probability"] == "exact" else f"the {kwargs['probability']} reading"
         raise InputError(
