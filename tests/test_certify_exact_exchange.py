@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import tolsynth
-from tolsynth.errors import OutOfRangeError
+from tolsynth.errors import CertificationWarning, OutOfRangeError
 from tolsynth.kinematics.joint_space import _limits
 from tolsynth.synthesis.workspace import synthesize_workspace
 
@@ -130,8 +130,6 @@ def test_exact_proof_on_five_searched_joints_is_announced_at_once():
     says it did not; the paper's robot (three searched joints) gets no such warning."""
     import warnings
 
-    from tolsynth.errors import CertificationWarning
-
     with pytest.warns(CertificationWarning, match="5 searched joints"):
         ws = synthesize_workspace(
             tolsynth.load_model("puma560"), 0.5, 0.99, certify=True, max_rounds=1, certify_options={"time_limit": 1}
@@ -147,6 +145,38 @@ def test_exact_proof_on_five_searched_joints_is_announced_at_once():
             max_rounds=1,
             certify_options={"time_limit": 1},
         )
+
+
+@pytest.mark.slow
+def test_exact_searches_on_five_searched_joints_have_a_default_time_limit(monkeypatch):
+    """Without a limit of its own, each exact certified search on five searched joints stops after
+    EXACT_WIDE_SECONDS (one search would otherwise bound 400 000 boxes, over 15 min on the Puma 560);
+    a limit the caller gives, of time or of boxes, is kept, and a smaller robot gets none."""
+    from tolsynth.analysis import certify
+    from tolsynth.synthesis import workspace
+
+    real, seen = certify.certify_worst_pose, []
+
+    def spy(*args, **kw):
+        seen.append({k: kw.get(k) for k in ("time_limit", "max_boxes")})
+        kw["max_boxes"] = 50  # the limits passed are what is checked; the search itself is cut short
+        kw.pop("time_limit", None)
+        return real(*args, **kw)
+
+    monkeypatch.setattr(certify, "certify_worst_pose", spy)
+    puma = tolsynth.load_model("puma560")
+    for options, expected in (
+        (None, {"time_limit": workspace.EXACT_WIDE_SECONDS, "max_boxes": None}),
+        ({"time_limit": 7}, {"time_limit": 7, "max_boxes": None}),
+        ({"max_boxes": 300}, {"time_limit": None, "max_boxes": 300}),
+    ):
+        seen.clear()
+        with pytest.warns(CertificationWarning, match="5 searched joints"):
+            synthesize_workspace(puma, 0.5, 0.99, certify=True, max_rounds=1, certify_options=options)
+        assert seen == [expected]
+    seen.clear()
+    synthesize_workspace(tolsynth.load_model("xu_zhang_1988"), 0.5, 0.99, certify=True, max_rounds=1)
+    assert seen == [{"time_limit": None, "max_boxes": None}]
 
 
 @pytest.mark.slow  # about 20 s: two certified searches and five independent worst directions
