@@ -100,3 +100,18 @@ def test_the_truncated_normal_is_not_covered():
 
 def test_degenerate_deviations():
     assert probability_lower(1.0, [0.0, np.inf, np.nan]).tolist() == [1.0, 0.0, 0.0]
+    # ratios past the cap take its bound (about 1e-301), not an overflow's NaN
+    assert probability_lower(1.0, [1e-300, 1e-2]).tolist() == pytest.approx([1.0, 1.0], abs=2e-15)
+    assert 0.0 < tail_upper(1e300) == tail_upper(40.0) < 1e-290
+
+
+def test_an_array_of_deviations_gets_each_its_own_bound():
+    # a whole array of boxes at once is the bound of each at a time, in any order; and it falls
+    # as the ratio grows, as Eaton's bound does
+    s = np.array([0.5, 0.2, 0.9, 0.33, 0.41, 0.2])
+    each = [float(probability_lower(1.0, v)) for v in s]
+    assert probability_lower(1.0, s).tolist() == each
+    assert probability_lower(1.0, s[::-1]).tolist() == each[::-1]
+    z = np.linspace(0.5, 39.0, 300)
+    t = [tail_upper(v) for v in z]
+    assert all(a >= b for a, b in zip(t, t[1:]))

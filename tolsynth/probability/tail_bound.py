@@ -36,6 +36,9 @@ __all__ = ["COVERED", "covered", "tail_upper", "probability_lower", "z_for"]
 COVERED = ("uniform", "triangular", "normal")
 
 _GOLDEN = 0.5 * (3.0 - math.sqrt(5.0))
+#: past this ratio the bound at it is used (the bound falls with z, and is about 1e-300 there): the
+#: squares of larger ratios overflow
+Z_CAP = 40.0
 
 
 def covered(shapes) -> bool:
@@ -43,20 +46,44 @@ def covered(shapes) -> bool:
     return all(s.kind in COVERED for s in shapes)
 
 
-def _e3(h: float) -> float:
+# math's exp and erfc element by element: the same values as the scalar functions (numpy's own exp may
+# differ from them in the last bit), while the loops around them run over whole arrays of boxes
+_exp = np.frompyfunc(math.exp, 1, 1)
+_erfc = np.frompyfunc(math.erfc, 1, 1)
+_SQRT2PI, _SQRT2 = math.sqrt(2.0 * math.pi), math.sqrt(2.0)
+
+
+def _e3(h: np.ndarray) -> np.ndarray:
     """``E (G - h)_+^3`` rounded up: ``(2 + h^2) phi(h) - h (3 + h^2) Q(h)``, with a margin for
     the rounding of its terms (the library's exp and erfc are within a few ulps) and their
     cancellation."""
-    phi = math.exp(-0.5 * h * h) / math.sqrt(2.0 * math.pi)
-    q = 0.5 * math.erfc(h / math.sqrt(2.0))
+    phi = _exp(-0.5 * h * h).astype(float) / _SQRT2PI
+    q = 0.5 * _erfc(h / _SQRT2).astype(float)
     a, b = (2.0 + h * h) * phi, h * (3.0 + h * h) * q
-    return max(0.0, a - b) + 1e-13 * (abs(a) + abs(b)) + 1e-300
+    return np.maximum(0.0, a - b) + 1e-13 * (np.abs(a) + np.abs(b)) + 1e-300
 
 
-def _ratio(h: float, z: float) -> float:
+def _ratio(h: np.ndarray, z: np.ndarray) -> np.ndarray:
     """``E (G - h)_+^3 / (z - h)^3`` rounded up (h < z)."""
     d = z - h
     return _e3(h) / (d * d * d) * (1.0 + 1e-14)
+
+
+def _tail_upper(z: np.ndarray) -> np.ndarray:
+    """:func:`tail_upper` of an array of finite ``z > 0``: the same golden-section steps on each."""
+    lo, hi = z - 6.0, z - 1e-3 * np.maximum(1.0, z)
+    x1, x2 = lo + _GOLDEN * (hi - lo), hi - _GOLDEN * (hi - lo)
+    f1, f2 = _ratio(x1, z), _ratio(x2, z)
+    for _ in range(48):
+        left = f1 <= f2  # the least lies left of x2: [lo, x2] kept, x1 becomes its right point
+        hi = np.where(left, x2, hi)
+        lo = np.where(left, lo, x1)
+        x1n = np.where(left, lo + _GOLDEN * (hi - lo), x2)
+        x2n = np.where(left, x1, hi - _GOLDEN * (hi - lo))
+        new = _ratio(np.where(left, x1n, x2n), z)  # one new evaluation a step, at the moved point
+        f1, f2 = np.where(left, new, f2), np.where(left, f1, new)
+        x1, x2 = x1n, x2n
+    return np.minimum(1.0, 2.0 * np.minimum(f1, f2) * (1.0 + 1e-14))
 
 
 def tail_upper(z: float) -> float:
@@ -68,28 +95,23 @@ def tail_upper(z: float) -> float:
         return 1.0
     if math.isinf(z):
         return 0.0
-    lo, hi = z - 6.0, z - 1e-3 * max(1.0, z)
-    x1, x2 = lo + _GOLDEN * (hi - lo), hi - _GOLDEN * (hi - lo)
-    f1, f2 = _ratio(x1, z), _ratio(x2, z)
-    for _ in range(48):
-        if f1 <= f2:
-            hi, x2, f2 = x2, x1, f1
-            x1 = lo + _GOLDEN * (hi - lo)
-            f1 = _ratio(x1, z)
-        else:
-            lo, x1, f1 = x1, x2, f2
-            x2 = hi - _GOLDEN * (hi - lo)
-            f2 = _ratio(x2, z)
-    return min(1.0, 2.0 * min(f1, f2) * (1.0 + 1e-14))
+    return float(_tail_upper(np.array([min(z, Z_CAP)]))[0])
 
 
 def probability_lower(R: float, s) -> np.ndarray:
     """Lower bounds of ``P(|S| <= R)`` for standard deviations at most ``s`` (array; 0 where ``s``
     is 0 or below gives 1)."""
     s = np.asarray(s, dtype=float)
-    out = np.empty(s.shape)
-    for i, si in np.ndenumerate(s):
-        out[i] = 1.0 if si <= 0.0 else max(0.0, 1.0 - tail_upper(R / si) - 1e-15)
+    out = np.ones(s.shape)
+    pos = ~(s <= 0.0)  # NaN too: its bound is 0
+    with np.errstate(over="ignore"):  # a ratio past the largest float is inf: no tail
+        z = R / s[pos]
+    t = np.ones(z.shape)  # the bound of z <= 0 (none here) or NaN: every probability at least 0
+    ok = z > 0.0
+    t[ok] = 0.0  # z infinite: no tail
+    fin = ok & np.isfinite(z)
+    t[fin] = _tail_upper(np.minimum(z[fin], Z_CAP))
+    out[pos] = np.maximum(0.0, 1.0 - t - 1e-15)
     return out
 
 
