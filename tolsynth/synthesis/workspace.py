@@ -225,7 +225,9 @@ def synthesize_workspace(
     probability to ``p - 1e-6``); then ``certified`` is True.  When the round limit is reached, or
     the search cannot close its gap within its box limit, the result says so (``converged`` False,
     ``reason``) with the bound reached.  ``certify_options``: ``rtol``, ``tol``, ``max_boxes``,
-    ``time_limit`` and ``workers`` (processes; default the cores) of each certified search, and
+    ``time_limit`` and ``workers`` (processes; default the cores) of each certified search (the
+    exact reading's on five or more searched joints, where its proof has not been seen to close,
+    stops after :data:`EXACT_WIDE_SECONDS` unless a time or box limit is given), and
     ``margin`` (relative, default 0): design at ``R / (1 + margin)`` and prove at ``R``, and
     ``through="sigma"``: the exact reading proven through ``sigma_1`` (:func:`_through_sigma`).  The proof
     needs room between the design's largest error and ``1 + tol``; an exchange's design is nearly
