@@ -30,6 +30,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from tolsynth.probability.stats import _MATH_UFUNCS
+
 __all__ = ["COVERED", "covered", "tail_upper", "probability_lower", "z_for"]
 
 #: the shapes whose order below the normal of their variance is proven (module docstring)
@@ -49,7 +51,7 @@ def covered(shapes) -> bool:
 # math's exp and erfc element by element: the same values as the scalar functions (numpy's own exp may
 # differ from them in the last bit), while the loops around them run over whole arrays of boxes
 _exp = np.frompyfunc(math.exp, 1, 1)
-_erfc = np.frompyfunc(math.erfc, 1, 1)
+_erfc = _MATH_UFUNCS["erfc"]
 _SQRT2PI, _SQRT2 = math.sqrt(2.0 * math.pi), math.sqrt(2.0)
 
 

@@ -364,11 +364,10 @@ def _through_sigma(mechanism, R, p, distribution, alpha, pose, tol, max_rounds, 
     once ``z sigma_1 / R <= 1 + tol`` is; the cost's lower bound from the exact reading's solve at
     the poses imposed, so ``gap`` shows what proving it this way cost."""
     import dataclasses
-    import math
 
-    from tolsynth.analysis.interval_ops import round_down
     from tolsynth.probability.distributions import resolve, shapes_of
-    from tolsynth.probability.tail_bound import COVERED, covered, tail_upper, z_for
+    from tolsynth.probability.stats import p_components
+    from tolsynth.probability.tail_bound import COVERED, covered, probability_lower, z_for
 
     options = dict(options)
     way = options.pop("through")
@@ -385,14 +384,14 @@ def _through_sigma(mechanism, R, p, distribution, alpha, pose, tol, max_rounds, 
             "certify_options['through']", "an error shape Eaton's bound does not cover", ", ".join(COVERED)
         )
     zg = z_for(1.0 - p + EXACT_SLACK) * (1.0 + tol)
-    pg = math.erf(zg / math.sqrt(2.0))
+    pg = float(p_components(1.0, zg))
     ws = synthesize_workspace(
         mechanism, R, pg, distribution, alpha, pose=pose, tol=tol, max_rounds=max_rounds, search=search,
         certify=True, certify_options=options or None, progress=progress, **{**kwargs, "probability": "gaussian"},
     )  # fmt: skip
     p_lb, certified, reason = None, ws.certified, ws.reason
     if ws.upper_bound is not None:  # sigma_1 <= upper_bound R / z_of_p(pg) everywhere
-        p_lb = round_down(1.0 - tail_upper(z_of_p(pg) / ws.upper_bound))
+        p_lb = float(probability_lower(R, ws.upper_bound * R / z_of_p(pg)))
         if certified and p_lb < p - EXACT_SLACK:
             certified, reason = False, f"the proven sigma_1 gives only {p_lb:.9f} < p - {EXACT_SLACK:g}"
     at_R = synthesize(mechanism, R, p, distribution, alpha, poses=ws.poses, **kwargs)
