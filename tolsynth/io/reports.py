@@ -260,7 +260,7 @@ def report(
     from tolsynth.kinematics.mechanism import as_mechanism
     from tolsynth.problem.result import SynthesisResult
     from tolsynth.synthesis.processes import ProcessChoice
-    from tolsynth.synthesis.workspace import WorkspaceSynthesis
+    from tolsynth.synthesis.workspace_result import WorkspaceSynthesis
 
     t0 = time.perf_counter()
     workspace = None

@@ -7,7 +7,6 @@ workspace for the worst pose at that optimum, add it, repeat.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -15,158 +14,10 @@ from tolsynth.checks import check_count, check_mapping, check_positive
 from tolsynth.errors import CertificationWarning, InputError
 from tolsynth.kinematics.joint_space import MODEL_REFERENCE, model_reference
 from tolsynth.probability.stats import z_of_p
-from tolsynth.problem.result import SynthesisResult
 from tolsynth.synthesis.single import COARSE_STEP_TOL, synthesize
-from tolsynth.tabular import Tabular
+from tolsynth.synthesis.workspace_result import WorkspaceSynthesis
 
 __all__ = ["synthesize_workspace", "WorkspaceSynthesis"]
-
-
-@dataclass(frozen=True)
-class WorkspaceSynthesis(Tabular):
-    """Result of :func:`synthesize_workspace`: the constraint imposed over the whole workspace.
-
-    Attributes
-    ----------
-    result : SynthesisResult
-        The optimum at the final set of poses.
-    poses : list of ndarray
-        The poses (rad) whose constraints were imposed, the starting pose first.
-    rounds : list of dict
-        Per round: ``n_poses``, ``cost``, ``worst_value`` (largest sigma z / R, or for the sphere
-        criterion (1 - P)/(1 - p), found over the workspace at that round's optimum), ``worst_q`` (rad), ``worst_position`` (mm).
-    converged : bool
-        True when the worst pose found meets the specification to ``tol`` (with ``certify``: when
-        the proven bound does).
-    certified : bool or None
-        With ``certify=True``: the specification is proven to hold at every pose of the joint
-        space, to ``tol`` (Gaussian: ``upper_bound <= 1 + tol``; exact: ``probability_lower_bound
-        >= p - 1e-6``).  None without ``certify``.
-    upper_bound : float or None
-        Gaussian reading: the proven bound of ``max z sigma_1 / R`` over the joint space, at the
-        last solve's tolerances.
-    probability_lower_bound : float or None
-        The proven lower bound of the smallest per-component probability over the joint space
-        (exact or Gaussian reading, as solved).
-    certificate : Certificate or None
-        The last certified search (:class:`tolsynth.analysis.certify.Certificate`).
-    reason : str
-        Why not converged ("" when converged).
-    margin : float
-        The design margin of a certified exchange (``certify_options["margin"]``): the designs were
-        solved at ``R / (1 + margin)``, the proof made at ``R``.  0 without one.
-    bound_at_R : float or None
-        With a margin: the dual bound of a solve at ``R`` itself at the final poses, a lower bound
-        on the cost of any tolerances meeting the specification everywhere (:attr:`lower_bound`).
-        Proven through sigma_1: the same from the exact reading's solve.
-    through : float or None
-        The exact reading proven through sigma_1 (``certify_options={"through": "sigma"}``): the
-        ``z`` of the Gaussian reading the design was made and proven for.  None otherwise.
-    """
-
-    result: SynthesisResult
-    poses: list
-    rounds: list
-    converged: bool
-    certified: bool | None = None
-    upper_bound: float | None = None
-    probability_lower_bound: float | None = None
-    certificate: object = None
-    reason: str = ""
-    margin: float = 0.0
-    bound_at_R: float | None = None
-    through: float | None = None
-
-    @property
-    def success(self) -> bool:
-        """The exchange converged and its last solve is optimal."""
-        return self.converged and self.result.success
-
-    @property
-    def lower_bound(self) -> float:
-        """Certified lower bound on the cost of *any* tolerances meeting the specification at every
-        pose: the dual bound of the last solve, whose poses are a subset of the workspace (a
-        relaxation), so it bounds the semi-infinite problem too.  With a design margin, the same
-        bound from a solve at ``R`` itself (the last solve's is at ``R / (1 + margin)``)."""
-        return self.bound_at_R if self.bound_at_R is not None else self.result.lower_bound
-
-    @property
-    def gap(self) -> float:
-        """``cost - lower_bound``: the last solve's own gap, and with a design margin also what the
-        margin cost."""
-        return self.result.gap if self.bound_at_R is None else self.result.cost - self.bound_at_R
-
-    @property
-    def worst_value(self) -> float:
-        """Largest ``sigma z / R`` (sphere: ``(1 - P)/(1 - p)``) found anywhere in the workspace by the
-        search run *after* the last solve, at its tolerances (NaN if that solve failed)."""
-        return float(self.rounds[-1]["worst_value"]) if self.rounds else float("nan")
-
-    @property
-    def binding_poses(self) -> list:
-        """The imposed poses (rad) whose constraint is active at the last solve (non-zero multiplier)."""
-        out = []
-        for q, b in zip(self.poses, self.result.constraints if self.result is not None else ()):
-            m = np.asarray(b.multipliers, dtype=float)
-            if np.any(m > 1e-9 * max(1.0, float(np.max(np.abs(m))))) or np.any(b.active):
-                out.append(q)
-        return out
-
-    @property
-    def max_violation(self) -> float:
-        """``max(0, worst_value - 1)``: how far the returned tolerances miss the specification at the
-        worst pose the search found (0 where they meet it everywhere it looked)."""
-        return max(0.0, self.worst_value - 1.0) if self.rounds else float("nan")
-
-    def certificate_line(self) -> str:
-        """The certified search's proven bound over the whole joint space, or why there is none."""
-        if self.certified is None:
-            return "no certified search (certify=False): the worst pose is sampled"
-        if self.upper_bound is not None:
-            what = f"max z sigma_1 / R <= {self.upper_bound:.6f}"
-        elif self.probability_lower_bound is not None:
-            what = f"every component probability >= {self.probability_lower_bound:.8f}"
-        else:
-            what = "no bound"
-        state = "the specification is proven to hold" if self.certified else "NOT proven: " + self.reason
-        if self.through:
-            state += (
-                f"; through sigma_1 and Eaton's tail bound (designed for z sigma_1 <= R with z = {self.through:.4f}), "
-                f"the cost is within {self.gap / self.result.cost:.2%} of the cheapest design that meets p at the "
-                "poses imposed"
-            )
-        elif self.margin:
-            state += (
-                f"; designed with a margin of {self.margin:g} on R, the cost is within "
-                f"{self.gap / self.result.cost:.2%} of the cheapest design that meets R everywhere"
-            )
-        return f"certificate over the whole joint space: {what} ({state})"
-
-    def summary(self) -> str:
-        """Readable summary: the exchange's rounds, the certificate, the largest value found after
-        the last solve, and the last solve's own summary."""
-        lines = [
-            f"workspace exchange: {'converged' if self.converged else 'NOT converged'} after "
-            f"{len(self.rounds)} round(s), {len(self.poses)} pose(s) imposed"
-            + (f"; designed at R' = R/(1+{self.margin:g}), the values below relative to R'" if self.margin else "")
-        ]
-        for k, r in enumerate(self.rounds):
-            pos = ", ".join(f"{v:.1f}" for v in np.asarray(r["worst_position"], dtype=float))
-            lines.append(
-                f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.8g}, worst over the "
-                f"workspace {r['worst_value']:.6f} at hand ({pos}) mm"
-            )
-        lines.append(
-            f"certificate: cost {self.result.cost:.8g}, lower bound {self.lower_bound:.8g} "
-            f"(valid at every pose), gap {self.gap:.2e}"
-        )
-        lines.append(
-            f"afterwards: largest value found anywhere {self.worst_value:.6f} (violation {self.max_violation:.2e})"
-        )
-        if self.certified is not None:
-            lines.append(self.certificate_line())
-        lines.append(self.result.summary())
-        return "\n".join(lines)
 
 
 def synthesize_workspace(
