@@ -53,8 +53,13 @@ EVAL_TOL = 1e-10
 LOOSE_TOL = 1e-6
 #: the tighter tolerances a patch evaluation takes in turn while it is not clear of the level
 MID_TOLS = (1e-8, EVAL_TOL)
-#: truncation tolerance of the gradients that tilt the lower bound's half-spaces
+#: truncation tolerance of the gradients that tilt the lower bound's half-spaces, at first
 GRAD_TOL = 1e-9
+#: the tightest it is taken to, where the multipliers (about 1 / (1 - p)) need more
+MIN_GRAD_TOL = 1e-14
+#: the share of the cost the gradients' error may widen the half-spaces by (the certificate's gap
+#: is 1e-6 of it)
+WIDEN_SHARE = 1e-8
 #: a patch smaller than this (1 - d) that still fails is reported as not certified
 MIN_SIZE = 1e-15
 #: grid points' face coordinates as integers in units of 2^-_GRID_BITS (exact for the dyadic splits)
@@ -390,15 +395,27 @@ def half_space_bound(costs, lu, uu, u_star, c_rows, R_rows, p_rows, shapes, lam0
         s = np.minimum(s + np.maximum(over, 0.0) / slope * 1.5 + 1e-15, reach_s)
     else:
         Ps, es_ = probability(c_rows * np.exp(u_star + s[:, None]), shapes, R_rows, 1e-11)
-    # the gradient to GRAD_TOL only: its error bound widens the half-spaces by about lam * n * 1e-9,
-    # far inside the certificate's gap, and a tighter one needs up to 2^18 series terms a row
-    _, G, _, _, eG = derivatives(
-        c_rows * np.exp(s)[:, None], u_star, shapes, R_rows, tol=GRAD_TOL, hessian=False, rigorous=True
-    )
+    # the gradient to GRAD_TOL first (a tighter one needs up to 2^18 series terms a row on some
+    # rows); its error bound widens the half-spaces by lam . delta, which the multipliers of a high p
+    # (about 1 / (1 - p)) carry past the certificate's gap: then to the tolerance that keeps the
+    # widening below WIDEN_SHARE of the cost
+    reach = np.maximum(np.abs(lu - u_star - s[:, None]), np.abs(uu - u_star - s[:, None]))
+    total = costs.total(u_star)
+    if total is None:
+        total = math.fsum(float(m.value(x)) for m, x in zip(costs.models, u_star))
+    lam_abs = np.abs(np.asarray(lam0, dtype=float))
+    tol = GRAD_TOL
+    for _ in range(2):
+        _, G, _, _, eG = derivatives(
+            c_rows * np.exp(s)[:, None], u_star, shapes, R_rows, tol=tol, hessian=False, rigorous=True
+        )
+        delta = (eG * reach).sum(axis=1)
+        widening, budget = float(lam_abs @ delta), WIDEN_SHARE * abs(total)
+        if widening <= budget or tol <= MIN_GRAD_TOL:
+            break
+        tol = max(tol * 0.5 * budget / widening, MIN_GRAD_TOL)
     P, eP = Ps, es_
     hs = np.maximum(-G, 0.0)  # the true gradient is <= 0: clipping only moves the estimate closer
-    reach = np.maximum(np.abs(lu - u_star - s[:, None]), np.abs(uu - u_star - s[:, None]))
-    delta = (eG * reach).sum(axis=1)
     cj = hs @ u_star + s * hs.sum(axis=1) + delta
     if not np.all(P + eP <= p_rows):  # still above p after the search: that cut gives no half-space
         keep = P + eP <= p_rows
@@ -419,9 +436,6 @@ def half_space_bound(costs, lu, uu, u_star, c_rows, R_rows, p_rows, shapes, lam0
     # (no certificate in reach: the relaxation's own optimum lies lower, with a cost not convex in
     # u), once a step gains less than a thousandth of that (the last steps crept on for hundreds of
     # evaluations of milliseconds each)
-    total = costs.total(u_star)
-    if total is None:
-        total = math.fsum(float(m.value(x)) for m, x in zip(costs.models, u_star))
     enough = total - 1e-8 * abs(total)
     lam = np.maximum(np.asarray(lam0, dtype=float), 0.0)
     best, grad, Hd = dual(lam)
