@@ -59,7 +59,7 @@ GRAD_TOL = 1e-9
 MIN_GRAD_TOL = 1e-14
 #: the share of the cost the gradients' error may widen the half-spaces by (the certificate's gap
 #: is 1e-6 of it)
-WIDEN_SHARE = 1e-8
+WIDEN_SHARE = 1e-7
 #: a patch smaller than this (1 - d) that still fails is reported as not certified
 MIN_SIZE = 1e-15
 #: grid points' face coordinates as integers in units of 2^-_GRID_BITS (exact for the dyadic splits)
