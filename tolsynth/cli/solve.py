@@ -139,6 +139,14 @@ def cmd_solve(args) -> int:
         args.dist = dist_for(args, mech)
     if args.probability is None:  # the library's default; the paper's cross-check of two solvers reads Gaussian
         args.probability = "gaussian" if args.solver == "both" else DEFAULT_PROBABILITY
+    if args.solver == "both" and args.probability == "exact":  # two labels on one and the same exact solve
+        raise InputError(
+            "--solver both",
+            "given with --probability exact: there the solver only finds the Gaussian start of the exact "
+            "interior-point method, which does the solve, so both columns would be the same run",
+            "--solver both with --probability gaussian (the paper's cross-check of IPOPT and SUMT + Powell; its "
+            "default), or --solver auto|ipopt|sumt with --probability exact",
+        )
     if args.probability == "worst_case":
         for flag, given in (
             ("--solver both", args.solver == "both"),
@@ -299,9 +307,12 @@ def cmd_solve(args) -> int:
         ok = c.ipopt.success and c.sumt.success
         met = c.ipopt if c.ipopt.feasible and c.sumt.feasible else None
     else:
-        with Working(
-            f"tolsynth solve: {SOLVER_LABELS[args.solver]}" + f" ({args.probability.replace('_', '-')} probabilities)"
-        ):
+        what = (  # under the exact reading the named solver only finds the exact method's start
+            f"the exact interior-point solve (its Gaussian start: {args.solver})"
+            if args.probability == "exact"
+            else SOLVER_LABELS[args.solver]
+        )
+        with Working(f"tolsynth solve: {what} ({args.probability.replace('_', '-')} probabilities)"):
             res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
         reps = _contributions(args, {"the optimum": res})
         if args.out:

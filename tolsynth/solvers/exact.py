@@ -56,7 +56,15 @@ from tolsynth.solvers.exact_newton import Barrier
 from tolsynth.solvers.exact_newton import cost_function as _cost_fn
 from tolsynth.solvers.exact_series import probability
 
-__all__ = ["solve_exact", "exact_margin", "PROBABILITIES", "EXACT_TOL", "DEFAULT_OPTIONS", "certifiable"]
+__all__ = [
+    "solve_exact",
+    "exact_margin",
+    "exact_label",
+    "PROBABILITIES",
+    "EXACT_TOL",
+    "DEFAULT_OPTIONS",
+    "certifiable",
+]
 
 PROBABILITIES = ("gaussian", "exact")
 #: every direction of every pose is proven to have P >= p - EXACT_TOL
@@ -79,6 +87,16 @@ START_STEPS = 8
 WARM_TAU = 1e-3
 #: fresh barrier paths from a stalled one's last iterate before the solve reports failure
 RESTARTS = 3
+
+
+#: the readable name of each Gaussian solver's ``result.solver``, for the exact result's label
+START_NAMES = {"ipm": "the compiled interior-point method", "ipopt": "IPOPT", "sumt": "SUMT + Powell"}
+
+
+def exact_label(start_solver: str) -> str:
+    """``result.solver`` of an exact solve: the barrier Newton method of this module is what ran;
+    the solver the caller named only found the Gaussian optimum it starts from."""
+    return f"exact interior point (started from the Gaussian optimum of {START_NAMES.get(start_solver, start_solver)})"
 
 
 @dataclass
@@ -198,7 +216,8 @@ def solve_exact(
 
         # the per-component problem at the same p: the sphere's lower bound
         comp = _solve_components(ToleranceNLP(spec.relaxed()), shapes, solver, eps0, opts, t0, False)
-        return solve_sphere(nlp, shapes, solver, comp, _gaussian_start(nlp, solver, eps0), opts, t0)
+        start = _gaussian_start(nlp, solver, eps0)
+        return solve_sphere(nlp, shapes, exact_label(start.solver), comp, start.x, opts, t0)
     return _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose)
 
 
@@ -221,7 +240,9 @@ def _checked(options) -> dict:
     return dict(options)
 
 
-def _gaussian_start(nlp, solver, eps0):
+def _gaussian_start(nlp, solver, eps0) -> SynthesisResult:
+    """The Gaussian optimum the exact solve starts from, solved by ``solver`` (its ``solver``
+    field names the method that ran)."""
     # A user's start (another R's design in a sweep) only warm-starts the Gaussian solve: the cuts
     # are placed at this problem's Gaussian design, which is near the exact one; cuts placed at a
     # far start took 30 times longer to move.
@@ -230,18 +251,18 @@ def _gaussian_start(nlp, solver, eps0):
     if nlp.spec.sphere_blocks and solver != "sumt":  # the design alone: its sphere bounds took 0.2-0.9 s
         from tolsynth.solvers.ipopt import solve_ipopt
 
-        return solve_ipopt(nlp, eps0, sphere_bounds=False).x
+        return solve_ipopt(nlp, eps0, sphere_bounds=False)
     if solver == "sumt":
         from tolsynth.solvers.sumt import solve_sumt
 
-        return solve_sumt(nlp, eps0).x
+        return solve_sumt(nlp, eps0)
     if solver == "auto":  # the compiled method where it applies: the start costs a millisecond
         from tolsynth.solvers.fast import solve_auto
 
-        return solve_auto(nlp, eps0).x
+        return solve_auto(nlp, eps0)
     from tolsynth.solvers.ipopt import solve_ipopt
 
-    return solve_ipopt(nlp, eps0).x
+    return solve_ipopt(nlp, eps0)
 
 
 def _gaussian_route(nlp, solver, eps0, t0):
@@ -267,7 +288,8 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
     spec = nlp.spec
     blocks = _blocks(spec)
     lu, uu = nlp.lu, nlp.uu
-    eps_g = _gaussian_start(nlp, solver, eps0)
+    start = _gaussian_start(nlp, solver, eps0)
+    eps_g = start.x
     cuts = Cuts(shapes, SAME_CUT)
     vals, dirs = nlp.block_values(eps_g)
     for i, blk in enumerate(blocks):
@@ -340,7 +362,23 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
         if not ok or added == 0:
             break
     eps = np.minimum(np.maximum(np.exp(u), spec.lower), spec.upper)
-    return _assemble(nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, message, covers, history, iters, evals, t0)
+    return _assemble(
+        nlp,
+        shapes,
+        exact_label(start.solver),
+        blocks,
+        cuts,
+        eps,
+        lam,
+        zb,
+        ok,
+        message,
+        covers,
+        history,
+        iters,
+        evals,
+        t0,
+    )
 
 
 def _assemble(nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, inner, covers, history, iters, evals, t0):

@@ -32,7 +32,7 @@ class DesignSpec:
     alpha: Any = 0.7
     k: Any = None
     bounds: Any = None
-    pose: Any = "worst"
+    pose: Any = None  # None: the model's 'worst' pose, unless poses are given
     poses: Any = None
     Phi: float | None = None
     p_orientation: float | None = None
@@ -66,8 +66,9 @@ def _same(a, b) -> bool:
 def merge_groups(given: dict, spec, solver_options) -> dict:
     """``given`` (synthesize's keywords as called) with the groups' fields filled in.
 
-    A field takes the group's value where the keyword was left at its default; a keyword set to a
-    different value than the group's is an error naming the field.
+    A field left at its default in the group counts as not given there (the keyword's value
+    stands), a keyword left at its default takes the group's value, and a field set both ways to
+    different values is an error naming it.
     """
     out = dict(given)
     for group, cls, argname in ((spec, DesignSpec, "spec"), (solver_options, SolverOptions, "solver")):
@@ -79,6 +80,8 @@ def merge_groups(given: dict, spec, solver_options) -> dict:
             value = getattr(group, f.name)
             if f.name not in out:
                 out[f.name] = value
+                continue
+            if _same(value, f.default):  # unset in the group: the keyword stands
                 continue
             if _same(out[f.name], f.default) or _same(out[f.name], value):
                 out[f.name] = value

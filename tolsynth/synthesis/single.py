@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tolsynth.checks import TINY, check_count, check_mapping, check_options, check_time_limit, check_vector
+from tolsynth.checks import TINY, check_count, check_mapping, check_options, check_seed, check_time_limit, check_vector
 from tolsynth.errors import InputError, TimeLimitError
 from tolsynth.kinematics.mechanism import as_mechanism
 from tolsynth.problem.nlp import ToleranceNLP
@@ -40,6 +40,28 @@ def _sumt(nlp, eps0, options):
     from tolsynth.solvers.sumt import solve_sumt
 
     return solve_sumt(nlp, eps0, **options)
+
+
+def _without_warm_start(options, solver: str, probability: str):
+    """``options``; ``warm_start`` where no earlier optimum is kept (only IPOPT and the compiled
+    method of the Gaussian reading keep one) refused, saying why."""
+    if (
+        not isinstance(options, dict)
+        or "warm_start" not in options
+        or "warm_start" in _solver_defaults(solver, probability)
+    ):
+        return options
+    why = (
+        "the exact interior-point solve keeps nothing between solves (each starts from this problem's Gaussian optimum)"
+        if probability == "exact"
+        else "SUMT + Powell keeps nothing between solves (each starts from scratch)"
+    )
+    raise InputError(
+        "options['warm_start']",
+        f"given with probability={probability!r}, solver={solver!r}: {why}",
+        f"{', '.join(_solver_defaults(solver, probability))}; warm_start only with probability='gaussian' and "
+        "solver 'auto' or 'ipopt'",
+    )
 
 
 def _solver_defaults(solver: str, probability: str = "gaussian") -> dict:
@@ -76,7 +98,7 @@ def synthesize(
     *,
     k=None,
     bounds=None,
-    pose="worst",
+    pose=None,
     poses=None,
     Phi: float | None = None,
     p_orientation: float | None = None,
@@ -119,12 +141,16 @@ def synthesize(
         where it applies (per-component criterion, power-law costs, Gaussian probability), IPOPT
         elsewhere; ``"ipopt"``: IPOPT with exact derivatives always; ``"sumt"``: the paper's SUMT +
         Powell.  Every result is certified the same way (feasibility checked, dual gap <= 1e-6).
+        Under ``probability="exact"`` (the default) it only finds the Gaussian optimum from which
+        the exact interior-point method (:mod:`tolsynth.solvers.exact`) solves the problem, as
+        ``result.solver`` says (all-normal errors: the named solver solves the problem).
     k : float, sequence or dict, optional
         Cost factors (default: the model's).
     bounds : (lower, upper) or dict name -> (lower, upper), optional
         Tolerance bounds in tolerance units (default: the model's).
     pose, poses : configuration name or joint vector (rad), or a list of them
-        Where the constraints are imposed (default: the model's ``worst`` pose).
+        Where the constraints are imposed: one pose, or several; not both (an
+        :class:`InputError`, whatever their values).  Default: the model's ``worst`` pose.
     Phi, p_orientation : float, optional
         Orientation specification (rad) and its probability (default p).
     criterion : {"components", "sphere"}
@@ -146,12 +172,15 @@ def synthesize(
     x0 : sequence, optional
         Starting tolerances (default: a strictly feasible interior point).
     options : dict, optional
-        Solver options (IPOPT: tol, constr_viol_tol, max_iter; SUMT: see solve_sumt).
+        Solver options.  ``probability="exact"``: max_rounds, max_iter, max_patches (see
+        :mod:`tolsynth.solvers.exact`); ``"gaussian"``: IPOPT's and the compiled method's tol,
+        constr_viol_tol, max_iter, feas_tol, max_rounds and warm_start (False: nothing from an
+        earlier solve of the same poses), SUMT's see solve_sumt.
     validate : int, optional
         Run this many Monte Carlo samples through the nonlinear kinematics at the optimum and
         attach the achieved probabilities as ``result.validation``.
     seed : int
-        Seed of that Monte Carlo run.
+        Seed of that Monte Carlo run (and of ``verify``'s): an integer >= 0.
     probability : {"exact", "gaussian", "worst_case"}
         ``"exact"`` (default): the exact probabilities of the linear error model as the
         constraints, along every direction (per component) or in the sphere
@@ -173,7 +202,8 @@ def synthesize(
 
     spec : DesignSpec, optional
         The specification's fields as one object (:mod:`tolsynth.synthesis.options`); ``solver``
-        may likewise be a :class:`SolverOptions`.  A field given both ways must agree.
+        may likewise be a :class:`SolverOptions`.  A group's field at its default is not given there;
+        one given both ways must agree.
 
     Returns
     -------
@@ -216,6 +246,15 @@ def synthesize(
             solver if isinstance(solver, SolverOptions) else None,
         )
         return synthesize(mechanism, **args)
+    if pose is not None and poses is not None:  # one of them would be dropped without a word
+        raise InputError(
+            "pose",
+            f"given together with poses ({pose!r} and {poses!r})",
+            "pose= (one pose) or poses= (a list, each constrained), not both",
+        )
+    if poses is None and pose is None:
+        pose = "worst"
+    seed = check_seed(seed)
     if probability == "worst_case":  # every error anywhere in its band: no p or distribution needed
         mechanism = as_mechanism(mechanism)
         if poses is None and isinstance(pose, str) and pose == "worst" and "worst" not in mechanism.configurations:
@@ -271,7 +310,9 @@ def synthesize(
     if not isinstance(probability, str) or probability not in PROBABILITIES:
         raise InputError("probability", f"got {probability!r}", " or ".join(repr(s) for s in PROBABILITIES))
     if options is not None:  # (None: every default)
-        options = check_options(options, _solver_defaults(solver, probability))
+        options = check_options(
+            _without_warm_start(options, solver, probability), _solver_defaults(solver, probability)
+        )
     if validate is not None and validate is not False:
         validate = check_count(validate, "validate", lower=0)
     limit = check_time_limit(time_limit)

@@ -1,0 +1,117 @@
+"""What synthesize and ``tolsynth solve`` make of their inputs: options that mean nothing under
+the exact reading, the label of what actually solved, pose against poses, the groups' unset
+fields, and the seed."""
+
+from __future__ import annotations
+
+import pytest
+
+import tolsynth
+from tolsynth.cli import main
+from tolsynth.errors import InputError, OutOfRangeError
+
+SPEC = dict(R=0.5, p=0.99, distribution="uniform")
+
+
+# --- warm_start and --solver both under the exact reading
+
+
+def test_solve_both_with_exact_probabilities_is_refused_naming_the_flags(capsys):
+    rc = main(
+        ["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--solver", "both"]
+        + ["--probability", "exact"]
+    )
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert "--solver both" in err and "--probability gaussian" in err and "--probability exact" in err
+    assert "warm_start" not in err and "Traceback" not in err  # nothing the user did not type
+
+
+@pytest.mark.parametrize("solver", ["auto", "ipopt", "sumt"])
+def test_warm_start_under_exact_is_refused_with_its_reason(xz, solver):
+    with pytest.raises(InputError) as exc:
+        tolsynth.synthesize(xz, **SPEC, solver=solver, options={"warm_start": False})
+    assert exc.value.field == "options['warm_start']"
+    assert "keeps nothing between solves" in str(exc.value) and "probability='gaussian'" in str(exc.value)
+    with pytest.raises(InputError, match="keeps nothing between solves"):
+        tolsynth.synthesize(xz, **SPEC, criterion="sphere", options={"warm_start": False})
+
+
+def test_warm_start_false_solves_from_scratch_under_the_gaussian_reading(xz):
+    """The guide's claim, where it holds: the same optimum as the paper's Table 1 value (84.41889)."""
+    res = tolsynth.synthesize(xz, **SPEC, solver="ipopt", probability="gaussian", options={"warm_start": False})
+    assert res.success and res.cost == pytest.approx(84.41889, rel=1e-6)
+    with pytest.raises(InputError, match="SUMT \\+ Powell keeps nothing"):
+        tolsynth.synthesize(xz, **SPEC, solver="sumt", probability="gaussian", options={"warm_start": False})
+
+
+# --- the result says what solved
+
+
+def test_exact_result_names_the_exact_method_and_its_start(xz):
+    runs = {s: tolsynth.synthesize(xz, **SPEC, solver=s) for s in ("auto", "ipopt", "sumt")}
+    gaussian_sumt = tolsynth.synthesize(xz, **SPEC, solver="sumt", probability="gaussian")
+    # one method ran three times: the same Newton steps and evaluations, none of them SUMT's own run
+    assert len({(r.iterations, r.function_evaluations) for r in runs.values()}) == 1
+    assert runs["sumt"].iterations != gaussian_sumt.iterations
+    for name, res in runs.items():
+        assert res.success and res.solver.startswith("exact interior point"), (name, res.solver)
+        assert res.summary().splitlines()[0].startswith(res.solver + ": optimal")
+        assert res.inputs["solver"] == name  # what was asked stays recorded as asked
+    assert "SUMT + Powell" in runs["sumt"].solver and "IPOPT" in runs["ipopt"].solver
+    # all-normal errors: the exact problem is the Gaussian one, and the named solver does solve it
+    normal = tolsynth.synthesize(xz, R=0.5, p=0.99, distribution="normal", solver="sumt")
+    assert normal.solver == "sumt"
+
+
+def test_cli_solve_labels_the_exact_run_honestly(capsys):
+    rc = main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--solver", "sumt"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert "exact interior point (started from the Gaussian optimum of SUMT + Powell): optimal" in out
+    assert not any(line.startswith("sumt:") for line in out.splitlines())
+
+
+# --- pose against poses
+
+
+def test_pose_and_poses_together_are_an_error(xz):
+    with pytest.raises(InputError) as exc:
+        tolsynth.synthesize(xz, R=0.5, p=0.99, pose="worst", poses=["home"])
+    assert exc.value.field == "pose" and "poses" in str(exc.value)
+    with pytest.raises(InputError, match="not both"):
+        tolsynth.synthesize(xz, spec=tolsynth.DesignSpec(R=0.5, p=0.99, pose="worst", poses=["home"]))
+    with pytest.raises(InputError, match="not both"):
+        tolsynth.synthesize(xz, spec=tolsynth.DesignSpec(R=0.5, p=0.99, poses=["home"]), pose="worst")
+
+
+# --- the groups' unset fields
+
+
+def test_unset_spec_fields_do_not_count_as_given(xz):
+    at_home = tolsynth.synthesize(xz, **SPEC, pose="home", probability="gaussian")
+    worst = tolsynth.synthesize(xz, **SPEC, probability="gaussian")
+    assert abs(at_home.cost - worst.cost) > 1e-3 * worst.cost  # the pose matters, so the tests below see it
+    a = tolsynth.synthesize(
+        xz, spec=tolsynth.DesignSpec(pose="home", distribution="uniform"), R=0.5, p=0.99, probability="gaussian"
+    )
+    b = tolsynth.synthesize(xz, spec=tolsynth.DesignSpec(**SPEC, probability="gaussian"), pose="home")
+    assert list(a.spec.poses) == list(b.spec.poses) == ["home"]
+    assert a.cost == pytest.approx(at_home.cost, rel=1e-9) and b.cost == pytest.approx(at_home.cost, rel=1e-9)
+    with pytest.raises(InputError, match="given as a keyword \\(0.6\\) and in spec \\(0.5\\)"):
+        tolsynth.synthesize(xz, spec=tolsynth.DesignSpec(R=0.5, p=0.99), R=0.6)
+    with pytest.raises(InputError, match="pose"):
+        tolsynth.synthesize(xz, spec=tolsynth.DesignSpec(R=0.5, p=0.99, pose="home"), pose="worst")
+
+
+# --- the seed
+
+
+@pytest.mark.parametrize("seed", ["x", 1.5, [1, 2], -1, True])
+@pytest.mark.parametrize("validate", [None, 1000])
+def test_bad_seed_is_the_same_typed_error_as_monte_carlo(xz, seed, validate):
+    with pytest.raises(OutOfRangeError) as mc:
+        tolsynth.monte_carlo(xz, "worst", "figure3", "uniform", R=0.2, n=100, seed=seed)
+    with pytest.raises(OutOfRangeError) as syn:
+        tolsynth.synthesize(xz, **SPEC, validate=validate, seed=seed)
+    assert syn.value.field == mc.value.field == "seed" and str(syn.value) == str(mc.value)
