@@ -115,3 +115,17 @@ def test_bad_seed_is_the_same_typed_error_as_monte_carlo(xz, seed, validate):
     with pytest.raises(OutOfRangeError) as syn:
         tolsynth.synthesize(xz, **SPEC, validate=validate, seed=seed)
     assert syn.value.field == mc.value.field == "seed" and str(syn.value) == str(mc.value)
+
+
+def test_compare_refuses_the_exact_reading():
+    """compare is IPOPT against SUMT + Powell on the paper's Gaussian reading: under the exact one
+    both would be the same exact interior-point run, so it is refused, naming the field (not an
+    internal option the user never gave); its default still compares the two solvers, which agree
+    on Table 1's design to 1e-6."""
+    m = tolsynth.load_model("xu_zhang_1988")
+    with pytest.raises(InputError, match=r"probability: got 'exact'.*same run") as e:
+        tolsynth.compare(m, 0.5, 0.99, probability="exact")
+    assert "warm_start" not in str(e.value)
+    c = tolsynth.compare(m, 0.5, 0.99)
+    assert c.ipopt.success and c.sumt.success and c.cost_rel_diff <= 1e-6
+    assert c.ipopt.cost == pytest.approx(84.41889, abs=1e-5)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from tolsynth.checks import check_mapping, check_options
+from tolsynth.errors import InputError
 from tolsynth.problem.result import SynthesisResult
 from tolsynth.synthesis.single import synthesize
 from tolsynth.tabular import Tabular
@@ -73,6 +74,13 @@ def compare(mechanism, R: float, p: float, distribution=None, alpha=0.7, **kwarg
     cross-check of the two solvers, not a design.
     """
     kwargs.setdefault("probability", "gaussian")
+    if kwargs["probability"] != "gaussian":  # both columns would be one and the same exact solve
+        raise InputError(
+            "probability",
+            f"got {kwargs['probability']!r}: under the exact reading IPOPT and SUMT + Powell only find the "
+            "Gaussian optimum the exact interior-point method starts from, so both columns would be the same run",
+            "'gaussian' (the default of compare, the paper's reading)",
+        )
     options = check_mapping(kwargs.pop("options", None), "options", "a dict with keys 'ipopt' and 'sumt'")
     check_options(options, {"ipopt": {}, "sumt": {}})
     kwargs.pop("solver", None)
