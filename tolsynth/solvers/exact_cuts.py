@@ -245,6 +245,18 @@ class Cuts:
         self._dt = dt
         return extra
 
+    def fixed_hessians(self, u: np.ndarray, H: np.ndarray) -> np.ndarray:
+        """The Hessians ``H`` of the last order-2 evaluation at ``u`` with the tracking cuts' own
+        ones at their fixed directions (``P_uu``, not those of ``min_w P``): what a step whose
+        directions do not turn must be modelled with."""
+        if self._model is None or not np.array_equal(self._model[0], u):
+            return H
+        _, _, Hinv, _, B, _, _ = self._model
+        mv = self._stack()[3]
+        out = np.array(H, dtype=float)
+        out[mv] += (B @ Hinv @ B.transpose(0, 2, 1)) / (1.0 - self._stack()[2][mv])[:, None, None]
+        return out
+
     def at(self, a: float) -> None:
         """The fraction of the planned step that the next evaluations stand at."""
         self._a = float(a)

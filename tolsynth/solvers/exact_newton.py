@@ -77,26 +77,10 @@ class Barrier:
         zu = np.where(free, tau / np.maximum(su, 1e-300), 0.0)
         plan, at = getattr(self.cuts, "plan", None), getattr(self.cuts, "at", None)
         slide = getattr(self.cuts, "slide", None)
+        fixed = getattr(self.cuts, "fixed_hessians", None)
         it = 0
         for it in range(1, max_iter + 1):
-            # Newton step on the reduced system (multipliers eliminated)
-            W = np.diag(d2f) - (lam @ H.reshape(g.size, -1)).reshape(u.size, u.size) if g.size else np.diag(d2f)
-            W = W + (J.T * (lam / g)) @ J if g.size else W
-            W = W + np.diag(np.where(free, zl / np.maximum(sl, 1e-300) + zu / np.maximum(su, 1e-300), 0.0))
-            rhs = (
-                -df
-                + (J.T @ (tau / g) if g.size else 0.0)
-                + np.where(free, tau / np.maximum(sl, 1e-300) - tau / np.maximum(su, 1e-300), 0.0)
-            )
-            Wf = W[np.ix_(free, free)]
-            du = np.zeros_like(u)
-            du[free] = _solve_pd(Wf, rhs[free])
-            Jdu = J @ du if g.size else np.zeros(0)
-            slope = float(
-                df @ du
-                - tau * (Jdu / g).sum()
-                - tau * np.sum(np.where(free, du / np.maximum(sl, 1e-300) - du / np.maximum(su, 1e-300), 0.0))
-            )
+            du, slope = self._step(u, df, d2f, g, J, H, lam, tau, zl, zu, sl, su)
             # cuts whose directions follow the worst one turn along the step: g's derivative along
             # the path gains their term (the joint Newton step; where that would take more than half
             # of the step's decrease, its part towards the minimum damped, or no turn at all)
@@ -111,13 +95,17 @@ class Barrier:
                 if slope + c1 > 0.5 * slope:
                     c0 = cost(plan(u, du, damp=0.0))
                     if slope + c0 > 0.5 * slope:
+                        # the directions stay put, so the step is modelled with the cuts' own Hessians:
+                        # those of min_w P (far larger where the minimum in w is far) stalled the path
+                        Hf = fixed(u, H) if fixed is not None else H
+                        du, slope = self._step(u, df, d2f, g, J, Hf, lam, tau, zl, zu, sl, su)
                         turn = plan(u, du, damp=0.0, follow=False)
                     else:
                         turn = plan(u, du, damp=(-0.5 * slope - c0) / (c1 - c0))
                         if slope + cost(turn) > 0.5 * slope:
                             turn = plan(u, du, damp=0.0)
             path_slope = slope - tau * float((turn / g).sum()) if g.size else slope
-            Jdu = Jdu + turn
+            Jdu = (J @ du + turn) if g.size else np.zeros(0)
             # the multipliers' Newton steps, and the fraction to the boundary on the bounds and on them
             dlam = (tau - lam * g - lam * Jdu) / g if g.size else np.zeros(0)
             dzl = np.where(free, (tau - zl * sl - zl * du) / np.maximum(sl, 1e-300), 0.0)
@@ -194,6 +182,28 @@ class Barrier:
         else:
             return BarrierResult(u, lam, zu - zl, it, False, f"iteration limit at tau {tau:.1e}")
         return BarrierResult(u, lam, zu - zl, it, True, f"converged in {it} Newton steps")
+
+    def _step(self, u, df, d2f, g, J, H, lam, tau, zl, zu, sl, su) -> tuple[np.ndarray, float]:
+        """The Newton step of the reduced system (multipliers eliminated) with the cuts' Hessians
+        ``H``, and the barrier function's slope along it."""
+        free = self.free
+        W = np.diag(d2f) - (lam @ H.reshape(g.size, -1)).reshape(u.size, u.size) if g.size else np.diag(d2f)
+        W = W + (J.T * (lam / g)) @ J if g.size else W
+        W = W + np.diag(np.where(free, zl / np.maximum(sl, 1e-300) + zu / np.maximum(su, 1e-300), 0.0))
+        rhs = (
+            -df
+            + (J.T @ (tau / g) if g.size else 0.0)
+            + np.where(free, tau / np.maximum(sl, 1e-300) - tau / np.maximum(su, 1e-300), 0.0)
+        )
+        du = np.zeros_like(u)
+        du[free] = _solve_pd(W[np.ix_(free, free)], rhs[free])
+        Jdu = J @ du if g.size else np.zeros(0)
+        slope = float(
+            df @ du
+            - tau * (Jdu / g).sum()
+            - tau * np.sum(np.where(free, du / np.maximum(sl, 1e-300) - du / np.maximum(su, 1e-300), 0.0))
+        )
+        return du, slope
 
     def _phi(self, f, g, sl, su, tau) -> float:
         free = self.free
