@@ -25,7 +25,7 @@ import _signal
 import os
 import sys
 
-__all__ = ["EXIT_INTERRUPTED", "started_as_command", "guard_start", "restore_default"]
+__all__ = ["EXIT_INTERRUPTED", "started_as_command", "worker_of_a_pool", "guard_start", "restore_default"]
 
 EXIT_INTERRUPTED = 130
 
@@ -43,6 +43,15 @@ def started_as_command(argv=None, orig_argv=None) -> bool:
     return False
 
 
+def worker_of_a_pool(orig_argv=None) -> bool:
+    """True in a worker process that :mod:`multiprocessing` started (spawn or forkserver: the
+    interpreter was started with ``-c 'from multiprocessing...'``).  Such a process copies its
+    parent's ``sys.argv``, so it looks like the ``tolsynth`` command, but a Ctrl-C there is its
+    parent's to report."""
+    orig = getattr(sys, "orig_argv", []) if orig_argv is None else orig_argv
+    return any(a == "-c" and str(b).startswith("from multiprocessing") for a, b in zip(orig, orig[1:]))
+
+
 def _interrupted_while_starting(signum, frame):  # pragma: no cover - runs in a child process (tested there)
     try:
         os.write(2, b"\ntolsynth: interrupted (Ctrl-C) while starting; nothing was done.\n")
@@ -57,7 +66,10 @@ def guard_start() -> None:
         return
     try:  # outside the main thread signal() raises ValueError: nothing to guard there
         if _signal.getsignal(_signal.SIGINT) is _signal.default_int_handler:
-            _signal.signal(_signal.SIGINT, _interrupted_while_starting)
+            # a pool's worker: the Ctrl-C reaches the whole process group and the parent reports
+            # it (and ends the workers), so the worker stays silent, as it does once started
+            ignore = worker_of_a_pool()
+            _signal.signal(_signal.SIGINT, _signal.SIG_IGN if ignore else _interrupted_while_starting)
     except (ValueError, OSError):  # pragma: no cover - no signals here
         pass
 

@@ -188,14 +188,16 @@ def monte_carlo(
     R : float
         Radius of the accuracy sphere and half-width of each component's zone (mm), > 0.
     n : int
-        Number of samples, >= 1.
+        Number of samples, >= 1 (the probabilities' intervals hold for any n; the mean needs one
+        sample, its interval and the covariance, spreads and kurtosis two: NaN below that).
     seed : int
         Seed of ``numpy.random.default_rng`` (recorded in the result); the same seed and batch
         size give the same numbers.
     batch : int
         Samples per batch (memory ~ ``batch * (work slots + errors) * 8`` bytes, not ~ n).
     Phi : float, optional
-        Orientation tolerance (rad): adds the orientation-component and cone probabilities.
+        Orientation tolerance (rad), a half-angle: 0 < Phi <= pi.  Adds the orientation-component
+        and cone probabilities.
     progress : bool, callable or None
         A tqdm bar on stderr (None: on a terminal, shown once the run has taken 2 s), or a
         callable ``progress(done, total)``.
@@ -236,7 +238,7 @@ def monte_carlo(
     batch = _check_n(batch, "batch")
     confidence = check_probability(confidence, "confidence")
     if Phi is not None:
-        Phi = check_positive(Phi, "Phi", "rad")
+        Phi = check_positive(Phi, "Phi", "rad", upper=math.pi)  # a half-angle: above pi it allows any turn
     eps = mechanism.tolerances(tolerances)
     qv = mechanism.joints(q, check_limits)
     Ud = None
@@ -337,9 +339,10 @@ def monte_carlo(
     elapsed = time.perf_counter() - t0
 
     zc = NormalDist().inv_cdf(0.5 + 0.5 * confidence)
+    # the mean needs one assembled sample; a covariance, spread or interval needs two
+    mean = shift + s1 / m_ok if m_ok >= 1 else np.full(3, np.nan)
     if m_ok >= 2:
         mx = s1 / m_ok
-        mean = shift + mx
         cov = (s2 - m_ok * np.outer(mx, mx)) / (m_ok - 1)
         # central moments of w_j
         mu = wpow[0] / m_ok
@@ -350,7 +353,6 @@ def monte_carlo(
         std_w = np.sqrt(np.maximum(np.diag(U.T @ cov @ U), 0.0))
         se_mean = np.sqrt(np.maximum(np.diag(cov), 0.0) / m_ok)
     else:
-        mean = np.full(3, np.nan)
         cov = np.full((3, 3), np.nan)
         kurt = np.full(3, np.nan)
         std_w = np.full(3, np.nan)

@@ -142,6 +142,16 @@ class MonteCarloResult(Tabular):
         """Plain dict (arrays as lists) for JSON."""
         return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
 
+    def _mean_text(self) -> str:
+        """The mean error, with why its interval (and the spreads) are missing where they are."""
+        assembled = self.n - self.n_loop_failures
+        if assembled < 1:
+            return "none (no sample closed the loop)"
+        text = f"({', '.join(f'{v:+.2e}' for v in self.mean)}) mm"
+        if assembled < 2:  # one sample has a mean but no spread
+            text += "; one sample: its interval and the sigmas below need n >= 2"
+        return text
+
     def report(self) -> str:
         """A readable table: Monte Carlo vs analytic, with intervals and flags."""
         pct = int(round(100 * self.confidence))
@@ -153,7 +163,7 @@ class MonteCarloResult(Tabular):
             f"samples      n = {self.n}, seed = {self.seed}, batch = {self.batch}; "
             f"{self.samples_per_s / 1e6:.2f} M samples/s; loop failures {self.n_loop_failures}",
             f"intervals    {pct}% {self.ci_method}",
-            f"mean error   ({', '.join(f'{v:+.2e}' for v in self.mean)}) mm",
+            f"mean error   {self._mean_text()}",
             "",
             f"{'':14}{'Monte Carlo':>12} {pct}% interval{'':9}{'analytic':>10}{'MC-analytic':>13}  flag",
         ]
@@ -182,8 +192,9 @@ class MonteCarloResult(Tabular):
             else:  # no spread along w_j (a planar mechanism's normal): no shape to judge
                 shown, note = f"{'-':>17}", "  no error along it" if self.principal_std[j] == 0 else ""
             lines.append(
-                f"w{j + 1} ({d[0]:+.3f},{d[1]:+.3f},{d[2]:+.3f}) {self.principal_std[j]:9.5f}"
-                f"{self.principal_std_analytic[j]:12.5f}{shown}{note}"
+                f"w{j + 1} ({d[0]:+.3f},{d[1]:+.3f},{d[2]:+.3f}) "
+                + (f"{self.principal_std[j]:9.5f}" if np.isfinite(self.principal_std[j]) else f"{'-':>9}")
+                + f"{self.principal_std_analytic[j]:12.5f}{shown}{note}"
             )
         if self.Phi is not None:
             lines.append("")

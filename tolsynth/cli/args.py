@@ -41,6 +41,7 @@ __all__ = [
     "inputs_record",
     "add_pose_arguments",
     "emit_json",
+    "fmt_p",
     "fmt_vec",
     "add_table_out_argument",
     "check_table_out",
@@ -131,6 +132,23 @@ def length_mm(field: str):
 def angle_rad(field: str):
     """argparse ``type=``: an angle in rad (suffixes allowed)."""
     return _arg_type(lambda text: quantity(text, field, "angle", "rad"), "angle")
+
+
+def half_angle_rad(field: str):
+    """argparse ``type=``: a cone half-angle in rad (suffixes allowed), 0 < angle <= pi: a rotation
+    turns the hand by at most pi, so a larger half-angle would allow everything and change nothing."""
+
+    def parse(text):
+        value = quantity(text, field, "angle", "rad")
+        if not 0 < value <= math.pi:
+            raise InputError(
+                field,
+                f"got {text}" + ("" if split_quantity(text)[1] is None else f" = {value:g} rad"),
+                f"a half-angle > 0 and <= pi rad (180 deg), in rad or with an angle unit suffix ({_suffixes('angle')})",
+            )
+        return value
+
+    return _arg_type(parse, "angle")
 
 
 def number(field: str, allowed: str, check: Callable[[float], bool] | None = None, integer: bool = False):
@@ -307,6 +325,16 @@ def write_out(frame, args, mech: Mechanism | None = None, option: str = "--out",
     write_table(frame, path, option)
 
 
+def fmt_p(p: float) -> str:
+    """A probability with enough digits that 1 - p keeps six significant ones (``0.99``, and
+    ``0.999999999999`` rather than ``1``): near 1 the shortfall is the specification."""
+    for digits in range(6, 18):
+        text = f"{p:.{digits}g}"
+        if abs((1.0 - float(text)) - (1.0 - p)) <= 5e-7 * abs(1.0 - p):
+            return text
+    return repr(float(p))
+
+
 def fmt_vec(v, fmt="{:.6g}") -> str:
     return "(" + ", ".join(fmt.format(x) for x in np.asarray(v).ravel()) + ")"
 
@@ -435,7 +463,7 @@ def add_specification_arguments(
     )
     p.add_argument(
         "--Phi",
-        type=angle_rad("--Phi"),
+        type=half_angle_rad("--Phi"),
         default=None,
         help="orientation accuracy half-angle, rad (or with a suffix: 2mrad, 0.1deg); default: none",
     )
@@ -503,7 +531,7 @@ def add_pose_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--Phi",
-        type=angle_rad("--Phi"),
+        type=half_angle_rad("--Phi"),
         default=None,
         help="orientation cone half-angle, rad (or with a suffix: 2mrad, 0.1deg); default: none",
     )

@@ -3,7 +3,7 @@ smallest R at a given p, or the largest p at a given R, bracketed by certified b
 
 from __future__ import annotations
 
-from tolsynth.cli.args import check_table_out, length_mm, number
+from tolsynth.cli.args import check_table_out, fmt_p, length_mm, number
 from tolsynth.cli.designs import add_output_arguments, design_command, design_kwargs, finish
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
@@ -42,7 +42,7 @@ def cmd_budget(args) -> int:
 
     def text():
         what = (
-            f"the smallest R at p = {args.p:g}: R = {out.value:.6g} mm"
+            f"the smallest R at p = {fmt_p(args.p)}: R = {out.value:.6g} mm"
             if out.quantity == "R"
             else f"the largest p at R = {args.R:g} mm: p = {out.value:.8g}"
         )

@@ -17,9 +17,9 @@ from tolsynth.cli.args import (
     add_dist_argument,
     add_model_argument,
     add_table_out_argument,
-    angle_rad,
     dist_for,
     emit_json,
+    half_angle_rad,
     inputs_record,
     length_mm,
     number,
@@ -63,7 +63,7 @@ def add_design_arguments(p) -> None:
     )
     p.add_argument(
         "--Phi",
-        type=angle_rad("--Phi"),
+        type=half_angle_rad("--Phi"),
         default=None,
         help="orientation accuracy half-angle, rad (or with a suffix: 2mrad); default: none",
     )
@@ -176,8 +176,9 @@ def design_kwargs(mech, args) -> tuple[dict, dict]:
     return kw, record
 
 
-def parse_range(text: str, field: str, check, unit_parse) -> list[float]:
-    """``START:STOP:N`` (N values, evenly spaced) or comma-separated values."""
+def parse_range(text: str, field: str, check, unit_parse, allowed: str) -> list[float]:
+    """``START:STOP:N`` (N values, evenly spaced) or comma-separated values, each passing ``check``
+    (``allowed`` says which values do, with their unit)."""
     text = str(text).strip()
     if ":" in text:
         parts = text.split(":")
@@ -201,5 +202,5 @@ def parse_range(text: str, field: str, check, unit_parse) -> list[float]:
             raise InputError(field, "empty", "START:STOP:N or comma-separated values")
     for v in values:
         if not check(v):
-            raise InputError(field, f"{v:g} in {text!r}", "values in range")
+            raise InputError(field, f"{v:g} in {text!r}", allowed)
     return values

@@ -17,7 +17,7 @@ from __future__ import annotations
 import os
 import sys
 
-from tolsynth.cli.args import check_table_out, quantity
+from tolsynth.cli.args import check_table_out, fmt_p, quantity
 from tolsynth.cli.designs import (
     add_max_nodes_argument,
     add_output_arguments,
@@ -82,7 +82,7 @@ def cmd_grades(args) -> int:
         frame=g.to_frame,
         data=lambda: dict(g.to_dict(), continuous=res.to_dict()),
         text=lambda: (
-            f"{mech.name}: R = {args.R:g} mm, p = {args.p:g}; the continuous optimum costs "
+            f"{mech.name}: R = {args.R:g} mm, p = {fmt_p(args.p)}; the continuous optimum costs "
             f"{res.cost:.8g}\n{g.summary()}"
         ),
         ok=g.proven,

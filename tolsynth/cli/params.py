@@ -203,4 +203,12 @@ def parse_bounds(mech: Mechanism, text: str | None, field: str = "--bounds"):
     pairs = _apply_items(mech, text, field, [(None, None)] * mech.n, parse)
     lo = np.array([p[0] if p[0] is not None else lo0[i] for i, p in enumerate(pairs)])
     hi = np.array([p[1] if p[1] is not None else hi0[i] for i, p in enumerate(pairs)])
+    for i, name in enumerate(mech.error_parameters):  # more than a turn: a unit mistake, not a tolerance
+        turn = 2 * math.pi / to_base(mech.units[i])
+        if _param_kind(mech, i) == "angle" and hi[i] > turn * (1 + 1e-12):
+            raise InputError(
+                f"{field}[{name}]",
+                f"upper bound {hi[i]:g} {mech.units[i]} is more than a full turn",
+                f"an angle tolerance up to {turn:g} {mech.units[i]} (2 pi rad, 360 deg)",
+            )
     return lo, hi

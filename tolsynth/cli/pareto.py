@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from tolsynth.cli.args import _number, check_table_out, quantity
+from tolsynth.cli.args import _number, check_table_out, fmt_p, quantity
 from tolsynth.cli.designs import add_output_arguments, design_command, design_kwargs, finish, parse_range
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
@@ -33,10 +33,10 @@ def cmd_pareto(args) -> int:
     kw, record = design_kwargs(mech, args)
     prob = _number("--p", "0 < p < 1", lambda v: 0 < v < 1)
     if swept == ["R"]:
-        R = parse_range(args.R, "--R", lambda v: v > 0, _R)
+        R = parse_range(args.R, "--R", lambda v: v > 0, _R, "radii > 0 (mm, or with a length unit suffix)")
         p = prob(args.p)
     else:
-        p = parse_range(args.p, "--p", lambda v: 0 < v < 1, _number("--p", "0 < p < 1"))
+        p = parse_range(args.p, "--p", lambda v: 0 < v < 1, _number("--p", "0 < p < 1"), "probabilities 0 < p < 1")
         R = _R(args.R)
         if not R > 0:
             raise InputError("--R", f"got {args.R}", "a radius > 0 (mm)")
@@ -49,12 +49,12 @@ def cmd_pareto(args) -> int:
     def text():
         lines = [
             f"{mech.name}: optimal cost against {front.axis} "
-            + (f"at p = {p:g}" if front.axis == "R" else f"at R = {R:g} mm"),
+            + (f"at p = {fmt_p(p)}" if front.axis == "R" else f"at R = {R:g} mm"),
             f"{'R, mm':>12} {'p':>10} {'cost':>14} {'lower bound':>14}  status",
         ]
         for r in front.rows:
             status = "optimal" if r["success"] else ("infeasible" if not math.isfinite(r["cost"]) else "NOT certified")
-            lines.append(f"{r['R']:>12.6g} {r['p']:>10.6g} {r['cost']:>14.8g} {r['lower_bound']:>14.8g}  {status}")
+            lines.append(f"{r['R']:>12.6g} {fmt_p(r['p']):>10} {r['cost']:>14.8g} {r['lower_bound']:>14.8g}  {status}")
         lines += [
             f"  the paper's {ref['table']} at R = {ref['R']:g}, p = {ref['p']:g}: printed tolerances cost "
             f"{ref['cost']:.8g}"

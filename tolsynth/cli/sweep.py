@@ -11,9 +11,10 @@ from tolsynth.cli.args import (
     SOLVER_HELP,
     _number,  # the InputError form of number(), for comma-separated items
     add_table_out_argument,
-    angle_rad,
     check_table_out,
     emit_json,
+    fmt_p,
+    half_angle_rad,
     inputs_record,
     number,
     parse_poses,
@@ -121,20 +122,26 @@ def cmd_sweep(args) -> int:
     if args.probability is not None:
         kw["probability"] = args.probability
     if args.scheduler is not None:
-        client = args.scheduler
+        client = _scheduler(args.scheduler)
     elif args.workers is None:
         client = None  # auto: processes only where the grid pays for starting them
     else:
         client = "serial" if args.workers == 1 else "processes"
     axes = {a: grid[a] for a in ("R", "p", "alpha", "distribution", "criterion", "solver") if a in grid}
-    df = sweep(
-        mech,
-        client=client,
-        workers=args.workers if client in (None, "processes") else None,
-        progress=False if args.quiet else None,
-        **axes,
-        **kw,
-    )
+    try:
+        df = sweep(
+            mech,
+            client=client,
+            workers=args.workers if client in (None, "processes") else None,
+            progress=False if args.quiet else None,
+            **axes,
+            **kw,
+        )
+    except InputError as exc:
+        if exc.field != "client":
+            raise
+        # the library's argument is the command line's --scheduler (a scheduler it could not reach)
+        raise InputError("--scheduler", str(exc).split(": ", 1)[-1]) from None
     record = dict(
         grid=axes,
         poses=[pose_label(q) for q in kw.get("poses", [])] or None,
@@ -157,7 +164,7 @@ def cmd_sweep(args) -> int:
     else:
         cols = ["R", "p", "alpha", "distribution", "criterion", "solver", "probability", "status", "cost", "gap"]
         cols = [c for c in cols if c in df.columns] + ["time_s"]
-        print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.6g}"))
+        print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.6g}", formatters={"p": fmt_p}))
         for _, row in df[df["error"] != ""].iterrows():
             print(f"row {row['row']}: {row['error']}")
         s = df.attrs["summary"]
@@ -176,6 +183,20 @@ def cmd_sweep(args) -> int:
         )
         return 1
     return 0
+
+
+def _scheduler(text: str) -> str:
+    """``--scheduler``: a Dask scheduler's address (the library's engine names are not addresses)."""
+    from tolsynth.synthesis.sweeps import ENGINES
+
+    if text.strip() in ENGINES or ":" not in text:
+        raise InputError(
+            "--scheduler",
+            f"{text!r} is not a scheduler address",
+            "a Dask scheduler's address such as tcp://host:8786 (processes on this machine: leave "
+            "--scheduler out, --workers N)",
+        )
+    return text.strip()
 
 
 def register(sub) -> None:
@@ -233,7 +254,7 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--Phi",
-        type=angle_rad("--Phi"),
+        type=half_angle_rad("--Phi"),
         default=None,
         help="orientation accuracy half-angle for every row, rad (suffixes allowed); default: none",
     )

@@ -79,6 +79,19 @@ def _tolerances(mech, text: str | None):
     ), "the geometric middle of the bounds (the model has no tolerance set; --tolerances not given)"
 
 
+def _joint_columns_with_units(frame, mech, columns):
+    """The joint columns named with their unit (``q2`` -> ``q2_rad``; a strut's ``_mm``): the
+    table holds the API's rad while the command line reads and shows deg, so the name says which."""
+    names = {}
+    for column, unit in zip(columns, mech.joint_units):
+        names[column] = f"{column}_{'mm' if unit == 'mm' else 'rad'}"
+    units = {k: v for k, v in frame.attrs.get("units", {}).items() if k != "q" and k not in names}
+    units.update({new: new.rsplit("_", 1)[1] for new in names.values()})
+    out = frame.rename(columns=names)
+    out.attrs = dict(frame.attrs, units=units)
+    return out
+
+
 def _cmd_map(args) -> int:
     check_figure_path(args.out)  # before any work: matplotlib, the format, the folder
     check_table_out(args, "--data")
@@ -129,7 +142,8 @@ def _cmd_map(args) -> int:
         n=args.n,
     )
     if args.data:
-        write_out(pm.to_frame(), args, mech, "--data", **record)
+        frame = _joint_columns_with_units(pm.to_frame(), mech, [f"q_{n}" for n in pm.joint_names])
+        write_out(frame, args, mech, "--data", **record)
     if args.json:
         out = {k: v for k, v in pm.to_dict().items() if k not in ("Q", "sigma")}
         out["out"] = args.out
@@ -166,6 +180,13 @@ def _cmd_worst(args) -> int:
     for flag, value in (("--certify-time-limit", args.certify_time_limit), ("--workers", args.workers)):
         if value is not None and not args.certify:
             raise InputError(flag, "only used with --certify", f"--certify {flag} VALUE")
+    if args.probability is not None and args.criterion != "components":
+        # only the per-component probability has two readings; the others would ignore it
+        raise InputError(
+            "--probability",
+            f"only used with --criterion components (got --criterion {args.criterion})",
+            f"--criterion components --probability {args.probability}",
+        )
     eps, label = _tolerances(mech, args.tolerances)
     what = "the grid and pattern search" + (", then the certified branch and bound" if args.certify else "")
     with Working(f"tolsynth worst-pose: {what}"):
@@ -190,7 +211,7 @@ def _cmd_worst(args) -> int:
         args,
         mech,
         record,
-        frame=w.to_frame,
+        frame=lambda: _joint_columns_with_units(w.to_frame(), mech, [f"q{j + 1}" for j in range(len(w.q))]),
         data=w.to_dict,
         text=lambda: f"tolerances   {label}\n{w.report(mech.joint_names, mech.joint_units)}",
         ok=not unproven,

@@ -140,6 +140,33 @@ class _Reader:
 
     def __init__(self, path: str):
         self.path = path
+        self.angle_unit = "rad"  # the file's [units] angle, once read: named in the range messages
+
+    # ---- physical ranges of angles (a unit mistake, degrees read as radians, shows here)
+    def revolute_limits(self, lo: float, hi: float, where: str) -> None:
+        """A revolute joint's limits (rad) within :data:`MAX_JOINT_TURNS` turns either way."""
+        top = MAX_JOINT_TURNS * 2 * math.pi
+        if -top <= lo and hi <= top:
+            return
+        per = ANGLE_UNITS[self.angle_unit]
+        raise self.fail(
+            where,
+            f"[{lo / per:g}, {hi / per:g}] {self.angle_unit} = [{math.degrees(lo):g}, {math.degrees(hi):g}] deg "
+            f"is beyond {MAX_JOINT_TURNS} turns; allowed: limits from {-top / per:g} to {top / per:g} "
+            f"{self.angle_unit} (+-{MAX_JOINT_TURNS * 360} deg) for a revolute joint "
+            f"(degrees written with angle = {self.angle_unit!r}?)",
+        )
+
+    def angle_tolerance(self, value: float, unit: str, where: str) -> None:
+        """An angle tolerance (or bound) in ``unit`` of at most one full turn."""
+        top = 2 * math.pi / to_base(unit)
+        if value <= top * (1 + 1e-12):
+            return
+        raise self.fail(
+            where,
+            f"{value:g} {unit} is more than a full turn; allowed: an angle tolerance up to {top:g} {unit} "
+            "(2 pi rad, 360 deg)",
+        )
 
     def fail(self, field_name: str, message: str) -> ModelFileError:
         return ModelFileError(self.path, field_name, message)
@@ -254,6 +281,7 @@ class _Reader:
         units = self.table(data["units"], "units", "units")
         length_unit = self.unit(self.get(units, "length", "units"), "units.length", "length")
         angle_unit = self.unit(self.get(units, "angle", "units"), "units.angle", "angle")
+        self.angle_unit = angle_unit
         return LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
 
     def configuration_tables(self, data: dict, joint_names: list[str], what: str = "joint"):
@@ -282,6 +310,9 @@ class _Reader:
 
 
 _UNIT_NAMES = list(LENGTH_UNITS) + list(ANGLE_UNITS)
+#: revolute joint limits beyond this many turns either way are a unit mistake (170 read as rad)
+#: rather than a robot: wrist joints of a few turns are real, tens of turns are not
+MAX_JOINT_TURNS = 4
 
 
 def _tolerance_sets(r, raw_sets, eparams) -> dict[str, dict[str, float]]:
@@ -311,6 +342,8 @@ def _tolerance_sets(r, raw_sets, eparams) -> dict[str, dict[str, float]]:
                 v = r.number(value, f"{where}.{key}")
             if not 0 <= v <= HUGE:
                 raise r.fail(f"{where}.{key}", f"a tolerance must be >= 0 (and at most {HUGE:g} {par.unit}), got {v}")
+            if par.kind == "angle":
+                r.angle_tolerance(v, par.unit, f"{where}.{key}")
             values[par.name] = v
         missing = [p.name for p in eparams if p.name not in values]
         if missing:

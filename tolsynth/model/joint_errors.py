@@ -83,6 +83,7 @@ References
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import Any, Mapping, Sequence
 
@@ -203,7 +204,13 @@ def _check(je: JointError, i: int, spec) -> JointError:
         hi = check_real(hi, f"{where}.bounds.upper", unit, lo, HUGE)
         bounds = (lo, hi)
     axial = length = None
-    if je.kind == "servo":
+    if je.kind == "servo":  # an angle: a servo error of more than a turn is a unit mistake
+        from tolsynth.units import to_base
+
+        top = 2 * math.pi / to_base(unit)
+        key, v = ("value", value) if value is not None else ("bounds.upper", bounds[1])
+        if v > top * (1 + 1e-12):
+            raise OutOfRangeError(f"{where}.{key}", f"{v:g} {unit} is more than a full turn", f"up to {top:g} {unit}")
         for key in ("axial", "length"):
             if getattr(je, key) is not None:
                 raise InputError(f"{where}.{key}", "given for a servo error", "clearance errors only")

@@ -159,6 +159,8 @@ def _parse_legs(r: _Reader, data: dict, lf: float, af: float):
                     raise r.fail(f"{where}.{key}", "only a revolute leg has an arm (this leg is prismatic)")
         jf = lf if actuation == "prismatic" else af
         lo, hi = r.pair(r.get(raw, "limits", where), f"{where}.limits")
+        if actuation != "prismatic":
+            r.revolute_limits(lo * jf, hi * jf, f"{where}.limits")
         joint = r.get(raw, "joint", where, str)
         joints.append(Joint(joint, lo * jf, hi * jf))
         b = _point(r, r.get(raw, "base", where), f"{where}.base", lf)
@@ -251,6 +253,8 @@ def _parse_errors(r: _Reader, data: dict, symbols: dict, kinds: dict) -> list[Er
         lo, hi = r.pair(list(b) if isinstance(b, (list, tuple)) else b, f"errors.bounds[{n}]")
         if lo <= 0:
             raise r.fail(f"errors.bounds[{n}]", f"the lower bound must be > 0 (cost eps**-alpha), got {lo}")
+        if kind == "angle":
+            r.angle_tolerance(hi, unit, f"errors.bounds[{n}]")
         dist = ds[n]
         if dist is not None:
             from tolsynth.errors import OutOfRangeError

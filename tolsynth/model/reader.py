@@ -186,6 +186,7 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
         where = f"joints[{i}]"
         jname = r.get(raw, "name", where, str)
         lo, hi = r.pair(r.get(raw, "limits", where), f"{where}.limits")
+        r.revolute_limits(lo * af, hi * af, f"{where}.limits")  # a link's theta: every joint here turns
         joints.append(Joint(jname, lo * af, hi * af))
     joint_names = [j.name for j in joints]
     _unique(r, joint_names, "joints", "joint name")
@@ -313,6 +314,8 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
         lo, hi = r.pair(r.get(raw, "bounds", where), f"{where}.bounds")
         if lo < TINY:
             raise r.fail(f"{where}.bounds", f"lower bound must be > 0 (cost eps**-alpha), at least {TINY:g}, got {lo}")
+        if kind == "angle":
+            r.angle_tolerance(hi, unit, f"{where}.bounds")
         cost, procs, lock = _designer_fields(r, raw, where)
         dist = r.get(raw, "distribution", where, default=None)
         if dist is not None:

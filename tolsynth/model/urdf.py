@@ -406,6 +406,8 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
                 lo, hi = lo * 1000.0, hi * 1000.0
             if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
                 raise rr.fail(f"joint {jn!r}", f"limits lower {lim.lower} must be below upper {lim.upper}")
+            if motion != "prismatic":
+                rr.revolute_limits(lo, hi, f"joint {jn!r} limits")
         joints.append(Joint(jn, lo, hi))
     if not joints:
         raise r.fail(
@@ -449,6 +451,8 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
         lo, hi = r.pair(list(b) if isinstance(b, (list, tuple)) else b, f"chain.bounds[{n}]")
         if lo <= 0:
             raise r.fail(f"chain.bounds[{n}]", f"the lower bound must be > 0 (cost eps**-alpha), got {lo}")
+        if kind == "angle":
+            r.angle_tolerance(hi, unit, f"chain.bounds[{n}]")
         eparams.append(
             ErrorParameter(
                 name=n,

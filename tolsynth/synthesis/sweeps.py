@@ -193,7 +193,9 @@ class _Processes:
 
         # forkserver: workers start from a clean interpreter (no threads inherited), cheaply
         method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method))
+        self.pool = ProcessPoolExecutor(
+            max_workers=workers, mp_context=multiprocessing.get_context(method), initializer=_ignore_ctrl_c
+        )
         self.workers = workers
         self.name = f"processes ({workers} on this machine)"
 
@@ -209,7 +211,18 @@ class _Processes:
         return mech
 
     def close(self, cancel: bool = False):
+        if cancel:  # the workers ignore Ctrl-C: ended here, not left to finish their chunks
+            for proc in list((getattr(self.pool, "_processes", None) or {}).values()):
+                proc.terminate()
         self.pool.shutdown(wait=True, cancel_futures=cancel)
+
+
+def _ignore_ctrl_c() -> None:  # pragma: no cover - runs in the worker
+    """A worker's start: Ctrl-C reaches the whole process group, and the parent alone handles it
+    (it reports the interrupt once and ends the workers)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 class _Dask:
