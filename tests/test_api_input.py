@@ -4,6 +4,7 @@ fields, and the seed."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 import tolsynth
@@ -129,3 +130,56 @@ def test_compare_refuses_the_exact_reading():
     c = tolsynth.compare(m, 0.5, 0.99)
     assert c.ipopt.success and c.sumt.success and c.cost_rel_diff <= 1e-6
     assert c.ipopt.cost == pytest.approx(84.41889, abs=1e-5)
+
+
+@pytest.mark.parametrize("Phi", [4.0, 1e8, float("nan"), 0.0])
+def test_a_cone_half_angle_above_pi_is_refused_everywhere(Phi):
+    """A rotation turns the hand axis by at most pi, so a half-angle above it would allow every turn
+    and change nothing: synthesize, analyze, p_cone and the exact cone probability refuse it (and
+    0 and NaN), naming Phi and (0, pi]."""
+    import math
+
+    from tolsynth.probability.exact_sphere import cone_probability
+    from tolsynth.probability.stats import p_cone
+
+    m = tolsynth.load_model("xu_zhang_1988")
+    q = m.joints("worst")
+    calls = [
+        lambda: tolsynth.synthesize(m, R=0.5, p=0.99, Phi=Phi, probability="gaussian"),
+        lambda: m.analyze(q, m.tolerances("figure3"), Phi=Phi),
+        lambda: p_cone(np.eye(3) * 1e-6, [0.0, 0.0, 1.0], Phi),
+        lambda: cone_probability(np.ones((2, 3)), np.full(3, 1e-3), ["uniform"] * 3, Phi),
+    ]
+    for call in calls:
+        with pytest.raises(OutOfRangeError, match=r"Phi: got .*to 3\.14159.*\(rad\)"):
+            call()
+    # pi itself is the widest cone: every orientation error of a rotation lies inside it
+    assert p_cone(np.eye(3) * 1e-6, [0.0, 0.0, 1.0], math.pi) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("criterion, R", [("sigma", None), ("probability", 0.5)])
+def test_worst_pose_refuses_the_exact_reading_it_would_ignore(criterion, R):
+    """The sigma and sphere searches read the Gaussian model: probability='exact' there used to be
+    accepted and ignored; now it names the field and the criterion that reads it. 'gaussian' and
+    the default give the same pose, whose sigma_1 matches the sensitivity's own eigenvalue."""
+    m = tolsynth.load_model("planar_2r")
+    with pytest.raises(InputError, match=r"probability: 'exact' given with criterion"):
+        tolsynth.worst_pose(m, "coarse", criterion=criterion, R=R, probability="exact")
+    a = tolsynth.worst_pose(m, "coarse", criterion="sigma", probability="gaussian")
+    b = tolsynth.worst_pose(m, "coarse", criterion="sigma")
+    assert a.value == b.value
+    A = m.sensitivity(a.q)[:3] * m.tolerances("coarse")
+    assert a.value == pytest.approx(np.sqrt(np.linalg.eigvalsh(A @ A.T / 3.0).max()), rel=1e-9)
+
+
+def test_solve_header_keeps_the_digits_of_p_and_lock_lists_its_kind(capsys):
+    """p near 1 is shown with the digits that keep 1 - p (not 'p=1'); a --lock value of the wrong
+    kind lists the suffixes of the parameter's own kind (length for h2, angle for alpha1)."""
+    main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.999999999999", "--probability", "gaussian"])
+    assert "p=0.999999999999," in capsys.readouterr().out.splitlines()[0]
+    assert main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--lock", "h2=0.01deg"]) == 2
+    err = capsys.readouterr().err
+    assert "length unit suffix (mm, um" in err and "deg" not in err.split("suffix")[1]
+    assert main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--lock", "alpha1=5um"]) == 2
+    err = capsys.readouterr().err
+    assert "angle unit suffix (rad, mrad" in err and "um" not in err.split("suffix")[1]

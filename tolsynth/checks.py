@@ -113,6 +113,12 @@ def check_positive(x: Any, field: str, unit: str = "mm", upper: float = HUGE, lo
     return v
 
 
+def check_half_angle(x: Any, field: str = "Phi") -> float:
+    """A cone half-angle (rad), or a typed error unless ``0 < x <= pi``: a rotation turns the hand
+    axis by at most pi, so a larger half-angle would allow every turn and change nothing."""
+    return check_positive(x, field, "rad", upper=math.pi)
+
+
 def check_probability(p: Any, field: str = "p") -> float:
     """``p`` as a float, or a typed error unless ``P_MIN <= p <= P_MAX`` (0 < p < 1 with the
     normal quantile representable)."""

@@ -39,7 +39,7 @@ import casadi as ca
 import numpy as np
 
 from tolsynth.analysis.montecarlo_result import MonteCarloResult
-from tolsynth.checks import check_count, check_seed
+from tolsynth.checks import check_count, check_half_angle, check_seed
 from tolsynth.errors import InputError, LoopClosureError, OutOfRangeError
 from tolsynth.kinematics.numpy_eval import NumpyEvaluator
 from tolsynth.probability.stats import check_positive, check_probability, principal
@@ -238,7 +238,7 @@ def monte_carlo(
     batch = _check_n(batch, "batch")
     confidence = check_probability(confidence, "confidence")
     if Phi is not None:
-        Phi = check_positive(Phi, "Phi", "rad", upper=math.pi)  # a half-angle: above pi it allows any turn
+        Phi = check_half_angle(Phi)
     eps = mechanism.tolerances(tolerances)
     qv = mechanism.joints(q, check_limits)
     Ud = None

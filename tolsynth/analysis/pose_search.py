@@ -286,6 +286,14 @@ def worst_pose(
         probability = "exact" if criterion == "components" else "gaussian"
     if probability not in ("gaussian", "exact"):
         raise OutOfRangeError("probability", f"got {probability!r}", "'gaussian' or 'exact'")
+    if probability == "exact" and criterion != "components":  # it would be ignored: say so
+        raise InputError(
+            "probability",
+            f"'exact' given with criterion {criterion!r}, which this search reads in the Gaussian model "
+            "(sigma_1, or P(|dr| <= R) from the principal variances)",
+            "criterion='components' with probability='exact' (the per-direction probability), or "
+            "probability 'gaussian' / None with criterion 'sigma' or 'probability'",
+        )
     if certify and criterion == "probability":
         # a proven bound of the sphere probability needs enclosures of all three principal
         # variances and of a quadrature's error; the per-component probability needs sigma_1 alone

@@ -510,8 +510,8 @@ def add_specification_arguments(
 SOLVER_HELP = (
     "auto: the compiled interior-point method where it applies (per-component Gaussian criterion, "
     "power-law costs), IPOPT elsewhere; ipopt: IPOPT with exact derivatives always; sumt: the "
-    "paper's SUMT + Powell; every result certified the same way. Under the exact probabilities "
-    "(the default) the solver only finds the Gaussian optimum the exact interior-point method starts from"
+    "paper's SUMT + Powell; every result certified the same way. With --probability exact, the "
+    "solver only finds the Gaussian optimum the exact interior-point method starts from"
 )
 TOLERANCES_HELP = (
     "SET | VALUE | name=VALUE,... | SET,name=VALUE,...; patterns such as *=0.02 or h*=0.01; "

@@ -14,6 +14,7 @@ from tolsynth.cli.args import (  # noqa: I001
     dist_for,
     dist_label,
     emit_json,
+    fmt_p,
     inputs_record,
     parse_poses,
     pose_label,
@@ -162,7 +163,7 @@ def cmd_solve(args) -> int:
     elif args.p is None:
         raise InputError("--p", "missing", "0 < p < 1 (only --probability worst_case reads no p)")
     alpha, kw = _spec_kwargs(mech, args)
-    p_text = "worst case" if args.p is None else f"p={args.p:g}"
+    p_text = "worst case" if args.p is None else f"p={fmt_p(args.p)}"
     head = (
         f"{mech.name}: R={args.R:g} mm, {p_text}, alpha={args.alpha or 0.7}, "
         + ("errors anywhere in their bands" if args.p is None else f"{dist_label(args.dist)} errors")
@@ -357,7 +358,7 @@ SOLVER_LABELS = {"auto": "the solve", "ipopt": "the IPOPT solve", "sumt": "the S
 def _parse_locks(mech, items) -> dict:
     """``--lock NAME=VALUE`` (repeatable): a tolerance fixed at VALUE, a bare number in the
     parameter's tolerance unit or with a unit suffix (``a=50um``); each parameter once."""
-    from tolsynth.units import split_quantity, to_base, unit_kind
+    from tolsynth.units import split_quantity, suffixes, to_base, unit_kind
 
     out = {}
     for item in items:
@@ -377,7 +378,7 @@ def _parse_locks(mech, items) -> dict:
                 f"--lock {canon}",
                 f"{value!r} is not a tolerance",
                 f"a number in {unit} (its tolerance unit), or with a{'n' if kind == 'angle' else ''} {kind} "
-                "unit suffix (5um, 0.02mm, 2mrad, 0.01deg)",
+                f"unit suffix ({suffixes(kind)})",
             )
         v = parsed[0] if parsed[1] is None else parsed[0] * to_base(parsed[1]) / to_base(unit)
         out[canon] = (v, item)

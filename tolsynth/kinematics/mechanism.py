@@ -18,7 +18,7 @@ from typing import Mapping, Sequence, Union
 
 import numpy as np
 
-from tolsynth.checks import HUGE, check_mapping, check_real, check_vector
+from tolsynth.checks import HUGE, check_half_angle, check_mapping, check_real, check_vector
 from tolsynth.errors import InputError, LoopClosureError, OutOfRangeError, UnknownNameError
 from tolsynth.kinematics.graphs import Graphs, build_graphs
 from tolsynth.kinematics.parallel import ParallelGraphs, build_parallel_graphs
@@ -533,7 +533,7 @@ class Mechanism:
         if R is not None:
             R = check_positive(R, "R")
         if Phi is not None:
-            Phi = check_positive(Phi, "Phi", "rad")
+            Phi = check_half_angle(Phi)
         eps = self.tolerances(tolerances)
         qv = self.joints(q, check_limits)
         T = self.fk(qv, check_limits=False)

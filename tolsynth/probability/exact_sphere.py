@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from tolsynth.checks import check_positive
+from tolsynth.checks import check_half_angle, check_positive
 from tolsynth.probability.exact_inputs import ExactProbabilityError, check_count, check_matrix, check_tol
 from tolsynth.probability.exact_parts import part_of
 from tolsynth.probability.exact_rows import evaluate
@@ -201,7 +201,7 @@ def cone_probability(C, eps, shapes, Phi: float, tol: float = 1e-7, max_nodes: i
     Gaussian approximation, by the planar rule of the module docstring (up to ``max_nodes``
     azimuths).  Raises :class:`ExactProbabilityError` if the estimate exceeds ``tol`` (unless
     ``return_error``)."""
-    Phi = check_positive(Phi, "Phi", "rad")
+    Phi = check_half_angle(Phi)
     C, eps, sh = check_matrix(C, eps, shapes, 2, "C")
     tol = check_tol(tol)
     max_nodes = check_count(max_nodes, "max_nodes", 16)

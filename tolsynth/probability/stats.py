@@ -59,7 +59,7 @@ def variance_divisor(distribution, mechanism=None):
 
 
 # the argument rules live in tolsynth.checks (one copy); re-exported here for older imports
-from tolsynth.checks import check_positive, check_probability, check_vector  # noqa: E402,F401
+from tolsynth.checks import check_half_angle, check_positive, check_probability, check_vector  # noqa: E402,F401
 
 
 def _array(x, field: str) -> np.ndarray:
@@ -477,7 +477,7 @@ def p_cone(Vo: np.ndarray, axis, Phi: float) -> float:
     perpendicular to it, so the deviation angle is the length of a 2-D normal vector with the
     covariance of ``Vo`` projected on the plane normal to the axis.
     """
-    Phi = check_positive(Phi, "Phi", "rad")
+    Phi = check_half_angle(Phi)
     a = check_vector(axis, "axis", 3)
     if not np.linalg.norm(a) > 0:
         raise OutOfRangeError("axis", "the zero vector", "a nonzero 3-vector")

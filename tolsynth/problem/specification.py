@@ -14,7 +14,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from tolsynth.checks import HUGE, TINY, check_real, check_vector
+from tolsynth.checks import HUGE, TINY, check_half_angle, check_real, check_vector
 from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.model.cost_set import CostSet, cost_set
 from tolsynth.probability.distributions import resolve, shape, shapes_of
@@ -242,7 +242,7 @@ def make_specification(
     costs.check_ranges(names, lo, hi)
     z = _z_of_p(p)
     if Phi is not None:
-        Phi = check_positive(Phi, "Phi", "rad")
+        Phi = check_half_angle(Phi)
         p_orientation = p if p_orientation is None else check_probability(p_orientation, "p_orientation")
         z_o = _z_of_p(p_orientation)
     elif p_orientation is not None:
