@@ -191,3 +191,63 @@ def test_sphinx_build_without_executing_the_notebooks(tmp_path):
     fmt = (out / "model_format.html").read_text(encoding="utf-8")
     assert "error_parameters" in fmt and "joint_errors" in fmt
     assert (out / "notebooks" / "01_reproduce_paper.html").exists()
+
+
+def _text_blocks(page: str) -> list[str]:
+    return code_blocks(page, "text")
+
+
+def test_designers_cost_examples_print_what_the_page_shows(capsys):
+    """The grades example's session and the worst-case command's lines, run as written, print what
+    docs/designers_cost.md shows (and its prose quotes the same numbers)."""
+    from tolsynth.cli import main
+
+    page = (DOCS / "designers_cost.md").read_text(encoding="utf-8")
+    session = next(b for b in _text_blocks("designers_cost.md") if "round_to_grades" in b)
+    code = "\n".join(line[4:] for line in session.splitlines() if line.startswith((">>> ", "... ")))
+    shown = [line for line in session.splitlines() if line and not line.startswith((">>> ", "... "))]
+    ns: dict = {"tolsynth": tolsynth}
+    exec(compile(code.replace("print(g.summary())", ""), "designers_cost.md", "exec"), ns)
+    assert ns["g"].summary().splitlines() == shown
+    assert f"# cost {ns['res'].cost:.6f}" in session
+    command = next(b for b in _text_blocks("designers_cost.md") if "--probability worst_case" in b)
+    argv = command.splitlines()[0].removeprefix("$ tolsynth ").split()
+    assert main(argv) == 0
+    out = capsys.readouterr().out.splitlines()
+    for line in command.splitlines()[2:]:
+        assert line in out, line
+    stat = next(line for line in out if line.startswith("statistical design"))
+    cost, more = re.search(r"cost (\d+\.\d+); the worst case costs \+(\d+\.\d) %", stat).groups()
+    assert f"costs {float(cost):.2f} at the same\nR" in page and f"about {more} % more" in page
+
+
+def test_joint_errors_costs_are_what_the_code_gives():
+    """docs/joint_errors.md's link costs against the servo quantisation, solved again as stated
+    (the default exact probabilities, and the Gaussian reading it quotes beside them)."""
+    from tolsynth import JointError
+
+    text = " ".join((DOCS / "joint_errors.md").read_text(encoding="utf-8").split())
+    part = text[text.index("Link cost against the servo quantisation") :]
+    exact_xu = [float(x) for x in re.findall(r"(\d+\.\d\d)(?: with| \()", part.split("The Puma")[0])]
+    exact_puma = float(re.search(r"The Puma 560 at `qn` costs (\d+\.\d\d)", part).group(1))
+    gauss = part[part.index("Gaussian way") :]
+    gauss_xu = [float(x) for x in re.findall(r"\d+\.\d\d", gauss.split("the Puma")[0])]
+    gauss_puma = [float(x) for x in re.findall(r"\d+\.\d\d", gauss.split("the Puma")[1])]
+
+    def costs(name, pose, probability, qs):
+        m = tolsynth.load_model(name)
+        out = []
+        for q in qs:
+            errs = [JointError(j, "servo", value=q / 2, unit="mrad") for j in m.joint_names]
+            mq = m.with_joint_errors(errs) if q else m
+            r = tolsynth.synthesize(
+                mq, R=0.5, p=0.99, distribution="uniform", alpha=0.7, pose=pose, probability=probability
+            )
+            out.append(round(r.cost, 2))
+        return out
+
+    qs = (0.0, 0.1, 0.2, 0.4, 0.6)
+    assert exact_xu == costs("xu_zhang_1988", "worst", "exact", qs)
+    assert [exact_puma] == costs("puma560", "qn", "exact", (0.0,))
+    assert gauss_xu == costs("xu_zhang_1988", "worst", "gaussian", qs)
+    assert gauss_puma == costs("puma560", "qn", "gaussian", qs)

@@ -3,8 +3,10 @@ within it, with a proven optimum (:func:`tolsynth.synthesize_processes`), from t
 processes or a table file.
 
 A table file (TOML or JSON) maps parameter names to lists of processes, each
-``{name, cost, lower, upper}`` (``cost`` as in a model file, e.g. ``{model = "power", k = 1,
-alpha = 0.7}``; ``lower``/``upper`` in the parameter's tolerance unit)::
+``{name, cost, lower, upper}``: ``cost`` is a cost-model table as in a model file (not a number),
+e.g. ``{model = "power", k = 1, alpha = 0.7}`` for ``k eps^-alpha`` (models: power, chase,
+exponential, tabulated; docs/model_format.md); ``lower``/``upper`` in the parameter's tolerance
+unit::
 
     [[h3]]
     name = "turning"
@@ -29,15 +31,26 @@ from tolsynth.kinematics.mechanism import load_model
 
 __all__ = ["register", "cmd_processes", "read_process_table"]
 
-_SHAPE = "a TOML or JSON file: parameter name -> list of {name, cost, lower, upper}"
+_SHAPE = (
+    "a TOML or JSON file: parameter name -> list of {name, cost, lower, upper}, cost a cost-model "
+    'table such as { model = "power", k = 1.0, alpha = 0.7 }'
+)
 
 
-def read_process_table(path: str) -> dict:
-    """The processes of a table file (module docstring); typed errors naming the file otherwise."""
+def read_process_table(path: str, mech=None) -> dict:
+    """The processes of a table file (module docstring); typed errors naming the file (and, with
+    the model ``mech``, the parameter and process of a bad entry) otherwise."""
+    from tolsynth.synthesis.processes import located, normalise_processes
+
     data = read_table_file(path, "--table", _SHAPE, "processes")
     for key, items in data.items():
         if not isinstance(items, list) or not all(isinstance(i, dict) for i in items):
-            raise InputError(f"--table[{key}]", f"got {items!r}", "a list of {name, cost, lower, upper}")
+            raise InputError(f"--table {path}: [{key}]", f"got {items!r}", "a list of {name, cost, lower, upper}")
+    if mech is not None:
+        try:
+            normalise_processes(mech, data)
+        except InputError as exc:
+            raise located(exc, f"--table {path}") from None
     return data
 
 
@@ -47,7 +60,7 @@ def cmd_processes(args) -> int:
     check_table_out(args)
     mech = load_model(args.model)
     if args.table is not None:
-        procs = read_process_table(args.table)
+        procs = read_process_table(args.table, mech)
     elif mech.processes:
         procs = None  # the model file's
     else:
@@ -97,8 +110,10 @@ def register(sub) -> None:
         "--table",
         default=None,
         metavar="FILE",
-        help="process table, TOML or JSON: parameter -> list of {name, cost, lower, upper}; "
-        "default: the model file's processes",
+        help="process table, TOML or JSON: parameter -> list of {name, cost, lower, upper}, with cost a "
+        'cost-model table, e.g. cost = { model = "power", k = 1.0, alpha = 0.7 } for k eps^-alpha (models: '
+        "power, chase, exponential, tabulated; as in a model file), lower and upper in the parameter's "
+        "tolerance unit; default: the model file's processes",
     )
     add_max_nodes_argument(p, 10_000, "the continuous solves of the search")
     add_output_arguments(p, "the chosen processes and tolerances")

@@ -24,12 +24,17 @@ def _synthesis_frame(res):
     for i, (name, eps) in enumerate(res.tolerances.items()):
         row = {"parameter": name, "unit": res.units[name], "tolerance": eps}
         if spec is not None:
+            model = spec.costs.models[i]
+            # k and alpha of the cost model the solve used (a process's or a cost= model's, not the
+            # model file's k); NaN where that model is not the power law k eps^-alpha
+            power = model.kind == "power"
             row.update(
                 lower=float(spec.lower[i]),
                 upper=float(spec.upper[i]),
-                k=float(spec.k[i]),
-                alpha=float(spec.alpha[i]),
-                cost=float(spec.costs.models[i].cost(eps)),
+                k=float(model.k) if power else float("nan"),
+                alpha=float(model.alpha) if power else float("nan"),
+                cost_model=model.describe(),
+                cost=float(model.cost(eps)),
             )
         row["bound_active"] = res.bounds_active.get(name, "")
         row["bound_multiplier"] = float(res.bound_multipliers.get(name, 0.0))

@@ -490,14 +490,20 @@ def _layout(rep) -> list[tuple]:
     else:
         B.append(("note", "Workspace map: " + rep.skipped.get("map", "not drawn")))
     if rep.worst is not None:
-        w = rep.worst
-        zr = spec.z / spec.R
+        w, judged = rep.worst, rep.worst_judged
         B.append(("h", 3, "Worst pose"))
         B.append(
             (
                 "p",
-                f"Search over the joint space inside every limit and constraint ({w.method}) for the largest "
-                "principal sigma at the optimal tolerances.",
+                f"Search over the joint space inside every limit and constraint ({w.method}) for the "
+                + (
+                    "lowest sphere probability"
+                    if w.criterion == "probability"
+                    else "largest principal sigma (the Gaussian ranking)"
+                )
+                + " at the optimal tolerances, judged in the design's own reading: "
+                + judged["quantity"]
+                + " (<= 1 meets the specification).",
             )
         )
         rows = [
@@ -513,9 +519,9 @@ def _layout(rep) -> list[tuple]:
                 _vec(w.reference_principal_std, ".4f") if w.reference_principal_std is not None else "-",
             ],
             [
-                "largest sigma z / R",
-                f"{w.value * zr:.4f}",
-                f"{w.reference_value * zr:.4f}" if w.reference_value is not None else "-",
+                judged["quantity"],
+                f"{judged['found']:.4f}",
+                f"{judged['reference']:.4f}" if judged["reference"] is not None else "-",
             ],
         ]
         if w.p_sphere is not None:
@@ -539,21 +545,30 @@ def _layout(rep) -> list[tuple]:
                 + ".",
             )
         )
-        if w.value * zr > 1 + 1e-6:
+        # the search ranks poses by sigma (or the Gaussian sphere): in another reading the
+        # reference pose can come out worse than the pose found, so the verdict takes both
+        found = max(v for v in (judged["found"], judged["reference"]) if v is not None)
+        ranked = (
+            " The search ranks poses by the Gaussian sigma, not by the exact probability: the exact worst "
+            "pose may lie elsewhere (report --certify proves a bound over the whole joint space)."
+            if rep.result.probability_kind == "exact" and w.certificate is None
+            else ""
+        )
+        if found > 1 + 1e-6:
             B.append(
                 (
                     "note",
-                    f"At the worst pose found the largest sigma z / R is {w.value * zr:.4f} > 1: the "
+                    f"At the poses compared {judged['quantity']} reaches {found:.4f} > 1: the "
                     "specification is met at the specification's pose(s) but not everywhere in the workspace. "
-                    "tolsynth solve --everywhere (synthesize_workspace) imposes it at every reachable pose.",
+                    "tolsynth solve --everywhere (synthesize_workspace) imposes it at every reachable pose." + ranked,
                 )
             )
         else:
             B.append(
                 (
                     "ok",
-                    f"At the worst pose found the largest sigma z / R is {w.value * zr:.4f} <= 1: the "
-                    "specification holds over the searched workspace.",
+                    f"At the poses compared {judged['quantity']} is at most {found:.4f} <= 1: the "
+                    "specification holds at the poses searched (a search, not a proof)." + ranked,
                 )
             )
     else:

@@ -33,6 +33,7 @@ import numpy as np
 
 from tolsynth.checks import check_writable_path
 from tolsynth.errors import InputError, MissingDependencyError, TolsynthError
+from tolsynth.io.report_certificate import shortfall
 from tolsynth.io.report_figures import _figures
 from tolsynth.io.report_layout import PLOT_INSTALL, _layout
 from tolsynth.io.report_render import _render_html, _render_markdown
@@ -63,6 +64,10 @@ class DesignReport:
         The Monte Carlo check at each pose of the specification (empty if ``mc_samples=0``).
     map : ProbabilityMap or None
     worst : WorstPose or None
+    worst_judged : dict or None
+        The worst pose judged in the design's own probability reading: ``quantity`` (its name),
+        ``found`` and ``reference`` (the values at the pose found and the reference pose; <= 1
+        meets the specification).
     skipped : dict
         Section -> why it is missing (switched off, or the reason it failed); shown in the report.
     settings : dict
@@ -85,6 +90,7 @@ class DesignReport:
     processes: dict | None = None
     process_choice: Any = None
     workspace: Any = None
+    worst_judged: dict | None = None
     created: str = field(default_factory=lambda: _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"))
 
     # ------------------------------------------------------------------ layout
@@ -377,24 +383,32 @@ def report(
             if isinstance(exc, InputError) and exc.field in ("plane", "hand_axis", "n"):
                 raise
             skipped["map"] = f"not drawn: {exc}"
-    worst = None
+    worst = worst_judged = None
     if worst_grid == 0:
         skipped["worst"] = "switched off (worst_grid = 0)"
     else:
         from tolsynth.analysis.pose_search import worst_pose
 
+        exact = result.probability_kind == "exact"
+        sphere = spec.criterion == "sphere"
         try:
+            # searched and judged in the reading the design was made for, as section 4's check
             worst = worst_pose(
                 mech,
                 result.tolerances,
-                criterion="sigma",
+                criterion=("probability" if not certify else "sigma")
+                if sphere
+                else ("components" if exact else "sigma"),
                 R=spec.R,
                 distribution=spec.distribution,
                 grid=worst_grid,
                 certify=bool(certify),
+                probability="exact" if exact and not sphere else None,
                 progress=False,
             )
+            worst_judged = _judge_worst(mech, result, worst, exact, sphere)
         except TolsynthError as exc:
+            worst, worst_judged = None, None
             skipped["worst"] = f"not searched: {exc}"
     procs = dict(choice.processes) if choice is not None else None
     rep = DesignReport(
@@ -404,6 +418,7 @@ def report(
         validations=tuple(validations),
         map=pmap,
         worst=worst,
+        worst_judged=worst_judged,
         skipped=skipped,
         settings=settings,
         elapsed_s=time.perf_counter() - t0,
@@ -414,6 +429,42 @@ def report(
     if path is not None:
         rep.write(path, format)
     return rep
+
+
+def _judge_worst(mech, result, worst, exact: bool, sphere: bool) -> dict:
+    """The worst pose's values in the reading the design was made for (<= 1 meets it): the exact
+    per-direction ``(1 - P) / (1 - p)`` (the search's ``value`` is that P), ``sigma z / R`` for the
+    Gaussian reading, or the sphere's ``(1 - P) / (1 - p)`` (Gaussian, or exact at the poses found)."""
+    spec = result.spec
+    if not sphere:
+        if exact:
+            return dict(
+                quantity="exact (1-P)/(1-p) along the worst direction",
+                found=shortfall(worst.value, spec.p),
+                reference=None if worst.reference_value is None else shortfall(worst.reference_value, spec.p),
+            )
+        zr = spec.z / spec.R
+        return dict(
+            quantity="largest sigma z / R",
+            found=worst.value * zr,
+            reference=None if worst.reference_value is None else worst.reference_value * zr,
+        )
+    if not exact:
+        P, Pref = worst.p_sphere, worst.reference_p_sphere
+    else:
+        from tolsynth.probability.exact_sphere import ball_probability
+
+        def exact_ball(q):
+            A = np.asarray(mech.sensitivity(q, check_limits=False))[:3]
+            return ball_probability(A, result.x, spec.shapes, spec.R)
+
+        P = exact_ball(worst.q)
+        Pref = None if worst.reference_q is None else exact_ball(worst.reference_q)
+    return dict(
+        quantity=("exact " if exact else "") + "(1-P)/(1-p), P = P(|dr| <= R)",
+        found=shortfall(P, spec.p),
+        reference=None if Pref is None else shortfall(Pref, spec.p),
+    )
 
 
 def _mechanism_of(result):

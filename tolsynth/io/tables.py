@@ -19,8 +19,10 @@ Every frame carries ``frame.attrs``:
 
 The rows of each type's frame:
 
-- ``SynthesisResult``: one per parameter: ``parameter, unit, tolerance, lower, upper, k, alpha,
-  cost`` (that parameter's share of the cost), ``bound_active`` ("lower" / "upper" / ""),
+- ``SynthesisResult``: one per parameter: ``parameter, unit, tolerance, lower, upper, k, alpha``
+  (of the cost model the solve used, a process's or ``cost=``'s included; NaN where it is not the
+  power law ``k eps^-alpha``), ``cost_model`` (that model, e.g. ``5 eps^-0.7``), ``cost`` (that
+  parameter's share of the cost), ``bound_active`` ("lower" / "upper" / ""),
   ``bound_multiplier``; the constraint blocks in ``attrs["summary"]["constraints"]``;
 - ``Comparison``: one per parameter: ``ipopt, sumt, rel_diff, ipopt_bound, sumt_bound``;
 - ``WorkspaceSynthesis``: one per exchange round (cost, worst value, worst pose and hand point);

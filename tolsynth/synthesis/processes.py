@@ -160,15 +160,35 @@ def _hull_model(procs: list[Process]) -> tuple[Tabulated, float, float]:
     return table, table.eps[0], table.eps[-1]
 
 
-def _normalise(mechanism, processes) -> dict[str, list[Process]]:
+def located(exc: InputError, where: str) -> InputError:
+    """``exc`` (same type, same ``allowed``) with ``where`` in front of its text: a table of many
+    processes needs the parameter and process named, a file its name, to find the bad entry."""
+    err = type(exc)(where, str(exc))
+    err.field, err.allowed = f"{where}: {exc.field}", exc.allowed
+    return err
+
+
+def normalise_processes(mechanism, processes) -> dict[str, list[Process]]:
+    """Parameter name -> list of :class:`Process` from ``processes`` (Process objects or dicts
+    ``{name, cost, lower, upper}``); a typed error naming the parameter and process otherwise."""
     if not isinstance(processes, Mapping) or not processes:
         raise InputError("processes", f"got {processes!r}", "a dict parameter name -> list of processes")
     out = {}
     for key, plist in processes.items():
-        nm = mechanism.error_parameters[mechanism.index(key)]
+        try:
+            nm = mechanism.error_parameters[mechanism.index(key)]
+        except InputError as exc:
+            raise located(exc, f"processes: parameter {key}") from None
         if isinstance(plist, (Process, Mapping)) or not hasattr(plist, "__len__") or len(plist) == 0:
             raise InputError(f"processes[{key}]", "expected a non-empty list", "a list of processes")
-        procs = [Process.make(p) for p in plist]
+        procs = []
+        for j, item in enumerate(plist):
+            try:
+                procs.append(Process.make(item))
+            except InputError as exc:
+                name = item.get("name") if isinstance(item, Mapping) else getattr(item, "name", None)
+                which = f"process {name!r}" if name is not None else f"process {j + 1}"
+                raise located(exc, f"processes: parameter {key}, {which}") from None
         names = [p.name for p in procs]
         if len(set(names)) != len(names):
             raise InputError(f"processes[{key}]", f"duplicate process names {names}", "distinct names")
@@ -364,7 +384,7 @@ def synthesize_processes(
     t0 = time.perf_counter()
     if processes is None:
         processes = mechanism.processes  # the model file's
-    procs = _normalise(mechanism, processes)
+    procs = normalise_processes(mechanism, processes)
     search = _Search(mechanism, R, p, distribution, procs, kwargs)
     names = search.names
     root = tuple(tuple(range(len(procs[nm]))) for nm in names)
@@ -470,7 +490,7 @@ def enumerate_processes(mechanism, R: float, p: float, processes, distribution=N
     from tolsynth.kinematics.mechanism import as_mechanism
 
     mechanism = as_mechanism(mechanism)
-    procs = _normalise(mechanism, processes)
+    procs = normalise_processes(mechanism, processes)
     search = _Search(mechanism, R, p, distribution, procs, kwargs)
     out = []
     for choice in itertools.product(*(range(len(procs[nm])) for nm in search.names)):
