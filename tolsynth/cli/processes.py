@@ -17,7 +17,7 @@ unit::
 
 from __future__ import annotations
 
-from tolsynth.cli.args import check_table_out
+from tolsynth.cli.args import check_table_out, fmt_p
 from tolsynth.cli.designs import (
     add_max_nodes_argument,
     add_output_arguments,
@@ -88,7 +88,7 @@ def cmd_processes(args) -> int:
         frame=frame,
         data=lambda: dict(best.to_dict(), result=res.to_dict()),
         text=lambda: (
-            f"{mech.name}: R = {args.R:g} mm, p = {args.p:g}, processes from "
+            f"{mech.name}: R = {args.R:g} mm, p = {fmt_p(args.p)}, processes from "
             f"{args.table or 'the model file'}\n{best.summary()}"
         ),
         ok=best.proven,
