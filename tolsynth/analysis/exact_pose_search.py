@@ -285,18 +285,7 @@ def worst_exact_pose(
 
     def best_directions(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per pose: the lowest of the principal axes, their bisectors and a lattice, then Newton."""
-        N = M.shape[0]
-        lam, vec = np.linalg.eigh(np.einsum("kxi,kyi->kxy", M, M))
-        cand = [vec[:, :, 0], vec[:, :, 1], vec[:, :, 2]]
-        for a in range(3):
-            for b in range(a + 1, 3):
-                cand += [(vec[:, :, a] + vec[:, :, b]) / math.sqrt(2), (vec[:, :, a] - vec[:, :, b]) / math.sqrt(2)]
-        C = np.concatenate(
-            [np.stack(cand, axis=1), np.broadcast_to(_lattice_of(directions), (N, directions, 3))], axis=1
-        )
-        P, _ = probability(np.abs(np.einsum("kdx,kxn->kdn", C, M)).reshape(-1, mech.n), shapes, R, GRID_TOL)
-        P = P.reshape(N, -1)
-        W, F = C[np.arange(N), np.argmin(P, axis=1)], P.min(axis=1)
+        W, F = screen_directions(M, shapes, R, directions)
         top = np.argsort(F, kind="stable")[:GRID_NEWTON]  # the rest stay at their candidates' lowest
         W[top], F[top] = descend(M[top], W[top], GRID_STEPS, GRID_TOL)
         return W, F
@@ -466,6 +455,22 @@ def worst_exact_pose(
         f"({directions} lattice directions + axes, Newton on the sphere), then pattern search over joints "
         f"with Newton over directions from {X.shape[1]} starts",
     )
+
+
+def screen_directions(M: np.ndarray, shapes, R: float, directions: int = 24) -> tuple[np.ndarray, np.ndarray]:
+    """Per pose of ``M = A diag(eps)`` (N, 3, n): the lowest exact ``P(|u . dr| <= R)`` over its
+    principal axes, their bisectors and a Fibonacci lattice of ``directions`` (the direction (N, 3)
+    and P (N,)), one batch of the compiled series: a screen, never below the lowest over all directions."""
+    N = M.shape[0]
+    _, vec = np.linalg.eigh(np.einsum("kxi,kyi->kxy", M, M))
+    cand = [vec[:, :, 0], vec[:, :, 1], vec[:, :, 2]]
+    for a in range(3):
+        for b in range(a + 1, 3):
+            cand += [(vec[:, :, a] + vec[:, :, b]) / math.sqrt(2), (vec[:, :, a] - vec[:, :, b]) / math.sqrt(2)]
+    C = np.concatenate([np.stack(cand, axis=1), np.broadcast_to(_lattice_of(directions), (N, directions, 3))], axis=1)
+    P, _ = probability(np.abs(np.einsum("kdx,kxn->kdn", C, M)).reshape(-1, M.shape[2]), shapes, R, GRID_TOL)
+    P = P.reshape(N, -1)
+    return C[np.arange(N), np.argmin(P, axis=1)], P.min(axis=1)
 
 
 _LATTICES: dict = {}
