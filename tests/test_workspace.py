@@ -111,6 +111,37 @@ def test_worst_pose_sigma_beats_the_paper_and_respects_limits(xz, rng):
     assert all(len(line) <= 22 + 42 for line in text.splitlines()[1:6]), text
 
 
+def test_worst_pose_search_does_not_creep_along_a_ridge(monkeypatch):
+    """The pattern search on puma560's exact single-pose design at step_tol 1e-7: a step only ever
+    halved crept along a ridge of tiny gains for millions of polls (minutes); a run of successes now
+    doubles it.  It ends within 200 000 evaluations (the guard raises past them), at a sigma_1 that
+    NumPy's eigenvalues of the sensitivity give again, at least the coarse search's and no random
+    feasible pose's exceeds."""
+    import tolsynth.analysis.pose_search as ps
+
+    m = tolsynth.load_model("puma560")
+    eps = tolsynth.synthesize(m, R=0.5, p=0.99).x
+    calls = [0]
+    inner = ps._criterion_batch
+
+    def guarded(mech, Q, *a, **k):
+        calls[0] += Q.shape[1]
+        if calls[0] > 200_000:
+            raise RuntimeError("the pattern search crept on past 200 000 evaluations")
+        return inner(mech, Q, *a, **k)
+
+    monkeypatch.setattr(ps, "_criterion_batch", guarded)
+    w = worst_pose(m, eps, step_tol=1e-7)
+    monkeypatch.setattr(ps, "_criterion_batch", inner)
+    A = m.sensitivity(w.q)[:3] * eps
+    assert w.value == pytest.approx(math.sqrt(np.linalg.eigvalsh(A @ A.T / 3.0).max()), rel=1e-9)
+    assert w.value >= worst_pose(m, eps, step_tol=1e-4).value * (1 - 1e-12)
+    lo = np.array([j.lower for j in m.spec.joints])
+    hi = np.array([j.upper for j in m.spec.joints])
+    Q = lo[:, None] + (hi - lo)[:, None] * np.random.default_rng(3).random((len(lo), 5000))  # no constraints
+    assert principal_std_batch(m, Q, eps)[:, 0].max() <= w.value * (1 + 1e-9)
+
+
 def test_worst_pose_probability(xz, rng):
     w = worst_pose(xz, "figure3", criterion="probability", R=0.2, grid=12, starts=2)
     xz.joints(w.q)

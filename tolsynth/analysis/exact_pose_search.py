@@ -29,6 +29,7 @@ from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.kinematics.batch_stats import SMALL_BATCH, _evaluator, _small_maps
 from tolsynth.kinematics.joint_space import (
     MODEL_REFERENCE,
+    STREAK,
     _feasible,
     _limits,
     _reference,
@@ -393,6 +394,7 @@ def worst_exact_pose(
     # (3) the pattern search over joints, each poll's value its own minimum over directions
     D = tangent_directions(mech, free, span) if k else np.zeros((0, 0))
     h = np.full(X.shape[1], 0.5 * h0)
+    streak = np.zeros(X.shape[1], dtype=int)
     checks = 0
     while True:
         while k and np.any(h >= step_tol):
@@ -412,8 +414,12 @@ def worst_exact_pose(
                     X[:, s] = Pp[:, a_i, j[a_i]]
                     FX[s] = best[a_i]
                     WX[s] = dirs[a_i * nd + j[a_i]]
+                    streak[s] += 1
+                    if streak[s] >= STREAK:  # a run of successes doubles the step: no creep along a ridge
+                        h[s], streak[s] = min(2.0 * h[s], 0.5 * h0), 0
                 else:
                     h[s] *= 0.5
+                    streak[s] = 0
         if k:  # onto the limits and joint constraints a pose ends near, where that is lower
             Y = np.column_stack([snap(X[:, s]) for s in range(X.shape[1])])
             My, oky = blocks(Y)

@@ -27,6 +27,7 @@ from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.kinematics.batch_stats import _criterion_batch, principal_std_batch
 from tolsynth.kinematics.joint_space import (
     MODEL_REFERENCE,
+    STREAK,
     _feasible,
     _limits,
     _reference,
@@ -394,6 +395,7 @@ def worst_pose(
         X = U[:, picked].copy()  # (k, S)
         F = vals[picked].copy()
         h = np.full(len(picked), 0.5 * h0)
+        streak = np.zeros(len(picked), dtype=int)
         while np.any(h >= step_tol):
             act = np.flatnonzero(h >= step_tol)
             P = X[:, act, None] + h[act][None, :, None] * D.T[:, None, :]  # (k, A, nd)
@@ -405,8 +407,12 @@ def worst_pose(
                 if better[a_i]:
                     X[:, s] = P[:, a_i, j[a_i]]
                     F[s] = gain[a_i]
+                    streak[s] += 1
+                    if streak[s] >= STREAK:  # a run of successes doubles the step: no creep along a ridge
+                        h[s], streak[s] = min(2.0 * h[s], 0.5 * h0), 0
                 else:
                     h[s] *= 0.5
+                    streak[s] = 0
         b = int(np.argmax(F))
         best_u = X[:, b]
     q = full(best_u[:, None])[:, 0]

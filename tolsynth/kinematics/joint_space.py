@@ -35,6 +35,13 @@ class _ModelReference:
 MODEL_REFERENCE = _ModelReference()
 
 
+#: the joint-space pattern searches (worst pose, exact worst pose): successes in a row at one step
+#: size that double it (up to the first step).  A step only ever halved crept along a ridge of tiny
+#: gains for millions of polls (puma560's single-pose design, step_tol 1e-7); doubling at every
+#: success made the exchanges' searches twice as long
+STREAK = 4
+
+
 def model_reference(mech) -> str | None:
     """The model's reference pose: the configuration its file names as ``reference`` (when the
     format has that field), else its configuration ``worst`` (the paper's pose of largest error),
