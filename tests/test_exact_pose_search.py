@@ -161,3 +161,36 @@ def test_sampled_exact_exchange_meets_p_near_its_worst_poses():
     assert min(values) >= p - 1e-6
     assert min(values) >= P_reported - 2e-7  # nothing near it lower than the worst reported
     assert values[1] <= P_reported + 2e-6  # and the reported value is the one there
+
+
+def _planar_single_design():
+    m = tolsynth.load_model("planar_2r")
+    eps = tolsynth.synthesize(m, R=0.5, p=0.99).x
+    return m, eps, tolsynth.worst_pose(m, eps, criterion="components", R=0.5)
+
+
+def test_worst_pose_with_the_exact_reading_searches_exactly():
+    """worst_pose(criterion='components', probability exact) goes on from the pose of largest sigma
+    with the exact search: on planar_2r's exact single-pose design the pose of largest sigma meets
+    p, but the design misses it by 9.6 % elsewhere.  The value found is checked by FFT convolution
+    (tests/independent.py) along the planar directions at the pose."""
+    m, eps, w = _planar_single_design()
+    assert "exact search" in w.method
+    sigma_pose = tolsynth.worst_pose(m, eps, criterion="sigma").q
+    assert independent_worst(m.sensitivity(sigma_pose)[:3] * eps, 0.5, plane=True)[0] > 0.99
+    P_found, _ = independent_worst(m.sensitivity(w.q)[:3] * eps, 0.5, plane=True)
+    assert P_found == pytest.approx(w.value, abs=2e-5) and (1 - w.value) / 0.01 > 1.09
+
+
+@pytest.mark.slow  # 91 FFT searches, about a minute
+def test_worst_pose_with_the_exact_reading_against_a_grid():
+    """A grid of 91 q2 values (q1 only turns the error), each searched over planar directions by
+    FFT convolution, finds nothing lower than worst_pose's exact value by more than the grid's
+    coarseness."""
+    m, eps, w = _planar_single_design()
+    lo, hi = m.spec.joints[1].lower, m.spec.joints[1].upper
+    grid = [
+        independent_worst(m.sensitivity(np.array([0.0, q2]))[:3] * eps, 0.5, plane=True)[0]
+        for q2 in np.linspace(lo, hi, 91)
+    ]
+    assert min(grid) >= w.value - 2e-4

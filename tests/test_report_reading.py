@@ -54,9 +54,10 @@ def test_exact_design_judged_by_its_exact_probability():
     reference = _exact_margin(mech, rep.worst.reference_q, eps, 0.5, 0.99)
     assert float(row[1]) == pytest.approx(found, abs=6e-5)
     assert float(row[2]) == pytest.approx(reference, abs=6e-5)
-    # the reference pose is the one designed for: its worst direction is the active constraint
-    assert reference == pytest.approx(1.0, abs=1e-4) and found < 1.0
+    # the reference pose is the one designed for: its worst direction is the active constraint; the
+    # exact search finds where the single-pose design misses p (9.6 %), and the verdict says so
+    assert reference == pytest.approx(1.0, abs=1e-4) and found > 1.09
     verdict = [b for b in blocks[start:] if b[0] in ("ok", "note") and "At the poses compared" in b[1]]
-    assert len(verdict) == 1 and verdict[0][0] == "ok", verdict
+    assert len(verdict) == 1 and verdict[0][0] == "note" and "1.0957 > 1" in verdict[0][1], verdict
     text = " ".join(str(b) for b in blocks)
     assert "sigma z / R" not in text  # no Gaussian judgement of an exact design anywhere

@@ -214,11 +214,15 @@ def worst_pose(
     coarse grid over the remaining joints, inside every joint limit and joint constraint;
     (3) from the ``starts`` best, mutually separated grid points, a generating-set search
     (compass search with complete polling; step halved on failure down to ``step_tol`` of each
-    joint's range) whose directions include the tangents of the linear joint constraints, with
-    infeasible polls rejected.  Derivative-free on purpose: the largest principal sigma is not
-    differentiable where two principal variances cross, the sphere probability is a quadrature,
-    and the worst pose typically lies on limits and the interference constraint, where a tangent
-    polling set is all that is needed.
+    joint's range, doubled after a run of successes) whose directions include the tangents of the
+    linear joint constraints, with infeasible polls rejected.  Derivative-free on purpose: the
+    largest principal sigma is not differentiable where two principal variances cross, the sphere
+    probability is a quadrature, and the worst pose typically lies on limits and the interference
+    constraint, where a tangent polling set is all that is needed.  (4) With the exact
+    per-component probability (``criterion="components"``, ``probability="exact"``): the pose of
+    largest sigma need not be the pose of lowest exact probability, so the exact search
+    (:func:`tolsynth.analysis.exact_pose_search.worst_exact_pose`) goes on from it, over joints and
+    directions together.
 
     Parameters
     ----------
@@ -416,6 +420,17 @@ def worst_pose(
         b = int(np.argmax(F))
         best_u = X[:, b]
     q = full(best_u[:, None])[:, 0]
+    exact_search = ""
+    if criterion == "components" and probability == "exact":
+        from tolsynth.analysis.exact_pose_search import worst_exact_pose
+
+        e = worst_exact_pose(
+            mechanism, eps, R, None, distribution, x0=[q], fixed=fixed, seed=seed, step_tol=max(step_tol, 1e-6)
+        )
+        n_eval += e.n_evaluations
+        exact_search = f"; then the exact search over joints and directions ({e.method})"
+        if e.probability < _value_at(mechanism, q, eps, distribution, R, criterion, probability):
+            q = np.asarray(e.q, dtype=float)
     cert = None
     if certify:
         from tolsynth.analysis.certify import certify_worst_pose
@@ -506,6 +521,7 @@ def worst_pose(
         n_evaluations=n_eval,
         elapsed_s=time.perf_counter() - t0,
         method=f"grid {g}^{k} over {', '.join(names[j] for j in free) or '-'}, then pattern search from {len(picked)} starts"
+        + exact_search
         + (f"; certified search: {cert.method}" if cert is not None else ""),
         certified=None if cert is None else cert.certified,
         upper_bound=None if cert is None else cert.upper_bound,

@@ -499,6 +499,8 @@ def _layout(rep) -> list[tuple]:
                 + (
                     "lowest sphere probability"
                     if w.criterion == "probability"
+                    else "lowest exact per-direction probability (from the pose of largest sigma)"
+                    if "exact search" in w.method
                     else "largest principal sigma (the Gaussian ranking)"
                 )
                 + " at the optimal tolerances, judged in the design's own reading: "
@@ -548,12 +550,13 @@ def _layout(rep) -> list[tuple]:
         # the search ranks poses by sigma (or the Gaussian sphere): in another reading the
         # reference pose can come out worse than the pose found, so the verdict takes both
         found = max(v for v in (judged["found"], judged["reference"]) if v is not None)
-        ranked = (
-            " The search ranks poses by the Gaussian sigma, not by the exact probability: the exact worst "
-            "pose may lie elsewhere (report --certify proves a bound over the whole joint space)."
-            if rep.result.probability_kind == "exact" and w.certificate is None
-            else ""
-        )
+        ranked = ""
+        if rep.result.probability_kind == "exact" and w.certificate is None:
+            ranked = (
+                " The search ranks poses by the Gaussian sigma, not by the exact probability: the exact worst pose"
+                if "exact search" not in w.method
+                else " The exact worst pose of a local search"
+            ) + " may lie elsewhere (report --certify proves a bound over the whole joint space)."
         if found > 1 + 1e-6:
             B.append(
                 (
