@@ -343,7 +343,7 @@ class WorkspaceCheck:
                     P = worst_direction(A, eps, spec.shapes, spec.R, grid=100, local=2)[1]
             except ExactProbabilityError:
                 continue
-            out[k] = max((1.0 - P) / (1.0 - spec.p), out[k]) if np.isfinite(out[k]) else (1.0 - P) / (1.0 - spec.p)
+            out[k] = np.fmax(out[k], (1.0 - P) / (1.0 - spec.p))  # the screen's value where it is the larger
         return out
 
     @property

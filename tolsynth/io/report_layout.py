@@ -491,6 +491,8 @@ def _layout(rep) -> list[tuple]:
         B.append(("note", "Workspace map: " + rep.skipped.get("map", "not drawn")))
     if rep.worst is not None:
         w, judged = rep.worst, rep.worst_judged
+        # worst_pose searches the exact per-direction probability itself for an exact components design
+        searched_exactly = w.criterion == "components" and rep.result.probability_kind == "exact"
         B.append(("h", 3, "Worst pose"))
         B.append(
             (
@@ -500,7 +502,7 @@ def _layout(rep) -> list[tuple]:
                     "lowest sphere probability"
                     if w.criterion == "probability"
                     else "lowest exact per-direction probability (from the pose of largest sigma)"
-                    if "exact search" in w.method
+                    if searched_exactly
                     else "largest principal sigma (the Gaussian ranking)"
                 )
                 + " at the optimal tolerances, judged in the design's own reading: "
@@ -554,7 +556,7 @@ def _layout(rep) -> list[tuple]:
         if rep.result.probability_kind == "exact" and w.certificate is None:
             ranked = (
                 " The search ranks poses by the Gaussian sigma, not by the exact probability: the exact worst pose"
-                if "exact search" not in w.method
+                if not searched_exactly
                 else " The exact worst pose of a local search"
             ) + " may lie elsewhere (report --certify proves a bound over the whole joint space)."
         if found > 1 + 1e-6:
