@@ -5,8 +5,8 @@ The package computes in millimetres and radians.  The rule, the same in the Pyth
 model builders and the command line (docs/units.md):
 
 * a bare number is in the unit its argument states: mm for lengths (``R``, offsets), rad for
-  angles (``Phi``, joint values), each error parameter's own tolerance unit for tolerances, locks
-  and bounds (the paper: mm for lengths, 1e-2 rad for angles);
+  angles (``Phi``, joint values; a joint that slides in mm), each error parameter's own tolerance
+  unit for tolerances, locks and bounds (the paper: mm for lengths, 1e-2 rad for angles);
 * a string with a unit suffix (``"500um"``, ``"0.5 mm"``, ``"2mrad"``, ``"0.1deg"``) is accepted
   wherever such a number is, and converted to the argument's unit;
 * the model builders (:func:`tolsynth.Mechanism.from_dh`, :func:`tolsynth.load_urdf`) read the
@@ -32,6 +32,7 @@ __all__ = [
     "split_quantity",
     "convert_quantity",
     "suffixes",
+    "joint_values",
 ]
 
 #: factor from the unit to mm
@@ -113,3 +114,13 @@ def convert_quantity(text: str, unit: str) -> float | None:
     if unit_kind(suffix) != unit_kind(unit):
         return None
     return value * to_base(suffix) / to_base(unit)
+
+
+def joint_values(q, units) -> dict:
+    """A pose for a JSON record or a table's inputs, its key naming the unit: ``{"q_rad": q}``
+    (every joint turns), ``{"q_mm": q}`` (every joint slides: a parallel robot's struts), or
+    ``{"q": q, "q_units": [...]}`` where the kinds mix."""
+    units = tuple(units)
+    if len(set(units)) <= 1:
+        return {f"q_{units[0] if units else 'rad'}": q}
+    return {"q": q, "q_units": list(units)}

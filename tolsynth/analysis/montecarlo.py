@@ -377,10 +377,11 @@ def monte_carlo(
             p_cone_ci=wilson_interval(inside_cone, n, confidence),
             p_cone_analytic=float(ana.p_cone),
         )
-    return MonteCarloResult(
+    out = MonteCarloResult(
         model=mechanism.name,
         q=qv,
         pose_text=mechanism.format_joints(qv),
+        joint_units=mechanism.joint_value_units,
         position=p0.copy(),
         distribution=distribution,
         tolerances=dict(zip(mechanism.error_parameters, eps.tolist())),
@@ -414,3 +415,5 @@ def monte_carlo(
         samples_per_s=n / elapsed if elapsed > 0 else math.inf,
         **extra,
     )
+    out.units["q"] = "/".join(sorted(set(mechanism.joint_value_units)))  # a strut's length in mm
+    return out

@@ -137,6 +137,8 @@ class MonteCarloResult(Tabular):
     )
     #: the pose as a person reads it, each joint in its own unit (a strut's in mm, a revolute's in deg)
     pose_text: str = ""
+    #: each joint value's unit, "rad" or "mm" (a joint that slides); empty: all "rad"
+    joint_units: tuple = ()
 
     def to_dict(self) -> dict:
         """Plain dict (arrays as lists) for JSON."""

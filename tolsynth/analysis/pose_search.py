@@ -124,6 +124,8 @@ class WorstPose(Tabular):
     probability_lower_bound: float | None = None
     boxes: int | None = None
     certificate: object = None
+    #: each joint value's unit, "rad" or "mm" (a joint that slides); empty: all "rad"
+    joint_units: tuple = ()
 
     def to_dict(self) -> dict:
         """Plain dict (arrays as lists) for JSON."""
@@ -528,6 +530,7 @@ def worst_pose(
         probability_lower_bound=None if cert is None else cert.probability_lower_bound,
         boxes=None if cert is None else cert.boxes,
         certificate=cert,
+        joint_units=mechanism.joint_value_units,
         **ref,
     )
 

@@ -93,6 +93,8 @@ class ProbabilityMap(Tabular):
     constraints: tuple
     elapsed_s: float
     units: dict = field(default_factory=lambda: {"u": "mm", "v": "mm", "sigma": "mm", "Q": "rad", "R": "mm"})
+    #: each joint value's unit, "rad" or "mm" (a joint that slides); empty: all "rad"
+    joint_units: tuple = ()
 
     @property
     def reachable(self) -> np.ndarray:
@@ -383,7 +385,7 @@ def probability_map(
         if on_plane:
             ref_point = (float(pr[iu]), float(pr[iv]))
             ref_P = float(mechanism.analyze(ref_pose, eps, distribution, R=R).p_sphere)
-    return ProbabilityMap(
+    pm = ProbabilityMap(
         model=mechanism.name,
         u=u,
         v=v,
@@ -418,4 +420,7 @@ def probability_map(
             for c in mechanism.spec.joint_constraints
         ),
         elapsed_s=time.perf_counter() - t0,
+        joint_units=mechanism.joint_value_units,
     )
+    pm.units["Q"] = "/".join(sorted(set(mechanism.joint_value_units)))  # a strut's length in mm
+    return pm

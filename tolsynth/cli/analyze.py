@@ -14,6 +14,7 @@ from tolsynth.cli.args import (
 from tolsynth.cli.args import fmt_vec as _fmt_vec
 from tolsynth.cli.params import parse_tolerances
 from tolsynth.kinematics.mechanism import load_model
+from tolsynth.units import joint_values
 
 __all__ = ["register"]
 
@@ -32,7 +33,7 @@ def cmd_analyze(args) -> int:
                 args,
                 mech,
                 pose=pose_label(q),
-                q_rad=a.q,
+                **joint_values(a.q, mech.joint_value_units),
                 tolerances=a.tolerances,
                 distribution=args.dist,
                 R_mm=args.R,
@@ -40,7 +41,7 @@ def cmd_analyze(args) -> int:
             ),
             "model": mech.name,
             "pose": pose_name,
-            "q_rad": a.q,
+            **joint_values(a.q, mech.joint_value_units),
             "distribution": args.dist,
             "tolerances": a.tolerances,
             "units": {

@@ -182,7 +182,8 @@ def split_items(text: str, field: str) -> list[str]:
 # poses
 # ---------------------------------------------------------------------------------------------
 def parse_pose(mech: Mechanism, text: str, field: str = "--pose"):
-    """A configuration name, or comma-separated joint values in deg (a suffix ``rad`` allowed)."""
+    """A configuration name, or comma-separated joint values in deg, a joint that slides in mm (a
+    suffix ``rad`` or ``um`` allowed)."""
     if text in mech.configurations:
         return text
     allowed = (
@@ -215,7 +216,8 @@ def default_pose(mech: Mechanism, field: str = "--pose"):
             field,
             f"not given, and model {mech.name} has no reference pose",
             "one of " + ", ".join(mech.configurations) + " (configurations), or "
-            f"{len(mech.joint_names)} comma-separated joint values in deg",
+            f"{len(mech.joint_names)} comma-separated joint values in "
+            f"{'/'.join(sorted(set(mech.joint_units)))} ({', '.join(mech.joint_names)})",
         )
     return ref
 
@@ -517,7 +519,10 @@ TOLERANCES_HELP = (
     "SET | VALUE | name=VALUE,... | SET,name=VALUE,...; patterns such as *=0.02 or h*=0.01; "
     "bare numbers in each parameter's tolerance unit, or with a unit suffix (0.1mm, 5um, 2mrad, 0.01deg)"
 )
-POSE_HELP = "configuration name, or joint values in deg, comma-separated (a suffix such as 1.2rad allowed)"
+POSE_HELP = (
+    "configuration name, or joint values in deg (a strut or slide in mm), comma-separated (a suffix "
+    "such as 1.2rad allowed)"
+)
 
 
 def add_pose_arguments(p: argparse.ArgumentParser) -> None:

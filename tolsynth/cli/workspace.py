@@ -34,7 +34,7 @@ from tolsynth.progress import Working
 __all__ = ["register"]
 
 REFERENCE_HELP = (
-    "reference pose: a configuration NAME, none, or joint values in deg, comma-separated; "
+    "reference pose: a configuration NAME, none, or joint values in deg (a strut or slide in mm), comma-separated; "
     "default: the model's reference pose (its 'worst' configuration if it has one, else none)"
 )
 

@@ -12,10 +12,16 @@ from tolsynth.tabular import (
     make_frame,
     synthesis_summary,
 )
+from tolsynth.units import joint_values
 
 # ---------------------------------------------------------------------------------------------
 # inputs of a synthesis
 # ---------------------------------------------------------------------------------------------
+
+
+def _joint_units(result, n: int) -> tuple[str, ...]:
+    """Each joint column's unit: the result's own ("mm" for a joint that slides), else rad."""
+    return tuple(getattr(result, "joint_units", ()) or ("rad",) * n)
 
 
 def _synthesis_frame(res):
@@ -129,7 +135,7 @@ def _workspace_frame(w):
         summary,
         {
             "worst_value": "sigma z / R (sphere: (1 - P)/(1 - p))",
-            "worst_q": "rad",
+            **{f"worst_q{j + 1}": u for j, u in enumerate(_joint_units(w, len(w.poses[0]) if w.poses else 0))},
             "worst_x": "mm",
             "worst_y": "mm",
             "worst_z": "mm",
@@ -176,7 +182,7 @@ def _montecarlo_frame(r):
         add(f"mean_{'xyz'[j]}", r.mean[j], (lo, hi), 0.0, lo <= 0.0 <= hi, "mm")
     inputs = {
         "model": r.model,
-        "q_rad": r.q,
+        **joint_values(r.q, _joint_units(r, len(r.q))),
         "distribution": r.distribution,
         "tolerances": r.tolerances,
         "R_mm": r.R,
@@ -207,6 +213,7 @@ def _map_frame(pm):
     for j in range(pm.sigma.shape[-1]):
         cols[f"sigma{j + 1}"] = pm.sigma[..., j].ravel()
     cols["limit_margin"] = pm.limit_margin.ravel()
+    units_q = _joint_units(pm, len(pm.joint_names))
     for name, q in zip(pm.joint_names, pm.Q):
         cols[f"q_{name}"] = np.asarray(q).ravel()
     inputs = {
@@ -237,8 +244,8 @@ def _map_frame(pm):
         "sigma1": "mm",
         "sigma2": "mm",
         "sigma3": "mm",
-        "limit_margin": "rad",
-        **{f"q_{n}": "rad" for n in pm.joint_names},
+        "limit_margin": "/".join(sorted(set(units_q))) if units_q else "rad",
+        **{f"q_{n}": u for n, u in zip(pm.joint_names, units_q)},
     }
     return make_frame(cols, "ProbabilityMap", inputs, summary, units)
 
@@ -288,7 +295,13 @@ def _worst_frame(w):
         "WorstPose",
         inputs,
         summary,
-        {"value": "mm (sigma) or probability", "x": "mm", "y": "mm", "z": "mm", "q": "rad"},
+        {
+            "value": "mm (sigma) or probability",
+            "x": "mm",
+            "y": "mm",
+            "z": "mm",
+            **{f"q{j + 1}": u for j, u in enumerate(_joint_units(w, len(w.q)))},
+        },
     )
 
 

@@ -73,7 +73,10 @@ def _wrap(mech, Q: np.ndarray) -> np.ndarray:
     """Move each revolute joint value by a multiple of 2 pi into its limits where possible."""
     lo, hi = _limits(mech)
     Q = Q.copy()
-    for j in range(Q.shape[0]):
+    slides = mech.spec.length_joints  # a slide moved by 2 pi mm is another pose
+    for j, name in enumerate(mech.joint_names):
+        if name in slides:
+            continue
         v = Q[j]
         k = np.ceil((lo[j] - v) / (2 * math.pi))  # smallest shift that reaches the lower limit
         w = v + 2 * math.pi * k

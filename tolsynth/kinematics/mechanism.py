@@ -207,10 +207,17 @@ class Mechanism:
 
     @property
     def joint_units(self) -> tuple[str, ...]:
-        """The unit each joint value is shown and typed in: ``"mm"`` for a parallel robot's struts
-        (prismatic actuators), ``"deg"`` for the others (the API takes mm and rad)."""
-        lengths = getattr(self.spec, "length_joints", ())
+        """The unit each joint value is shown and typed in: ``"mm"`` for a joint that slides (a
+        parallel robot's struts, a URDF's prismatic joints), ``"deg"`` for the others (the API
+        takes mm and rad: :attr:`joint_value_units`)."""
+        lengths = self.spec.length_joints
         return tuple("mm" if name in lengths else "deg" for name in self.joint_names)
+
+    @property
+    def joint_value_units(self) -> tuple[str, ...]:
+        """The unit of each joint value in the API, the model files and tables: ``"mm"`` for a joint
+        that slides, ``"rad"`` for the others."""
+        return tuple("mm" if u == "mm" else "rad" for u in self.joint_units)
 
     def format_joints(self, q) -> str:
         """Joint values for a reader: ``(10, 20) deg``, ``(755.6, 755.6) mm``, or each with its unit."""
@@ -360,7 +367,7 @@ class Mechanism:
             # limits are inclusive; LIMIT_SLACK only absorbs the rounding of deg -> rad conversions
             # and of the constraint sums (a pose given exactly on a limit in degrees is accepted)
             eps = LIMIT_SLACK
-            lengths = getattr(self.spec, "length_joints", ())  # a parallel robot's struts, in mm
+            lengths = self.spec.length_joints  # a parallel robot's struts, a slide, in mm
             for j, v in zip(self.spec.joints, qv):
                 if j.name not in waive and not (j.lower - eps <= v <= j.upper + eps):
                     if j.name in lengths:

@@ -160,3 +160,8 @@ class MechanismSpec:
     @property
     def joint_names(self) -> tuple[str, ...]:
         return tuple(j.name for j in self.joints)
+
+    @property
+    def length_joints(self) -> tuple[str, ...]:
+        """Joints whose values are lengths (mm): those that slide (a URDF's prismatic joints)."""
+        return tuple(link.theta for link in self.links if link.motion == "prismatic")

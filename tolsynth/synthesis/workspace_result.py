@@ -67,6 +67,8 @@ class WorkspaceSynthesis(Tabular):
     margin: float = 0.0
     bound_at_R: float | None = None
     through: float | None = None
+    #: each joint value's unit, "rad" or "mm" (a joint that slides); empty: all "rad"
+    joint_units: tuple = ()
 
     @property
     def success(self) -> bool:
