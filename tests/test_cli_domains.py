@@ -296,3 +296,15 @@ def test_ctrl_c_on_a_sweep_with_workers_is_one_line(after):
     lines = [line for line in err.splitlines() if line.strip()]
     assert proc.returncode == 130, err
     assert len(lines) == 1 and lines[0].startswith("tolsynth sweep: interrupted (Ctrl-C)"), err
+
+
+def test_joint_constraint_limits_beyond_the_joints_turns_fail_at_load(tmp_path):
+    """The paper's interference limit theta'2 - theta2 sums two joints of at most 4 turns each, so
+    its limits lie within +-2 * 4 * 360 = 2880 deg; 7000 deg is a unit mistake, named at load."""
+    path = ["joint_constraints", 0, "limits"]
+    with pytest.raises(ModelFileError) as info:
+        load_dict(tmp_path, edited("xu_zhang_1988", set_at(path, [50.0, 7000.0])))
+    assert info.value.field == "joint_constraints[0].limits"
+    assert "+-2880 deg" in str(info.value) and "coefficients sum to 2" in str(info.value)
+    wide = load_dict(tmp_path, edited("xu_zhang_1988", set_at(path, [-2880.0, 2880.0])))
+    assert wide.spec.joint_constraints[0].upper == pytest.approx(16 * math.pi)

@@ -143,17 +143,20 @@ class _Reader:
         self.angle_unit = "rad"  # the file's [units] angle, once read: named in the range messages
 
     # ---- physical ranges of angles (a unit mistake, degrees read as radians, shows here)
-    def revolute_limits(self, lo: float, hi: float, where: str) -> None:
-        """A revolute joint's limits (rad) within :data:`MAX_JOINT_TURNS` turns either way."""
-        top = MAX_JOINT_TURNS * 2 * math.pi
+    def revolute_limits(self, lo: float, hi: float, where: str, weight: float = 1.0) -> None:
+        """A revolute joint's limits (rad) within :data:`MAX_JOINT_TURNS` turns either way; a joint
+        constraint's, a sum of joints with coefficients summing to ``weight`` in absolute value,
+        within ``weight`` times that."""
+        top = MAX_JOINT_TURNS * 2 * math.pi * weight
         if -top <= lo and hi <= top:
             return
         per = ANGLE_UNITS[self.angle_unit]
+        what = "a revolute joint" if weight == 1.0 else f"a joint constraint whose coefficients sum to {weight:g}"
         raise self.fail(
             where,
             f"[{lo / per:g}, {hi / per:g}] {self.angle_unit} = [{math.degrees(lo):g}, {math.degrees(hi):g}] deg "
             f"is beyond {MAX_JOINT_TURNS} turns; allowed: limits from {-top / per:g} to {top / per:g} "
-            f"{self.angle_unit} (+-{MAX_JOINT_TURNS * 360} deg) for a revolute joint "
+            f"{self.angle_unit} (+-{MAX_JOINT_TURNS * 360 * weight:g} deg) for {what} "
             f"(degrees written with angle = {self.angle_unit!r}?)",
         )
 

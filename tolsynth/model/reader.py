@@ -265,6 +265,7 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
             if r.number(coef, f"{where}.terms.{jn}") == 0:
                 raise r.fail(f"{where}.terms.{jn}", "a coefficient of 0 (leave the joint out)")
         lo, hi = r.pair(r.get(raw, "limits", where), f"{where}.limits")
+        r.revolute_limits(lo * af, hi * af, f"{where}.limits", sum(abs(float(v)) for v in terms.values()))
         jcons.append(
             JointConstraint(r.get(raw, "name", where, str), {k: float(v) for k, v in terms.items()}, lo * af, hi * af)
         )
