@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import re
+import select
 import signal
 import sys
 import threading
@@ -82,10 +83,15 @@ class QuietCasadiInterrupt:
     NOISE = re.compile(rb'^CasADi - .*WARNING\("KeyboardInterruptException"\)')
     PREFIX = b"CasADi - "
 
+    #: after the block, the pump stops once the pipe has been quiet this long (s): a process
+    #: started inside the block (a sweep's forkserver) may hold the pipe open until the very end
+    QUIET = 0.05
+
     def __init__(self):
         self.saved = None
         self.thread = None
         self.stream = None
+        self._closing = threading.Event()
 
     def __enter__(self):
         try:
@@ -113,6 +119,10 @@ class QuietCasadiInterrupt:
         pending = b""
         while True:
             try:
+                if not _readable(r, self.QUIET):
+                    if self._closing.is_set():
+                        break
+                    continue
                 chunk = os.read(r, 65536)
             except OSError:  # pragma: no cover
                 break
@@ -140,10 +150,20 @@ class QuietCasadiInterrupt:
         if isinstance(sys.stderr, _Stderr):
             sys.stderr = self.stream
         os.dup2(self.saved, 2)  # the pipe's last writer (unless a child holds it) goes: the pump ends
+        self._closing.set()
         self.thread.join(timeout=2.0)
         os.close(self.saved)
         self.saved = None
         return False
+
+
+def _readable(fd: int, timeout: float) -> bool:
+    """True when ``fd`` has data (or its end) within ``timeout`` s; without ``select`` on pipes,
+    True (a blocking read)."""
+    try:
+        return bool(select.select([fd], [], [], timeout)[0])
+    except (OSError, ValueError):  # pragma: no cover - select cannot wait on this descriptor
+        return True
 
 
 class _Stderr:
