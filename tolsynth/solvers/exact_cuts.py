@@ -245,6 +245,24 @@ class Cuts:
         self._dt = dt
         return extra
 
+    def path_model(self, u: np.ndarray):
+        """The tracking cuts' turn along a Newton step ``du`` from ``u``, before the cap of
+        :data:`MAX_TURN`, as ``damp * c + T @ du`` per cut (zero for fixed cuts and where P is not
+        at a local minimum in w): ``c`` the turn towards the minimum at ``u``, ``T`` the part that
+        follows the minimiser's shift.  None without a model at ``u``."""
+        if self._model is None or not np.array_equal(self._model[0], u):
+            return None
+        _, _, Hinv, gt, B, pd, _ = self._model
+        mv = self._stack()[3]
+        s = 1.0 / (1.0 - self._stack()[2][mv])
+        Hg = np.matmul(Hinv, gt[:, :, None])[:, :, 0]
+        Hg[~pd] = 0.0
+        c = np.zeros(len(self.w))
+        T = np.zeros((len(self.w), B.shape[1]))
+        c[mv] = -np.sum(gt * Hg, axis=1) * s
+        T[mv] = -np.matmul(B, Hg[:, :, None])[:, :, 0] * s[:, None]
+        return c, T
+
     def fixed_hessians(self, u: np.ndarray, H: np.ndarray) -> np.ndarray:
         """The Hessians ``H`` of the last order-2 evaluation at ``u`` with the tracking cuts' own
         ones at their fixed directions (``P_uu``, not those of ``min_w P``): what a step whose

@@ -78,12 +78,16 @@ class Barrier:
         plan, at = getattr(self.cuts, "plan", None), getattr(self.cuts, "at", None)
         slide = getattr(self.cuts, "slide", None)
         fixed = getattr(self.cuts, "fixed_hessians", None)
+        path_model = getattr(self.cuts, "path_model", None)
         it = 0
         for it in range(1, max_iter + 1):
-            du, slope = self._step(u, df, d2f, g, J, H, lam, tau, zl, zu, sl, su)
+            model = path_model(u) if path_model is not None and g.size else None
+            du, slope = self._step(u, df, d2f, g, J, H, lam, tau, zl, zu, sl, su, model)
             # cuts whose directions follow the worst one turn along the step: g's derivative along
             # the path gains their term (the joint Newton step; where that would take more than half
-            # of the step's decrease, its part towards the minimum damped, or no turn at all)
+            # of the step's decrease, its part towards the minimum damped, or no turn at all).  The
+            # step is solved with the turn in its linearised margins: without it a turn that takes a
+            # cut's margin to zero is met by no move of u, and the line search cut every step short.
             turn = np.zeros(g.size)
             if plan is not None and g.size:
                 turn = plan(u, du)
@@ -93,6 +97,11 @@ class Barrier:
 
                 c1 = cost(turn)
                 if slope + c1 > 0.5 * slope:
+                    if model is not None:  # the step with the turn that follows the minimiser alone
+                        du, slope = self._step(
+                            u, df, d2f, g, J, H, lam, tau, zl, zu, sl, su, (0.0 * model[0], model[1])
+                        )
+                        c1 = cost(plan(u, du))
                     c0 = cost(plan(u, du, damp=0.0))
                     if slope + c0 > 0.5 * slope:
                         # the directions stay put, so the step is modelled with the cuts' own Hessians:
@@ -183,16 +192,19 @@ class Barrier:
             return BarrierResult(u, lam, zu - zl, it, False, f"iteration limit at tau {tau:.1e}")
         return BarrierResult(u, lam, zu - zl, it, True, f"converged in {it} Newton steps")
 
-    def _step(self, u, df, d2f, g, J, H, lam, tau, zl, zu, sl, su) -> tuple[np.ndarray, float]:
+    def _step(self, u, df, d2f, g, J, H, lam, tau, zl, zu, sl, su, turn=None) -> tuple[np.ndarray, float]:
         """The Newton step of the reduced system (multipliers eliminated) with the cuts' Hessians
-        ``H``, and the barrier function's slope along it."""
+        ``H``, and the barrier function's slope along it in u alone.  ``turn = (c, T)``: the cuts'
+        margins change by ``J du + c + T du`` along the step (their directions turn), so the
+        linearised complementarity ``lam (g + (J + T) du + c) + g dlam = tau`` is the path's."""
         free = self.free
+        Jp, shift = (J, 0.0) if turn is None or not g.size else (J + turn[1], turn[0])
         W = np.diag(d2f) - (lam @ H.reshape(g.size, -1)).reshape(u.size, u.size) if g.size else np.diag(d2f)
-        W = W + (J.T * (lam / g)) @ J if g.size else W
+        W = W + (Jp.T * (lam / g)) @ Jp if g.size else W
         W = W + np.diag(np.where(free, zl / np.maximum(sl, 1e-300) + zu / np.maximum(su, 1e-300), 0.0))
         rhs = (
             -df
-            + (J.T @ (tau / g) if g.size else 0.0)
+            + (Jp.T @ ((tau - lam * shift) / g) if g.size else 0.0)
             + np.where(free, tau / np.maximum(sl, 1e-300) - tau / np.maximum(su, 1e-300), 0.0)
         )
         du = np.zeros_like(u)
