@@ -55,6 +55,9 @@ def test_tables_and_json_label_struts_in_mm(capsys):
     inputs = mc.to_frame().attrs["inputs"]
     assert "q_rad" not in inputs and inputs["q_mm"] == _struts("tilted")
     assert mc.units["q"] == "mm"
+    res = tolsynth.synthesize(mech, R=0.5, p=0.9, pose="home", probability="gaussian")
+    poses = res.to_frame().attrs["inputs"]
+    assert "poses_rad" not in poses and poses["poses_mm"]["home"] == _struts("home")
     import json
 
     from tolsynth.cli import main

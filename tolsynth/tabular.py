@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from tolsynth.errors import MissingDependencyError
+from tolsynth.units import joint_values
 from tolsynth.version import __version__
 
 __all__ = ["Tabular", "register", "require_pandas", "jsonable", "make_frame", "spec_inputs", "synthesis_row"]
@@ -130,7 +131,11 @@ def spec_inputs(spec) -> dict:
         "alpha": dict(zip(spec.names, np.asarray(spec.alpha, dtype=float))),
         "k": dict(zip(spec.names, np.asarray(spec.k, dtype=float))),
         "bounds": {n: [float(lo), float(hi)] for n, lo, hi in zip(spec.names, spec.lower, spec.upper)},
-        "poses_rad": {label: np.asarray(q, dtype=float) for label, q in (spec.poses or {}).items()},
+        **joint_values(
+            {label: np.asarray(q, dtype=float) for label, q in (spec.poses or {}).items()},
+            getattr(spec, "joint_units", ()) or ("rad",),
+            "poses",
+        ),
     }
     costs = getattr(spec, "cost", None)
     if costs is not None and hasattr(costs, "models"):

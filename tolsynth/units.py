@@ -116,11 +116,11 @@ def convert_quantity(text: str, unit: str) -> float | None:
     return value * to_base(suffix) / to_base(unit)
 
 
-def joint_values(q, units) -> dict:
-    """A pose for a JSON record or a table's inputs, its key naming the unit: ``{"q_rad": q}``
-    (every joint turns), ``{"q_mm": q}`` (every joint slides: a parallel robot's struts), or
-    ``{"q": q, "q_units": [...]}`` where the kinds mix."""
+def joint_values(q, units, key: str = "q") -> dict:
+    """Joint values (a pose, or poses by name) for a JSON record or a table's inputs, the key
+    naming their unit: ``{"q_rad": q}`` (every joint turns), ``{"q_mm": q}`` (every joint slides: a
+    parallel robot's struts), or ``{"q": q, "joint_units": [...]}`` where the kinds mix."""
     units = tuple(units)
     if len(set(units)) <= 1:
-        return {f"q_{units[0] if units else 'rad'}": q}
-    return {"q": q, "q_units": list(units)}
+        return {f"{key}_{units[0] if units else 'rad'}": q}
+    return {key: q, "joint_units": list(units)}

@@ -122,7 +122,7 @@ def _workspace_frame(w):
     summary.update(
         converged=w.converged,
         tolerances=res.tolerances,
-        poses_rad=w.poses,
+        **joint_values(w.poses, _joint_units(w, 1), "poses"),
         worst_value=w.worst_value if w.rounds else None,
         max_violation=w.max_violation if w.rounds else None,
     )

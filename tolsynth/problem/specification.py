@@ -95,6 +95,8 @@ class Specification:
     #: variance divisor), so ``A diag(eps^2 / c) A^T`` is the covariance for mixed shapes too; 1.0
     #: when every parameter has the same shape
     col_scale: np.ndarray | float = 1.0
+    #: each joint value's unit in ``poses``, "rad" or "mm" (a joint that slides); empty: all "rad"
+    joint_units: tuple = ()
 
     @property
     def costs(self) -> CostSet:
@@ -286,6 +288,7 @@ def make_specification(
         cost=costs,  # built once here (the power law from k, alpha when no cost was given)
         shapes=shapes,
         col_scale=col_scale,
+        joint_units=mechanism.joint_value_units,
     )
 
 
