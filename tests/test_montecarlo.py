@@ -16,6 +16,7 @@ import pytest
 from tolsynth.analysis.montecarlo import NumpyEvaluator, monte_carlo, wilson_interval
 from tolsynth.analysis.validation import validate
 from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
+from tolsynth.kinematics.mechanism import load_model
 
 Z999 = NormalDist().inv_cdf(0.9995)  # two-sided 99.9 %
 
@@ -390,3 +391,22 @@ def test_planar_arm_has_no_error_normal_to_its_plane():
     j = int(np.argmax(np.abs(r.principal_directions[1])))  # the principal direction along y
     assert abs(r.principal_directions[1, j]) > 0.999
     assert r.kurtosis[j] == pytest.approx(-1.2 * (a**4 + b**4) / (a**2 + b**2) ** 2, abs=5 * r.kurtosis_se)
+
+
+def test_wilson_interval_reaches_the_ends_exactly():
+    """Every sample inside: the interval's upper end is 1 (the Wilson bound's closed form at k = n),
+    so an analytic probability of exactly 1 lies inside it; none inside: the lower end is 0."""
+    for n in (7, 2000, 123457):
+        assert wilson_interval(n, n, 0.95)[1] == 1.0
+        assert wilson_interval(0, n, 0.95)[0] == 0.0
+
+
+def test_a_certain_component_is_not_flagged_outside_its_interval():
+    """stewart_gough's third component at R 0.3 mm: every sample inside and P = 1 analytically
+    (the analytic model's own value, read from analyze), so no 'outside CI' flag."""
+    m = load_model("stewart_gough")
+    mc = monte_carlo(m, "home", "coarse", R=0.3, n=2000, seed=1)
+    a = m.analyze("home", "coarse", R=0.3)
+    j = int(np.argmax(a.p_components))
+    assert a.p_components[j] == 1.0 and mc.p_components[j] == 1.0
+    assert mc.p_components_analytic_in_ci[j]

@@ -84,7 +84,10 @@ def wilson_interval(k, n: int, confidence: float = 0.95) -> np.ndarray:
     den = 1.0 + z * z / n
     centre = (ph + z * z / (2 * n)) / den
     half = z * np.sqrt(ph * (1 - ph) / n + z * z / (4.0 * n * n)) / den
-    return np.stack([np.clip(centre - half, 0, 1), np.clip(centre + half, 0, 1)], axis=-1)
+    # at k = 0 and k = n the end is exactly 0 and 1 (centre -+ half cancel), which rounding misses
+    lo = np.where(k <= 0, 0.0, np.clip(centre - half, 0, 1))
+    hi = np.where(k >= n, 1.0, np.clip(centre + half, 0, 1))
+    return np.stack([lo, hi], axis=-1)
 
 
 def _check_n(n, field: str = "n") -> int:
