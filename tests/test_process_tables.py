@@ -72,3 +72,20 @@ def test_help_says_cost_is_a_cost_model_table(capsys):
         main(["processes", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert 'cost a cost-model table, e.g. cost = { model = "power", k = 1.0, alpha = 0.7 }' in text
+
+
+def test_printed_report_lists_every_parameter(tmp_path, capsys):
+    """The printed report shows each parameter's tolerance, those without a process too ('model
+    cost'), and the printed values are the CSV's, every parameter of the model once."""
+    table = tmp_path / "proc.toml"
+    table.write_text(TABLE)
+    out = tmp_path / "pr.csv"
+    assert main(BASE + ["--table", str(table), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    frame = pd.read_csv(out).set_index("parameter")
+    m = tolsynth.load_model("xu_zhang_1988")
+    for name in m.error_parameters:
+        line = next(ln for ln in text.splitlines() if ln.strip().startswith(f"{name}:"))
+        eps = float(line.split("eps = ")[1].split()[0])
+        assert eps == pytest.approx(frame.loc[name, "tolerance"], rel=1e-5)
+        assert ("model cost" in line) == (name not in ("h2", "alpha1")), line

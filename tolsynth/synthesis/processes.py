@@ -102,8 +102,10 @@ class ProcessChoice:
         ]
         if self.rounded:
             lines.append(f"rounding the continuous relaxation instead: cost {self.rounded['cost']:.8g}")
-        for nm, proc in self.processes.items():
-            lines.append(f"  {nm:>8}: {proc:<12} eps = {self.result.tolerances[nm]:.6g} {self.result.units[nm]}")
+        # every parameter, those the table gives no process keeping the model's own cost
+        for nm, eps in self.result.tolerances.items():
+            proc = self.processes.get(nm, "model cost")
+            lines.append(f"  {nm:>8}: {proc:<12} eps = {eps:.6g} {self.result.units[nm]}")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
