@@ -54,3 +54,20 @@ def test_process_staircase_lies_above_the_continuous_front():
     )
     for s, c in zip(stairs.rows, cont.rows):  # each process has costs >= turning's curve
         assert s["cost"] >= c["cost"] * (1 - 1e-9)
+
+
+def test_cli_header_names_the_reading(capsys):
+    """The printed front says which probability reading its solves used; the exact reading's cost
+    at R 0.5 is the exact synthesize's, the Gaussian's the Gaussian one's (they differ)."""
+    import tolsynth
+    from tolsynth.cli import main
+
+    m = tolsynth.load_model("planar_2r")
+    for reading, label in (("exact", "exact reading"), ("gaussian", "Gaussian reading")):
+        args = ["pareto", "--model", "planar_2r", "--pose", "elbow90", "--p", "0.99", "--R", "0.5,0.8"]
+        assert main(args + ["--probability", reading]) == 0
+        lines = capsys.readouterr().out.splitlines()
+        assert lines[0].endswith(label), lines[0]
+        cost = float(lines[2].split()[2])
+        solo = tolsynth.synthesize(m, R=0.5, p=0.99, pose="elbow90", probability=reading).cost
+        assert abs(cost - solo) <= 1e-6 * solo

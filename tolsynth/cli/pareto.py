@@ -47,9 +47,12 @@ def cmd_pareto(args) -> int:
     failed = [r for r in front.rows if not r["success"] and math.isfinite(r["cost"])]
 
     def text():
+        # the reading each solve used (exact or Gaussian), as the API's table records it
+        readings = sorted({r["probability"] for r in front.rows if r.get("probability")})
         lines = [
             f"{mech.name}: optimal cost against {front.axis} "
-            + (f"at p = {fmt_p(p)}" if front.axis == "R" else f"at R = {R:g} mm"),
+            + (f"at p = {fmt_p(p)}" if front.axis == "R" else f"at R = {R:g} mm")
+            + (f", {' and '.join(readings).replace('gaussian', 'Gaussian')} reading" if readings else ""),
             f"{'R, mm':>12} {'p':>10} {'cost':>14} {'lower bound':>14}  status",
         ]
         for r in front.rows:
