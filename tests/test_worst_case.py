@@ -239,3 +239,16 @@ def test_many_poses_with_orientation_on_a_six_joint_arm():
             for _ in range(30):
                 s = np.where(C.T @ (C @ s) >= 0, 1.0, -1.0)
             assert np.linalg.norm(C @ s) <= c.values[0] * limit * (1 + 1e-12)
+
+
+def test_cli_refuses_a_shape_the_worst_case_would_ignore(capsys):
+    """Without --p the worst case reads no error shape: --dist is refused (exit 2, one line naming
+    it); with --p the statistical design beside it uses the shape, so it is accepted there."""
+    from tolsynth.cli import main
+
+    base = ["solve", "--model", "planar_2r", "--pose", "elbow90", "--R", "0.8", "--probability", "worst_case"]
+    assert main(base + ["--dist", "normal"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--dist" in err[0] and "worst_case" in err[0], err
+    assert main(base + ["--dist", "normal", "--p", "0.99"]) == 0
+    assert "normal errors" in capsys.readouterr().out

@@ -136,6 +136,14 @@ def cmd_solve(args) -> int:
 
     check_table_out(args)  # before any work
     mech = load_model(args.model)
+    if args.probability == "worst_case" and args.p is None and getattr(args, "dist", None) is not None:
+        raise InputError(  # errors anywhere in their bands: no shape is read, so a shape given would be ignored
+            "--dist",
+            f"{args.dist} with --probability worst_case and no --p: the worst case places every error anywhere "
+            "in its band, whatever its shape",
+            "--probability worst_case without --dist, or --dist with a probability reading (--p and "
+            "--probability exact|gaussian)",
+        )
     if hasattr(args, "dist"):
         args.dist = dist_for(args, mech)
     if args.probability is None:  # the library's default; the paper's cross-check of two solvers reads Gaussian
