@@ -305,6 +305,9 @@ def test_joint_constraint_limits_beyond_the_joints_turns_fail_at_load(tmp_path):
     with pytest.raises(ModelFileError) as info:
         load_dict(tmp_path, edited("xu_zhang_1988", set_at(path, [50.0, 7000.0])))
     assert info.value.field == "joint_constraints[0].limits"
-    assert "+-2880 deg" in str(info.value) and "coefficients sum to 2" in str(info.value)
+    text = str(info.value)
+    assert "from -2880 to 2880 deg" in text and "coefficients sum to 2" in text
+    # the file is in degrees: no "degrees written with angle = 'deg'?" hint, no deg = deg echo
+    assert "degrees written" not in text and "= [" not in text, text
     wide = load_dict(tmp_path, edited("xu_zhang_1988", set_at(path, [-2880.0, 2880.0])))
     assert wide.spec.joint_constraints[0].upper == pytest.approx(16 * math.pi)

@@ -152,12 +152,21 @@ class _Reader:
             return
         per = ANGLE_UNITS[self.angle_unit]
         what = "a revolute joint" if weight == 1.0 else f"a joint constraint whose coefficients sum to {weight:g}"
+        in_deg = self.angle_unit == "deg"
+        # a file in rad may hold degrees by mistake; one in degrees (or finer) has no such excuse
+        hint = (
+            ""
+            if self.angle_unit in ("deg", "arcmin", "arcsec")
+            else f" (degrees written with angle = {self.angle_unit!r}?)"
+        )
         raise self.fail(
             where,
-            f"[{lo / per:g}, {hi / per:g}] {self.angle_unit} = [{math.degrees(lo):g}, {math.degrees(hi):g}] deg "
-            f"is beyond {MAX_JOINT_TURNS} turns; allowed: limits from {-top / per:g} to {top / per:g} "
-            f"{self.angle_unit} (+-{MAX_JOINT_TURNS * 360 * weight:g} deg) for {what} "
-            f"(degrees written with angle = {self.angle_unit!r}?)",
+            f"[{lo / per:g}, {hi / per:g}] {self.angle_unit}"
+            + ("" if in_deg else f" = [{math.degrees(lo):g}, {math.degrees(hi):g}] deg")
+            + f" is beyond {MAX_JOINT_TURNS} turns; allowed: limits from {-top / per:g} to {top / per:g} "
+            f"{self.angle_unit}"
+            + ("" if in_deg else f" (+-{MAX_JOINT_TURNS * 360 * weight:g} deg)")
+            + f" for {what}{hint}",
         )
 
     def angle_tolerance(self, value: float, unit: str, where: str) -> None:
