@@ -311,3 +311,14 @@ def test_joint_constraint_limits_beyond_the_joints_turns_fail_at_load(tmp_path):
     assert "degrees written" not in text and "= [" not in text, text
     wide = load_dict(tmp_path, edited("xu_zhang_1988", set_at(path, [-2880.0, 2880.0])))
     assert wide.spec.joint_constraints[0].upper == pytest.approx(16 * math.pi)
+
+
+def test_a_lock_outside_its_bounds_fails_at_load(tmp_path):
+    """planar_2r's l1 takes tolerances of 0.001-5 mm (its bounds in the file): a lock of 7 mm is
+    refused when the file is read, naming the file's field, not at the first solve; 5 mm loads."""
+    with pytest.raises(ModelFileError) as info:
+        load_dict(tmp_path, edited("planar_2r", set_at(["error_parameters", 0, "lock"], 7.0)))
+    assert info.value.field == "error_parameters[0].lock"
+    assert "7 mm" in str(info.value) and "0.001 to 5 mm" in str(info.value)
+    ok = load_dict(tmp_path, edited("planar_2r", set_at(["error_parameters", 0, "lock"], 5.0)))
+    assert ok.spec.error_parameters[0].lock == 5.0

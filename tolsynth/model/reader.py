@@ -318,6 +318,8 @@ def _parse(data: dict, r: _Reader) -> MechanismSpec:
         if kind == "angle":
             r.angle_tolerance(hi, unit, f"{where}.bounds")
         cost, procs, lock = _designer_fields(r, raw, where)
+        if lock is not None and not lo <= lock <= hi:  # a lock is a tolerance: it must be one the bounds allow
+            raise r.fail(f"{where}.lock", f"{lock:g} {unit} is outside the bounds; allowed: {lo:g} to {hi:g} {unit}")
         dist = r.get(raw, "distribution", where, default=None)
         if dist is not None:
             if not isinstance(dist, str):
