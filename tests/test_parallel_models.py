@@ -286,3 +286,16 @@ def test_sphere_designs_with_exact_probabilities_meet_p(name):
     w = np.random.default_rng(13).uniform(-1.0, 1.0, (200_000, m.n)) * res.x @ A.T
     P = np.mean(np.linalg.norm(w, axis=1) <= 0.1)
     assert P >= 0.99 - 4 * np.sqrt(0.99 * 0.01 / 200_000), (name, P)
+
+
+def test_a_leg_axis_is_a_direction(tmp_path):
+    """The format reads a revolute leg's axis as a direction: a longer vector along it gives the same
+    robot (hand position and sensitivity at the home pose to 1e-12), a zero vector is refused."""
+    from model_text import edited, load_dict
+
+    ref = tolsynth.load_model("delta")
+    long = load_dict(tmp_path, edited("delta", _set(["leg", 1, "axis"], [-1.5, 3 * 0.8660254037844386, 0.0])))
+    q = ref.configurations["home"]
+    assert np.allclose(long.fk(q), ref.fk(q), rtol=0, atol=1e-12)
+    assert np.allclose(long.sensitivity(q), ref.sensitivity(q), rtol=0, atol=1e-12)
+    assert_defect_named(tmp_path, "delta", _set(["leg", 1, "axis"], [0.0, 0.0, 0.0]), "leg[1].axis", "zero vector")
