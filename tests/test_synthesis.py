@@ -322,6 +322,24 @@ def test_cli_reproduce_json_has_all_columns(capsys):
         assert pr["printed_cost"] == pytest.approx(float(np.sum(k * printed ** -col["alpha"])), rel=1e-12)
 
 
+def test_cli_reproduce_without_sumt_shows_dashes_not_nan(capsys):
+    """Without SUMT its columns say '-' (not run), never nan; the IPOPT cost of each column is the
+    JSON's, and the printed cost is recomputed from the paper's numbers in the JSON."""
+    from tolsynth.cli import main
+
+    assert main(["reproduce", "--no-sumt"]) == 0
+    text = capsys.readouterr().out
+    assert "nan" not in text.lower()
+    summary = [ln for ln in text.splitlines() if ln.startswith("  Table ")]
+    assert main(["reproduce", "--no-sumt", "--json"]) == 0
+    cols = json.loads(capsys.readouterr().out)["columns"]
+    assert len(summary) == len(cols) == 18
+    for line, col in zip(summary, cols):
+        cells = line[54:].split()
+        assert cells[2:5] == ["-", "-", "-"] and cells[-1] == "-", line  # SUMT cost, diffs, time
+        assert float(cells[1]) == pytest.approx(col["readings"]["printed"]["ipopt"]["cost"], rel=5e-4)
+
+
 # ------------------------------------------------------------------------------------------
 # beyond the paper: the constraint at every reachable pose
 # ------------------------------------------------------------------------------------------

@@ -147,6 +147,12 @@ def reproduce(
     return reports
 
 
+def _cell(value, spec: str) -> str:
+    """A number in its column, or a dash where it was not computed (SUMT skipped, no degree reading)."""
+    width = int("".join(ch for ch in spec.split(".")[0] if ch.isdigit()))
+    return format(value, spec) if value is not None and value is not False else "-".rjust(width)
+
+
 def format_report(reports: list[ColumnReport], mech: Mechanism | None = None) -> str:
     """Readable text: one block per column, then a summary table."""
     lines = []
@@ -162,21 +168,21 @@ def format_report(reports: list[ColumnReport], mech: Mechanism | None = None) ->
         for name, value in pr.printed.items():
             row = (
                 f"  {name:>7} {pr.ipopt.units[name]:>9} {value:>9.4g} {pr.ipopt.tolerances[name]:>9.4g} "
-                f"{(pr.sumt.tolerances[name] if pr.sumt else float('nan')):>9.4g} {pr.ratio[name]:>6.2f}"
+                f"{_cell(pr.sumt and pr.sumt.tolerances[name], '>9.4g')} {pr.ratio[name]:>6.2f}"
             )
             if deg is not None:
                 row += f"   | {deg.ipopt.units[name]:>12} {deg.ipopt.tolerances[name]:>9.4g} {deg.ratio[name]:>6.2f}"
             lines.append(row)
         row = (
             f"  {'cost':>7} {'':>9} {pr.printed_cost:>9.4g} {pr.ipopt.cost:>9.4g} "
-            f"{(pr.sumt.cost if pr.sumt else float('nan')):>9.4g} {pr.ipopt.cost / pr.printed_cost:>6.2f}"
+            f"{_cell(pr.sumt and pr.sumt.cost, '>9.4g')} {pr.ipopt.cost / pr.printed_cost:>6.2f}"
         )
         if deg is not None:
             row += f"   | {'':>12} {deg.ipopt.cost:>9.4g} {deg.ipopt.cost / deg.printed_cost:>6.2f}"
         lines.append(row)
         row = (
             f"  {'max sz/R':>7} {'':>9} {pr.printed_max_constraint:>9.4f} {pr.ipopt.max_constraint:>9.4f} "
-            f"{(pr.sumt.max_constraint if pr.sumt else float('nan')):>9.4f}"
+            f"{_cell(pr.sumt and pr.sumt.max_constraint, '>9.4f')}"
         )
         if deg is not None:
             row += f"   | printed as deg: max sz/R {deg.printed_max_constraint:.4f}"
@@ -193,10 +199,10 @@ def format_report(reports: list[ColumnReport], mech: Mechanism | None = None) ->
         pr, deg, ag = rep.printed_unit, rep.readings.get("deg"), rep.agreement()
         lines.append(
             f"  {rep.label:<52} {pr.printed_cost:>8.4g} {pr.ipopt.cost:>8.4g} "
-            f"{(pr.sumt.cost if pr.sumt else float('nan')):>8.4g} {ag.get('cost_rel_diff', float('nan')):>9.1e} "
-            f"{ag.get('max_tolerance_rel_diff', float('nan')):>9.1e} {pr.printed_max_constraint:>8.3f} "
-            f"{(deg.printed_max_constraint if deg else float('nan')):>8.3f} {pr.ipopt.wall_time * 1e3:>8.1f} "
-            f"{(pr.sumt.wall_time * 1e3 if pr.sumt else float('nan')):>8.0f}"
+            f"{_cell(pr.sumt and pr.sumt.cost, '>8.4g')} {_cell(ag.get('cost_rel_diff'), '>9.1e')} "
+            f"{_cell(ag.get('max_tolerance_rel_diff'), '>9.1e')} {pr.printed_max_constraint:>8.3f} "
+            f"{_cell(deg and deg.printed_max_constraint, '>8.3f')} {pr.ipopt.wall_time * 1e3:>8.1f} "
+            f"{_cell(pr.sumt and pr.sumt.wall_time * 1e3, '>8.0f')}"
         )
     ok = all(
         r.printed_unit.ipopt.success and (r.printed_unit.sumt is None or r.printed_unit.sumt.success) for r in reports
