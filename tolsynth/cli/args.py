@@ -206,26 +206,18 @@ def parse_pose(mech: Mechanism, text: str, field: str = "--pose"):
     return np.array(values)
 
 
-def default_pose(mech: Mechanism, field: str = "--pose"):
-    """The model's reference pose, or an error asking for ``--pose`` if it has none."""
-    from tolsynth.kinematics.joint_space import model_reference
+def default_pose(mech: Mechanism):
+    """The model's default design pose, the one :func:`tolsynth.synthesize` takes without a pose
+    (so a command and the library give the same design)."""
+    from tolsynth.analysis.design_pose import default_design_pose
 
-    ref = model_reference(mech)
-    if ref is None:
-        raise InputError(
-            field,
-            f"not given, and model {mech.name} has no reference pose",
-            "one of " + ", ".join(mech.configurations) + " (configurations), or "
-            f"{len(mech.joint_names)} comma-separated joint values in "
-            f"{'/'.join(sorted(set(mech.joint_units)))} ({', '.join(mech.joint_names)})",
-        )
-    return ref
+    return default_design_pose(mech)[0]
 
 
 def parse_poses(mech: Mechanism, texts: list[str] | None, field: str = "--pose") -> list:
     """Every ``--pose`` given (the option repeated), or the model's reference pose."""
     if not texts:
-        return [default_pose(mech, field)]
+        return [default_pose(mech)]
     return [parse_pose(mech, t, field) for t in texts]
 
 
@@ -460,8 +452,7 @@ def add_specification_arguments(
         "--pose",
         action="append",
         default=None,
-        help=POSE_HELP + "; repeat the option for several poses (the constraints hold at each); "
-        "default: the model's reference pose",
+        help=f"{POSE_HELP}; repeat the option for several poses (the constraints hold at each); {DEFAULT_POSE_HELP}",
     )
     p.add_argument(
         "--Phi",
@@ -523,12 +514,17 @@ POSE_HELP = (
     "configuration name, or joint values in deg (a strut or slide in mm), comma-separated (a suffix "
     "such as 1.2rad allowed)"
 )
+#: the default of every --pose, the library's rule (tolsynth.analysis.design_pose)
+DEFAULT_POSE_HELP = (
+    "default: the model's design pose, as tolsynth.synthesize takes it (its 'worst' configuration, else the "
+    "worst-pose search's pose at mid-bound tolerances)"
+)
 
 
 def add_pose_arguments(p: argparse.ArgumentParser) -> None:
     """The arguments of a one-pose analysis: model, pose, tolerances, distribution, R, Phi."""
     add_model_argument(p)
-    p.add_argument("--pose", default=None, help=POSE_HELP + "; default: the model's reference pose")
+    p.add_argument("--pose", default=None, help=f"{POSE_HELP}; {DEFAULT_POSE_HELP}")
     p.add_argument("--tolerances", required=True, help=TOLERANCES_HELP)
     add_dist_argument(p)
     p.add_argument(

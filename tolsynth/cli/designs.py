@@ -13,6 +13,7 @@ import sys
 import numpy as np
 
 from tolsynth.cli.args import (
+    DEFAULT_POSE_HELP,
     POSE_HELP,
     add_dist_argument,
     add_model_argument,
@@ -59,7 +60,7 @@ def add_design_arguments(p) -> None:
         "--pose",
         action="append",
         default=None,
-        help=POSE_HELP + "; repeat for several poses; default: the model's reference pose",
+        help=f"{POSE_HELP}; repeat for several poses; {DEFAULT_POSE_HELP}",
     )
     p.add_argument(
         "--Phi",

@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 
+from tolsynth.analysis.design_pose import default_design_pose
 from tolsynth.cli.args import (  # noqa: I001
     add_specification_arguments,
     add_table_out_argument,
@@ -334,8 +335,10 @@ def cmd_solve(args) -> int:
                 out["verification"] = res.verification.to_dict()
             if res.workspace is not None:
                 out["workspace_check"] = res.workspace.to_dict()
-            if res.inputs and res.inputs.get("default_pose"):
-                out["default_pose"] = res.inputs["default_pose"]
+            if not args.pose:  # the library's note on how it chose the pose, as synthesize gives it
+                note = default_design_pose(mech)[1]
+                if note:
+                    out["default_pose"] = note
             out["inputs"] = inputs_record(args, mech, **record)
             emit_json(out)
         else:

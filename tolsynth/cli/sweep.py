@@ -7,6 +7,7 @@ from __future__ import annotations
 import sys
 
 from tolsynth.cli.args import (
+    DEFAULT_POSE_HELP,
     POSE_HELP,
     SOLVER_HELP,
     _number,  # the InputError form of number(), for comma-separated items
@@ -250,7 +251,7 @@ def register(sub) -> None:
         "--pose",
         action="append",
         default=None,
-        help=POSE_HELP + "; repeat for several poses; default: the model's reference pose",
+        help=f"{POSE_HELP}; repeat for several poses; {DEFAULT_POSE_HELP}",
     )
     p.add_argument(
         "--Phi",

@@ -45,7 +45,9 @@ STREAK = 4
 def model_reference(mech) -> str | None:
     """The model's reference pose: the configuration its file names as ``reference`` (when the
     format has that field), else its configuration ``worst`` (the paper's pose of largest error),
-    else None -- a model without one works everywhere, with no pose marked or compared."""
+    else None -- a model without one works everywhere, with no pose marked or compared.  It is what
+    searches and maps compare with; the pose a design is made at without one given is
+    :func:`tolsynth.analysis.design_pose.default_design_pose`."""
     name = getattr(mech.spec, "reference", None)
     if isinstance(name, str) and name in mech.configurations:
         return name

@@ -106,7 +106,8 @@ class ParallelSpec(MechanismSpec):
 
     legs: tuple[Leg, ...] = ()
     dof: tuple[str, ...] = ()
-    #: the configuration the searches, maps and command line compare with by default
+    #: the configuration the worst-pose searches and maps compare with by default (not the design
+    #: pose, which is the same rule for every model: tolsynth.analysis.design_pose)
     reference: str = "home"
     assembly: tuple[float, ...] = ()
     tool_point: tuple[float, float, float] = (0.0, 0.0, 0.0)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from tolsynth.analysis.design_pose import resolve_design_pose
 from tolsynth.checks import TINY, check_count, check_mapping, check_options, check_seed, check_time_limit, check_vector
 from tolsynth.errors import InputError, TimeLimitError
 from tolsynth.kinematics.mechanism import as_mechanism
@@ -150,7 +151,9 @@ def synthesize(
         Tolerance bounds in tolerance units (default: the model's).
     pose, poses : configuration name or joint vector (rad), or a list of them
         Where the constraints are imposed: one pose, or several; not both (an
-        :class:`InputError`, whatever their values).  Default: the model's ``worst`` pose.
+        :class:`InputError`, whatever their values).  Default: the model's default design pose,
+        its ``worst`` configuration, else the worst-pose search's pose
+        (:func:`tolsynth.analysis.design_pose.default_design_pose`; ``pose="worst"`` means the same).
     Phi, p_orientation : float, optional
         Orientation specification (rad) and its probability (default p).
     criterion : {"components", "sphere"}
@@ -252,13 +255,10 @@ def synthesize(
             f"given together with poses ({pose!r} and {poses!r})",
             "pose= (one pose) or poses= (a list, each constrained), not both",
         )
-    if poses is None and pose is None:
-        pose = "worst"
     seed = check_seed(seed)
     if probability == "worst_case":  # every error anywhere in its band: no p or distribution needed
         mechanism = as_mechanism(mechanism)
-        if poses is None and isinstance(pose, str) and pose == "worst" and "worst" not in mechanism.configurations:
-            pose, _ = _default_pose(mechanism)  # as the statistical solve below chooses it
+        pose, _ = resolve_design_pose(mechanism, pose, poses)  # as the statistical solve below chooses it
         return _worst_case(
             mechanism,
             R,
@@ -287,9 +287,7 @@ def synthesize(
     if probability is None:
         probability = DEFAULT_PROBABILITY
     mechanism = as_mechanism(mechanism)
-    chosen = None
-    if poses is None and isinstance(pose, str) and pose == "worst" and "worst" not in mechanism.configurations:
-        pose, chosen = _default_pose(mechanism)  # a model without a 'worst' pose (from_dh, load_urdf)
+    pose, chosen = resolve_design_pose(mechanism, pose, poses)
     if not isinstance(solver, str) or solver not in SOLVERS:
         raise InputError("solver", f"unknown solver {solver!r}", " or ".join(repr(s) for s in SOLVERS))
     again = dict(
@@ -385,33 +383,6 @@ def synthesize(
         )
         result = replace(result, inputs={**(result.inputs or {}), "verify": verify})  # the re-solves' record it not
     return result
-
-
-def _default_pose(mechanism):
-    """``pose="worst"`` on a model without that configuration: the pose of largest principal sigma
-    at the geometric middle of the tolerance bounds (:func:`tolsynth.worst_pose`, deterministic;
-    remembered per mechanism), else the model's first configuration.  Returns the pose and the
-    sentence that says which was chosen (``result.inputs["default_pose"]``, the summary)."""
-    known = mechanism.__dict__.get("_default_pose")
-    if known is not None:
-        return known
-    from tolsynth.analysis.pose_search import worst_pose
-    from tolsynth.errors import TolsynthError
-
-    lo, hi = (np.asarray(b, dtype=float) for b in mechanism.bounds)
-    try:
-        w = worst_pose(mechanism, np.sqrt(lo * hi), criterion="sigma", reference=None)
-        q = np.asarray(w.q, dtype=float)
-        text = (
-            f"the worst-pose search's pose q = {mechanism.format_joints(q)} "
-            "(largest principal sigma at the middle of the bounds; the model has no 'worst' configuration)"
-        )
-        out = (q, text)
-    except TolsynthError:
-        first = next(iter(mechanism.configurations))
-        out = (first, f"the model's first configuration {first!r} (it has no 'worst' one; the pose search failed)")
-    mechanism.__dict__["_default_pose"] = out
-    return out
 
 
 def _timed_out(nlp, solver: str, eps0, exc: TimeLimitError) -> SynthesisResult:

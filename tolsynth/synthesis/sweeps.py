@@ -324,7 +324,10 @@ def sweep(
         A bar on stderr (None: only on a terminal for runs over 2 s), or ``progress(done, total)``.
     **kwargs
         Any other keyword argument of :func:`tolsynth.synthesize` (k, bounds, pose, poses, Phi,
-        p_orientation, cost, locks, options, x0), the same for every row.
+        p_orientation, cost, locks, options, x0), the same for every row.  Without ``pose`` and
+        ``poses``: synthesize's default, the model's default design pose
+        (:func:`tolsynth.analysis.design_pose.default_design_pose`), chosen once; how it was chosen
+        is in ``attrs["inputs"]["default_pose"]`` when it is not the model's ``worst`` configuration.
 
     Returns
     -------
@@ -344,6 +347,7 @@ def sweep(
     MissingDependencyError
         Without pandas (or without Dask for a cluster).
     """
+    from tolsynth.analysis.design_pose import resolve_design_pose
     from tolsynth.kinematics.mechanism import as_mechanism
     from tolsynth.problem.specification import make_specification
     from tolsynth.progress import Progress
@@ -356,6 +360,9 @@ def sweep(
         workers = check_count(workers, "workers", lower=1, upper=4096)
     if chunk is not None:
         chunk = check_count(chunk, "chunk", lower=1, upper=MAX_ROWS)
+    # the pose synthesize would choose, chosen once here so that no worker searches for it again
+    pose, chosen = resolve_design_pose(mechanism, kwargs.get("pose"), kwargs.get("poses"))
+    solve_kwargs = {**kwargs, "pose": pose} if kwargs.get("poses") is None else kwargs
     # the common arguments checked once, here, on the first grid point (typed errors before work)
     first = points[0]
     make_specification(
@@ -366,7 +373,7 @@ def sweep(
         first["alpha"],
         kwargs.get("k"),
         kwargs.get("bounds"),
-        kwargs.get("pose", "worst"),
+        pose,
         kwargs.get("poses"),
         kwargs.get("Phi"),
         kwargs.get("p_orientation"),
@@ -388,7 +395,7 @@ def sweep(
         rest = indexed
         if client is None:  # auto: time a few solves here, then go to processes only if it pays
             probe = indexed[:AUTO_PROBE]
-            rows = _solve_chunk(token, mechanism, probe, kwargs)
+            rows = _solve_chunk(token, mechanism, probe, solve_kwargs)
             bar.update(len(rows), len(rows))
             per_row = (time.perf_counter() - t0) / len(probe)
             rest = indexed[len(probe) :]
@@ -402,7 +409,7 @@ def sweep(
         if rest:
             engine = _engine(client, workers, len(rest))
             label += engine.name
-            rows += _run(engine, token, mechanism, rest, kwargs, chunk, bar, len(rows))
+            rows += _run(engine, token, mechanism, rest, solve_kwargs, chunk, bar, len(rows))
     except BaseException:
         if engine is not None:
             engine.close(cancel=True)
@@ -412,7 +419,7 @@ def sweep(
     if engine is not None:
         engine.close()
     elapsed = time.perf_counter() - t0
-    return _frame(pd, mechanism, points, rows, label or "serial (this process)", elapsed, kwargs)
+    return _frame(pd, mechanism, points, rows, label or "serial (this process)", elapsed, kwargs, chosen)
 
 
 def _run(engine, token, mechanism, indexed, kwargs, chunk, bar, done) -> list[dict]:
@@ -437,7 +444,7 @@ def _run(engine, token, mechanism, indexed, kwargs, chunk, bar, done) -> list[di
     return rows
 
 
-def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dict):
+def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dict, default_pose: str | None):
     by_index = {r["row"]: r for r in rows}
     eps_cols = ["eps_" + n for n in mechanism.error_parameters]
     result_cols = [
@@ -487,6 +494,7 @@ def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dic
             for a in AXES
         },
         "common": kwargs,
+        **({"default_pose": default_pose} if default_pose else {}),
         "error_parameters": list(mechanism.error_parameters),
         "tolerance_units": dict(zip(mechanism.error_parameters, mechanism.units)),
     }

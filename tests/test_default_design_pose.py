@@ -1,0 +1,96 @@
+"""The model's default design pose is one rule for every door: without a pose, ``tolsynth solve``,
+:func:`tolsynth.synthesize`, :func:`tolsynth.sweep` and ``tolsynth sweep`` design at the same pose,
+the one docs/model_format.md names: the model's ``worst`` configuration (read here from the model
+file with tomllib), else the worst-pose search's pose (largest principal sigma at the geometric
+middle of the tolerance bounds, found here by calling :func:`tolsynth.worst_pose` directly)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+import tolsynth
+from tolsynth.cli import main
+
+SPEC = dict(R=0.5, p=0.99)
+
+
+def _cli_solve(capsys, model: str) -> dict:
+    rc = main(["solve", "--model", model, "--R", "0.5", "--p", "0.99", "--json"])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err[-2000:]
+    return json.loads(cap.out)
+
+
+def _search_pose(m) -> np.ndarray:
+    """The documented rule for a model without a ``worst`` configuration, computed here."""
+    lo, hi = (np.asarray(b, dtype=float) for b in m.bounds)
+    return np.asarray(tolsynth.worst_pose(m, np.sqrt(lo * hi), criterion="sigma", reference=None).q, dtype=float)
+
+
+def _file_configurations(m) -> dict:
+    with open(m.spec.path, "rb") as f:
+        return tomllib.load(f).get("configurations", {})
+
+
+@pytest.mark.parametrize("name", ["delta", "stewart_gough", "puma560"])
+def test_cli_and_api_design_at_the_same_documented_pose(capsys, name):
+    m = tolsynth.load_model(name)
+    assert "worst" not in _file_configurations(m)
+    q = _search_pose(m)
+    out = _cli_solve(capsys, name)
+    res = tolsynth.synthesize(m, **SPEC)
+    assert out["cost"] == pytest.approx(res.cost, rel=1e-9)
+    np.testing.assert_allclose(out["inputs"]["poses"][0], q, atol=1e-12)
+    np.testing.assert_allclose(list(res.spec.poses.values())[0], q, atol=1e-12)
+    assert "worst-pose search" in out["default_pose"]
+    # and the design is the one made at that pose when it is given explicitly
+    assert tolsynth.synthesize(m, **SPEC, pose=q).cost == pytest.approx(res.cost, rel=1e-9)
+
+
+def test_a_worst_configuration_is_the_design_pose_of_a_parallel_robot_too(capsys, tmp_path):
+    """A parallel robot's ``home`` (the pose its maps compare with) does not displace its
+    ``worst`` configuration as the design pose: the Delta's file with one added."""
+    src = tolsynth.load_model("delta").spec.path
+    text = open(src, encoding="utf-8").read()
+    text += '\n[configurations.worst]\nnote = "a test pose"\ntheta1 = -2.5\ntheta2 = 0.5\ntheta3 = 31.0\n'
+    path = tmp_path / "delta_worst.toml"
+    path.write_text(text, encoding="utf-8")
+    m = tolsynth.load_model(str(path))
+    worst = _file_configurations(m)["worst"]
+    q = np.radians([worst[j] for j in m.joint_names])  # the file's angles are deg
+    out = _cli_solve(capsys, str(path))
+    res = tolsynth.synthesize(m, **SPEC)
+    assert out["inputs"]["poses"] == ["worst"] and "default_pose" not in out
+    np.testing.assert_allclose(res.spec.poses["worst"], q, atol=1e-12)
+    assert out["cost"] == pytest.approx(res.cost, rel=1e-9)
+
+
+@pytest.mark.parametrize("name", ["delta", "puma560"])
+def test_sweep_without_a_pose_designs_at_the_default_pose(name):
+    pytest.importorskip("pandas")
+    m = tolsynth.load_model(name)
+    q = _search_pose(m)
+    df = tolsynth.sweep(m, R=[0.5], p=[0.99], client="serial", progress=False)
+    assert list(df["status"]) == ["optimal"], df["error"].tolist()
+    assert df["cost"][0] == pytest.approx(tolsynth.synthesize(m, **SPEC, pose=q).cost, rel=1e-9)
+    assert "worst-pose search" in df.attrs["inputs"]["default_pose"]
+
+
+def test_sweep_command_without_a_pose(capsys, tmp_path):
+    pd = pytest.importorskip("pandas")
+    out = tmp_path / "delta.csv"
+    rc = main(["sweep", "--model", "delta", "--R", "0.5", "--p", "0.99", "--workers", "1", "--out", str(out)])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err[-2000:]
+    cost = pd.read_csv(out)["cost"][0]
+    m = tolsynth.load_model("delta")
+    assert math.isclose(cost, tolsynth.synthesize(m, **SPEC, pose=_search_pose(m)).cost, rel_tol=1e-9)
