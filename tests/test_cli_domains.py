@@ -296,6 +296,7 @@ def test_ctrl_c_on_a_sweep_with_workers_is_one_line(after):
     lines = [line for line in err.splitlines() if line.strip()]
     assert proc.returncode == 130, err
     assert len(lines) == 1 and lines[0].startswith("tolsynth sweep: interrupted (Ctrl-C)"), err
+    assert err == lines[0] + "\n", repr(err)  # not a terminal: no blank line before it
 
 
 def test_joint_constraint_limits_beyond_the_joints_turns_fail_at_load(tmp_path):

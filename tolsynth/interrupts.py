@@ -54,7 +54,8 @@ def worker_of_a_pool(orig_argv=None) -> bool:
 
 def _interrupted_while_starting(signum, frame):  # pragma: no cover - runs in a child process (tested there)
     try:
-        os.write(2, b"\ntolsynth: interrupted (Ctrl-C) while starting; nothing was done.\n")
+        lead = b"\n" if os.isatty(2) else b""  # a fresh line after the terminal's ^C; none in a log
+        os.write(2, lead + b"tolsynth: interrupted (Ctrl-C) while starting; nothing was done.\n")
     finally:
         os._exit(EXIT_INTERRUPTED)
 

@@ -152,7 +152,9 @@ def _main(argv) -> int:
 def _interrupted(command: str, args) -> int:
     task = getattr(args, "task", None) or "the command"
     try:
-        print(f"\n{command}: interrupted (Ctrl-C): {task} was not finished; nothing was written.", file=sys.stderr)
+        # on a terminal the line starts fresh (after the echoed ^C or a progress bar); in a log it is one line
+        lead = "\n" if sys.stderr.isatty() else ""
+        print(f"{lead}{command}: interrupted (Ctrl-C): {task} was not finished; nothing was written.", file=sys.stderr)
     except (OSError, ValueError):  # pragma: no cover - stderr gone
         pass
     return EXIT_INTERRUPTED
