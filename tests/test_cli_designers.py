@@ -5,6 +5,7 @@ line and exit status 2."""
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
@@ -299,3 +300,46 @@ def test_grades_command(capsys, tmp_path):
     capsys.readouterr()
     for bad in (["--sizes", "l1=abc"], ["--sizes", "l1=3,l1=4"], ["--grades", str(tmp_path / "none.toml")]):
         assert main(["grades", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", *bad]) == 2
+
+
+def test_grades_errors_name_the_options(capsys, tmp_path):
+    """Bad grades input on the command line names --sizes and --grades (what was typed), never the
+    library's sizes= or table=, and is refused before the solve."""
+    base = ["grades", "--model", "planar_2r", "--R", "0.5", "--p", "0.99"]
+    good = tmp_path / "g.toml"
+    good.write_text('["o*"]\nA = 0.1\n', encoding="utf-8")
+    bad = tmp_path / "bad.toml"
+    bad.write_text('["o*"]\nA = "0.1mm"\n', encoding="utf-8")
+    one = tmp_path / "one.toml"
+    one.write_text('["o1"]\nA = 0.1\n', encoding="utf-8")
+    cases = [
+        (["--sizes", "l1=5000", "--grades", str(good)], "--sizes l1: got 5000 mm"),
+        (["--sizes", "5m", "--grades", str(good)], "--sizes: got 5000 mm"),
+        (["--sizes", "l1=300"], "error: --grades: o1 is an angle (mrad) and ISO 286 grades are for linear sizes"),
+        (["--grades", str(bad)], f"--grades {bad}: [o*] A: '0.1mm' is not a number with an angle unit"),
+        (["--grades", str(one)], f"--grades {one}: [o2]: o2 is an angle"),
+    ]
+    for extra, needle in cases:
+        assert main(base + extra) == 2, extra
+        err = capsys.readouterr().err
+        assert needle in err, (extra, err)
+        assert "size:" not in err and "table[" not in err and "table=" not in err, err
+        assert "Traceback" not in err and err.count("\n") == 1
+    assert main(base + ["--sizes", "l1=300"]) == 2
+    assert '--grades FILE, a TOML file with a table ["o1"]' in capsys.readouterr().err
+
+
+def test_grades_file_with_unit_suffixes(capsys, tmp_path):
+    """A grade file's suffixed values are converted to the angles' unit, mrad, by hand here:
+    "200urad" = 0.2 mrad, "0.0573deg" = 0.0573 pi / 180 rad = 1.000070 mrad."""
+    grades = tmp_path / "g.toml"
+    grades.write_text('["o*"]\nA = "200urad"\nB = "0.0573deg"\n', encoding="utf-8")
+    out = _json(
+        capsys,
+        ["grades", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--probability", "gaussian"]
+        + ["--sizes", "0.3m", "--grades", str(grades)],
+    )
+    want = {"A": 0.2, "B": 0.0573 * math.pi / 180 * 1000}
+    for n in ("o1", "o2"):
+        assert out["tolerances"][n] == pytest.approx(want[out["grades"][n]], rel=1e-12)
+    assert out["sizes"] == {"l1": 300.0, "l2": 300.0}

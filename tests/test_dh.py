@@ -242,3 +242,33 @@ def test_bad_input_is_a_typed_error_naming_the_field(kwargs, error, field):
 def test_modified_convention_rejects_both_a_and_h():
     with pytest.raises(InputError, match=r"links\[0\]\.h"):
         tolsynth.Mechanism.from_dh([{"a": 1.0, "h": 1.0, "limits": (-1, 1)}], "modified")
+
+
+def test_default_bounds_are_physical_in_any_tolerance_unit():
+    """The default bounds 0.001-5 mm and 0.001-50 mrad read 1-5000 um and 0.001-50 mrad in deg
+    when the tolerances are in um and deg; the optimum is then the one of the same arm in mm and
+    mrad whose cost factors are rescaled by hand so that k eps^-alpha is the same cost:
+    k_um (1000 eps_mm)^-alpha = (k_um 1000^-alpha) eps_mm^-alpha, and likewise for deg."""
+    links = [{"a": 500.0, "limits": (-170, 170)}, {"a": 300.0, "limits": (-150, 150)}]
+    kw = dict(angle_unit="deg", configurations={"p": [30, 90]})
+    um = tolsynth.Mechanism.from_dh(links, tolerance_units={"length": "um", "angle": "deg"}, **kw)
+    deg = 180.0 / math.pi * 1e-3  # one mrad in deg
+    for p in um.parameters:
+        lo, hi = (1.0, 5000.0) if p.kind == "length" else (0.001 * deg, 50.0 * deg)
+        assert (p.lower, p.upper) == (pytest.approx(lo, rel=1e-12), pytest.approx(hi, rel=1e-12)), p.name
+    alpha = 0.7
+    ref = tolsynth.Mechanism.from_dh(links, k={"length": 1000.0**-alpha, "angle": 1.5 * deg**-alpha}, **kw)
+    spec = dict(R=0.5, p=0.99, pose="p", alpha=alpha, probability="gaussian")
+    a, b = tolsynth.synthesize(um, **spec), tolsynth.synthesize(ref, **spec)
+    assert a.success and b.success
+    assert a.cost == pytest.approx(b.cost, rel=1e-6)
+    for p in um.parameters:
+        to_ref = 1e-3 if p.kind == "length" else 1.0 / deg  # um -> mm, deg -> mrad
+        assert a.tolerances[p.name] * to_ref == pytest.approx(b.tolerances[p.name], rel=1e-4), p.name
+    # the lengths are not held at an upper bound (5 um was the bound before it was physical)
+    assert all(a.tolerances[n] < 0.99 * 5000.0 for n in ("a1", "a2"))
+    # given bounds stay in the tolerance unit, as given
+    given = tolsynth.Mechanism.from_dh(
+        links, tolerance_units={"length": "um"}, bounds={"length": (2.0, 40.0)}, errors=["a1", "a2"], **kw
+    )
+    assert [(p.lower, p.upper) for p in given.parameters] == [(2.0, 40.0), (2.0, 40.0)]

@@ -182,7 +182,7 @@ def test_grades_with_sizes_and_default_probability():
 def test_grade_errors_are_typed():
     m = tolsynth.load_model("planar_2r")
     res = tolsynth.synthesize(m, R=0.5, p=0.95, probability="gaussian")
-    with pytest.raises(InputError, match="user grade table"):
+    with pytest.raises(InputError, match="a grade table for it"):
         round_to_grades(m, res)  # o1, o2 are angles
     with pytest.raises(InputError, match="matches no parameter"):
         round_to_grades(m, res, table={"x*": {"A": 0.1}})
@@ -246,3 +246,59 @@ def test_exact_feasibility_is_the_certified_cover():
     P = (np.abs(U @ A[:2].T @ W) <= 0.5).mean(axis=0)
     se = math.sqrt(0.01 * 0.99 / len(U))
     assert P.min() - 4 * se - 1e-3 <= worst <= P.min() + 4 * se  # the 1-degree grid may miss the minimum a little
+
+
+# ---------------------------------------------------------------------------------------------
+# the docstring's example, unit suffixes, messages that say what would help
+# ---------------------------------------------------------------------------------------------
+def test_docstring_example_runs_and_its_cost_is_the_grades_cost():
+    """Every example of round_to_grades' docstring runs (none skipped) and prints what it shows;
+    its cost is k eps^-0.7 summed by hand at the grades it prints: IT12 at 300 mm is 520 um wide
+    (ISO 286-1 Table 1, 250-315 mm), eps = 0.26 mm, with k = 1; o1 B = 0.2 mrad and o2 D = 1 mrad,
+    with k = 1.5."""
+    import doctest
+
+    (test,) = doctest.DocTestFinder().find(round_to_grades, "round_to_grades", globs={})
+    assert len(test.examples) >= 4 and not any(ex.options for ex in test.examples)
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
+    runner.run(test)
+    assert runner.summarize(verbose=False) == (0, len(test.examples))
+    by_hand = 2 * 0.26**-0.7 + 1.5 * 0.2**-0.7 + 1.5 * 1.0**-0.7
+    assert "(11.2629, True)" in test.examples[-1].want and round(by_hand, 4) == 11.2629
+
+
+def test_grade_table_in_another_unit_says_what_would_help():
+    """A table written in rad where the unit is mrad: the message gives the table's values in the
+    tolerance unit and how to write them, not "give a grade table" (one was given)."""
+    m, res = _planar_design("gaussian")
+    with pytest.raises(tolsynth.InfeasibleSpecificationError) as err:
+        round_to_grades(m, res, sizes=300, table={"o*": {"A": 1e-4, "B": 2e-4}})
+    text = str(err.value)
+    assert "0.0001 to 0.0002 mrad" in text and "bounds [0.001, 50] mrad" in text
+    assert "a bare number is in mrad" in text and "'0.1mrad'" in text and "give a grade table" not in text
+
+
+def test_sizes_and_grades_with_unit_suffixes():
+    """Suffixed sizes and grades are converted by hand here: 0.3 m = 30 cm = 300 mm; 0.1 deg =
+    0.1 pi / 180 rad = 1.745329 mrad, 500 urad = 0.5 mrad; the choice is the one of the same
+    grades written as bare numbers in mm and mrad, and IT12 at 300 mm is 0.26 mm (520 um / 2)."""
+    m, res = _planar_design("gaussian")
+    bare = {"A": 0.1, "B": 0.2, "C": 0.5, "D": math.pi / 1.8}
+    suffixed = {"A": "100urad", "B": "0.2mrad", "C": "500 urad", "D": "0.1deg"}
+    g0 = round_to_grades(m, res, sizes=300, table={"o*": bare})
+    for sizes in ("300mm", "0.3m", {"l1": "0.3m", "l2": "30cm"}):
+        g = round_to_grades(m, res, sizes=sizes, table={"o*": suffixed})
+        assert g.sizes == {"l1": 300.0, "l2": 300.0}
+        assert g.grades == g0.grades and g.cost == pytest.approx(g0.cost, rel=1e-12)
+        for n in ("o1", "o2"):
+            assert g.tolerances[n] == pytest.approx(bare[g.grades[n]], rel=1e-12)
+    assert g0.tolerances["l1"] == pytest.approx(0.26, rel=1e-12) and g0.grades["l1"] == "IT12"
+    # a suffix of the other kind, or none known, names the field and the units it takes
+    with pytest.raises(InputError, match=r"^sizes: '300mrad' is not a number with a length unit"):
+        round_to_grades(m, res, sizes="300mrad", table=ANGLES)
+    with pytest.raises(InputError, match=r"^sizes\[l2\]: .*length unit \(mm, um, cm, m\)"):
+        round_to_grades(m, res, sizes={"l2": "3 ft"}, table=ANGLES)
+    with pytest.raises(InputError, match=r"^table\[o\*\]\[B\]: '0.2mm' is not a number with an angle unit"):
+        round_to_grades(m, res, table={"o*": {"A": 0.1, "B": "0.2mm"}})
+    with pytest.raises(OutOfRangeError, match=r"^sizes\[l1\]: got '5m' \(5000 mm\).*3150"):
+        round_to_grades(m, res, sizes={"l1": "5m"}, table=ANGLES)

@@ -351,6 +351,25 @@ def test_error_selection_by_pattern(tmp_path):
     assert np.allclose(S2[:, m2.error_parameters.index("f1.x")], 1e-3 * S[:, m.error_parameters.index("f1.x")])
 
 
+def test_default_bounds_follow_the_tolerance_units(tmp_path):
+    """The default bounds, 0.001-5 mm and 0.001-50 mrad, are physical: in um they read 1-5000 um,
+    in arcsec 0.001 mrad = 0.206265 arcsec to 50 mrad = 10313.24 arcsec (1 rad = 180 * 3600 / pi
+    arcsec); bounds given stay as given."""
+    m = tolsynth.load_urdf(
+        _urdf(tmp_path, TOY),
+        "base",
+        "tip",
+        tolerance_units={"length": "um", "angle": "arcsec"},
+        bounds={"j1.z": (2, 9)},
+    )
+    arcsec = 180 * 3600 / math.pi * 1e-3  # one mrad in arcsec
+    for p in m.parameters:
+        want = (
+            (2.0, 9.0) if p.name == "j1.z" else (1.0, 5000.0) if p.kind == "length" else (0.001 * arcsec, 50 * arcsec)
+        )
+        assert (p.lower, p.upper) == (pytest.approx(want[0], rel=1e-12), pytest.approx(want[1], rel=1e-12)), p.name
+
+
 def test_bad_input_is_a_typed_error_naming_the_field(tmp_path):
     path = _urdf(tmp_path, TOY)
     with pytest.raises(ModelFileError, match=r"base_link: no link 'bse' .*did you mean `base`"):

@@ -79,7 +79,12 @@ def _as_float(x: Any, field: str, allowed: str, unit: str = "") -> float:
     if isinstance(x, str) and unit_kind(unit):  # "500um": the same rule as the command line's
         v = convert_quantity(x, unit)
         if v is None:
-            raise InputError(field, f"{x!r} is not a number with a {unit_kind(unit)} unit", _with_units(allowed, unit))
+            kind = unit_kind(unit)
+            raise InputError(
+                field,
+                f"{x!r} is not a number with a{'n' if kind == 'angle' else ''} {kind} unit",
+                _with_units(allowed, unit),
+            )
         return v
     if not is_real(x):
         raise InputError(field, f"expected a number, got {x!r}", _with_units(allowed, unit))

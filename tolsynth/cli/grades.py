@@ -5,11 +5,11 @@ that still meets the specification, with a proven optimum (:func:`tolsynth.round
 ``--sizes`` gives each length's nominal size: one length for every parameter (``300`` or
 ``0.3m``), ``name=SIZE,...`` (patterns allowed by the library), or a TOML/JSON file mapping names to
 sizes in mm.  ``--grades FILE`` (TOML or JSON) is a grade table: parameter name or pattern ->
-{grade label: tolerance in the parameter's tolerance unit}::
+{grade label: tolerance in the parameter's tolerance unit, or a string with a unit suffix}::
 
     ["o*"]
     A = 0.1
-    B = 0.2
+    B = "0.2mrad"
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from tolsynth.cli.designs import (
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
 
-__all__ = ["register", "cmd_grades", "parse_sizes"]
+__all__ = ["register", "cmd_grades", "parse_sizes", "option_names"]
 
 _SIZES = "SIZE (mm, or with a suffix) for every length, name=SIZE,... or a TOML/JSON file name -> mm"
 
@@ -55,8 +55,26 @@ def parse_sizes(text):
     return out
 
 
+def option_names(grades_file: str | None) -> dict:
+    """How :func:`tolsynth.synthesis.grades.grade_candidates` names the inputs in its errors: the
+    options ``--sizes`` and ``--grades FILE`` (its tables ``["o*"]`` and their grades) where the
+    library names its arguments ``sizes`` and ``table``."""
+    where = f"--grades {grades_file}" if grades_file else "--grades"
+    return {
+        "sizes": "--sizes",
+        "size": "--sizes {name}",
+        "table": where,
+        "entry": where + ": [{key}]" if grades_file else where,
+        "grade": where + ": [{key}] {label}",
+        "give_table": '--grades FILE, a TOML file with a table ["{name}"] (or a pattern such as ["o*"] or ["*"]) '
+        "and its grades one a line, A = 0.1, B = 0.2, ..., in {unit} (its tolerance unit) or with a unit suffix "
+        '(A = "0.1mrad")',
+        "give_size": "its nominal size: --sizes {name}=SIZE, in mm or with a length unit suffix",
+    }
+
+
 def cmd_grades(args) -> int:
-    from tolsynth.synthesis.grades import round_to_grades
+    from tolsynth.synthesis.grades import grade_candidates, round_to_grades
     from tolsynth.synthesis.single import synthesize
 
     check_table_out(args)
@@ -67,6 +85,8 @@ def cmd_grades(args) -> int:
         table = read_table_file(
             args.grades, "--grades", "a TOML or JSON file: parameter name or pattern -> {grade label: tolerance}"
         )
+    # the grades read before the solve, their errors naming the options typed
+    grade_candidates(mech, sizes, table, names=option_names(args.grades))
     kw, record = design_kwargs(mech, args)
     res = synthesize(mech, args.R, args.p, **kw)
     if not res.success:
@@ -107,7 +127,8 @@ def register(sub) -> None:
         "--grades",
         default=None,
         metavar="FILE",
-        help="grade table, TOML or JSON: parameter or pattern -> {label: tolerance in its unit}; "
+        help="grade table, TOML or JSON: parameter or pattern -> {label: tolerance in its unit, or with a "
+        'unit suffix such as "0.1mrad"}; '
         "needed for angles (ISO 286 has none); default: ISO 286 only",
     )
     add_max_nodes_argument(p, 5000, "the search's solves and checks")

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from tolsynth.errors import InputError, ModelFileError, UnknownNameError
-from tolsynth.model.fields import DEFAULT_BOUNDS, DEFAULT_K, DEFAULT_TOLERANCE_UNITS, _by_kind, _nearest, _Reader
+from tolsynth.model.fields import DEFAULT_K, DEFAULT_TOLERANCE_UNITS, _bounds_by_kind, _by_kind, _nearest, _Reader
 from tolsynth.model.reader import _parse
 from tolsynth.model.spec import CONVENTIONS, ELEMENTARY
 
@@ -112,7 +112,9 @@ def dh_spec(
         Cost factor (> 0), default tolerance bounds ``(lower, upper)`` and tolerance unit of the
         error parameters: one value for all, or a dict with keys ``"length"``, ``"angle"`` and/or
         parameter names (a name wins over its kind).  Defaults: k 1 (lengths) and 1.5 (angles);
-        bounds 0.001-5 mm and 0.001-50 mrad; units mm and mrad.  Bounds are in the tolerance unit.
+        units mm and mrad; bounds 0.001-5 mm and 0.001-50 mrad, physical quantities converted into
+        the tolerance unit chosen (um: 1-5000 um; deg: 5.73e-5 to 2.865 deg).  Bounds given are
+        in the tolerance unit.
     configurations : dict, optional
         Name -> joint values (a list in joint order, in ``angle_unit``) or a dict of joint name ->
         value with optional ``note`` and ``waive`` (as in a model file).
@@ -248,7 +250,7 @@ def dh_spec(
     k_of = _by_kind(_plain(k), "k", DEFAULT_K, sel_kinds)
     units_of = _by_kind(tolerance_units, "tolerance_units", DEFAULT_TOLERANCE_UNITS, sel_kinds)
     if bounds is None or isinstance(bounds, Mapping):
-        bounds_of = _by_kind(bounds, "bounds", DEFAULT_BOUNDS, sel_kinds)
+        bounds_of = _bounds_by_kind(bounds, "bounds", units_of, sel_kinds)
     else:
         bounds_of = {s: bounds for s in selected}
     raw_errors = []

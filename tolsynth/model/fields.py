@@ -376,7 +376,8 @@ def _unique(r: _Reader, names: list, where: str, what: str) -> None:
 # --------------------------------------------------------------------------------------------
 #: cost factor by kind, as in Xu & Zhang 1988 (and the bundled models): lengths 1, angles 1.5
 DEFAULT_K = {"length": 1.0, "angle": 1.5}
-#: default tolerance bounds (Eq. 22) by kind, in the default tolerance units: mm and mrad
+#: default tolerance bounds (Eq. 22) by kind, physical quantities in the default tolerance units
+#: (mm and mrad); :func:`_bounds_by_kind` converts them into each parameter's own unit
 DEFAULT_BOUNDS = {"length": (0.001, 5.0), "angle": (0.001, 50.0)}
 DEFAULT_TOLERANCE_UNITS = {"length": "mm", "angle": "mrad"}
 
@@ -404,6 +405,28 @@ def _by_kind(arg: Any, argname: str, default: dict, selectable: dict[str, str]) 
     for name in selectable:
         if name in arg:
             out[name] = arg[name]
+    return out
+
+
+def _bounds_by_kind(arg: Any, argname: str, units: dict[str, Any], selectable: dict[str, str]) -> dict[str, Any]:
+    """``bounds`` as :func:`_by_kind` reads it, given bounds in the tolerance unit as they are, and
+    the defaults :data:`DEFAULT_BOUNDS` (0.001-5 mm, 0.001-50 mrad) converted into each parameter's
+    tolerance unit (``units``: name -> unit), so that choosing um or deg keeps the same physical
+    range instead of reading 5 as 5 um.  A unit that is not one of the parameter's kind keeps the
+    numbers: the reader refuses that unit with its own message."""
+    unset = object()
+    given = _by_kind(arg, argname, {"length": unset, "angle": unset}, selectable)
+    out = {}
+    for name, kind in selectable.items():
+        if given[name] is not unset:
+            out[name] = given[name]
+            continue
+        lo, hi = DEFAULT_BOUNDS[kind]
+        unit = units.get(name)
+        if isinstance(unit, str) and unit_kind(unit) == kind:
+            f = to_base(DEFAULT_TOLERANCE_UNITS[kind]) / to_base(unit)
+            lo, hi = lo * f, hi * f
+        out[name] = (lo, hi)
     return out
 
 

@@ -33,9 +33,9 @@ from typing import Any
 
 from tolsynth.errors import InputError
 from tolsynth.model.fields import (
-    DEFAULT_BOUNDS,
     DEFAULT_K,
     DEFAULT_TOLERANCE_UNITS,
+    _bounds_by_kind,
     _by_kind,
     _check_configurations,
     _nearest,
@@ -242,8 +242,8 @@ def _parse_errors(r: _Reader, data: dict, symbols: dict, kinds: dict) -> list[Er
     sel = {n: kinds[n] for n in names if n in chosen}
     try:
         ks = _by_kind(errs.get("k"), "errors.k", DEFAULT_K, sel)
-        bs = _by_kind(errs.get("bounds"), "errors.bounds", DEFAULT_BOUNDS, sel)
         us = _by_kind(errs.get("tolerance_units"), "errors.tolerance_units", DEFAULT_TOLERANCE_UNITS, sel)
+        bs = _bounds_by_kind(errs.get("bounds"), "errors.bounds", us, sel)
         ds = _by_kind(errs.get("distribution"), "errors.distribution", {"length": None, "angle": None}, sel)
     except InputError as err:
         raise r.fail(err.field, str(err).split(": ", 1)[-1]) from None

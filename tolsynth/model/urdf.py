@@ -70,9 +70,9 @@ import numpy as np
 from tolsynth.checks import is_real
 from tolsynth.errors import InputError, MissingDependencyError, ModelFileError, UnsupportedJointError
 from tolsynth.model.fields import (
-    DEFAULT_BOUNDS,
     DEFAULT_K,
     DEFAULT_TOLERANCE_UNITS,
+    _bounds_by_kind,
     _by_kind,
     _check_configurations,
     _nearest,
@@ -171,7 +171,7 @@ def urdf_spec(
         Cost factor, default bounds (in the tolerance unit) and tolerance unit: one value for all
         or a dict keyed by ``"length"``, ``"angle"`` or parameter names (as in
         :func:`tolsynth.Mechanism.from_dh`).  Defaults: mm and mrad, k 1 and 1.5, bounds
-        0.001-5 mm and 0.001-50 mrad.
+        0.001-5 mm and 0.001-50 mrad, converted into the tolerance unit chosen (um: 1-5000).
     configurations : dict, optional
         Name -> joint values: a list in joint order or a dict joint name -> value (with optional
         ``note``); revolute joints in ``angle_unit``, prismatic in ``length_unit``.  Each must lie
@@ -440,8 +440,8 @@ def _parse_urdf_model(data: dict, r: _Reader, python: bool = False) -> Mechanism
     sel = {n: selectable[n] for n in order}
     try:
         ks = _by_kind(chain.get("k"), "chain.k", DEFAULT_K, sel)
-        bs = _by_kind(chain.get("bounds"), "chain.bounds", DEFAULT_BOUNDS, sel)
         us = _by_kind(chain.get("tolerance_units"), "chain.tolerance_units", DEFAULT_TOLERANCE_UNITS, sel)
+        bs = _bounds_by_kind(chain.get("bounds"), "chain.bounds", us, sel)
     except InputError as err:
         raise r.fail(err.field, str(err).split(": ", 1)[-1]) from None
     eparams = []

@@ -29,17 +29,23 @@ import itertools
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Mapping
 
 import numpy as np
 
 from tolsynth.checks import check_count
 from tolsynth.errors import InfeasibleSpecificationError, InputError, OutOfRangeError
-from tolsynth.model import iso286
+from tolsynth.synthesis.grade_tables import (
+    API_NAMES,
+    _candidates,
+    _no_grade_message,
+    _read_sizes,
+    _size_of,
+    grade_candidates,
+)
 from tolsynth.synthesis.grades_eval import _achieved, constraint_values, meets
 from tolsynth.tabular import Tabular
 
-__all__ = ["GradeChoice", "round_to_grades", "grade_candidates", "constraint_values", "meets"]
+__all__ = ["GradeChoice", "round_to_grades", "grade_candidates", "constraint_values", "meets", "API_NAMES"]
 
 
 @dataclass(frozen=True)
@@ -140,80 +146,6 @@ class GradeChoice(Tabular):
 
 
 # ---------------------------------------------------------------------------------------------
-# the grades each parameter may take
-# ---------------------------------------------------------------------------------------------
-def _table_for(table, name: str):
-    if table is None:
-        return None
-    if not isinstance(table, Mapping):
-        raise InputError("table", f"got {table!r}", "a dict parameter name (or '*') -> {grade label: tolerance}")
-    entry = table.get(name, table.get("*"))
-    if entry is None:
-        return None
-    if not isinstance(entry, Mapping) or not entry:
-        raise InputError(
-            f"table[{name}]",
-            f"got {entry!r}",
-            "a non-empty dict grade label -> tolerance (the parameter's tolerance unit)",
-        )
-    out = {}
-    for label, value in entry.items():
-        try:
-            v = float(value)
-        except (TypeError, ValueError):
-            raise InputError(f"table[{name}][{label}]", f"got {value!r}", "a tolerance > 0") from None
-        if not (math.isfinite(v) and v > 0):
-            raise OutOfRangeError(f"table[{name}][{label}]", f"got {value!r}", "a tolerance > 0")
-        out[str(label)] = v
-    return out
-
-
-def grade_candidates(mechanism, sizes=None, table=None) -> dict[str, dict[str, float]]:
-    """Parameter -> {grade label: tolerance in its tolerance unit}, finest first: the user's
-    ``table`` where it names the parameter (or ``"*"``), else ISO 286-1 at ``sizes[name]`` (mm;
-    default: the nominal value of the dimension the parameter perturbs)."""
-    out = {}
-    if sizes is not None and (isinstance(sizes, bool) or not isinstance(sizes, (Mapping, int, float))):
-        raise InputError("sizes", f"got {sizes!r}", "a dict parameter name -> nominal size in mm, or one size")
-    if isinstance(sizes, Mapping):
-        for key in sizes:
-            mechanism.index(key)  # UnknownNameError naming the parameters for a name that is none
-    for par in mechanism.parameters:
-        own = _table_for(table, par.name)
-        if own is not None:
-            out[par.name] = dict(sorted(own.items(), key=lambda kv: kv[1]))
-            continue
-        if par.kind != "length":
-            raise InputError(
-                f"table[{par.name}]",
-                f"{par.name} is an angle ({par.unit}) and ISO 286 grades are for linear sizes",
-                "a user grade table for it: table={'"
-                + par.name
-                + "': {'A1': 0.01, ...}} in its tolerance unit (or '*' for every parameter)",
-            )
-        size = _size_of(mechanism, par, sizes)
-        # ISO gives mm; the parameter's tolerance unit is par.scale mm
-        out[par.name] = {g: v / par.scale for g, v in iso286.grades_for(size).items()}
-    return out
-
-
-def _size_of(mechanism, par, sizes) -> float:
-    if isinstance(sizes, (int, float)) and not isinstance(sizes, bool):
-        return float(sizes)
-    if isinstance(sizes, Mapping) and par.name in sizes:
-        return sizes[par.name]  # iso286.size_range checks it
-    nominal = [abs(mechanism.spec.symbols.get(s, 0.0)) for s in par.perturbs]
-    nominal = [v for v in nominal if v > 0]
-    if not nominal:
-        raise InputError(
-            f"sizes[{par.name}]",
-            f"{par.name} perturbs a dimension of nominal size 0 ({', '.join(par.perturbs) or 'a joint'})",
-            "its nominal size in mm for the ISO 286 grade, e.g. sizes={'" + par.name + "': 50}",
-        )
-    return max(nominal)
-
-
-# ---------------------------------------------------------------------------------------------
 # the search
 # ---------------------------------------------------------------------------------------------
 def round_to_grades(
@@ -227,22 +159,32 @@ def round_to_grades(
         The model ``result`` was solved on.
     result : SynthesisResult
         A continuous optimum of :func:`tolsynth.synthesize` (any probability).
-    sizes : dict or float, optional
-        Nominal size (mm) per length parameter for its ISO 286 grades (default: the nominal value
-        of the dimension it perturbs; a parameter of nominal size 0 must be given one).
+    sizes : dict or float or str, optional
+        Nominal size per length parameter for its ISO 286 grades, in mm or as a string with a
+        length unit (``300``, ``"0.3m"``, ``{"l1": "300mm"}``); one size for every length, or a
+        dict (default: the nominal value of the dimension it perturbs; a parameter of nominal
+        size 0 must be given one).
     table : dict, optional
-        Parameter name (or ``"*"``) -> {grade label: tolerance in the parameter's tolerance unit}:
-        a user's own grades, which angles need (ISO 286 has none for them).
+        Parameter name, pattern (``"o*"``) or ``"*"`` -> {grade label: tolerance}: a user's own
+        grades, which angles need (ISO 286 has none for them).  A bare number is in the
+        parameter's tolerance unit (``mechanism.units``: planar_2r's angles are in mrad); a string
+        with a unit suffix (``"0.2mrad"``, ``"0.01deg"``) is converted to it.
     rel_gap, max_nodes
         Optimality tolerance of the search (relative to the cost) and its limit of solves and
         checks (then ``proven`` is False).
 
     Examples
     --------
+    planar_2r's angle tolerances are in mrad, so its grade table's bare numbers are mrad:
+
     >>> import tolsynth
     >>> res = tolsynth.synthesize("planar_2r", R=0.5, p=0.99)
     >>> g = tolsynth.round_to_grades("planar_2r", res, sizes=300,
-    ...                              table={"o*": {"A": 1e-4, "B": 2e-4}})  # doctest: +SKIP
+    ...                              table={"o*": {"A": 0.1, "B": 0.2, "C": 0.5, "D": 1.0}})
+    >>> g.grades
+    {'l1': 'IT12', 'l2': 'IT12', 'o1': 'B', 'o2': 'D'}
+    >>> round(g.cost, 4), g.proven
+    (11.2629, True)
     """
     from tolsynth.kinematics.mechanism import as_mechanism
 
@@ -258,34 +200,15 @@ def round_to_grades(
         raise InputError("result", "solved on another model's parameters", f"a result of {mechanism.name}")
     if not result.success:
         raise InputError("result", f"not an optimum ({result.status}: {result.message})", "a successful result")
-    if isinstance(table, Mapping):  # patterns such as "o*" name several parameters
-        table = _expand_patterns(mechanism, table)
     probability = (result.inputs or {}).get("probability") or "gaussian"
-    search = _Search(mechanism, result, spec, probability, grade_candidates(mechanism, sizes, table))
+    sizes = _read_sizes(mechanism, sizes, API_NAMES)
+    candidates, sources = _candidates(mechanism, sizes, table, API_NAMES)
+    search = _Search(mechanism, result, spec, probability, candidates, sources)
     return search.run(rel_gap, max_nodes, t0, sizes)
 
 
-def _expand_patterns(mechanism, table):
-    import fnmatch
-
-    out = {}
-    for key, value in table.items():
-        if key != "*" and any(c in str(key) for c in "*?["):
-            hits = [n for n in mechanism.error_parameters if fnmatch.fnmatchcase(n, str(key))]
-            if not hits:
-                raise InputError(
-                    "table", f"pattern {key!r} matches no parameter", ", ".join(mechanism.error_parameters)
-                )
-            out.update({h: value for h in hits})
-        else:
-            if key != "*":
-                mechanism.index(key)  # UnknownNameError for a bad name
-            out[key] = value
-    return out
-
-
 class _Search:
-    def __init__(self, mechanism, result, spec, probability, candidates):
+    def __init__(self, mechanism, result, spec, probability, candidates, sources=None):
         self.mech, self.result, self.spec, self.prob = mechanism, result, spec, probability
         self.costs = spec.costs
         self.lower, self.upper = np.asarray(spec.lower, dtype=float), np.asarray(spec.upper, dtype=float)
@@ -303,8 +226,9 @@ class _Search:
                 raise InfeasibleSpecificationError(
                     f"grades[{name}]",
                     float(self.eps_c[i]),
-                    f"no grade of {name} lies within its bounds [{self.lower[i]:g}, {self.upper[i]:g}] "
-                    f"{spec.units[i]}: widen the bounds or give a grade table",
+                    _no_grade_message(
+                        name, spec.units[i], (self.lower[i], self.upper[i]), candidates[name], (sources or {}).get(name)
+                    ),
                 )
             self.free.append(i)
             self.labels[i] = [g for g, _ in cand]
