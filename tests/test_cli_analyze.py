@@ -149,7 +149,7 @@ BAD = [
     ({"--R": "0"}, ["R", "> 0"]),
     ({"--R": "-0.5"}, ["R", "> 0"]),
     ({"--tolerances": "figure3,h2=-0.1"}, ["tolerances[h2]", ">= 0"]),
-    ({"--tolerances": "figure3,h9=0.1"}, ["error parameter", "h9"]),
+    ({"--tolerances": "figure3,h9=0.1"}, ["--tolerances", "unknown error parameter", "h9"]),
     ({"--tolerances": "figure3,h2=abc"}, ["--tolerances", "abc"]),
     ({"--tolerances": "figure7"}, ["tolerances", "figure7"]),
     ({"--pose": "banana"}, ["--pose", "banana"]),

@@ -50,15 +50,15 @@ def test_missing_model_file(tmp_path):
 
 
 def test_unknown_parameter_in_deltas(xz):
-    with _raises(UnknownNameError, "error parameter", "'h9'", "h2", "alpha4"):
+    with _raises(UnknownNameError, "deltas[h9]", "'h9'", "h2", "alpha4"):
         xz.fk("worst", deltas={"h9": 0.1})
-    with _raises(UnknownNameError, "error parameter", "'x12'"):
+    with _raises(UnknownNameError, "deltas[x12]", "'x12'"):
         xz.sensitivity("worst", deltas={"x12": 0.1})
 
 
 def test_unknown_parameter_or_set_in_tolerances(xz):
     eps = dict(zip(xz.error_parameters, xz.tolerances("figure3")))
-    with _raises(UnknownNameError, "error parameter", "'h7'"):
+    with _raises(UnknownNameError, "tolerances[h7]", "'h7'"):
         xz.tolerances({**eps, "h7": 0.1})
     with _raises(UnknownNameError, "tolerances", "'figure4'", "figure3"):
         xz.tolerances("figure4")
@@ -269,3 +269,28 @@ def test_every_entry_point_takes_a_model_name_and_types_anything_else():
     ]:
         with pytest.raises(InputError, match="mechanism"):
             fn(*args, **kw)
+
+
+def test_dict_arguments_name_the_entry_and_take_unit_suffixes():
+    """An unknown name in bounds, k or locks is an error naming that entry (bounds[length]); a bound
+    written with a unit is converted into the parameter's tolerance unit (1 um = 0.001 mm, planar_2r's
+    l1 in mm), one of the wrong kind is refused; a partial alpha names the parameters left out."""
+    m = tolsynth.load_model("planar_2r")
+    spec = dict(R=0.5, p=0.99, pose="elbow90", probability="gaussian")
+    for kw, field in (
+        (dict(bounds={"length": (0.001, 5.0)}), "bounds[length]"),
+        (dict(k={"l3": 2.0}), "k[l3]"),
+        (dict(locks={"zz": 0.1}), "locks[zz]"),
+    ):
+        with pytest.raises(UnknownNameError) as info:
+            tolsynth.synthesize(m, **spec, **kw)
+        assert info.value.field == field and "l1, l2, o1, o2" in str(info.value)
+    r = tolsynth.synthesize(m, **spec, bounds={"l1": ("100um", "0.12mm")})
+    assert (r.spec.lower[0], r.spec.upper[0]) == pytest.approx((0.1, 0.12), rel=1e-12)
+    plain = tolsynth.synthesize(m, **spec, bounds={"l1": (0.1, 0.12)})
+    assert r.cost == pytest.approx(plain.cost, rel=1e-12)
+    with pytest.raises(InputError) as info:
+        tolsynth.synthesize(m, **spec, bounds={"o1": ("1um", "5mm")})
+    assert info.value.field == "bounds[o1].lower"
+    with pytest.raises(InputError, match="no value for l2, o1, o2"):
+        tolsynth.synthesize(m, **spec, alpha={"l1": 0.5})

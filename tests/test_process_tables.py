@@ -57,7 +57,7 @@ def test_bad_cost_names_file_parameter_and_process(tmp_path, capsys):
     table.write_text(TABLE.replace("[[h2]]", "[[h9]]"))
     assert main(BASE + ["--table", str(table)]) == 2
     err = capsys.readouterr().err
-    assert str(table) in err and "h9" in err and "unknown name" in err
+    assert str(table) in err and "h9" in err and "unknown error parameter" in err
 
 
 def test_api_error_names_parameter_and_process():

@@ -86,7 +86,7 @@ def _apply_items(
                     )
                 patterns.append((hits, conv))
             else:
-                i = mech.index(key)  # UnknownNameError for a bad name
+                i = mech.index(key, field)  # UnknownNameError naming the option
                 canon = names[i]
                 if canon in seen_exact:
                     raise InputError(

@@ -376,7 +376,7 @@ def _parse_locks(mech, items) -> dict:
         name, sep, value = (s.strip() for s in item.partition("="))
         if not sep or not name or not value:
             raise InputError("--lock", f"got {item!r}", "NAME=VALUE, e.g. --lock h3=0.2 or --lock a=50um")
-        i = mech.index(name)  # UnknownNameError naming the parameter and the allowed names
+        i = mech.index(name, "--lock")  # UnknownNameError naming the option and the allowed names
         canon, unit = mech.error_parameters[i], mech.units[i]
         if canon in out:
             raise InputError(

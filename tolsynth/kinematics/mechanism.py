@@ -296,13 +296,14 @@ class Mechanism:
         """Default tolerance bounds (Eq. 22) in tolerance units."""
         return self._per_parameter["lower"].copy(), self._per_parameter["upper"].copy()
 
-    def index(self, name: str) -> int:
-        """Position of an error parameter by name or alias (``"h2"`` or ``"x1"``)."""
+    def index(self, name: str, field: str = "error parameter") -> int:
+        """Position of an error parameter by name or alias (``"h2"`` or ``"x1"``); an unknown name
+        is an error naming ``field`` (the argument it came in, e.g. ``"bounds[l3]"``)."""
         try:
             return self._index[name]
         except (KeyError, TypeError):
             raise UnknownNameError(
-                "error parameter", f"unknown name {name!r}", "one of " + ", ".join(self.error_parameters)
+                field, f"unknown error parameter {name!r}", "one of " + ", ".join(self.error_parameters)
             ) from None
 
     def with_units(self, units: Mapping[str, str]) -> "Mechanism":
@@ -319,7 +320,7 @@ class Mechanism:
         params = list(self.parameters)
         factors = np.ones(self.n)
         for name, unit in check_mapping(units, "units", "a dict parameter name -> unit").items():
-            i = self.index(name)
+            i = self.index(name, f"units[{name}]")
             par = params[i]
             if unit_kind(unit) != par.kind:
                 raise OutOfRangeError(
@@ -402,7 +403,7 @@ class Mechanism:
             return out
         if isinstance(deltas, Mapping):
             for name, value in deltas.items():
-                out[self.index(name)] = check_real(value, f"deltas[{name}]", "tolerance units")
+                out[self.index(name, f"deltas[{name}]")] = check_real(value, f"deltas[{name}]", "tolerance units")
         else:
             out[:] = check_vector(deltas, "deltas", self.n, "tolerance units", names=self.error_parameters)
         return out
@@ -424,7 +425,7 @@ class Mechanism:
             out = np.zeros(self.n)
             given = np.zeros(self.n, dtype=bool)
             for name, value in tolerances.items():
-                i = self.index(name)
+                i = self.index(name, f"tolerances[{name}]")
                 if given[i]:
                     raise InputError(
                         f"tolerances[{name}]", "given twice (by name and alias)", "one value per parameter"

@@ -29,7 +29,7 @@ def _locked(mechanism, locks) -> dict[str, float]:
         raise InputError("locks", f"got {locks!r}", "a dict parameter name -> tolerance")
     out = {}
     for name, value in locks.items():
-        i = mechanism.index(name)  # UnknownNameError naming the field
+        i = mechanism.index(name, f"locks[{name}]")  # UnknownNameError naming the field
         unit = mechanism.units[i]
         out[mechanism.error_parameters[i]] = check_positive(value, f"locks[{name}]", unit)
     return out
@@ -44,7 +44,7 @@ def apply_locks(mechanism, bounds, locks) -> dict:
     if isinstance(bounds, Mapping):
         out = {nm: (float(a), float(b)) for nm, a, b in zip(names, lo, hi)}
         for key, pair in bounds.items():
-            out[names[mechanism.index(key)]] = pair
+            out[names[mechanism.index(key, f"bounds[{key}]")]] = pair
     elif bounds is None:
         out = {nm: (float(a), float(b)) for nm, a, b in zip(names, lo, hi)}
     else:

@@ -140,9 +140,10 @@ def _per_parameter(value, names: Sequence[str], index, field_name: str, default=
     if isinstance(value, Mapping):
         out = np.array(default, dtype=float).copy() if default is not None else np.full(n, np.nan)
         for key, v in value.items():
-            out[index(key)] = check_real(v, f"{field_name}[{key}]")
+            out[index(key, f"{field_name}[{key}]")] = check_real(v, f"{field_name}[{key}]")
         if np.any(np.isnan(out)):
-            raise InputError(field_name, "a value is missing for some parameters", f"a value for each of {list(names)}")
+            missing = ", ".join(nm for nm, v in zip(names, out) if np.isnan(v))
+            raise InputError(field_name, f"no value for {missing}", f"a value for each of {', '.join(names)}")
         return out
     if np.ndim(value) == 0:
         return np.full(n, check_real(value, field_name))
@@ -218,8 +219,9 @@ def make_specification(
                 a, b = pair
             except (TypeError, ValueError):
                 raise InputError(f"bounds[{key}]", f"got {pair!r}", "a pair (lower, upper)") from None
-            i = mechanism.index(key)
-            lo[i], hi[i] = check_real(a, f"bounds[{key}].lower"), check_real(b, f"bounds[{key}].upper")
+            i = mechanism.index(key, f"bounds[{key}]")
+            unit = mechanism.units[i]  # a bound written with a unit ("5um") in the parameter's own
+            lo[i], hi[i] = check_real(a, f"bounds[{key}].lower", unit), check_real(b, f"bounds[{key}].upper", unit)
     else:
         try:
             lo, hi = (np.asarray(b, dtype=float) * np.ones(len(names)) for b in bounds)
@@ -306,7 +308,7 @@ def _plain_pairs(bounds: Mapping, mechanism, lo: np.ndarray, hi: np.ndarray) -> 
             and -HUGE <= pair[0] <= HUGE
             and -HUGE <= pair[1] <= HUGE
         ):
-            i = mechanism.index(key)
+            i = mechanism.index(key, f"bounds[{key}]")
             lo[i], hi[i] = pair
         else:
             rest.append((key, pair))
