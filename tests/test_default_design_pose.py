@@ -94,3 +94,15 @@ def test_sweep_command_without_a_pose(capsys, tmp_path):
     cost = pd.read_csv(out)["cost"][0]
     m = tolsynth.load_model("delta")
     assert math.isclose(cost, tolsynth.synthesize(m, **SPEC, pose=_search_pose(m)).cost, rel_tol=1e-9)
+
+
+def test_validate_plain_tolerances_checks_the_design_pose():
+    """validate() of plain tolerances on a model without a 'worst' configuration runs at the design
+    pose (the worst-pose search's, computed here) instead of failing on the missing name; its
+    probabilities are monte_carlo's at that pose with the same seed."""
+    m = tolsynth.load_model("delta")
+    q = _search_pose(m)
+    v = tolsynth.validate(m, "coarse", R=0.5, p=0.99, n=20_000, seed=1)
+    assert np.allclose(v.montecarlo.q, q, rtol=0, atol=1e-12)
+    mc = tolsynth.monte_carlo(m, q, "coarse", R=0.5, n=20_000, seed=1)
+    assert np.array_equal(v.p_components, mc.p_components)

@@ -156,8 +156,9 @@ def validate(
     distribution : str or dict, optional
         Same fallback; default "uniform".
     pose : str, array, or a list of them
-        Where to check: the paper's pose of largest error by default, or, for a result, every pose
-        it was designed at.  With several poses each is run (seeds ``seed``, ``seed + 1``, ...) and
+        Where to check: the model's ``worst`` configuration by default (the paper's pose of
+        largest error), else, for a result, every pose it was designed at, and for plain tolerances
+        the pose a design is made at by default (:func:`tolsynth.analysis.design_pose.default_design_pose`).  With several poses each is run (seeds ``seed``, ``seed + 1``, ...) and
         the worst (lowest ``P(|w_j| <= R)`` against p) is returned, every pose's in ``per_pose``.
     n, seed, batch, confidence, progress
         As for :func:`monte_carlo`.
@@ -192,6 +193,10 @@ def validate(
         designed = getattr(getattr(tolerances_or_result, "spec", None), "poses", None)
         if designed:  # a result: the poses it was designed at
             pose = list(designed.values())
+        else:  # plain tolerances: the pose a design is made at by default, as synthesize takes it
+            from tolsynth.analysis.design_pose import default_design_pose
+
+            pose = default_design_pose(mechanism)[0]
     if isinstance(pose, list) and pose and not all(is_real(v) for v in pose):
         runs = [
             validate(mechanism, tol, R, p, distribution, q, n, seed + k, batch, confidence, progress, Phi)
