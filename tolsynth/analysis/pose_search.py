@@ -244,8 +244,9 @@ def worst_pose(
         ``max_grid_points``).
     reference : str, array or None
         Configuration reported beside the result: a configuration name, joint values (rad), or
-        None for none.  Default: the model's reference pose (its ``worst`` configuration if it
-        has one, else none; :func:`tolsynth.kinematics.joint_space.model_reference`).
+        None for none.  Default: the model's reference pose (a parallel robot's ``home``, else its
+        ``worst`` configuration if it has one, else none;
+        :func:`tolsynth.kinematics.joint_space.model_reference`).
     fixed : dict, optional
         Joint name -> value (rad) to hold in addition to the invariant joints.
     starts : int

@@ -206,7 +206,8 @@ def probability_map(
     reference : str, array or None
         Configuration to start the continuation from and to mark: a configuration name, joint
         values (rad), or None (start from the joints' zeros, clipped into the limits, and mark
-        nothing).  Default: the model's reference pose (its ``worst`` if it has one, else none).
+        nothing).  Default: the model's reference pose (a parallel robot's ``home``, else its
+        ``worst`` if it has one, else none).
     seeds : int
         Quasi-random seeds for points not reached by continuation.
     check_points : int

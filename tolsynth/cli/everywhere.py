@@ -29,7 +29,7 @@ def add_everywhere_arguments(p) -> None:
         default=None,
         help="with --everywhere: the pose the exchange method starts from: NAME, none (the search's "
         "worst pose at mid-bound tolerances), or joint values in deg (a strut or slide in mm); default: the model's "
-        "reference pose (its 'worst' configuration if it has one, else none)",
+        "reference pose (a parallel robot's 'home', else its 'worst' configuration if it has one, else none)",
     )
     p.add_argument(
         "--max-rounds",

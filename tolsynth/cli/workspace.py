@@ -35,7 +35,7 @@ __all__ = ["register"]
 
 REFERENCE_HELP = (
     "reference pose: a configuration NAME, none, or joint values in deg (a strut or slide in mm), comma-separated; "
-    "default: the model's reference pose (its 'worst' configuration if it has one, else none)"
+    "default: the model's reference pose (a parallel robot's 'home', else its 'worst' configuration if it has one, else none)"
 )
 
 
