@@ -402,3 +402,32 @@ def test_cli_report_takes_probability_and_verify(tmp_path, capsys):
     exact = tolsynth.synthesize("planar_2r", 0.5, 0.9, probability="exact")
     assert "| probability model | exact" in text and f"{exact.cost:.8g}" in text
     _assert_exact_certificate_stated(text, exact)
+
+
+def test_linear_model_column_is_in_the_designs_own_reading(tmp_path, xu_report):
+    """The Monte Carlo table's linear-model column: for an exact design, the linear model's exact
+    probabilities along the principal directions (checked by sampling the linear model, 400 000
+    draws of the uniform errors); for a Gaussian design, 2 Phi(R / sigma_j) - 1 with sigma_j from
+    NumPy's eigenvalues of the covariance."""
+    m, rep_g, text_g = xu_report
+    rng = np.random.default_rng(5)
+    for rep, text in ((rep_g, text_g), (None, None)):
+        if rep is None:
+            path = tmp_path / "exact.html"
+            rep = tolsynth.report(m, R=0.5, p=0.99, mc_samples=N_MC, seed=1, map_n=0, worst_grid=0, path=path)
+            text = path.read_text(encoding="utf-8")
+        table = _table_with(_parse(text), "probability")
+        res, (label, _) = rep.result, rep.validations[0]
+        exact = res.probability_kind == "exact"
+        assert table[0][4] == "linear model, " + ("exact" if exact else "Gaussian")
+        A = np.asarray(m.sensitivity(res.spec.poses[label]))[:3] * res.x
+        lam, vec = np.linalg.eigh(A @ A.T / 3.0)  # uniform errors: variance eps^2 / 3
+        lam, vec = lam[::-1], vec[:, ::-1]
+        printed = np.array([float(table[1 + j][4]) for j in range(3)])
+        if exact:
+            Y = rng.uniform(-1.0, 1.0, (400_000, A.shape[1]))
+            ref = np.mean(np.abs(Y @ (A.T @ vec)) <= 0.5, axis=0)
+            assert np.all(np.abs(printed - ref) <= 5 * np.sqrt(ref * (1 - ref) / 4e5) + 1e-5), (printed, ref)
+        else:
+            ref = np.array([math.erf(0.5 / math.sqrt(2 * s2)) for s2 in lam])
+            assert np.allclose(printed, ref, atol=6e-6), (printed, ref)

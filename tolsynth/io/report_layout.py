@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from tolsynth.io.report_certificate import certificate_blocks
+from tolsynth.io.report_certificate import certificate_blocks, exact_certificate
 
 PLOT_INSTALL = 'pip install "tolsynth[plot]"'
 
@@ -17,32 +17,6 @@ def _is_exact(res) -> bool:
     """Whether ``res`` was designed with ``probability="exact"``."""
     return (getattr(res, "inputs", None) or {}).get("probability") == "exact" or any(
         b.kind.endswith("(exact)") for b in res.constraints
-    )
-
-
-def _exact_certificate(res, spec, rel: float) -> tuple:
-    """What an exact-probability design's certificate proves, read from the result itself (its
-    success, gap and message), so that the report never claims more than the solver proved."""
-    said = f"The solver says: {res.status}: {res.message}"
-    if spec.criterion == "sphere":
-        return (
-            "note",
-            "Exact probabilities, sphere criterion: the problem is not known to be convex, so the gap is "
-            "no certificate of global optimality; the lower bound is the certified optimum of the "
-            f"per-component problem at the same p (the sphere lies in every slab). {said}",
-        )
-    if res.success:
-        return (
-            "ok",
-            f"Exact probabilities, certified optimum: every direction of every pose is proven to meet p "
-            f"(to 1e-7), the feasible set is convex (independent errors with symmetric log-concave "
-            f"densities), and the lower bound leaves a gap of {rel:.1e} of the cost: no tolerances inside "
-            f"the bounds meet the specification at a lower cost (to that margin). {said}",
-        )
-    return (
-        "note",
-        f"Exact probabilities, NOT certified: the numbers are the solver's last design and the lower "
-        f"bound is not proven tight. {said}",
     )
 
 
@@ -241,7 +215,7 @@ def _layout(rep) -> list[tuple]:
         )
     )
     if _is_exact(res):
-        B.append(_exact_certificate(res, spec, rel))
+        B.append(exact_certificate(res, spec, rel))
     elif spec.criterion == "sphere":
         B.append(
             (
@@ -349,6 +323,8 @@ def _layout(rep) -> list[tuple]:
         )
         rows = []
         sphere = spec.criterion == "sphere"  # then the sphere is the specification, the components are not
+        # the linear model in the design's own reading: exact probabilities for an exact design
+        lin_P, lin_sphere = rep.linear_exact.get(lbl, (v.p_components_analytic, v.p_sphere_analytic))
         for j in range(3):
             lo, hi = v.p_components_ci[j]
             rows.append(
@@ -357,7 +333,7 @@ def _layout(rep) -> list[tuple]:
                     "-" if sphere else f"{v.p:g}",
                     f"{v.p_components[j]:.5f}",
                     f"[{lo:.5f}, {hi:.5f}]",
-                    f"{v.p_components_analytic[j]:.5f}",
+                    f"{lin_P[j]:.5f}",
                     "-" if sphere else _verdict(v.p_components[j], hi, v.p),
                 ]
             )
@@ -368,7 +344,7 @@ def _layout(rep) -> list[tuple]:
                 f"{v.p:g}" if sphere else "-",
                 f"{v.p_sphere:.5f}",
                 f"[{lo:.5f}, {hi:.5f}]",
-                f"{v.p_sphere_analytic:.5f}",
+                f"{lin_sphere:.5f}" if math.isfinite(lin_sphere) else "-",
                 _verdict(v.p_sphere, hi, v.p)
                 if sphere
                 else ("reaches p" if v.sphere_met else "below p (the sphere is stricter than Eq. 20)"),
@@ -402,7 +378,14 @@ def _layout(rep) -> list[tuple]:
         B.append(
             (
                 "table",
-                ["probability", "asked", "Monte Carlo", f"{pct} % interval", "linear model", "verdict"],
+                [
+                    "probability",
+                    "asked",
+                    "Monte Carlo",
+                    f"{pct} % interval",
+                    "linear model, " + ("exact" if lbl in rep.linear_exact else "Gaussian"),
+                    "verdict",
+                ],
                 rows,
                 [False, True, True, True, True, False],
                 f"R = {v.R:g} mm"

@@ -76,6 +76,10 @@ class DesignReport:
         Seconds spent gathering (solve included when :func:`report` solved).
     workspace : WorkspaceSynthesis or None
         The workspace design the report was made of (its certified exchange shown), if one was given.
+    linear_exact : dict
+        For a design in exact probabilities: pose label -> the linear error model's exact
+        ``P(|w_j| <= R)`` along the three principal directions and its exact ``P(|dr| <= R)``,
+        shown beside the Monte Carlo values (a Gaussian design shows its Gaussian reading there).
     """
 
     mechanism: Any
@@ -91,6 +95,7 @@ class DesignReport:
     process_choice: Any = None
     workspace: Any = None
     worst_judged: dict | None = None
+    linear_exact: dict = field(default_factory=dict)
     created: str = field(default_factory=lambda: _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"))
 
     # ------------------------------------------------------------------ layout
@@ -334,7 +339,7 @@ def report(
     from tolsynth.analysis.contributions import contributions
 
     contrib = contributions(result)
-    validations = []
+    validations, linear_exact = [], {}
     if mc_samples == 0:
         skipped["montecarlo"] = "switched off (mc_samples = 0)"
     elif not result.feasible:
@@ -356,6 +361,8 @@ def report(
                 Phi=spec.Phi,
             )  # p: as asked, not the loop's target
             validations.append((label, v))
+            if result.probability_kind == "exact":
+                linear_exact[label] = _exact_linear(mech, result, q)
     pmap = None
     if map_n == 0:
         skipped["map"] = "switched off (map_n = 0)"
@@ -425,10 +432,25 @@ def report(
         processes=procs,
         process_choice=choice,
         workspace=workspace,
+        linear_exact=linear_exact,
     )
     if path is not None:
         rep.write(path, format)
     return rep
+
+
+def _exact_linear(mech, result, q) -> tuple:
+    """The linear error model's exact probabilities at ``q``: ``P(|w_j| <= R)`` along the principal
+    directions (the Monte Carlo table's components) and ``P(|dr| <= R)``."""
+    from tolsynth.probability.exact import components_probability
+    from tolsynth.probability.exact_sphere import ball_probability
+
+    spec = result.spec
+    A = np.asarray(mech.sensitivity(np.asarray(q, dtype=float), check_limits=False))[:3]
+    P, _ = components_probability(A, result.x, spec.shapes, spec.R)
+    # shown to 5 decimals: an error estimate within 5e-6 is enough, a larger one leaves the cell empty
+    ball, err = ball_probability(A, result.x, spec.shapes, spec.R, tol=1e-6, return_error=True)
+    return np.asarray(P, dtype=float), float(ball) if err <= 5e-6 else float("nan")
 
 
 def _judge_worst(mech, result, worst, exact: bool, sphere: bool) -> dict:
