@@ -41,3 +41,19 @@ def test_budget_errors(mech):
         best_accuracy(mech, -1.0, p=0.99, probability="gaussian")
     with pytest.raises(tolsynth.InfeasibleSpecificationError, match="budget"):
         best_accuracy(mech, 1e-3, p=0.99, probability="gaussian")
+
+
+def test_a_budget_inside_a_solves_gap_is_still_bracketed():
+    """stewart_gough, exact reading: the bisection reaches R = 0.98588562 mm, whose solve's cost
+    (188.717974) and lower bound (188.717928) straddle the budget 188.717951264. The bracket is then
+    closed by two solves just past that gap; fresh solves at its ends confirm it (the upper end's
+    design fits the budget, the lower end's lower bound exceeds it)."""
+    m = tolsynth.load_model("stewart_gough")
+    budget = 188.717951264
+    out = best_accuracy(m, budget, p=0.99, rtol=1e-3)
+    assert out.certified, out.log[-3:]
+    assert any(e["verdict"] == "unknown" for e in out.log)  # the case this test is about
+    lo, hi = out.bracket
+    assert hi / lo - 1 <= 1e-3
+    assert tolsynth.synthesize(m, hi, 0.99).cost <= budget
+    assert tolsynth.synthesize(m, lo, 0.99).lower_bound > budget

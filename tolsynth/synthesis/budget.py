@@ -162,7 +162,20 @@ def best_accuracy(
         mid = 0.5 * (good + bad)
         v, res = verdict(*spec(mid))
         if v == "unknown":
-            certified = False
+            # the budget lies within this solve's gap, so the answer lies within about the gap's
+            # worth of x of mid: two solves that far to either side decide the bracket there
+            slope = _slope(log, to_x, p is not None)
+            if slope is None or not slope > 0:
+                certified = False
+                break
+            delta = 4.0 * (res.cost - res.lower_bound) / slope + 1e-12 * max(1.0, abs(mid))
+            toward_good = delta if good > bad else -delta
+            v_good, r_good = verdict(*spec(mid + toward_good))
+            v_bad, _ = verdict(*spec(mid - toward_good))
+            if v_good != "buys" or v_bad != "cannot":
+                certified = False
+                break
+            good, good_res, bad = mid + toward_good, r_good, mid - toward_good
             break
         if v == "buys":
             good, good_res = mid, res
@@ -180,3 +193,17 @@ def best_accuracy(
         wall_time=time.perf_counter() - t0,
         log=log,
     )
+
+
+def _slope(log: list, to_x, in_R: bool) -> float | None:
+    """The cost's fall per unit of x (ln R, or logit p with the sign turned) between the two solves
+    of the log nearest the last one: what a budget straddled by a solve's gap needs to step past it."""
+    pts = [(to_x(e["R"] if in_R else e["p"]), e["cost"]) for e in log[:-1] if "cost" in e]
+    if len(pts) < 2:
+        return None
+    last = to_x(log[-1]["R"] if in_R else log[-1]["p"])
+    (x1, c1), (x2, c2) = sorted(pts, key=lambda t: abs(t[0] - last))[:2]
+    if x1 == x2:
+        return None
+    s = (c1 - c2) / (x1 - x2)
+    return -s if in_R else s  # cost falls as R grows, rises as p grows
