@@ -36,11 +36,11 @@ from tolsynth.analysis.certify_parallel import worker_count
 from tolsynth.analysis.certify_structure import structure
 from tolsynth.analysis.interval_ops import round_down as _dn
 from tolsynth.analysis.interval_ops import round_up as _up
-from tolsynth.checks import check_count, check_positive
+from tolsynth.checks import check_count, check_positive, check_probability, check_real
 from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.progress import Progress, remaining
 
-__all__ = ["Certificate", "certify_worst_pose", "DEFAULT_RTOL", "DEFAULT_MAX_BOXES"]
+__all__ = ["Certificate", "certify_worst_pose", "check_limits", "LIMITS", "DEFAULT_RTOL", "DEFAULT_MAX_BOXES"]
 
 #: relative gap between the certified bound and the best value found (sigma criterion)
 DEFAULT_RTOL = 5e-4
@@ -61,7 +61,11 @@ class Certificate:
         from the sigma bound; the default with ``criterion="sigma"``) or the exact distribution
         of the linear model (the default with ``criterion="components"``).
     certified : bool
-        The bound is proven and the best pose found is within the tolerance of it.
+        Without a ``target``: the bound is proven and the best pose found is within the tolerance
+        of it.  With one: the target is proven (``upper_bound <= target``, or
+        ``probability_lower_bound >= target`` for the exact criterion), nothing else; a pose found
+        past the target, or a bound that stops short of it, leaves it False and ``reason`` says
+        which (the pose and its value).
     upper_bound : float or None
         Proven upper bound of the largest principal standard deviation over the joint space (mm);
         None for the exact criterion.
@@ -77,6 +81,9 @@ class Certificate:
         Boxes bounded, and left undecided at the end.
     reason : str
         Why not certified ("" when certified).
+    target : float or None
+        The decision asked (:func:`certify_worst_pose`'s ``target``: sigma_1 in mm, or the exact
+        probability), None for the tightest bound.
     held : dict
         Joint name -> why it was held (it cannot change the criterion).
     half_turn : tuple of str
@@ -129,6 +136,7 @@ class Certificate:
     method: str = ""
     history: tuple = ()
     leaves: tuple | None = None
+    target: float | None = None
 
     @property
     def gap(self) -> float:
@@ -167,9 +175,50 @@ class Certificate:
             lines.append("  searched over half a turn (the other half the same, proven): " + ", ".join(self.half_turn))
         for sym, joint in self.symmetries:
             lines.append(f"  {joint} searched over half its range: the rest is the image of it under {sym} (proven)")
+        if self.target is not None:
+            goal = (
+                f"sigma_1 <= {self.target:.9g} mm"
+                if self.criterion == "sigma"
+                else f"every component probability >= {self.target:.12g}"
+            )
+            lines.append(f"  target {goal} everywhere: " + ("proven" if self.certified else "NOT proven"))
         if self.dropped:
             lines.append("  no effect on the hand position: " + ", ".join(self.dropped))
         return "\n".join(lines)
+
+
+#: the certified search's limits a caller may set, here and in the certified exchange's
+#: ``certify_options`` (:func:`tolsynth.synthesize_workspace`)
+LIMITS = ("rtol", "tol", "max_boxes", "time_limit", "workers")
+
+
+def check_limits(field=lambda key: key, **limits) -> dict:
+    """The limits of :data:`LIMITS` given, each checked by its one rule (None: the default, kept
+    None), so that :func:`certify_worst_pose` and the callers that pass them on refuse the same
+    values before any work; ``field(key)`` names an offending one.  ``time_limit`` is seconds
+    > 0 (None: none; 0 is refused, not read as none); ``max_boxes`` and ``workers`` are counts
+    >= 1, not bools."""
+    out = {}
+    for key, v in limits.items():
+        f = field(key)
+        if key not in LIMITS:
+            raise InputError(f, f"unknown limit {key!r}", ", ".join(LIMITS))
+        if v is None:
+            out[key] = None
+        elif key == "rtol":
+            out[key] = check_positive(v, f, "relative", upper=0.5, lower=1e-12)
+        elif key == "tol":
+            out[key] = check_positive(v, f, "probability", upper=0.5)
+        elif key == "max_boxes":
+            out[key] = check_count(v, f, 1, 10**9)
+        elif key == "time_limit":
+            try:
+                out[key] = check_positive(v, f, "s")
+            except InputError as e:  # the same type, with None named among the allowed values
+                raise type(e)(f, f"got {v!r}", "a number of seconds > 0, or None for no limit") from None
+        else:
+            out[key] = worker_count(v, f)
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -217,7 +266,7 @@ def certify_worst_pose(
     tol : float, optional
         Absolute gap in probability (exact criterion; default 2e-7).
     max_boxes : int
-        Boxes to bound before giving up.
+        Boxes to bound before giving up, >= 1 (None: :data:`DEFAULT_MAX_BOXES`).
     x0 : array_like, optional
         Poses (rad, every joint) to evaluate first, e.g. the poses already known to be bad.
     base_q : array_like, optional
@@ -226,11 +275,14 @@ def certify_worst_pose(
     progress : None, bool or callable
         A progress bar on stderr (None: on a terminal, for runs over a couple of seconds).
     time_limit : float, optional
-        Seconds; also any enclosing :func:`tolsynth.progress.time_limit` block.
+        Seconds, > 0 (None: no limit of its own); also any enclosing
+        :func:`tolsynth.progress.time_limit` block.
     target : float, optional
         A decision: prove sigma_1 <= target (mm) everywhere (sigma), or the probability >= target
-        (exact components), not the tightest bound; ``certified`` then means the target is proven,
-        and the bound returned lies between the best value and the target.
+        (exact components), not the tightest bound.  ``certified`` then means the target is
+        proven and nothing else: a pose found past it (sigma_1 above it, the probability below
+        it) disproves it, and ``reason`` names that pose and its value.  Proven, the bound returned
+        lies between the best value and the target.  The Certificate records it (``target``).
     stop_at : float, optional
         Stop as soon as a pose worse than this is found (sigma above it, probability below it).
     keep_boxes : bool
@@ -280,9 +332,21 @@ def certify_worst_pose(
             "'exact' is a reading of the per-component probability",
             "criterion='components' with probability='exact', or probability='gaussian'",
         )
-    max_boxes = check_count(max_boxes, "max_boxes", 1, 10**9)
-    workers = worker_count(workers)
-    rtol = DEFAULT_RTOL if rtol is None else check_positive(rtol, "rtol", "relative", upper=0.5, lower=1e-12)
+    if criterion == "components" and probability == "gaussian" and (target is not None or stop_at is not None):
+        raise InputError(
+            "target" if target is not None else "stop_at",
+            "given with the Gaussian per-component probability",
+            "criterion='sigma' with a target in mm",
+        )
+    if target is not None:
+        target = check_positive(target, "target", "mm") if criterion == "sigma" else check_probability(target, "target")
+    if stop_at is not None:
+        stop_at = check_real(stop_at, "stop_at")
+    lim = check_limits(rtol=rtol, tol=tol, max_boxes=max_boxes, time_limit=time_limit, workers=workers)
+    rtol = DEFAULT_RTOL if lim["rtol"] is None else lim["rtol"]
+    tol, time_limit = lim["tol"], lim["time_limit"]
+    max_boxes = DEFAULT_MAX_BOXES if lim["max_boxes"] is None else lim["max_boxes"]
+    workers = worker_count(lim["workers"])
     distribution = resolve(distribution, mech)
     eps = mech.tolerances(tolerances)
     st = structure(mech)
@@ -303,7 +367,7 @@ def certify_worst_pose(
         if X0.shape[1] != nq:
             raise InputError("x0", f"shape {X0.shape}", f"poses of {nq} joint values (rad)")
         seeds = dom.fold(X0[:, dom.free])
-    deadline = time.monotonic() + (check_positive(time_limit, "time_limit", "s") if time_limit else math.inf)
+    deadline = time.monotonic() + (math.inf if time_limit is None else time_limit)
 
     def stop():
         if remaining() <= 0 or time.monotonic() > deadline:
@@ -334,12 +398,6 @@ def certify_worst_pose(
                 sdom = sheared(mech, dom)
                 if sdom is not dom:
                     bounds, method = sigma_bounds(st, sdom, nq, w)
-            if criterion == "components" and (target is not None or stop_at is not None):
-                raise InputError(
-                    "target",
-                    "given with the Gaussian per-component probability",
-                    "criterion='sigma' with a target in mm",
-                )
             polygons = isinstance(bounds, PolygonSigmaBounds)
             r = maximize(
                 (lambda L, H, level=None: _with_split(bounds.bound(L, H, level)))
@@ -416,6 +474,8 @@ def certify_worst_pose(
             cert["upper_bound"] = None
     finally:
         bar.close()
+    if target is not None:
+        _decide(cert, target, criterion == "sigma", mech.format_joints(q))
     return Certificate(
         model=mech.name,
         criterion=criterion,
@@ -434,8 +494,36 @@ def certify_worst_pose(
         method=method,
         history=tuple(history),
         leaves=_leaves(leaves, len(dom.free), sign),
+        target=target,
         **cert,
     )
+
+
+def _decide(cert: dict, target: float, sigma: bool, pose: str) -> None:
+    """With a target the search answers a decision, and ``certified`` says whether the target is
+    proven: the branch and bound's own flag says only that its search ended decided or within its
+    tolerance of the maximum, which a pose past the target also ends with."""
+    best = cert["best_value"]
+    if sigma:
+        proven, past = cert["upper_bound"] <= target, best > target
+        found, bound = f"sigma_1 = {best:.9g} mm > {target:.9g} mm", f"{cert['upper_bound']:.9g} mm"
+    else:
+        proven, past = cert["probability_lower_bound"] >= target, best < target
+        found, bound = f"P = {best:.12g} < {target:.12g}", f"P >= {cert['probability_lower_bound']:.12g}"
+    if proven:
+        cert.update(certified=True, reason="")
+    elif past:
+        cert.update(certified=False, reason=f"the target is exceeded: {found} at the pose {pose}")
+    else:
+        cert.update(
+            certified=False,
+            reason=f"the target is not proven: the bound reached is {bound}, and no pose past the target was found"
+            + (
+                f" ({cert['reason']})"
+                if cert["reason"]
+                else f" (the search closed its tolerance first; a smaller {'rtol' if sigma else 'tol'} may decide it)"
+            ),
+        )
 
 
 def _leaves(leaves, k, sign):

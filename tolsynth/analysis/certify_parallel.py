@@ -36,6 +36,8 @@ import time
 import traceback
 from multiprocessing.connection import wait
 
+import numpy as np
+
 from tolsynth.errors import InputError
 
 __all__ = ["SERIAL_SECONDS", "MAX_WORKERS", "worker_count", "run", "Shared", "fan_out", "Background"]
@@ -50,20 +52,21 @@ HALTED = "ended by another worker"
 POLL = 0.05
 
 
-def worker_count(workers) -> int:
+def worker_count(workers, field: str = "workers") -> int:
     """Processes for a search: ``None`` the cores this process may use (at most
     :data:`MAX_WORKERS`; 1 inside a worker process, whose siblings have the other cores), else an
-    integer >= 1 (1: the serial search alone); 1 where processes cannot be forked."""
+    integer >= 1 (1: the serial search alone; not a bool, which is no count); 1 where processes
+    cannot be forked."""
     if workers is None:
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
         n = 1 if multiprocessing.parent_process() is not None else min(cores or 1, MAX_WORKERS)
     else:
         try:
-            n = int(workers)
-        except (TypeError, ValueError):
+            n = 0 if isinstance(workers, (bool, np.bool_)) else int(workers)
+        except (TypeError, ValueError, OverflowError):
             n = 0
         if n < 1 or n != workers:
-            raise InputError("workers", f"got {workers!r}", "None (the machine's cores) or an integer >= 1")
+            raise InputError(field, f"got {workers!r}", "None (the machine's cores) or an integer >= 1")
     if n > 1 and "fork" not in multiprocessing.get_all_start_methods():
         return 1  # the workers inherit the compiled programs: without fork they would rebuild them
     return n

@@ -267,8 +267,10 @@ def worst_pose(
         probabilities of the linear error model (the default there, as :func:`tolsynth.synthesize`
         reads them), or the paper's Gaussian reading.
     rtol, max_boxes, progress, time_limit
-        Of the certified search (relative gap, box limit, progress bar, seconds): a limit reached
-        leaves ``certified`` False with the bound reached, which holds, only looser.
+        Of the certified search (relative gap, box limit >= 1, progress bar, seconds > 0; None:
+        the defaults, 400 000 boxes and no time limit): a limit reached leaves ``certified`` False
+        with the bound reached, which holds, only looser.  ``rtol``, ``max_boxes``,
+        ``time_limit`` and ``workers`` without ``certify=True`` raise an ``InputError``.
     workers : int, optional
         Processes of the certified search (default: the cores this process may use; 1: one).
 
@@ -311,6 +313,15 @@ def worst_pose(
             "per-component probability P(|u.dr| <= R) has one (criterion 'components')",
             "criterion 'components' (probability_lower_bound, with R) or 'sigma' (upper_bound, mm) with certify=True",
         )
+    limits = dict(rtol=rtol, max_boxes=max_boxes, time_limit=time_limit, workers=workers)
+    if certify:
+        from tolsynth.analysis.certify import check_limits
+
+        check_limits(**limits)  # before the sampled search, not after it
+    else:  # the certified search's limits would be ignored: say so
+        given = [key for key, v in limits.items() if v is not None]
+        if given:
+            raise InputError(given[0], "only used with certify=True", f"certify=True with {given[0]}, or no {given[0]}")
     from tolsynth.probability.distributions import resolve
 
     distribution = resolve(distribution, mechanism)
@@ -446,7 +457,7 @@ def worst_pose(
             R,
             probability,
             rtol=rtol,
-            max_boxes=max_boxes or 400_000,
+            max_boxes=max_boxes,
             x0=[q],
             base_q=base_q,
             progress=progress,

@@ -75,8 +75,9 @@ def synthesize_workspace(
     imposed poses unless the bound already meets the specification to ``tol`` (exact: the
     probability to ``p - 1e-6``); then ``certified`` is True.  When the round limit is reached, or
     the search cannot close its gap within its box limit, the result says so (``converged`` False,
-    ``reason``) with the bound reached.  ``certify_options``: ``rtol``, ``tol``, ``max_boxes``,
-    ``time_limit`` and ``workers`` (processes; default the cores) of each certified search (the
+    ``reason``) with the bound reached.  ``certify_options``: ``rtol``, ``tol``, ``max_boxes``
+    (>= 1), ``time_limit`` (seconds > 0, as ``--certify-time-limit``; 0 is refused, None is no
+    limit) and ``workers`` (processes, an integer >= 1; default the cores) of each certified search (the
     exact reading's on five or more searched joints, where its proof has not been seen to close,
     stops after :data:`EXACT_WIDE_SECONDS` unless a time or box limit is given), and
     ``margin`` (relative, default 0): design at ``R / (1 + margin)`` and prove at ``R``, and
@@ -105,6 +106,8 @@ def synthesize_workspace(
     search = check_mapping(search, "search", "keyword arguments of tolsynth.worst_pose")
     if certify_options and not certify:  # options of a search that would not run
         raise InputError("certify_options", "given without certify=True", "certify=True, or no certify_options")
+    if certify:  # before the first solve or search, not when the first certified search starts
+        _check_certify_options(certify_options)
     allowed = ("grid", "reference", "fixed", "starts", "step_tol", "max_grid_points", "seed")
     for key in search or {}:  # the search's own arguments; the others are set here
         if key not in allowed:
@@ -273,6 +276,21 @@ ROUNDS, SHARE_ROUNDS = 20, 30
 EXACT_WIDE_SECONDS = 120.0
 
 
+def _check_certify_options(options) -> dict:
+    """``certify_options`` as a dict, or a typed error naming the offending key: the certified
+    search's limits by their rules (:func:`tolsynth.analysis.certify.check_limits`: 0 seconds or
+    0 boxes refused, a bool is no count), ``margin`` and ``through``."""
+    from tolsynth.analysis.certify import LIMITS, check_limits
+
+    options = dict(check_mapping(options, "certify_options", "keyword arguments of the certified search") or {})
+    keys = LIMITS + ("margin", "through")
+    for key in options:
+        if key not in keys:
+            raise InputError("certify_options", f"unknown key {key!r}", ", ".join(keys))
+    check_limits(lambda key: f"certify_options[{key!r}]", **{k: v for k, v in options.items() if k in LIMITS})
+    return options
+
+
 def _certified_exchange(
     mechanism, R, p, z, distribution, alpha, poses, tol, max_rounds, options, progress, sphere, kwargs, sampled
 ) -> WorkspaceSynthesis:
@@ -294,11 +312,7 @@ def _certified_exchange(
             "criterion 'components' (the default) with certify=True",
         )
     check_certifiable(mechanism)  # at once, not after rounds of solves (and a warning about the proof)
-    options = dict(check_mapping(options, "certify_options", "keyword arguments of the certified search") or {})
-    keys = ("rtol", "tol", "max_boxes", "time_limit", "workers", "margin")
-    for key in options:
-        if key not in keys:
-            raise InputError("certify_options", f"unknown key {key!r}", ", ".join(keys))
+    options = _check_certify_options(options)
     margin = options.pop("margin", 0.0)
     margin = 0.0 if margin == 0 else check_positive(margin, "certify_options['margin']", "relative", upper=0.5)
     Rd = R / (1.0 + margin)  # the radius designed for; the proof is made at R
