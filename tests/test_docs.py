@@ -43,6 +43,8 @@ def test_every_page_with_code_is_tested_here():
 def test_units_block_runs():
     ns = run_blocks("units.md")
     assert ns["b"].cost == pytest.approx(ns["a"].cost, rel=1e-8)
+    np.testing.assert_allclose(ns["c"].spec.poses["#0"], [math.pi / 2, math.pi / 2], rtol=1e-15)  # 90 deg
+    assert ns["c"].cost == pytest.approx(ns["d"].cost, rel=1e-12)
 
 
 def test_index_block_runs():

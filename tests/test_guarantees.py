@@ -38,7 +38,7 @@ def planar():
         (lambda m: tolsynth.compare(m, 0.5, 0.99, options={"ipopt": "a"}), "options['ipopt']"),
         (lambda m: tolsynth.compare(m, 0.5, 0.99, options={"ipopt": {"warm_start": 1}}), "options['warm_start']"),
         (lambda m: m.tolerances({"l1": "a", "l2": 1, "o1": 1, "o2": 1}), "tolerances[l1]"),
-        (lambda m: m.fk(["a", "b"]), "q"),
+        (lambda m: m.fk(["a", "b"]), "q[q1]"),  # the first joint that is not an angle
         (lambda m: m.index(["l1"]), "error parameter"),
     ],
 )

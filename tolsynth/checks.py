@@ -97,10 +97,14 @@ def _as_float(x: Any, field: str, allowed: str, unit: str = "") -> float:
     return v
 
 
-def check_real(x: Any, field: str, unit: str = "", lower: float = -HUGE, upper: float = HUGE) -> float:
-    """``x`` as a float, or a typed error unless it is a finite number in ``[lower, upper]``."""
-    u = f" {unit}" if unit else ""
-    allowed = f"a finite number >= {lower:g} and <= {upper:g}{u}"
+def check_real(
+    x: Any, field: str, unit: str = "", lower: float = -HUGE, upper: float = HUGE, allowed: str | None = None
+) -> float:
+    """``x`` as a float, or a typed error unless it is a finite number in ``[lower, upper]``;
+    ``allowed`` says what the argument takes in place of that range (where the caller knows more)."""
+    if allowed is None:
+        u = f" {unit}" if unit else ""
+        allowed = f"a finite number >= {lower:g} and <= {upper:g}{u}"
     v = _as_float(x, field, allowed, unit)
     if not lower <= v <= upper:
         raise OutOfRangeError(field, f"got {x!r}", allowed)
@@ -158,31 +162,60 @@ def check_seed(seed: Any, field: str = "seed") -> int:
 
 
 def check_vector(
-    x: Any, field: str, size: int | None = None, unit: str = "", lower: float = -HUGE, upper: float = HUGE, names=None
+    x: Any,
+    field: str,
+    size: int | None = None,
+    unit: str = "",
+    lower: float = -HUGE,
+    upper: float = HUGE,
+    names=None,
+    units=None,
+    allowed: str | None = None,
 ) -> np.ndarray:
     """A 1-D float array of finite numbers in ``[lower, upper]`` (of length ``size`` if given);
-    an offending element is named ``field[names[i]]`` (or ``field[i]``)."""
+    an offending element is named ``field[names[i]]`` (or ``field[i]``).
 
-    def allowed() -> str:  # the message, built only for an error
-        u = f" {unit}" if unit else ""
+    ``units`` (one per element; else ``unit`` for all) is each element's unit: an element of a
+    list given as a string with a unit suffix (``["30deg", "90deg"]``) is converted to it, the
+    units rule of :mod:`tolsynth.units`.  ``allowed`` says what the argument takes in place of
+    the range (where the caller knows more)."""
+
+    def _allowed() -> str:  # the message, built only for an error
+        if allowed is not None:
+            return allowed
+        if units is not None and len(set(units)) > 1:
+            u = " (" + ", ".join(units) + ")"
+        else:
+            u = f" {units[0] if units else unit}" if (units or unit) else ""
         return f"{size if size is not None else 'some'} finite numbers >= {lower:g} and <= {upper:g}{u}"
 
     if isinstance(x, (str, bytes)) or x is None:
-        raise InputError(field, f"expected numbers, got {x!r}", allowed())
+        raise InputError(field, f"expected numbers, got {x!r}", _allowed())
+    if isinstance(x, np.ndarray) and x.ndim == 1 and x.dtype.kind in "UO":
+        x = x.tolist()
+    if isinstance(x, (list, tuple)) and any(isinstance(v, str) for v in x):
+        if units is not None and len(x) != len(units):
+            raise InputError(field, f"expected {len(units)} values, got {len(x)}", _allowed())
+        x = [
+            _as_float(v, f"{field}[{names[i] if names is not None else i}]", _allowed(), units[i] if units else unit)
+            if isinstance(v, str)
+            else v
+            for i, v in enumerate(x)
+        ]
     try:
         arr = np.asarray(x, dtype=float)
     except (TypeError, ValueError, OverflowError):
-        raise InputError(field, f"expected numbers, got {x!r}", allowed()) from None
+        raise InputError(field, f"expected numbers, got {x!r}", _allowed()) from None
     if arr.ndim > 1 and arr.size == max(arr.shape):
         arr = arr.ravel()
     if arr.ndim != 1 or (size is not None and arr.shape != (size,)):
         raise InputError(
-            field, f"expected {size if size is not None else 'a vector of'} values, got shape {arr.shape}", allowed()
+            field, f"expected {size if size is not None else 'a vector of'} values, got shape {arr.shape}", _allowed()
         )
     bad = ~(np.isfinite(arr) & (arr >= lower) & (arr <= upper))
     if bad.any():
         i = int(bad.nonzero()[0][0])
-        raise OutOfRangeError(f"{field}[{names[i] if names is not None else i}]", f"got {float(arr[i])!r}", allowed())
+        raise OutOfRangeError(f"{field}[{names[i] if names is not None else i}]", f"got {float(arr[i])!r}", _allowed())
     return arr
 
 

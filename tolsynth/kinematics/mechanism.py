@@ -343,6 +343,9 @@ class Mechanism:
     def joints(self, q: JointInput, check_limits: bool = True) -> np.ndarray:
         """Joint vector (rad) from a configuration name or values, checked against the limits.
 
+        Values may be strings with a unit suffix (``["30deg", "90deg"]``), converted to each
+        joint's unit (:attr:`joint_value_units`: rad, or mm for a joint that slides).
+
         A named configuration may waive limits it declares (the paper's ``worst`` pose lies 0.33
         deg past the interference limit); the same joint values passed as an array get the same
         waiver.  Any other violation raises :class:`OutOfRangeError` naming the joint.
@@ -360,7 +363,8 @@ class Mechanism:
             waive = self.spec.configurations[q].waive
             qv = self.configurations[q].copy()
         else:
-            qv = check_vector(q, "q", len(self.joint_names), "rad", names=self.joint_names)
+            # "30deg" in a list: each joint in its own unit (rad, or mm for a joint that slides)
+            qv = check_vector(q, "q", len(self.joint_names), names=self.joint_names, units=self.joint_value_units)
             for cfg in self.spec.configurations.values():
                 if cfg.waive and np.array_equal(qv, np.array(cfg.q)):
                     waive = cfg.waive
@@ -403,20 +407,23 @@ class Mechanism:
             return out
         if isinstance(deltas, Mapping):
             for name, value in deltas.items():
-                out[self.index(name, f"deltas[{name}]")] = check_real(value, f"deltas[{name}]", "tolerance units")
+                i = self.index(name, f"deltas[{name}]")
+                out[i] = check_real(value, f"deltas[{name}]", self.units[i])
         else:
-            out[:] = check_vector(deltas, "deltas", self.n, "tolerance units", names=self.error_parameters)
+            out[:] = check_vector(deltas, "deltas", self.n, names=self.error_parameters, units=self.units)
         return out
 
-    def tolerances(self, tolerances: ToleranceInput) -> np.ndarray:
+    def tolerances(self, tolerances: ToleranceInput, field: str = "tolerances") -> np.ndarray:
         """Tolerance half-widths (tolerance units) from a set name, a dict (all names) or a vector.
 
-        Raises for an unknown set or name, a missing parameter, or a negative value.
+        A value may be a string with a unit suffix (``{"l1": "50um"}``), converted to its
+        parameter's tolerance unit (:attr:`units`).  Raises for an unknown set or name, a missing
+        parameter, or a negative value, naming ``field`` (the argument they came in, e.g. ``"x0"``).
         """
         if isinstance(tolerances, str):
             if tolerances not in self.tolerance_sets:
                 raise UnknownNameError(
-                    "tolerances",
+                    field,
                     f"unknown tolerance set {tolerances!r}",
                     "one of " + (", ".join(self.tolerance_sets) or "(none in this model)"),
                 )
@@ -425,18 +432,16 @@ class Mechanism:
             out = np.zeros(self.n)
             given = np.zeros(self.n, dtype=bool)
             for name, value in tolerances.items():
-                i = self.index(name, f"tolerances[{name}]")
+                i = self.index(name, f"{field}[{name}]")
                 if given[i]:
-                    raise InputError(
-                        f"tolerances[{name}]", "given twice (by name and alias)", "one value per parameter"
-                    )
-                out[i] = check_real(value, f"tolerances[{name}]", "tolerance units", 0.0, HUGE)
+                    raise InputError(f"{field}[{name}]", "given twice (by name and alias)", "one value per parameter")
+                out[i] = check_real(value, f"{field}[{name}]", self.units[i], 0.0, HUGE)
                 given[i] = True
             missing = [self.error_parameters[i] for i in np.flatnonzero(~given)]
             if missing:
-                raise InputError("tolerances", f"missing value(s) for {missing}", "a value for every error parameter")
+                raise InputError(field, f"missing value(s) for {missing}", "a value for every error parameter")
         else:
-            out = check_vector(tolerances, "tolerances", self.n, "tolerance units", 0.0, HUGE, self.error_parameters)
+            out = check_vector(tolerances, field, self.n, "", 0.0, HUGE, self.error_parameters, units=self.units)
         return out
 
     # ------------------------------------------------------------------ kinematics

@@ -259,8 +259,9 @@ def shapes_of(distribution, names: Sequence[str], index=None) -> tuple[Shape, ..
     """One :class:`Shape` per parameter from ``distribution``: a shape name for all of them, or a
     mapping ``name -> shape`` (``"*"`` sets the default of the others, else ``"uniform"``).
 
-    ``index`` maps a parameter name to its position (a mechanism's ``index``, which raises a typed
-    error for an unknown name); default: exact names.
+    ``index(name, field)`` maps a parameter name to its position (a mechanism's ``index``, which
+    raises a typed error naming ``field``, here ``distribution[name]``, for an unknown name);
+    default: exact names.
     """
     names = list(names)
     if isinstance(distribution, (list, tuple)) and not isinstance(distribution, str):
@@ -292,7 +293,7 @@ def shapes_of(distribution, names: Sequence[str], index=None) -> tuple[Shape, ..
                     raise InputError(f"distribution[{key}]", "unknown parameter", ", ".join(names))
                 i = names.index(key)
             else:
-                i = index(key)
+                i = index(key, f"distribution[{key}]")
             try:
                 out[i] = shape(value)
             except OutOfRangeError as exc:

@@ -32,6 +32,15 @@ __all__ = [
 CRITERIA = ("components", "sphere")
 #: largest cost exponent: k eps**-alpha stays finite for eps >= 1e-12 (the paper: alpha <= 1)
 ALPHA_MAX = 10.0
+#: what alpha and k take, said by every error about them (type or range)
+ALPHA_ALLOWED = (
+    f"the cost's exponent, {TINY:g} <= alpha <= {ALPHA_MAX:g} (the paper: alpha <= 1, typically 0.7): "
+    "a number, a dict name -> number, or one number per parameter"
+)
+K_ALLOWED = (
+    f"the cost factor, {TINY:g} <= k <= {HUGE:g} (the paper: k >= 1): "
+    "a number, a dict name -> number (the others the model's), or one number per parameter"
+)
 SPHERE_NODES = 24  # Gauss-Legendre nodes in v_z (twice as many in the azimuth); refined if needed
 
 
@@ -127,11 +136,14 @@ class Specification:
 # ---------------------------------------------------------------------------------------------
 # validation of the user's specification
 # ---------------------------------------------------------------------------------------------
-def _per_parameter(value, names: Sequence[str], index, field_name: str, default=None) -> np.ndarray:
+def _per_parameter(value, names: Sequence[str], index, field_name: str, allowed: str, default=None) -> np.ndarray:
+    """One number per parameter from one number, a dict name -> number (the others ``default``)
+    or a vector; ``allowed`` (what the argument takes) goes into every error (the caller checks
+    each value's range)."""
     n = len(names)
     if value is None:
         if default is None:
-            raise InputError(field_name, "missing", f"a number or {n} numbers")
+            raise InputError(field_name, "missing", allowed)
         if isinstance(default, np.ndarray) and default.shape == (n,):  # the model's own (checked on load)
             return np.array(default, dtype=float)
         value = default
@@ -140,16 +152,16 @@ def _per_parameter(value, names: Sequence[str], index, field_name: str, default=
     if isinstance(value, Mapping):
         out = np.array(default, dtype=float).copy() if default is not None else np.full(n, np.nan)
         for key, v in value.items():
-            out[index(key, f"{field_name}[{key}]")] = check_real(v, f"{field_name}[{key}]")
+            out[index(key, f"{field_name}[{key}]")] = check_real(v, f"{field_name}[{key}]", allowed=allowed)
         if np.any(np.isnan(out)):
             missing = ", ".join(nm for nm, v in zip(names, out) if np.isnan(v))
             raise InputError(field_name, f"no value for {missing}", f"a value for each of {', '.join(names)}")
         return out
     if np.ndim(value) == 0:
-        return np.full(n, check_real(value, field_name))
-    arr = check_vector(value, field_name, n)
+        return np.full(n, check_real(value, field_name, allowed=allowed))
+    arr = check_vector(value, field_name, n, names=names, allowed=allowed)
     if arr.shape != (n,):
-        raise InputError(field_name, f"expected {n} values, got shape {arr.shape}", f"a number or {n} numbers")
+        raise InputError(field_name, f"expected {n} values, got shape {arr.shape}", allowed)
     return arr.astype(float)
 
 
@@ -200,16 +212,12 @@ def make_specification(
     if criterion not in CRITERIA:
         raise InputError("criterion", f"unknown criterion {criterion!r}", " or ".join(repr(c) for c in CRITERIA))
     names = mechanism.error_parameters
-    alpha_v = _per_parameter(alpha, names, mechanism.index, "alpha")
+    alpha_v = _per_parameter(alpha, names, mechanism.index, "alpha", ALPHA_ALLOWED)
     for i in _outside(alpha_v, TINY, ALPHA_MAX):
-        raise OutOfRangeError(
-            f"alpha[{names[i]}]",
-            f"got {alpha_v[i]}",
-            f"{TINY:g} <= alpha <= {ALPHA_MAX:g} (the paper: alpha <= 1, typically 0.7)",
-        )
-    k_v = _per_parameter(k, names, mechanism.index, "k", default=mechanism.k)
+        raise OutOfRangeError(f"alpha[{names[i]}]", f"got {alpha_v[i]}", ALPHA_ALLOWED)
+    k_v = _per_parameter(k, names, mechanism.index, "k", K_ALLOWED, default=mechanism.k)
     for i in _outside(k_v, TINY, HUGE):
-        raise OutOfRangeError(f"k[{names[i]}]", f"got {k_v[i]}", f"{TINY:g} <= k <= {HUGE:g} (the paper: k >= 1)")
+        raise OutOfRangeError(f"k[{names[i]}]", f"got {k_v[i]}", K_ALLOWED)
     if bounds is None:
         lo, hi = mechanism.bounds  # copies
     elif isinstance(bounds, Mapping):

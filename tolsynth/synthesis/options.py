@@ -63,12 +63,35 @@ def _same(a, b) -> bool:
         return a is b
 
 
+#: the fields that take a number with a unit ("500um"), and that unit: compared converted
+QUANTITIES = {"R": "mm", "Phi": "rad"}
+
+
+def _same_quantity(a, b, unit: str) -> bool:
+    """True if ``a`` and ``b`` are the same number in ``unit`` once converted (``"500um"`` and
+    0.5 mm; to 1e-12 relative, the rounding of the conversion); False for anything that does not
+    convert (the keyword's own checks then name it)."""
+    import math
+
+    from tolsynth.checks import is_real
+    from tolsynth.units import convert_quantity
+
+    def value(x):
+        if isinstance(x, str):
+            return convert_quantity(x, unit)
+        return float(x) if is_real(x) else None
+
+    va, vb = value(a), value(b)
+    return va is not None and vb is not None and math.isclose(va, vb, rel_tol=1e-12, abs_tol=0.0)
+
+
 def merge_groups(given: dict, spec, solver_options) -> dict:
     """``given`` (synthesize's keywords as called) with the groups' fields filled in.
 
     A field left at its default in the group counts as not given there (the keyword's value
     stands), a keyword left at its default takes the group's value, and a field set both ways to
-    different values is an error naming it.
+    different values is an error naming it; ``R`` and ``Phi`` are compared in mm and rad
+    (``R="500um"`` and ``R=0.5`` are the same value).
     """
     out = dict(given)
     for group, cls, argname in ((spec, DesignSpec, "spec"), (solver_options, SolverOptions, "solver")):
@@ -83,7 +106,11 @@ def merge_groups(given: dict, spec, solver_options) -> dict:
                 continue
             if _same(value, f.default):  # unset in the group: the keyword stands
                 continue
-            if _same(out[f.name], f.default) or _same(out[f.name], value):
+            if (
+                _same(out[f.name], f.default)
+                or _same(out[f.name], value)
+                or (f.name in QUANTITIES and _same_quantity(out[f.name], value, QUANTITIES[f.name]))
+            ):
                 out[f.name] = value
             else:
                 raise InputError(

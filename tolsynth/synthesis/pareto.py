@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tolsynth.checks import check_positive, check_probability
 from tolsynth.errors import InfeasibleSpecificationError, InputError
 
 __all__ = ["pareto_front", "ParetoFront"]
@@ -74,7 +75,8 @@ class ParetoFront:
 
 
 def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, processes=None, **kwargs) -> ParetoFront:
-    """Sweep one of R (mm) or p (give a sequence) with the other fixed (a number).
+    """Sweep one of R (mm, or strings with a unit: ``["500um", "1mm"]``) or p (give a sequence)
+    with the other fixed (a number).
 
     ``processes`` (as :func:`tolsynth.synthesize_processes`) makes each point a process choice.
     Other keyword arguments go to :func:`tolsynth.synthesize`.
@@ -97,7 +99,13 @@ def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, pro
             "R/p", "give one as a sequence (the sweep) and the other as a number", "e.g. R=[0.25, 0.5, 1.0], p=0.99"
         )
     axis = "R" if R_seq else "p"
-    values = sorted(float(v) for v in (R if R_seq else p))
+    # R in mm or with a unit ("500um"), as synthesize reads it; checked here, before any solve
+    if R_seq:
+        values = sorted(check_positive(v, f"R[{i}]") for i, v in enumerate(R))
+        p = check_probability(p, "p")
+    else:
+        values = sorted(check_probability(v, f"p[{i}]") for i, v in enumerate(p))
+        R = check_positive(R, "R")
     if not values:
         raise InputError(axis, "empty sweep", "at least one value")
     t0 = time.perf_counter()

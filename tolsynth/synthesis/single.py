@@ -324,7 +324,7 @@ def synthesize(
 
         check_locks(nlp, mechanism.joint_error_parameters)
     nlp.check_feasible()
-    eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0), "x0", lower=TINY)
+    eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0, "x0"), "x0", lower=TINY)
     with deadline(limit):
         try:
             if probability == "exact":
@@ -545,7 +545,7 @@ def _run_inputs(mechanism, solver, options, locks, x0, validate, seed, probabili
         "locks": dict(locks) if locks else None,
         "probability": probability,
         "verify": None if verify is None or verify is False else verify,
-        "x0": None if x0 is None else np.asarray(mechanism.tolerances(x0), dtype=float).tolist(),
+        "x0": None if x0 is None else np.asarray(mechanism.tolerances(x0, "x0"), dtype=float).tolist(),
         "validate": validate or None,
         "seed": seed if validate else None,
         "joint_errors": _joint_error_inputs(mechanism),

@@ -66,7 +66,8 @@ def synthesize_workspace(
 
     ``pose`` is where the exchange starts (a configuration name or joint values, rad); by default
     the model's reference pose (its ``worst`` configuration), and for a model without one, as for
-    None, the worst pose the search finds at tolerances in the middle of the bounds.
+    None, the worst pose the search finds at tolerances in the middle of the bounds.  There is no
+    ``poses``: the exchange chooses the poses itself (``poses=`` is an :class:`InputError` saying so).
 
     With ``certify=True`` the sampled search is replaced by the certified one
     (:func:`tolsynth.analysis.certify.certify_worst_pose`): after each solve a branch and bound over
@@ -95,6 +96,13 @@ def synthesize_workspace(
     from tolsynth.analysis.pose_search import worst_pose
     from tolsynth.kinematics.mechanism import as_mechanism
 
+    if "poses" in kwargs:  # the exchange chooses the poses itself; synthesize would get them twice
+        raise InputError(
+            "poses",
+            f"synthesize_workspace chooses the poses itself (the exchange adds the worst pose found each round), "
+            f"got poses={kwargs['poses']!r}",
+            "pose= (where the exchange starts: a configuration name or joint values, rad), or nothing",
+        )
     mechanism = as_mechanism(mechanism)
     if pose is MODEL_REFERENCE:
         pose = model_reference(mechanism)

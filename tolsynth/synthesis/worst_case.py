@@ -82,7 +82,7 @@ def synthesize_worst_case(
         p_orientation=None,
         blocks=tuple(replace(b, scale=math.nan) for b in spec.blocks),
     )
-    eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0), "x0", lower=TINY)
+    eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0, "x0"), "x0", lower=TINY)
     result = solve_worst_case(spec, eps0, options)
     stat = None
     if statistical is not None and p is not None:
