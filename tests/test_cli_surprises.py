@@ -228,3 +228,37 @@ def test_progress_shows_in_a_notebook(monkeypatch):
     assert interactive() is False
     monkeypatch.setitem(sys.modules, "ipykernel", type(sys)("ipykernel"))
     assert interactive() is True
+
+
+def test_summary_runs_no_workspace_search_and_shows_it_once_computed():
+    """summary() and to_dict() are pure: they run no sampled workspace check (no warning, nothing
+    computed) and say how to get it; once it is read, both show it, with its own numbers."""
+    res = tolsynth.synthesize("xu_zhang_1988", 0.5, 0.99, probability="gaussian")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        text = res.summary()
+        d = res.to_dict()
+    assert not res.workspace.computed and d["workspace_check"] is None
+    assert "workspace check: not computed (result.workspace.line() samples 300 poses" in text
+    with pytest.warns(WorkspaceWarning):
+        line = res.workspace.line()
+    assert line in res.summary()
+    d = json.loads(json.dumps(res.to_dict(), allow_nan=False))
+    assert d["workspace_check"]["worst"] == res.workspace.worst > 1.05 and d["workspace_check"]["line"] == line
+    assert res.to_frame().attrs["summary"]["workspace_check"]["worst"] == res.workspace.worst
+
+
+def test_command_line_solve_still_shows_the_workspace_check(capsys):
+    """The command line computes the check for what it prints: the line in the summary, and the
+    warning on stderr for a design over its specification elsewhere (sigma z / R from
+    Mechanism.analyze at the pose it names)."""
+    assert main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--probability", "gaussian"]) == 0
+    cap = capsys.readouterr()
+    line = next(s for s in cap.out.splitlines() if s.startswith("workspace check ("))
+    assert "% over the specification" in line and "warning: workspace check (" in cap.err
+    m = tolsynth.load_model("xu_zhang_1988")
+    res = tolsynth.synthesize(m, 0.5, 0.99, probability="gaussian")
+    with pytest.warns(WorkspaceWarning):
+        ws = res.workspace
+        a = m.analyze(ws.q, res.x, R=0.5, check_limits=False)
+    assert f"{a.principal_std[0] * tolsynth.z_of_p(0.99) / 0.5:.4f}" in line

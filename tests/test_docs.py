@@ -253,3 +253,35 @@ def test_joint_errors_costs_are_what_the_code_gives():
     assert [exact_puma] == costs("puma560", "qn", "exact", (0.0,))
     assert gauss_xu == costs("xu_zhang_1988", "worst", "gaussian", qs)
     assert gauss_puma == costs("puma560", "qn", "gaussian", qs)
+
+
+def _public_examples():
+    """The doctests of every public name of tolsynth (functions and classes, their methods too)."""
+    import doctest
+    import inspect
+
+    finder = doctest.DocTestFinder(recurse=True)
+    out = {}
+    for name in tolsynth.__all__:
+        obj = getattr(tolsynth, name)
+        if inspect.isfunction(obj) or inspect.isclass(obj):
+            for test in finder.find(obj, name, globs={}):
+                if test.examples:
+                    out.setdefault(test.name, test)
+    return out
+
+
+# round_to_grades' example has its own test of its numbers (tests/test_grades.py)
+@pytest.mark.parametrize("name", sorted(set(_public_examples()) - {"round_to_grades"}))
+def test_every_public_example_runs_as_copied(name):
+    """Each help() example runs in a fresh namespace, as a user copies it: it imports what it uses
+    (no NameError for np or an unqualified name) and prints what it shows."""
+    import doctest
+    import warnings
+
+    test = _public_examples()[name]
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        runner.run(test, out=lambda text: None)
+    assert runner.summarize(verbose=False).failed == 0, name

@@ -524,3 +524,24 @@ def test_command_line_sphere_prints_the_design_and_says_it_is_not_proven(capsys)
         / math.pi
     )
     assert P == pytest.approx(0.9, abs=2e-5)  # (the printed tolerances have six digits)
+
+
+@pytest.mark.parametrize(
+    "criterion,options,limit",
+    [
+        ("components", {"max_iter": 3}, "max_iter=3"),
+        ("components", {"max_patches": 1}, "max_patches=1"),
+        ("sphere", {"max_iter": 3}, "max_iter=3"),
+    ],
+)
+def test_a_limit_reached_has_the_status_of_a_limit(criterion, options, limit):
+    """An option's limit stops the exact solve short: the status is the documented word for a
+    limit (Status.ITERATION_LIMIT, "iteration_limit"), not a numerical error, and the message names
+    the option, with no -inf for a bound that was never proven."""
+    m = tolsynth.load_model("planar_2r")
+    r = tolsynth.synthesize(m, R=R, p=0.99, pose="elbow90", criterion=criterion, options=options)
+    assert str(r.status) == "iteration_limit" and not r.success and not r.feasible
+    assert limit in r.message and "-inf" not in r.message and "nan" not in r.message
+    # without the limit the same problem is certified: only the limit stood in the way
+    full = tolsynth.synthesize(m, R=R, p=0.99, pose="elbow90", criterion=criterion)
+    assert full.status in (Status.OPTIMAL, Status.FEASIBLE)

@@ -51,3 +51,15 @@ def test_a_plane_reached_nowhere_is_a_one_line_error(capsys):
     assert not pm.reachable.any()
     with pytest.raises(InputError, match="nothing to draw"):
         plot_map(pm)
+
+
+def test_map_to_dict_is_json_with_none_where_unreachable():
+    """The unreachable grid points (P NaN) become None in to_dict, the reachable ones keep their
+    value, and strict JSON (no NaN tokens) takes the dict."""
+    import json
+
+    pm = tolsynth.probability_map("planar_2r", "coarse", R=0.5, n=10)
+    assert np.isnan(pm.P).any() and np.isfinite(pm.P).any()
+    d = json.loads(json.dumps(pm.to_dict(), allow_nan=False))
+    P = np.array([[np.nan if v is None else v for v in row] for row in d["P"]])
+    assert np.array_equal(np.isnan(P), ~pm.reachable) and np.array_equal(P[pm.reachable], pm.P[pm.reachable])

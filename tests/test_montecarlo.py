@@ -410,3 +410,13 @@ def test_a_certain_component_is_not_flagged_outside_its_interval():
     j = int(np.argmax(a.p_components))
     assert a.p_components[j] == 1.0 and mc.p_components[j] == 1.0
     assert mc.p_components_analytic_in_ci[j]
+
+
+def test_to_dict_is_json_without_nan():
+    """A planar arm has no error along z: its third kurtosis is NaN (0/0). to_dict gives None there,
+    the other entries as the arrays hold them, and strict JSON (no NaN tokens) takes the dict."""
+    mc = monte_carlo(load_model("planar_2r"), "elbow90", "coarse", R=0.5, n=2000, seed=1)
+    assert np.isnan(mc.kurtosis[2]) and np.all(np.isfinite(mc.kurtosis[:2]))
+    d = json.loads(json.dumps(mc.to_dict(), allow_nan=False))
+    assert d["kurtosis"][2] is None and d["kurtosis"][:2] == mc.kurtosis[:2].tolist()
+    assert d["p_sphere"] == mc.p_sphere and d["n"] == 2000

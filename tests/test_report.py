@@ -431,3 +431,40 @@ def test_linear_model_column_is_in_the_designs_own_reading(tmp_path, xu_report):
         else:
             ref = np.array([math.erf(0.5 / math.sqrt(2 * s2)) for s2 in lam])
             assert np.allclose(printed, ref, atol=6e-6), (printed, ref)
+
+
+def test_design_report_docstrings_say_what_it_holds_and_what_it_writes(tmp_path):
+    """DesignReport.validations holds (pose label, ValidationResult) pairs, as its docstring says,
+    and write() refuses the suffixes its docstring names (.txt, .pdf) with an InputError."""
+    from tolsynth.analysis.validation import ValidationResult
+    from tolsynth.errors import InputError
+    from tolsynth.io.reports import DesignReport
+
+    doc = " ".join(DesignReport.__doc__.split())
+    assert "validations : tuple of (str, ValidationResult)" in doc
+    rep = tolsynth.report("planar_2r", R=0.5, p=0.99, mc_samples=500, map_n=0, worst_grid=0, pose="elbow90")
+    ((label, v),) = rep.validations
+    assert label == "elbow90" and isinstance(v, ValidationResult) and v.n == 500
+    wdoc = " ".join(DesignReport.write.__doc__.split())
+    assert "anything else HTML" not in wdoc
+    for suffix in (".txt", ".pdf"):
+        assert f"``{suffix}``" in wdoc
+        with pytest.raises(InputError, match="cannot be written as"):
+            rep.write(tmp_path / f"r{suffix}")
+    assert not list(tmp_path.iterdir())
+
+
+def test_report_says_which_search_each_largest_value_comes_from():
+    """Section 4's sampled workspace check and section 7's worst-pose search find different largest
+    values for the paper's single-pose design (300 sampled poses against a search over the joint
+    space); the text names each and points from one to the other, so they do not contradict."""
+    rep = tolsynth.report("xu_zhang_1988", R=0.5, p=0.99, mc_samples=0, map_n=0)
+    blocks = [b for b in rep.blocks() if b[0] in ("note", "ok", "p")]  # section 4 runs the sampled check
+    ws = rep.result.workspace
+    judged = rep.worst_judged
+    assert ws.computed and judged["found"] > ws.worst > 1  # two searches, two different values
+    sampled = next(b[1] for b in blocks if b[1].startswith("workspace check"))
+    assert f"{ws.worst:.4f}" in sampled and "The worst-pose search of section 7 looks beyond these samples" in sampled
+    verdict = next(b[1] for b in blocks if "At the poses compared" in b[1])
+    assert f"reaches {judged['found']:.4f}" in verdict and "the worst pose found by the search" in verdict
+    assert f"Section 4's sampled check found at most {ws.worst:.4f} at its {ws.n_poses} sampled poses" in verdict

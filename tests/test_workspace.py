@@ -444,3 +444,33 @@ def test_synthesize_workspace_on_puma560():
     puma = tolsynth.load_model("puma560")
     w = tolsynth.synthesize_workspace(puma, 0.5, 0.99, "uniform", 0.7, pose="qn", probability="gaussian")
     _check_workspace_result(w, puma, puma_fk, "puma560", 300)
+
+
+def test_exact_workspace_design_labels_its_values_and_its_verdicts_agree():
+    """An exact design for every pose of the planar arm (uniform errors): the table labels
+    worst_value by the design's reading, and the value is that reading, the exact (1 - P)/(1 - p)
+    along the worst direction, recomputed by FFT convolution (tests/independent.py); the summary's
+    verdict on a value just above 1 names the exchange's tol, as the sampled check's line does, and
+    to_dict is strict JSON with the same numbers."""
+    from independent import independent_worst
+
+    m = tolsynth.load_model("planar_2r")
+    w = tolsynth.synthesize_workspace(m, R=0.5, p=0.99)
+    quantity = "exact (1 - P)/(1 - p) along the worst direction"
+    assert w.worst_quantity == quantity and w.to_frame().attrs["units"]["worst_value"] == quantity
+    last = w.rounds[-1]
+    A = np.asarray(m.sensitivity(last["worst_q"], check_limits=False))[:3]
+    P, _ = independent_worst(A * w.result.x, 0.5, plane=True)
+    v = w.worst_value
+    assert v == pytest.approx((1 - P) / (1 - 0.99), abs=1e-4)
+    assert w.converged and 1 < v <= 1 + 1e-3  # met to the exchange's tol, not within 1 itself
+    line = next(s for s in w.summary().splitlines() if s.startswith("afterwards"))
+    assert f"{v:.6f}: {v - 1:.2e} over 1, within the tolerance tol=0.001 of the specification" in line
+    check = w.result.workspace.line()  # the sampled check, 300 poses: its own value just above 1 too
+    assert 1 < w.result.workspace.worst <= 1 + 1e-3 and "within the tolerance 0.001 of the specification" in check
+    d = json.loads(json.dumps(w.to_dict(), allow_nan=False))
+    assert d["worst_value"] == v and d["tol"] == 1e-3 and d["worst_quantity"] == quantity
+    assert d["result"]["cost"] == w.result.cost and d["result"]["tolerances"] == w.result.tolerances
+    assert d["poses"] == [np.asarray(q, dtype=float).tolist() for q in w.poses] and len(d["rounds"]) == len(w.rounds)
+    g = tolsynth.synthesize_workspace(m, R=0.5, p=0.99, probability="gaussian")
+    assert g.to_frame().attrs["units"]["worst_value"] == "sigma z / R"

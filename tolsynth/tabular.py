@@ -70,26 +70,27 @@ def require_pandas(what: str = "a table"):
     return pandas
 
 
-def jsonable(obj):
+def jsonable(obj, null: bool = False):
     """Plain JSON types: arrays to lists, NumPy scalars to Python, enums to strings, non-finite
-    floats to the strings ``"nan"``, ``"inf"``, ``"-inf"``."""
+    floats to the strings ``"nan"``, ``"inf"``, ``"-inf"`` (with ``null``: to None, JSON's null, as
+    the results' ``to_dict()`` give them), so ``json.dumps(..., allow_nan=False)`` takes the result."""
     if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
+        return {str(k): jsonable(v, null) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
+        return [jsonable(v, null) for v in obj]
     if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist())
+        return jsonable(obj.tolist(), null)
     if isinstance(obj, (bool, np.bool_)):
         return bool(obj)
     if isinstance(obj, (np.integer,)):
         return int(obj)
     if isinstance(obj, (np.floating, float)):
         v = float(obj)
-        return v if math.isfinite(v) else str(v)
+        return v if math.isfinite(v) else None if null else str(v)
     if isinstance(obj, (str, int)) or obj is None:
         return str(obj) if isinstance(obj, str) and type(obj) is not str else obj
     if hasattr(obj, "to_dict"):
-        return jsonable(obj.to_dict())
+        return jsonable(obj.to_dict(), null)
     return str(obj)
 
 

@@ -85,6 +85,7 @@ def certified_map(
 
     Examples
     --------
+    >>> import numpy as np
     >>> import tolsynth
     >>> from tolsynth.analysis.certify_map import certified_map
     >>> cm = certified_map(tolsynth.load_model("xu_zhang_1988"), "figure3", n=6, slices=6)

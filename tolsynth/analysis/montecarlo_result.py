@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tolsynth.tabular import Tabular
+from tolsynth.tabular import Tabular, jsonable
 
 __all__ = ["MonteCarloResult"]
 
@@ -141,8 +141,9 @@ class MonteCarloResult(Tabular):
     joint_units: tuple = ()
 
     def to_dict(self) -> dict:
-        """Plain dict (arrays as lists) for JSON."""
-        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
+        """Plain dict for JSON (arrays as lists): every field, with NaN and infinities as None
+        (NaN where a quantity is undefined (a kurtosis without spread, a sigma of no samples)), so ``json.dumps(..., allow_nan=False)`` takes it."""
+        return jsonable(self.__dict__, null=True)
 
     def _mean_text(self) -> str:
         """The mean error, with why its interval (and the spreads) are missing where they are."""

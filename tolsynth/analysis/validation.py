@@ -256,9 +256,10 @@ class WorkspaceCheck:
     worst pose; :func:`tolsynth.synthesize_workspace` designs for every pose and certifies it); a
     value above 1 is a pose where the design is over its specification.
 
-    Computed when first read (``result.summary()``, reports, the command line), not by
-    ``synthesize`` itself; it then warns (:class:`tolsynth.errors.WorkspaceWarning`) if the largest
-    value exceeds ``1 + WARN``.  The same answer every time (a fixed seed).
+    Computed when first read (:attr:`worst`, :meth:`line`, :meth:`to_dict`; reports and the
+    command line's ``solve`` read it), not by ``synthesize`` itself nor by ``result.summary()``,
+    which shows it once computed; it then warns (:class:`tolsynth.errors.WorkspaceWarning`) if the
+    largest value exceeds ``1 + WARN``.  The same answer every time (a fixed seed).
     """
 
     N = 300
@@ -310,6 +311,11 @@ class WorkspaceCheck:
         if self.exceeds:
             warnings.warn(WorkspaceWarning(self.line()), stacklevel=3)
         return self._value
+
+    @property
+    def computed(self) -> bool:
+        """Whether the sample has been evaluated (reading any value evaluates it once)."""
+        return self._value is not None
 
     @property
     def exact(self) -> bool:
@@ -397,12 +403,20 @@ class WorkspaceCheck:
             checked = f"every sampled pose (a screen of directions; the {self.EXACT} lowest searched over all)"
         else:
             checked = f"each of the {self.EXACT} poses checked" if self.exact else "every sampled pose"
-        return text + f": within the specification at {checked} (a sample, not a proof)"
+        within = (
+            f"within the tolerance {self.WARN:g} of the specification ({worst - 1:.1e} over 1)"
+            if worst > 1.0
+            else "within the specification"
+        )
+        return text + f": {within} at {checked} (a sample, not a proof)"
 
     def to_dict(self) -> dict:
+        """Plain dict for JSON: the largest value (None where no sampled pose could be evaluated),
+        its pose (rad), the sample, and the verdict in words (:meth:`line`)."""
         worst, q, n = self._compute()
         return {
-            "worst": worst,
+            "worst": worst if math.isfinite(worst) else None,
+            "line": self.line(),
             "q": None if q is None else np.asarray(q).tolist(),
             "n_poses": n,
             "exceeds": self.exceeds,

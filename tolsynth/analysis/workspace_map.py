@@ -25,7 +25,7 @@ from tolsynth.kinematics.parallel_ik import ParallelGridIK
 from tolsynth.model.parallel import is_parallel
 from tolsynth.probability.stats import check_positive, p_ball_batch
 from tolsynth.progress import make_bar
-from tolsynth.tabular import Tabular
+from tolsynth.tabular import Tabular, jsonable
 
 __all__ = ["ProbabilityMap", "probability_map", "PLANES"]
 
@@ -102,8 +102,9 @@ class ProbabilityMap(Tabular):
         return np.isfinite(self.P)
 
     def to_dict(self) -> dict:
-        """Plain dict (arrays as lists) for JSON."""
-        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
+        """Plain dict for JSON (arrays as lists): every field, with NaN and infinities as None
+        (``P`` and ``sigma`` NaN where a grid point is unreachable), so ``json.dumps(..., allow_nan=False)`` takes it."""
+        return jsonable(self.__dict__, null=True)
 
     def plot(self, path=None, ax=None):
         """See :func:`tolsynth.analysis.plot.plot_map`."""

@@ -267,6 +267,15 @@ def check_figure_path(path: str | None, field: str = "--out") -> None:
 # ---------------------------------------------------------------------------------------------
 # output
 # ---------------------------------------------------------------------------------------------
+def workspace_checked(res):
+    """``res`` with its sampled workspace check computed, for the summary printed next: the command
+    line shows it, and warns where the design is over its specification away from its poses."""
+    ws = getattr(res, "workspace", None)
+    if ws is not None:
+        ws.line()
+    return res
+
+
 def emit_json(obj) -> None:
     print(json.dumps(jsonable(obj), indent=2))
 

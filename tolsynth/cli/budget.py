@@ -3,7 +3,7 @@ smallest R at a given p, or the largest p at a given R, bracketed by certified b
 
 from __future__ import annotations
 
-from tolsynth.cli.args import check_table_out, fmt_p, length_mm, number
+from tolsynth.cli.args import check_table_out, fmt_p, length_mm, number, workspace_checked
 from tolsynth.cli.designs import add_output_arguments, design_command, design_kwargs, finish
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
@@ -50,7 +50,7 @@ def cmd_budget(args) -> int:
         return (
             f"{mech.name}: a budget of {out.budget:g} buys {what}\n"
             f"  the optimum lies in [{lo:.6g}, {hi:.6g}] ({'certified' if out.certified else 'NOT certified'}), "
-            f"{out.solves} solves, {out.wall_time:.2f} s; the tolerances cost {res.cost:.8g}\n{res.summary()}"
+            f"{out.solves} solves, {out.wall_time:.2f} s; the tolerances cost {res.cost:.8g}\n{workspace_checked(res).summary()}"
         )
 
     return finish(

@@ -19,6 +19,7 @@ from tolsynth.cli.args import (  # noqa: I001
     inputs_record,
     parse_poses,
     pose_label,
+    workspace_checked,
     write_out,
 )
 from tolsynth.cli.everywhere import add_everywhere_arguments, exchange_options, reject_exchange_flags
@@ -268,12 +269,15 @@ def cmd_solve(args) -> int:
             print(
                 f"  certificate: lower bound {w.lower_bound:.8g} (valid at every pose), gap {w.gap:.2e}; "
                 f"afterwards the largest value found anywhere{at} is {w.worst_value:.6f} "
-                f"(violation {w.max_violation:.2e}"
-                + (" of R', the radius designed for; the proof below is at R)" if w.margin else ")")
+                + (
+                    f"(violation {w.max_violation:.2e} of R', the radius designed for; the proof below is at R)"
+                    if w.margin
+                    else f"({w.verdict()})"
+                )
             )
             if w.certified is not None:  # the certified search's proof (or why there is none)
                 print("  " + w.certificate_line())
-            print(w.result.summary())
+            print(workspace_checked(w.result).summary())
             _print_contributions(reps)
         if not w.success and w.converged and w.result.feasible:  # the sphere's: met, optimality not proven
             print(
@@ -343,7 +347,7 @@ def cmd_solve(args) -> int:
             emit_json(out)
         else:
             print(f"{head}, pose{'s' if len(poses) > 1 else ''} {where}")
-            print(res.summary())
+            print(workspace_checked(res).summary())
             if res.verification is not None:
                 print(res.verification.report())
             _print_contributions(reps)

@@ -53,6 +53,9 @@ def _synthesis_frame(res):
     summary["constraints"] = constraints
     if res.validation is not None:  # synthesize(validate=N): the Monte Carlo check at the optimum
         summary["validation"] = res.validation.to_dict()
+    ws = getattr(res, "workspace", None)
+    if ws is not None and ws.computed:  # the sampled workspace check, once read (never run here)
+        summary["workspace_check"] = ws.to_dict()
     if getattr(res, "statistical", None) is not None:  # a worst-case design's statistical comparison
         summary["statistical"] = res.statistical
     return make_frame(
@@ -134,7 +137,7 @@ def _workspace_frame(w):
         inputs,
         summary,
         {
-            "worst_value": "sigma z / R (sphere: (1 - P)/(1 - p))",
+            "worst_value": w.worst_quantity,
             **{f"worst_q{j + 1}": u for j, u in enumerate(_joint_units(w, len(w.poses[0]) if w.poses else 0))},
             "worst_x": "mm",
             "worst_y": "mm",

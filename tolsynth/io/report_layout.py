@@ -263,7 +263,9 @@ def _layout(rep) -> list[tuple]:
 
         with warnings.catch_warnings():  # the report says it; no second copy on stderr
             warnings.simplefilter("ignore")
-            B.append(("note" if ws.exceeds else "p", ws.line()))
+            # the section 7 search looks beyond the sample and may find a larger value: say which is which
+            beyond = " The worst-pose search of section 7 looks beyond these samples." if rep.worst is not None else ""
+            B.append(("note" if ws.exceeds else "p", ws.line() + "." + beyond))
 
     # 5. contributions
     c = rep.contributions
@@ -542,11 +544,18 @@ def _layout(rep) -> list[tuple]:
                 if not searched_exactly
                 else " The exact worst pose of a local search"
             ) + " may lie elsewhere (report --certify proves a bound over the whole joint space)."
+        ws = getattr(rep.result, "workspace", None)
+        if ws is not None and ws.computed and math.isfinite(ws.worst):
+            ranked += (
+                f" (Section 4's sampled check found at most {ws.worst:.4f} at its {ws.n_poses} sampled poses; "
+                "this search looks beyond them.)"
+            )
         if found > 1 + 1e-6:
             B.append(
                 (
                     "note",
-                    f"At the poses compared {judged['quantity']} reaches {found:.4f} > 1: the "
+                    f"At the poses compared (the worst pose found by the search, and the reference) "
+                    f"{judged['quantity']} reaches {found:.4f} > 1: the "
                     "specification is met at the specification's pose(s) but not everywhere in the workspace. "
                     "tolsynth solve --everywhere (synthesize_workspace) imposes it at every reachable pose." + ranked,
                 )
@@ -555,7 +564,8 @@ def _layout(rep) -> list[tuple]:
             B.append(
                 (
                     "ok",
-                    f"At the poses compared {judged['quantity']} is at most {found:.4f} <= 1: the "
+                    f"At the poses compared (the worst pose found by the search, and the reference) "
+                    f"{judged['quantity']} is at most {found:.4f} <= 1: the "
                     "specification holds at the poses searched (a search, not a proof)." + ranked,
                 )
             )

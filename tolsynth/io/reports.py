@@ -60,8 +60,9 @@ class DesignReport:
         Parameter -> chosen process name when the result comes from
         :func:`tolsynth.synthesize_processes` (with ``process_choice`` its search).
     contributions : Contributions
-    validations : tuple of ValidationResult
-        The Monte Carlo check at each pose of the specification (empty if ``mc_samples=0``).
+    validations : tuple of (str, ValidationResult)
+        The Monte Carlo check at each pose of the specification, as ``(pose label, result)`` pairs
+        in the specification's pose order (empty if ``mc_samples=0``).
     map : ProbabilityMap or None
     worst : WorstPose or None
     worst_judged : dict or None
@@ -129,7 +130,10 @@ class DesignReport:
         path : str or path
             The HTML or Markdown file.  With Markdown the figures go to ``<stem>_files/`` beside it.
         format : {"html", "md"}, optional
-            Default: from the suffix (``.md`` / ``.markdown`` Markdown, anything else HTML).
+            Default: from the suffix, ``.html`` / ``.htm`` HTML, ``.md`` / ``.markdown`` Markdown.
+            Any other suffix (``.txt``, ``.pdf``, none) raises :class:`InputError`, as does a
+            ``format`` that disagrees with the suffix (:func:`check_report_path`); for a PDF, print
+            the HTML from a browser.
         """
         path = os.fspath(path)
         fmt = check_report_path(path, format)

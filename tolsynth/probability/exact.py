@@ -111,6 +111,7 @@ def direction_probability_batch(B, shapes, R, tol: float = DEFAULT_TOL, kmax: in
 
     Examples
     --------
+    >>> from tolsynth import direction_probability_batch
     >>> P, err = direction_probability_batch([[1.0, 0.5], [1.0, 1.0]], ["uniform"] * 2, 0.8)
     >>> [round(float(x), 12) for x in P]  # trapezoid 1 - 0.7^2 / 2; triangle 1 - 1.2^2 / 4
     [0.755, 0.64]
@@ -139,6 +140,7 @@ def direction_probability(b, shapes, R: float, tol: float = DEFAULT_TOL, kmax: i
 
     Examples
     --------
+    >>> from tolsynth import direction_probability
     >>> round(direction_probability([1.0, 1e-9], ["uniform"] * 2, 0.3), 12)  # a dominant term
     0.3
     """

@@ -119,7 +119,9 @@ class SynthesisResult(Tabular):
     #: ``synthesize(..., verify=...)``: the closed loop's :class:`tolsynth.analysis.verify.Verification`
     verification: Any = field(default=None, repr=False)
     #: how the design does over the workspace, a quick sampled check computed when first read
-    #: (:class:`tolsynth.analysis.validation.WorkspaceCheck`); None where synthesize attached none
+    #: (:class:`tolsynth.analysis.validation.WorkspaceCheck`: ``result.workspace.line()``, ``.worst``);
+    #: :meth:`summary`, :meth:`to_dict` and ``to_frame()`` show it once computed and never compute it.
+    #: None where synthesize attached none
     workspace: Any = field(default=None, repr=False, compare=False)
 
     @property
@@ -178,8 +180,13 @@ class SynthesisResult(Tabular):
             lines.append(f"  {b.label}: {what} = ({vals}); multipliers ({mult})")
         if self.inputs and self.inputs.get("default_pose"):
             lines.append(f"pose: {self.inputs['default_pose']}")
-        if self.workspace is not None:
-            lines.append(self.workspace.line())
+        if self.workspace is not None:  # shown once computed: a summary runs no search (about a second)
+            lines.append(
+                self.workspace.line()
+                if self.workspace.computed
+                else "workspace check: not computed (result.workspace.line() samples "
+                f"{self.workspace.n} poses; tolsynth.synthesize_workspace designs for every pose)"
+            )
         return "\n".join(lines)
 
     def _repr_html_(self) -> str:
@@ -198,7 +205,10 @@ class SynthesisResult(Tabular):
         )
 
     def to_dict(self) -> dict:
-        """Plain dict for JSON (probability kind, tolerances, units, cost, bound, gap, constraints, bounds, counts, time)."""
+        """Plain dict for JSON (probability kind, tolerances, units, cost, bound, gap, constraints,
+        bounds, counts, time; ``workspace_check``: the sampled workspace check's dict once it has
+        been computed, else None)."""
+        ws = self.workspace
         return {
             "solver": self.solver,
             "probability": self.probability_kind,
@@ -224,4 +234,5 @@ class SynthesisResult(Tabular):
             "iterations": self.iterations,
             "function_evaluations": self.function_evaluations,
             "wall_time": self.wall_time,
+            "workspace_check": ws.to_dict() if ws is not None and ws.computed else None,
         }

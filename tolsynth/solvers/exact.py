@@ -363,6 +363,7 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
             break
     eps = np.minimum(np.maximum(np.exp(u), spec.lower), spec.upper)
     return _assemble(
+        opts,
         nlp,
         shapes,
         exact_label(start.solver),
@@ -381,7 +382,7 @@ def _solve_components(nlp, shapes, solver, eps0, opts, t0, verbose):
     )
 
 
-def _assemble(nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, inner, covers, history, iters, evals, t0):
+def _assemble(opts, nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, inner, covers, history, iters, evals, t0):
     spec = nlp.spec
     u = np.log(eps)
     cost = nlp.cost(eps)
@@ -430,13 +431,35 @@ def _assemble(nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, inner, covers
         + f"; lower bound from the active cuts' half-spaces, gap {gap:.2e} ({gap / abs(cost):.1e} of the cost); "
         + inner
     )
-    if not ok:
+    # the last round still added cuts (the loop stops early only on a failure or when none is added)
+    out_of_rounds = ok and bool(history) and history[-1]["added"] > 0
+    if not ok and inner.startswith("iteration limit"):
+        status = Status.ITERATION_LIMIT
+        message = (
+            f"exact probabilities: the interior-point solve stopped at its iteration limit "
+            f"(max_iter={opts['max_iter']}) before converging: {detail}"
+        )
+    elif not ok:
         status = Status.NUMERICAL_ERROR
         message = f"exact probabilities: the interior-point solve failed: {detail}"
     elif not proven:
-        status = Status.NUMERICAL_ERROR
-        short = [f"{b.label} (proven P >= {c.proven:.9f})" for b, c in zip(blocks, covers) if not c.certified]
-        message = f"exact probabilities: not every direction proven to meet p: {', '.join(short)}; {detail}"
+        # a limit of the search (patches, rounds) is not a numerical failure: the user can raise it
+        limited = any(c.limit for c in covers)
+        status = Status.ITERATION_LIMIT if limited or out_of_rounds else Status.NUMERICAL_ERROR
+        short = [
+            f"{b.label} (the branch and bound over directions reached max_patches={opts['max_patches']} "
+            "before covering every direction: no bound on P proven)"
+            if c.limit
+            else f"{b.label} (a direction with P = {c.proven:.9f} < p - {EXACT_TOL:g})"
+            for b, c in zip(blocks, covers)
+            if not c.certified
+        ]
+        why = (
+            f"the exchange of direction cuts reached max_rounds={opts['max_rounds']} with directions still short of p; "
+            if out_of_rounds
+            else ""
+        )
+        message = f"exact probabilities: not certified: {why}not every direction proven to meet p: {', '.join(short)}; {detail}"
     elif not can:
         status = Status.OPTIMAL_INACCURATE
         message = f"exact probabilities: feasible, but {why}; {detail}"

@@ -75,6 +75,8 @@ class Cover:
     violations: list  # [(w (3,), P)] directions found with P < p - cut_tol, worst first
     patches: int  # patches examined
     evaluations: int  # probability evaluations
+    #: the search stopped at ``max_patches`` before it closed: nothing is proven (``proven`` is -inf)
+    limit: bool = False
 
 
 def _frames():
@@ -151,7 +153,7 @@ def cover(
     while face.size:
         patches += face.size
         if patches > max_patches:
-            return Cover(False, -math.inf, violations, patches, evaluations)
+            return Cover(False, -math.inf, violations, patches, evaluations, limit=True)
         F = _FRAMES[face]  # (N, 3, 3)
         cs, ct, corners = [], [], []
         for ds, dt in ((0, 0), (1, 0), (0, 1), (1, 1)):

@@ -137,6 +137,12 @@ def solve_sphere(
             "exact probabilities, sphere criterion met, optimality not proven (a local optimum; gap "
             f"{(cost - lower) / cost:.1%} of the cost): " + detail
         )
+    elif not ok and message.startswith("iteration limit"):  # a limit the caller can raise, not a failure
+        status = Status.ITERATION_LIMIT
+        text = (
+            "exact probabilities, sphere criterion: the interior-point solve stopped at its iteration limit "
+            f"(max_iter={opts['max_iter']}) before converging: " + detail
+        )
     else:
         status = Status.NUMERICAL_ERROR
         text = "exact probabilities, sphere criterion: " + ("not met: " if not met else "not converged: ") + detail

@@ -217,7 +217,9 @@ def synthesize_workspace(
         bar.close()
     if not converged and rounds and reason.startswith("round limit"):
         reason += f"; the last design misses the specification by {rounds[-1]['worst_value'] - 1:.3g} at a pose found"
-    return WorkspaceSynthesis(res, poses, rounds, converged, reason=reason, joint_units=mechanism.joint_value_units)
+    return WorkspaceSynthesis(
+        res, poses, rounds, converged, reason=reason, joint_units=mechanism.joint_value_units, tol=tol
+    )
 
 
 def _through_sigma(mechanism, R, p, distribution, alpha, pose, tol, max_rounds, search, options, progress, kwargs):
@@ -469,4 +471,5 @@ def _certified_exchange(
         margin=margin,
         bound_at_R=bound_at_R,
         joint_units=mechanism.joint_value_units,
+        tol=tol,
     )

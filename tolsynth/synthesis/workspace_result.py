@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tolsynth.problem.result import SynthesisResult
-from tolsynth.tabular import Tabular
+from tolsynth.tabular import Tabular, jsonable
 
 __all__ = ["WorkspaceSynthesis"]
 
@@ -24,11 +24,16 @@ class WorkspaceSynthesis(Tabular):
     poses : list of ndarray
         The poses (rad) whose constraints were imposed, the starting pose first.
     rounds : list of dict
-        Per round: ``n_poses``, ``cost``, ``worst_value`` (largest sigma z / R, or for the sphere
-        criterion (1 - P)/(1 - p), found over the workspace at that round's optimum), ``worst_q`` (rad), ``worst_position`` (mm).
+        Per round: ``n_poses``, ``cost``, ``worst_value`` (the largest value found over the
+        workspace at that round's optimum, in the design's reading, :attr:`worst_quantity`: sigma
+        z / R; the sphere's (1 - P)/(1 - p); or the exact (1 - P)/(1 - p) along the worst direction or in
+        the sphere), ``worst_q`` (rad), ``worst_position`` (mm).
     converged : bool
-        True when the worst pose found meets the specification to ``tol`` (with ``certify``: when
-        the proven bound does).
+        True when the worst pose found meets the specification to ``tol``, ``worst_value <= 1 +
+        tol`` (with ``certify``: when the proven bound does).
+    tol : float or None
+        The exchange's tolerance ``synthesize_workspace(tol=...)``: a worst value up to ``1 + tol``
+        counts as meeting the specification.
     certified : bool or None
         With ``certify=True``: the specification is proven to hold at every pose of the joint
         space, to ``tol`` (Gaussian: ``upper_bound <= 1 + tol``; exact: ``probability_lower_bound
@@ -69,6 +74,7 @@ class WorkspaceSynthesis(Tabular):
     through: float | None = None
     #: each joint value's unit, "rad" or "mm" (a joint that slides); empty: all "rad"
     joint_units: tuple = ()
+    tol: float | None = None
 
     @property
     def success(self) -> bool:
@@ -90,9 +96,19 @@ class WorkspaceSynthesis(Tabular):
         return self.result.gap if self.bound_at_R is None else self.result.cost - self.bound_at_R
 
     @property
+    def worst_quantity(self) -> str:
+        """What ``worst_value`` measures, in the design's reading (each <= 1 meets the specification)."""
+        res = self.result
+        sphere = any(b.kind.startswith("sphere") for b in res.constraints) if res is not None else False
+        if res is not None and res.probability_kind == "exact":
+            return "exact (1 - P)/(1 - p) " + ("in the sphere" if sphere else "along the worst direction")
+        return "(1 - P)/(1 - p) in the sphere" if sphere else "sigma z / R"
+
+    @property
     def worst_value(self) -> float:
-        """Largest ``sigma z / R`` (sphere: ``(1 - P)/(1 - p)``) found anywhere in the workspace by the
-        search run *after* the last solve, at its tolerances (NaN if that solve failed)."""
+        """The largest value found anywhere in the workspace by the search run *after* the last
+        solve, at its tolerances, in the design's reading (:attr:`worst_quantity`); NaN if that
+        solve failed."""
         return float(self.rounds[-1]["worst_value"]) if self.rounds else float("nan")
 
     @property
@@ -135,6 +151,47 @@ class WorkspaceSynthesis(Tabular):
             )
         return f"certificate over the whole joint space: {what} ({state})"
 
+    def verdict(self) -> str:
+        """Whether :attr:`worst_value` meets the specification, or meets it only to ``tol`` (a value
+        up to ``1 + tol`` is taken as met by the exchange)."""
+        v = self.worst_value
+        if not v > 1.0:
+            return "within the specification"
+        if self.tol is not None and v <= 1.0 + self.tol:
+            return f"{v - 1:.2e} over 1, within the tolerance tol={self.tol:g} of the specification"
+        return f"over the specification by {v - 1:.2e}"
+
+    def to_dict(self) -> dict:
+        """Plain dict for JSON: the exchange's outcome, its rounds, the poses (rad) and the last
+        solve's :meth:`SynthesisResult.to_dict` under ``"result"``; NaN and infinities as None."""
+        cert = self.certificate
+        return jsonable(
+            {
+                "success": self.success,
+                "converged": self.converged,
+                "reason": self.reason,
+                "tol": self.tol,
+                "cost": self.result.cost if self.result is not None else None,
+                "lower_bound": self.lower_bound,
+                "gap": self.gap,
+                "worst_quantity": self.worst_quantity,
+                "worst_value": self.worst_value,
+                "max_violation": self.max_violation,
+                "certified": self.certified,
+                "upper_bound": self.upper_bound,
+                "probability_lower_bound": self.probability_lower_bound,
+                "margin": self.margin,
+                "bound_at_R": self.bound_at_R,
+                "through": self.through,
+                "joint_units": list(self.joint_units) or ["rad"],
+                "poses": self.poses,
+                "rounds": self.rounds,
+                "certificate": cert.to_dict() if cert is not None else None,
+                "result": self.result.to_dict() if self.result is not None else None,
+            },
+            null=True,
+        )
+
     def summary(self) -> str:
         """Readable summary: the exchange's rounds, the certificate, the largest value found after
         the last solve, and the last solve's own summary."""
@@ -153,9 +210,12 @@ class WorkspaceSynthesis(Tabular):
             f"certificate: cost {self.result.cost:.8g}, lower bound {self.lower_bound:.8g} "
             f"(valid at every pose), gap {self.gap:.2e}"
         )
-        lines.append(
-            f"afterwards: largest value found anywhere {self.worst_value:.6f} (violation {self.max_violation:.2e})"
-        )
+        if self.rounds:
+            lines.append(
+                f"afterwards: largest {self.worst_quantity} found by the worst-pose search {self.worst_value:.6f}: {self.verdict()}"
+            )
+        else:
+            lines.append("afterwards: no worst-pose search (no round finished)")
         if self.certified is not None:
             lines.append(self.certificate_line())
         lines.append(self.result.summary())
