@@ -12,7 +12,7 @@ certified).  Rows:
 * puma560 and panda at 10, 30 and 100 random poses, cold (a new pose set each repeat);
 * 1000 random poses, warm (an R step; puma560 and panda);
 * one warm re-solve of the same specification (paper's robot), with IPOPT's warm re-solve
-  (``solver="ipopt"``), scipy SLSQP with exact gradients (``bench_synthesis.SLSQPExact``) and
+  (``solver="ipopt"``, ``options={"warm_start": True}``), scipy SLSQP with exact gradients (``bench_synthesis.SLSQPExact``) and
   SUMT + Powell timed beside it, their ratios printed under the table;
 * a grid of 144 solves by ``tolsynth.sweep`` in this process (``bench_sweep.py``'s grid: R x p x
   alpha x distribution on the paper's robot) against the lean model doing the same grid (one
@@ -50,7 +50,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import bench_solve as bs  # noqa: E402
-from bench_synthesis import SLSQPExact, median_time  # noqa: E402
+from bench_synthesis import IPOPT_WARM, SLSQPExact, median_time  # noqa: E402
 from lean_cvxpy import LeanModel  # noqa: E402
 
 import tolsynth  # noqa: E402
@@ -84,9 +84,12 @@ def warm_resolve(reps: int, alt_reps: int) -> tuple[bs.Row, str]:
         solve,
         lambda: lm.solve(bs.R, bs.P),
     )
-    tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt", probability="gaussian")
+    tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt", probability="gaussian", options=IPOPT_WARM)
     t_ip, _ = median_time(
-        lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt", probability="gaussian"), alt_reps
+        lambda: tolsynth.synthesize(
+            m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt", probability="gaussian", options=IPOPT_WARM
+        ),
+        alt_reps,
     )
     sl = SLSQPExact(make_specification(m, bs.R, bs.P, bs.DIST, bs.ALPHA))
     for ftol in (1e-6, 1e-8, 1e-10, 1e-12, 1e-14):  # the loosest ftol that reaches the optimum to 1e-6
@@ -100,7 +103,7 @@ def warm_resolve(reps: int, alt_reps: int) -> tuple[bs.Row, str]:
     t = row.t_ts
     line = (
         f"The warm re-solve ({bs.fmt_t(t)}) against other methods in the same run (their time / tolsynth's): "
-        f'IPOPT\'s warm re-solve (`solver="ipopt"`) {bs.fmt_t(t_ip)} ({t_ip / t:.1f}x); scipy SLSQP with '
+        f'IPOPT\'s warm re-solve (`solver="ipopt"`, asked with `warm_start=True`) {bs.fmt_t(t_ip)} ({t_ip / t:.1f}x); scipy SLSQP with '
         f"exact gradients (ftol {ftol:g}, cost within {abs(r_sl.fun - ref) / ref:.0e}) {bs.fmt_t(t_sl)} "
         f"({t_sl / t:.1f}x); SUMT + Powell {bs.fmt_t(t_su)} ({t_su / t:.1f}x)."
     )

@@ -177,8 +177,10 @@ def synthesize(
     options : dict, optional
         Solver options.  ``probability="exact"``: max_rounds, max_iter, max_patches (see
         :mod:`tolsynth.solvers.exact`); ``"gaussian"``: IPOPT's and the compiled method's tol,
-        constr_viol_tol, max_iter, feas_tol, max_rounds and warm_start (False: nothing from an
-        earlier solve of the same poses), SUMT's see solve_sumt.
+        constr_viol_tol, max_iter, feas_tol, max_rounds and warm_start (whether a solve starts from
+        the last solve of the same poses in this process: the compiled method's default True;
+        IPOPT's default False, from scratch, as True reaches the optimum only to IPOPT's
+        tolerance, so that the answer then depends on what ran before), SUMT's see solve_sumt.
     validate : int, optional
         Run this many Monte Carlo samples through the nonlinear kinematics at the optimum and
         attach the achieved probabilities as ``result.validation``.
