@@ -8,14 +8,17 @@ specification, and checks that both reach the same optimum (1e-6 relative; tolsy
 certified).  Rows:
 
 * a cold single-pose solve of the paper's robot (new model, new cost factors each repeat);
-* one step of a sweep over k, alpha, an active bound, a lock, R and p (paper's robot);
+* one step of a sweep over k, alpha, an active bound, a lock, R and p (paper's robot), tolsynth
+  from scratch (its default: an answer never depends on what ran before it);
 * puma560 and panda at 10, 30 and 100 random poses, cold (a new pose set each repeat);
-* 1000 random poses, warm (an R step; puma560 and panda);
-* one warm re-solve of the same specification (paper's robot), with IPOPT's warm re-solve
-  (``solver="ipopt"``), scipy SLSQP with exact gradients (``bench_synthesis.SLSQPExact``) and
+* 1000 random poses, an R step (puma560 and panda), tolsynth from scratch and asked to warm-start
+  (``options={"warm_start": True}``);
+* one re-solve of the same specification (paper's robot) asked to warm-start
+  (``options={"warm_start": True}``), with IPOPT's warm re-solve
+  (``solver="ipopt"``, ``options={"warm_start": True}``), scipy SLSQP with exact gradients (``bench_synthesis.SLSQPExact``) and
   SUMT + Powell timed beside it, their ratios printed under the table;
-* a grid of 144 solves by ``tolsynth.sweep`` in this process (``bench_sweep.py``'s grid: R x p x
-  alpha x distribution on the paper's robot) against the lean model doing the same grid (one
+* a grid of 144 solves by ``tolsynth.sweep`` in this process, each from scratch (``bench_sweep.py``'s
+  grid: R x p x alpha x distribution on the paper's robot) against the lean model doing the same grid (one
   Problem per alpha and distribution, re-solved for every R and p);
 * the exact-probability design, the library's default (paper's robot, uniform and mixed shapes,
   p 0.7, 0.9, 0.99, a new R each repeat) against one cold lean solve of the Gaussian problem
@@ -50,7 +53,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import bench_solve as bs  # noqa: E402
-from bench_synthesis import SLSQPExact, median_time  # noqa: E402
+from bench_synthesis import IPOPT_WARM, SLSQPExact, median_time  # noqa: E402
 from lean_cvxpy import LeanModel  # noqa: E402
 
 import tolsynth  # noqa: E402
@@ -70,23 +73,29 @@ REPEATS = {
 
 
 def warm_resolve(reps: int, alt_reps: int) -> tuple[bs.Row, str]:
-    """The same specification solved again (paper's robot) against the lean model's re-solve, and
-    the line of the other methods' times on it (IPOPT warm, SLSQP with exact gradients, SUMT)."""
+    """The same specification solved again (paper's robot), asked to warm-start, against the lean
+    model's re-solve, and the line of the other methods' times on it (IPOPT asked to warm-start,
+    SLSQP with exact gradients, SUMT)."""
     m = tolsynth.load_model("xu_zhang_1988")
     lm = LeanModel(tolsynth.load_model("xu_zhang_1988"), ["worst"], bs.DIST, bs.ALPHA)
-    solve = lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, probability="gaussian")
+    solve = lambda: tolsynth.synthesize(
+        m, bs.R, bs.P, bs.DIST, bs.ALPHA, probability="gaussian", options={"warm_start": True}
+    )
     ref = solve().cost
     lm.solve(bs.R, bs.P)  # canonicalised once: untimed
     row = bs.paired(
-        bs.Row("one warm re-solve, same specification, paper's robot"),
+        bs.Row("one re-solve, same specification, paper's robot, asked to warm-start"),
         reps,
         lambda i: (),
         solve,
         lambda: lm.solve(bs.R, bs.P),
     )
-    tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt", probability="gaussian")
+    tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt", probability="gaussian", options=IPOPT_WARM)
     t_ip, _ = median_time(
-        lambda: tolsynth.synthesize(m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt", probability="gaussian"), alt_reps
+        lambda: tolsynth.synthesize(
+            m, bs.R, bs.P, bs.DIST, bs.ALPHA, solver="ipopt", probability="gaussian", options=IPOPT_WARM
+        ),
+        alt_reps,
     )
     sl = SLSQPExact(make_specification(m, bs.R, bs.P, bs.DIST, bs.ALPHA))
     for ftol in (1e-6, 1e-8, 1e-10, 1e-12, 1e-14):  # the loosest ftol that reaches the optimum to 1e-6
@@ -99,8 +108,8 @@ def warm_resolve(reps: int, alt_reps: int) -> tuple[bs.Row, str]:
     )
     t = row.t_ts
     line = (
-        f"The warm re-solve ({bs.fmt_t(t)}) against other methods in the same run (their time / tolsynth's): "
-        f'IPOPT\'s warm re-solve (`solver="ipopt"`) {bs.fmt_t(t_ip)} ({t_ip / t:.1f}x); scipy SLSQP with '
+        f"The re-solve asked to warm-start ({bs.fmt_t(t)}) against other methods in the same run (their time / tolsynth's): "
+        f'IPOPT\'s warm re-solve (`solver="ipopt"`, asked with `warm_start=True`) {bs.fmt_t(t_ip)} ({t_ip / t:.1f}x); scipy SLSQP with '
         f"exact gradients (ftol {ftol:g}, cost within {abs(r_sl.fun - ref) / ref:.0e}) {bs.fmt_t(t_sl)} "
         f"({t_sl / t:.1f}x); SUMT + Powell {bs.fmt_t(t_su)} ({t_su / t:.1f}x)."
     )
@@ -167,7 +176,7 @@ def grid_sweep(repeat: int, size: int = 6) -> PlainRow:
                 lean.append(time.perf_counter() - t0)
     rel = max(abs(lean_cost[(r.R, r.p, r.alpha, r.distribution)] - r.cost) / r.cost for r in df.itertuples())
     return PlainRow(
-        f"a grid of {n} solves, `tolsynth.sweep` in this process (R x p x alpha x distribution)",
+        f"a grid of {n} solves, `tolsynth.sweep` in this process (R x p x alpha x distribution), each from scratch",
         ts,
         lean,
         failures,
@@ -233,7 +242,8 @@ def table(rows, quick: bool, seconds: float, loads: tuple, warm_line: str) -> st
     prose = [
         f"From one run of `python benchmarks/speed_table.py{' --quick' if quick else ''}` ({stamp}, "
         f"{os.cpu_count()} cores, load average {loads[0]:.1f} at the start and {loads[1]:.1f} at the end, "
-        f"{seconds:.0f} s): tolsynth (`solver='auto'`) on the paper's Gaussian criterion against the lean "
+        f"{seconds:.0f} s): tolsynth (`solver='auto'`; every solve from scratch, its default, unless its row "
+        "says it was asked to warm-start) on the paper's Gaussian criterion against the lean "
         "cvxpy + Clarabel model of the same problem in `benchmarks/lean_cvxpy.py` (the model a competent "
         "cvxpy user writes, its Problem built once and re-solved where a sweep allows), paired repeat by "
         "repeat in the same process; then tolsynth's default, the exact probabilities, against one cold "

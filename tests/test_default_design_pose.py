@@ -106,3 +106,40 @@ def test_validate_plain_tolerances_checks_the_design_pose():
     assert np.allclose(v.montecarlo.q, q, rtol=0, atol=1e-12)
     mc = tolsynth.monte_carlo(m, q, "coarse", R=0.5, n=20_000, seed=1)
     assert np.array_equal(v.p_components, mc.p_components)
+
+
+def _file_pose(m, name: str) -> np.ndarray:
+    """A configuration's joint values read from the model file (degrees there), in rad."""
+    cfg = _file_configurations(m)[name]
+    return np.radians([float(cfg[j]) for j in m.joint_names])
+
+
+def test_validate_of_a_result_checks_the_pose_it_was_designed_at():
+    """A result designed at ``elbow90`` is validated at ``elbow90``, not at the model's ``worst``
+    configuration: the Monte Carlo's joint values are the model file's, and its probabilities are
+    monte_carlo's at that pose with the same seed; an explicit pose still wins."""
+    m = tolsynth.load_model("planar_2r")
+    q = _file_pose(m, "elbow90")
+    assert not np.allclose(q, _file_pose(m, "worst"))
+    res = tolsynth.synthesize(m, **SPEC, pose="elbow90")
+    v = tolsynth.validate(m, res, n=20_000, seed=1)
+    assert v.to_dict()["pose"] == "elbow90"
+    np.testing.assert_allclose(v.montecarlo.q, q, rtol=0, atol=1e-12)
+    mc = tolsynth.monte_carlo(m, q, res.tolerances, "uniform", R=0.5, n=20_000, seed=1)
+    assert np.array_equal(v.p_components, mc.p_components)
+    explicit = tolsynth.validate(m, res, n=20_000, seed=1, pose="stretched")
+    np.testing.assert_allclose(explicit.montecarlo.q, _file_pose(m, "stretched"), rtol=0, atol=1e-12)
+
+
+def test_validate_of_a_several_pose_result_checks_each_pose():
+    """A result designed at two poses is validated at both (seeds seed, seed + 1), in the model
+    file's joint values; plain tolerances are checked at the model's ``worst`` configuration."""
+    m = tolsynth.load_model("planar_2r")
+    res = tolsynth.synthesize(m, **SPEC, poses=["elbow90", [0.2, 1.0]])
+    v = tolsynth.validate(m, res, n=5_000, seed=4)
+    assert len(v.per_pose) == 2
+    np.testing.assert_allclose(v.per_pose[0].montecarlo.q, _file_pose(m, "elbow90"), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(v.per_pose[1].montecarlo.q, [0.2, 1.0], rtol=0, atol=1e-12)
+    assert v.per_pose[1].seed == 5
+    plain = tolsynth.validate(m, res.tolerances, R=0.5, p=0.99, n=5_000, seed=4)
+    np.testing.assert_allclose(plain.montecarlo.q, _file_pose(m, "worst"), rtol=0, atol=1e-12)

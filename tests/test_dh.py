@@ -89,9 +89,9 @@ def panda():
 # the same robot as its model file
 # ---------------------------------------------------------------------------------------------
 def _solve_cold(m, pose):
-    """Synthesize without a warm start: it would start the second of two solves of the same blocks
-    from the first's remembered optimum, and warm and cold solves of one model differ by up to 2e-7
-    relative in the tolerances (measured on panda: the optimum is met to the solver's tol)."""
+    """Synthesize from scratch (stated, though it is the default): a warm start from another solve
+    of the same blocks would differ from a cold solve by up to 2e-7 relative in the tolerances
+    (measured on panda: the optimum is met to the solver's tol)."""
     return tolsynth.synthesize(m, R=0.5, p=0.99, pose=pose, options={"warm_start": False}, probability="gaussian")
 
 

@@ -45,7 +45,7 @@ def _check_against_synthesize(df, mech):
             assert row["gap"] <= 1e-6 * row["cost"]
         got = row[["eps_" + n for n in mech.error_parameters]].to_numpy(dtype=float)
         # the cost is flat at the optimum (its error is quadratic in the tolerances' error): costs equal
-        # to 1e-8 allow tolerances ~1e-5 apart, which the solver's warm-start state in another process gives
+        # to 1e-8 allow tolerances ~1e-5 apart
         np.testing.assert_allclose(got, ref.x, rtol=1e-4)
 
 

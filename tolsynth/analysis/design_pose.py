@@ -2,7 +2,7 @@
 
 :func:`tolsynth.synthesize` and :func:`tolsynth.sweep` (through :func:`resolve_design_pose`), the
 designs built on them and every command of the command line (through :func:`default_design_pose`)
-take it, so that the same request gives the same design through every door.  The rule: the model's configuration ``worst`` if it has one (the
+take it (and :func:`tolsynth.validate` checks plain tolerances there), so that the same request gives the same design through every door.  The rule: the model's configuration ``worst`` if it has one (the
 paper's pose of largest error, or the one a model file's author found); else the pose of largest
 principal sigma at the geometric middle of the tolerance bounds, found by :func:`worst_pose`
 (deterministic, remembered per mechanism); else, if that search fails, the model's first

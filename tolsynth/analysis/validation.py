@@ -128,13 +128,33 @@ def _attr(obj, name):
     return None
 
 
+def _designed_poses(mechanism, obj):
+    """The poses a result was designed at (its own, or its inner ``result``'s, specification): one
+    pose, or a list of them; a pose named by a configuration keeps its name.  None for plain
+    tolerances or an object that records no poses."""
+    for o in (obj, getattr(obj, "result", None)):
+        designed = getattr(getattr(o, "spec", None), "poses", None)
+        if isinstance(designed, Mapping) and designed:
+            break
+    else:
+        return None
+    known = getattr(mechanism, "configurations", {})
+    out = [
+        label
+        if label in known and np.array_equal(np.asarray(known[label], dtype=float), np.asarray(q, dtype=float))
+        else q
+        for label, q in designed.items()
+    ]
+    return out[0] if len(out) == 1 else out
+
+
 def validate(
     mechanism,
     tolerances_or_result,
     R: float | None = None,
     p: float | None = None,
     distribution: str | None = None,
-    pose="worst",
+    pose=None,
     n: int = 1_000_000,
     seed: int = 0,
     batch: int = DEFAULT_BATCH,
@@ -155,11 +175,15 @@ def validate(
         Probability asked for, 0 < p < 1 (same fallback).
     distribution : str or dict, optional
         Same fallback; default "uniform".
-    pose : str, array, or a list of them
-        Where to check: the model's ``worst`` configuration by default (the paper's pose of
-        largest error), else, for a result, every pose it was designed at, and for plain tolerances
-        the pose a design is made at by default (:func:`tolsynth.analysis.design_pose.default_design_pose`).  With several poses each is run (seeds ``seed``, ``seed + 1``, ...) and
-        the worst (lowest ``P(|w_j| <= R)`` against p) is returned, every pose's in ``per_pose``.
+    pose : str, array, or a list of them, optional
+        Where to check.  Not given: for a result, every pose it was designed at (``result.spec.poses``);
+        for plain tolerances, the pose a design is made at by default
+        (:func:`tolsynth.analysis.design_pose.default_design_pose`: the model's ``worst``
+        configuration, else the worst-pose search's pose).  Given, it is used as it is: a
+        configuration name or a joint vector (rad; mm for a sliding joint); ``"worst"`` is read as
+        ``synthesize`` reads it, the model's ``worst`` configuration, else its default design pose.
+        With several poses each is run (seeds ``seed``, ``seed + 1``, ...) and the worst (lowest
+        ``P(|w_j| <= R)`` against p) is returned, every pose's in ``per_pose``.
     n, seed, batch, confidence, progress
         As for :func:`monte_carlo`.
     Phi : float, optional
@@ -189,14 +213,12 @@ def validate(
     if p is None:
         raise InputError("p", "no probability given", "0 < p < 1")
     p = check_probability(p, "p")
-    if isinstance(pose, str) and pose == "worst" and "worst" not in getattr(mechanism, "configurations", {"worst": 0}):
-        designed = getattr(getattr(tolerances_or_result, "spec", None), "poses", None)
-        if designed:  # a result: the poses it was designed at
-            pose = list(designed.values())
-        else:  # plain tolerances: the pose a design is made at by default, as synthesize takes it
-            from tolsynth.analysis.design_pose import default_design_pose
+    if pose is None:
+        pose = _designed_poses(mechanism, tolerances_or_result)
+    if pose is None or (isinstance(pose, str) and pose == "worst"):
+        from tolsynth.analysis.design_pose import default_design_pose
 
-            pose = default_design_pose(mechanism)[0]
+        pose = default_design_pose(mechanism)[0]
     if isinstance(pose, list) and pose and not all(is_real(v) for v in pose):
         runs = [
             validate(mechanism, tol, R, p, distribution, q, n, seed + k, batch, confidence, progress, Phi)

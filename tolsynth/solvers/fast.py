@@ -16,19 +16,20 @@ minimised in closed form by :meth:`tolsynth.model.cost_set.CostSet.dual_min`), e
 IPOPT: ``success`` needs the point feasible and the gap within 1e-6 of the cost (the method closes
 it to about 1e-11).
 
-Warm starts.  The last solve of each set of blocks (the same poses and rows, whatever R, p, k,
-alpha, the bounds or the locks) is remembered; a solve close to it (a sweep's step: every change a
-few per cent at most) starts from its optimum moved slightly into the interior, and takes 4-5
-iterations instead of 8-12; the very same problem again takes none.
+Cold by default.  Every solve starts from scratch (8-12 iterations on one pose), so that its
+answer is a function of its problem alone, bit for bit, whatever ran before it in the process.
+
+Warm starts, asked for (``options={"warm_start": True}``).  The last solve of each set of blocks
+(the same poses and rows, whatever R, p, k, alpha, the bounds or the locks) is remembered; a solve
+asked to warm-start that is close to it (a sweep's step: every change a few per cent at most)
+starts from its optimum moved slightly into the interior, and takes 4-5 iterations; the very same
+problem again takes none.  It reaches the same optimum only to about 1e-11 of the cost (1e-8 of a
+tolerance), so its answer then depends on what ran before it: the user's choice, for speed.
 
 Many poses.  Up to :data:`ALL_BLOCKS` blocks the method takes them all at once.  Beyond, it works
-on a set of blocks (an exchange method over poses): those active at the last solve of the same
-poses, else those nearest to their limit at the start point; every block is checked at each
-round's optimum and the violated ones join the set.
-
-Every run is solved to the same accuracy, so a warm start or a working set changes the time, not
-the answer (the same optimum to about 1e-11 of the cost; ``options={"warm_start": False}`` solves
-from scratch).
+on a set of blocks (an exchange method over poses): those nearest to their limit at the start
+point (with a warm start, those active at the last solve of the same poses); every block is
+checked at each round's optimum and the violated ones join the set.
 """
 
 from __future__ import annotations
@@ -73,7 +74,8 @@ FIRST_MODE_ITER = 40
 
 #: the last solve of recent block sets, by the blocks' sensitivity rows (free of R, p and the cost):
 #: (the active blocks of a problem with many, else None; the final state on them; its cost
-#: scale; its bounds of y; its k, alpha and blocks' scales)
+#: scale; its bounds of y; its k, alpha and blocks' scales); read only by a solve asked to
+#: warm-start, as reading it makes the answer depend on the solves before
 _MEMORY: "OrderedDict[tuple, tuple]" = OrderedDict()
 _MEMORY_SIZE = 64
 #: a warm start's distance from the cones' boundary (in the scaled multipliers and slacks)
@@ -134,8 +136,9 @@ def solve_fast(nlp: ToleranceNLP, compiled=None, **options):
     complementarity relative to the cost, default and at most 1e-10), ``feas_tol`` (largest
     ``sigma z / R - 1`` accepted at the returned point, default 1e-9), ``max_iter`` (per solve of
     the method, at most 100), ``max_rounds`` (exchange rounds over blocks) and ``warm_start``
-    (False: nothing from the last solve of the same blocks, neither its optimum as the start nor
-    its active blocks as the working set); ``constr_viol_tol`` is IPOPT's alone.
+    (default False: nothing from an earlier solve; True: the last solve of the same blocks in this
+    process gives its optimum as the start, where the problem is close to it, and its active
+    blocks as the working set); ``constr_viol_tol`` is IPOPT's alone.
     """
     spec = nlp.spec
     tol = min(float(options.get("tol", 1e-10)), 1e-10)  # the method is cheap: never looser than 1e-10
@@ -178,7 +181,7 @@ def solve_fast(nlp: ToleranceNLP, compiled=None, **options):
     # a digest, not the rows themselves: a thousand poses' rows are half a megabyte
     key = (n, m, hashlib.blake2b(b"".join(b.A.tobytes() for b in spec.blocks), digest_size=16).digest())
     scales = nlp.scales * (1.0 / math.sqrt(spec.c))  # each block's factor on its rows
-    memo = _MEMORY.get(key) if options.get("warm_start", True) else None
+    memo = _MEMORY.get(key) if options.get("warm_start", False) else None
     memo_start, shift = memo, WARM_SHIFT
     if memo is not None:
         d = _distance(memo, k, alpha, L, U, scales)

@@ -65,15 +65,18 @@ IPOPT_STATUS = {
 }
 
 #: IPOPT's own tolerances, its iteration limit per cut NLP, the exchange method's limits, and
-#: whether a solve may start from what an earlier solve of the same blocks left (its active cuts
-#: and its optimum rescaled; False: from scratch, as :func:`tolsynth.compare` runs IPOPT)
+#: whether a solve may start from what an earlier solve of the same blocks in this process left
+#: (its active cuts and its optimum rescaled).  False by default: a solve starts from scratch, so
+#: its answer depends on nothing run before it; a warm start lands on the same optimum only to
+#: about the solver's tolerance (1e-9 of a tolerance on the paper's column), so it is the user's
+#: explicit choice, for speed
 DEFAULT_OPTIONS = {
     "tol": 1e-10,
     "constr_viol_tol": 1e-12,
     "max_iter": 500,
     "feas_tol": None,
     "max_rounds": 60,
-    "warm_start": True,
+    "warm_start": False,
 }
 
 #: tried in turn on a cut NLP until one ends in Solve_Succeeded
@@ -243,7 +246,8 @@ def _solver(
 
 
 #: the active cuts at the end of recent solves, by the blocks' sensitivity rows (directions do not
-#: depend on R, p, c or the cost, only on where the optimum sits)
+#: depend on R, p, c or the cost, only on where the optimum sits); read only by a solve asked to
+#: warm-start (``warm_start=True``)
 _CUT_CACHE: "OrderedDict[tuple, tuple[np.ndarray, np.ndarray]]" = OrderedDict()
 _CUT_CACHE_SIZE = 256
 
@@ -307,8 +311,10 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, *, sphere_bou
 
     Options: tol, constr_viol_tol, max_iter (IPOPT's own, per cut NLP), feas_tol (largest
     ``sigma z / R - 1`` accepted over all blocks; default ``min(1e-9, 10 tol)``), max_rounds
-    (exchange rounds) and warm_start (default True: start from the active cuts and the rescaled
-    optimum of the last solve of the same blocks, cost model and bounds, if there is one).
+    (exchange rounds) and warm_start (default False: from scratch; True: start from the active cuts
+    and the rescaled optimum of the last solve in this process of the same blocks, cost model and
+    bounds, if there is one, which is faster but reaches the optimum only to the solver's
+    tolerance, so that the answer then depends on what ran before).
     ``sphere_bounds=False`` leaves out the sphere criterion's lower bounds (their result's
     ``lower_bound`` is then -inf): for a design wanted only as another method's start.
     """
@@ -322,9 +328,9 @@ def solve_ipopt(nlp: ToleranceNLP, eps0: np.ndarray | None = None, *, sphere_bou
     n, m, ms = spec.n, len(spec.blocks), len(spec.sphere_blocks)
     # default: as tight as IPOPT's own tolerance asks (1e-9 at the default tol)
     feas_tol = min(1e-9, 10.0 * float(opts["tol"])) if opts["feas_tol"] is None else float(opts["feas_tol"])
-    # initial cuts: those that were active at the end of the last solve on the same blocks (a
-    # sweep over R, p, the distribution or the cost re-solves the same poses), else every
-    # principal direction of the blocks that are near the worst at the start
+    # initial cuts: with warm_start, those that were active at the end of the last solve on the
+    # same blocks (a sweep over R, p, the distribution or the cost re-solves the same poses), else
+    # every principal direction of the blocks that are near the worst at the start
     cut_b = np.zeros(0, dtype=int)
     cut_w = np.zeros((0, 3))
     key = _cache_key(nlp)

@@ -290,9 +290,9 @@ class _Search:
             lo[i], hi[i] = self.values[i][a], self.values[i][b]
         trivial = self.costs.cost(hi)  # every cost falls with its tolerance
         spec = self.spec
-        # the paper's power law as k and alpha: the solvers' closed forms and warm starts serve it;
-        # no x0: the parent's optimum clipped to the box breaks the specification and costs IPOPT
-        # 40-80 iterations, where the solver's own warm start (its remembered cuts) needs about one
+        # the paper's power law as k and alpha: the compiled method's closed forms serve it; no x0:
+        # the parent's optimum clipped to the box breaks the specification and costs IPOPT 40-80
+        # iterations
         cost = None if spec.costs.power_law() is not None else list(spec.costs.models)
         kw = dict(
             bounds=(lo, hi),

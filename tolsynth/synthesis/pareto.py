@@ -1,9 +1,10 @@
 """Pareto fronts: optimal cost against R (at a given p) or against p (at a
-given R), optionally with discrete process choice (then a staircase), by warm-started sweeps.
+given R), optionally with discrete process choice (then a staircase).
 
 Every point is a certified optimum (:func:`tolsynth.synthesize`, or
-:func:`tolsynth.synthesize_processes` with processes); the sweep starts each solve from the
-previous point's tolerances.  The paper's columns (the model's ``reference_results`` with the
+:func:`tolsynth.synthesize_processes` with processes); the sweep gives each solve the previous
+point's tolerances as its start (IPOPT and SUMT start there; the default compiled method needs no
+start).  The paper's columns (the model's ``reference_results`` with the
 same p, distribution and alpha) are marked on the plot at their own printed tolerances' cost.
 """
 

@@ -177,8 +177,11 @@ def synthesize(
     options : dict, optional
         Solver options.  ``probability="exact"``: max_rounds, max_iter, max_patches (see
         :mod:`tolsynth.solvers.exact`); ``"gaussian"``: IPOPT's and the compiled method's tol,
-        constr_viol_tol, max_iter, feas_tol, max_rounds and warm_start (False: nothing from an
-        earlier solve of the same poses), SUMT's see solve_sumt.
+        constr_viol_tol, max_iter, feas_tol, max_rounds and warm_start (default False: from
+        scratch, so that the answer depends on nothing run before it in the process; True: start
+        from the last solve of the same poses in this process, faster, but the optimum is then
+        reached only to the solver's tolerance and the answer depends on what ran before), SUMT's
+        see solve_sumt.
     validate : int, optional
         Run this many Monte Carlo samples through the nonlinear kinematics at the optimum and
         attach the achieved probabilities as ``result.validation``.
