@@ -17,6 +17,7 @@ import numpy as np
 from tolsynth.analysis.montecarlo import DEFAULT_BATCH, MonteCarloResult, monte_carlo
 from tolsynth.checks import is_real
 from tolsynth.errors import InputError, WorkspaceWarning
+from tolsynth.kinematics.mechanism import as_mechanism
 from tolsynth.probability.stats import check_probability
 from tolsynth.tabular import Tabular
 
@@ -213,6 +214,7 @@ def validate(
     if p is None:
         raise InputError("p", "no probability given", "0 < p < 1")
     p = check_probability(p, "p")
+    mechanism = as_mechanism(mechanism)  # a model name too; anything else an InputError naming it
     if pose is None:
         pose = _designed_poses(mechanism, tolerances_or_result)
     if pose is None or (isinstance(pose, str) and pose == "worst"):
