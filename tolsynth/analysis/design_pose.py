@@ -2,12 +2,14 @@
 
 :func:`tolsynth.synthesize` and :func:`tolsynth.sweep` (through :func:`resolve_design_pose`), the
 designs built on them and every command of the command line (through :func:`default_design_pose`)
-take it (and :func:`tolsynth.validate` checks plain tolerances there), so that the same request gives the same design through every door.  The rule: the model's configuration ``worst`` if it has one (the
-paper's pose of largest error, or the one a model file's author found); else the pose of largest
-principal sigma at the geometric middle of the tolerance bounds, found by :func:`worst_pose`
-(deterministic, remembered per mechanism); else, if that search fails, the model's first
-configuration.  A parallel robot's ``reference`` configuration (``home``) is the pose its searches
-and maps compare with, not its design pose.  Units: joint values in rad (mm for a sliding joint).
+take it, and :func:`tolsynth.validate` checks plain tolerances there, so that the same request
+gives the same design through every door.  The rule: the model's configuration ``worst`` if it
+has one (the paper's pose of largest error, or the one a model file's author found); else the pose
+of largest principal sigma at the geometric middle of the tolerance bounds, found by
+:func:`worst_pose` (deterministic, remembered per mechanism); else, if that search fails, the
+model's first configuration.  A parallel robot's ``reference`` configuration (``home``) is the pose
+its searches and maps compare with, not its design pose.  Units: joint values in rad (mm for a
+sliding joint).
 """
 
 from __future__ import annotations
