@@ -33,6 +33,7 @@ __all__ = [
     "convert_quantity",
     "suffixes",
     "joint_values",
+    "units_label",
 ]
 
 #: factor from the unit to mm
@@ -124,3 +125,9 @@ def joint_values(q, units, key: str = "q") -> dict:
     if len(set(units)) <= 1:
         return {f"{key}_{units[0] if units else 'rad'}": q}
     return {key: q, "joint_units": list(units)}
+
+
+def units_label(units) -> str:
+    """One label for the units of a set of joints: ``"rad"``, ``"mm"`` or ``"mm/rad"`` where
+    they mix (``"deg"`` and ``"mm"`` alike for the units shown)."""
+    return "/".join(sorted(set(units))) or "rad"

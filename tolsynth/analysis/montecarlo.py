@@ -44,6 +44,7 @@ from tolsynth.errors import InputError, LoopClosureError, OutOfRangeError
 from tolsynth.kinematics.numpy_eval import NumpyEvaluator
 from tolsynth.probability.stats import check_positive, check_probability, principal
 from tolsynth.progress import Progress, make_bar  # noqa: F401  (make_bar: re-exported for older imports)
+from tolsynth.units import units_label
 
 __all__ = [
     "NumpyEvaluator",
@@ -418,5 +419,5 @@ def monte_carlo(
         samples_per_s=n / elapsed if elapsed > 0 else math.inf,
         **extra,
     )
-    out.units["q"] = "/".join(sorted(set(mechanism.joint_value_units)))  # a strut's length in mm
+    out.units["q"] = units_label(mechanism.joint_value_units)  # a strut's length in mm
     return out

@@ -37,6 +37,7 @@ from tolsynth.kinematics.joint_space import (
 )
 from tolsynth.probability.stats import p_ball
 from tolsynth.tabular import Tabular
+from tolsynth.units import units_label
 
 __all__ = ["WorstPose", "worst_pose"]
 
@@ -153,7 +154,7 @@ class WorstPose(Tabular):
 
         row("", "found", f"reference ({self.reference})")
         row(
-            "joints (" + "/".join(sorted(set(units))) + ")",
+            "joints (" + units_label(units) + ")",
             fmt(shown(self.q)),
             None if self.reference_q is None else fmt(shown(self.reference_q)),
         )

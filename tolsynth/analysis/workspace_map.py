@@ -26,6 +26,7 @@ from tolsynth.model.parallel import is_parallel
 from tolsynth.probability.stats import check_positive, p_ball_batch
 from tolsynth.progress import make_bar
 from tolsynth.tabular import Tabular, jsonable
+from tolsynth.units import units_label
 
 __all__ = ["ProbabilityMap", "probability_map", "PLANES"]
 
@@ -424,5 +425,5 @@ def probability_map(
         elapsed_s=time.perf_counter() - t0,
         joint_units=mechanism.joint_value_units,
     )
-    pm.units["Q"] = "/".join(sorted(set(mechanism.joint_value_units)))  # a strut's length in mm
+    pm.units["Q"] = units_label(mechanism.joint_value_units)  # a strut's length in mm
     return pm

@@ -23,7 +23,7 @@ from tolsynth.errors import InputError, UnknownNameError
 from tolsynth.io.tables import jsonable
 from tolsynth.kinematics.mechanism import Mechanism
 from tolsynth.units import QUANTITY as _QTY
-from tolsynth.units import SUFFIXES, split_quantity, to_base, unit_kind
+from tolsynth.units import SUFFIXES, split_quantity, to_base, unit_kind, units_label
 from tolsynth.units import suffixes as _suffixes
 
 __all__ = [
@@ -189,7 +189,7 @@ def parse_pose(mech: Mechanism, text: str, field: str = "--pose"):
     allowed = (
         "one of " + ", ".join(mech.configurations) + " (configurations), or "
         f"{len(mech.joint_names)} comma-separated joint values in "
-        f"{'/'.join(sorted(set(mech.joint_units)))} ({', '.join(mech.joint_names)})"
+        f"{units_label(mech.joint_units)} ({', '.join(mech.joint_names)})"
     )
     items = [t.strip() for t in str(text).split(",")]
     if not any(_QTY.match(t) for t in items):

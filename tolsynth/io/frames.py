@@ -12,7 +12,7 @@ from tolsynth.tabular import (
     make_frame,
     synthesis_summary,
 )
-from tolsynth.units import joint_values
+from tolsynth.units import joint_values, units_label
 
 # ---------------------------------------------------------------------------------------------
 # inputs of a synthesis
@@ -247,7 +247,7 @@ def _map_frame(pm):
         "sigma1": "mm",
         "sigma2": "mm",
         "sigma3": "mm",
-        "limit_margin": "/".join(sorted(set(units_q))) if units_q else "rad",
+        "limit_margin": units_label(units_q),
         **{f"q_{n}": u for n, u in zip(pm.joint_names, units_q)},
     }
     return make_frame(cols, "ProbabilityMap", inputs, summary, units)

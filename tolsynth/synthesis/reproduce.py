@@ -149,8 +149,7 @@ def reproduce(
 
 def _cell(value, spec: str) -> str:
     """A number in its column, or a dash where it was not computed (SUMT skipped, no degree reading)."""
-    width = int("".join(ch for ch in spec.split(".")[0] if ch.isdigit()))
-    return format(value, spec) if value is not None and value is not False else "-".rjust(width)
+    return format(value, spec) if value is not None else "-".rjust(len(format(0.0, spec)))
 
 
 def format_report(reports: list[ColumnReport], mech: Mechanism | None = None) -> str:
