@@ -274,7 +274,7 @@ def test_every_entry_point_takes_a_model_name_and_types_anything_else():
 def test_dict_arguments_name_the_entry_and_take_unit_suffixes():
     """An unknown name in bounds, k or locks is an error naming that entry (bounds[length]); a bound
     written with a unit is converted into the parameter's tolerance unit (1 um = 0.001 mm, planar_2r's
-    l1 in mm), one of the wrong kind is refused; a partial alpha names the parameters left out."""
+    l1 in mm), one of the wrong kind is refused."""
     m = tolsynth.load_model("planar_2r")
     spec = dict(R=0.5, p=0.99, pose="elbow90", probability="gaussian")
     for kw, field in (
@@ -292,5 +292,25 @@ def test_dict_arguments_name_the_entry_and_take_unit_suffixes():
     with pytest.raises(InputError) as info:
         tolsynth.synthesize(m, **spec, bounds={"o1": ("1um", "5mm")})
     assert info.value.field == "bounds[o1].lower"
-    with pytest.raises(InputError, match="no value for l2, o1, o2"):
-        tolsynth.synthesize(m, **spec, alpha={"l1": 0.5})
+
+
+def test_partial_alpha_dict_keeps_the_default_for_the_others():
+    """A dict alpha names only the parameters it changes, as k does: the others keep synthesize's
+    default exponent (0.7, read from its signature; a model file has no alpha), so it solves the
+    same problem as the full dict written out by hand; an unknown name is refused naming it."""
+    import inspect
+
+    m = tolsynth.load_model("planar_2r")
+    spec = dict(R=0.5, p=0.99, pose="elbow90", probability="gaussian")
+    default = inspect.signature(tolsynth.synthesize).parameters["alpha"].default
+    assert default == 0.7
+    partial = tolsynth.synthesize(m, **spec, alpha={"l1": 0.5})
+    full = tolsynth.synthesize(m, **spec, alpha={"l1": 0.5, "l2": default, "o1": default, "o2": default})
+    assert partial.spec.alpha.tolist() == [0.5, 0.7, 0.7, 0.7]
+    assert partial.cost == pytest.approx(full.cost, rel=1e-12)
+    assert partial.x == pytest.approx(full.x, rel=1e-12)
+    uniform = tolsynth.synthesize(m, **spec)
+    assert abs(partial.cost - uniform.cost) > 1e-3 * uniform.cost  # the one override took effect
+    with pytest.raises(UnknownNameError) as info:
+        tolsynth.synthesize(m, **spec, alpha={"l1": 0.5, "l3": 0.5})
+    assert info.value.field == "alpha[l3]" and "l1, l2, o1, o2" in str(info.value)

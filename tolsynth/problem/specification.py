@@ -32,10 +32,12 @@ __all__ = [
 CRITERIA = ("components", "sphere")
 #: largest cost exponent: k eps**-alpha stays finite for eps >= 1e-12 (the paper: alpha <= 1)
 ALPHA_MAX = 10.0
+#: the cost exponent of a parameter given none (the paper's; a model file carries no alpha)
+ALPHA_DEFAULT = 0.7
 #: what alpha and k take, said by every error about them (type or range)
 ALPHA_ALLOWED = (
     f"the cost's exponent, {TINY:g} <= alpha <= {ALPHA_MAX:g} (the paper: alpha <= 1, typically 0.7): "
-    "a number, a dict name -> number, or one number per parameter"
+    f"a number, a dict name -> number (the others {ALPHA_DEFAULT:g}), or one number per parameter"
 )
 K_ALLOWED = (
     f"the cost factor, {TINY:g} <= k <= {HUGE:g} (the paper: k >= 1): "
@@ -136,26 +138,21 @@ class Specification:
 # ---------------------------------------------------------------------------------------------
 # validation of the user's specification
 # ---------------------------------------------------------------------------------------------
-def _per_parameter(value, names: Sequence[str], index, field_name: str, allowed: str, default=None) -> np.ndarray:
-    """One number per parameter from one number, a dict name -> number (the others ``default``)
-    or a vector; ``allowed`` (what the argument takes) goes into every error (the caller checks
-    each value's range)."""
+def _per_parameter(value, names: Sequence[str], index, field_name: str, allowed: str, default) -> np.ndarray:
+    """One number per parameter from one number, a dict name -> number (the others ``default``,
+    one number or one per parameter) or a vector; ``allowed`` (what the argument takes) goes into
+    every error (the caller checks each value's range)."""
     n = len(names)
     if value is None:
-        if default is None:
-            raise InputError(field_name, "missing", allowed)
         if isinstance(default, np.ndarray) and default.shape == (n,):  # the model's own (checked on load)
             return np.array(default, dtype=float)
         value = default
     if isinstance(value, float) and -HUGE <= value <= HUGE:  # the common case: one number for all
         return np.full(n, value)
     if isinstance(value, Mapping):
-        out = np.array(default, dtype=float).copy() if default is not None else np.full(n, np.nan)
+        out = np.array(np.broadcast_to(np.asarray(default, dtype=float), (n,)))
         for key, v in value.items():
             out[index(key, f"{field_name}[{key}]")] = check_real(v, f"{field_name}[{key}]", allowed=allowed)
-        if np.any(np.isnan(out)):
-            missing = ", ".join(nm for nm, v in zip(names, out) if np.isnan(v))
-            raise InputError(field_name, f"no value for {missing}", f"a value for each of {', '.join(names)}")
         return out
     if np.ndim(value) == 0:
         return np.full(n, check_real(value, field_name, allowed=allowed))
@@ -212,7 +209,7 @@ def make_specification(
     if criterion not in CRITERIA:
         raise InputError("criterion", f"unknown criterion {criterion!r}", " or ".join(repr(c) for c in CRITERIA))
     names = mechanism.error_parameters
-    alpha_v = _per_parameter(alpha, names, mechanism.index, "alpha", ALPHA_ALLOWED)
+    alpha_v = _per_parameter(alpha, names, mechanism.index, "alpha", ALPHA_ALLOWED, default=ALPHA_DEFAULT)
     for i in _outside(alpha_v, TINY, ALPHA_MAX):
         raise OutOfRangeError(f"alpha[{names[i]}]", f"got {alpha_v[i]}", ALPHA_ALLOWED)
     k_v = _per_parameter(k, names, mechanism.index, "k", K_ALLOWED, default=mechanism.k)

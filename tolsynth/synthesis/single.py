@@ -136,7 +136,8 @@ def synthesize(
         "truncnormal(beta)" (sigma = eps/beta, cut at +-eps) -- or a dict name -> shape ("*" the
         default; :mod:`tolsynth.probability.distributions`); default: the model file's, else uniform.
     alpha : float, sequence or dict
-        Cost exponent(s) alpha_i > 0.
+        Cost exponent(s) alpha_i > 0: one for all, one per parameter, or a dict name -> exponent
+        for some parameters (the others keep 0.7, the paper's; a model file carries no alpha).
     solver : {"auto", "ipopt", "sumt"}
         ``"auto"`` (default): the compiled interior-point method of :mod:`tolsynth.solvers.fast`
         where it applies (per-component criterion, power-law costs, Gaussian probability), IPOPT
