@@ -156,6 +156,18 @@ def test_certified_search_options_without_certify_are_refused(planar, key, value
         tolsynth.worst_pose(planar, "coarse", **{key: value})
 
 
+@pytest.mark.parametrize("progress", [True, lambda done, total: None])
+def test_progress_without_certify_is_refused(planar, progress):
+    """Only the certified search reports progress: a bar asked of the sampled search would never
+    come, so the call names progress and certify=True; False (no bar) and None stay accepted."""
+    with pytest.raises(InputError) as info:
+        tolsynth.worst_pose(planar, "coarse", grid=4, starts=1, progress=progress)
+    assert info.value.field == "progress" and "certify=True" in str(info.value)
+    plain = tolsynth.worst_pose(planar, "coarse", grid=4, starts=1)
+    quiet = tolsynth.worst_pose(planar, "coarse", grid=4, starts=1, progress=False)
+    assert quiet.value == plain.value
+
+
 def test_a_bool_is_no_count_of_workers(planar):
     with pytest.raises(InputError, match=r"^workers: got True"):
         certify_worst_pose(planar, "coarse", workers=True, progress=False)

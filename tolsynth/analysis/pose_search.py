@@ -22,7 +22,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from tolsynth.checks import check_count, check_mapping, check_positive, check_real, check_seed
+from tolsynth.checks import check_count, check_mapping, check_positive, check_progress, check_real, check_seed
 from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.kinematics.batch_stats import _criterion_batch, principal_std_batch
 from tolsynth.kinematics.joint_space import (
@@ -271,7 +271,9 @@ def worst_pose(
         Of the certified search (relative gap, box limit >= 1, progress bar, seconds > 0; None:
         the defaults, 400 000 boxes and no time limit): a limit reached leaves ``certified`` False
         with the bound reached, which holds, only looser.  ``rtol``, ``max_boxes``,
-        ``time_limit`` and ``workers`` without ``certify=True`` raise an ``InputError``.
+        ``time_limit`` and ``workers`` without ``certify=True`` raise an ``InputError``, and so
+        does a ``progress`` that asks for reports (True or a callable): the sampled search
+        reports none.
     workers : int, optional
         Processes of the certified search (default: the cores this process may use; 1: one).
 
@@ -323,6 +325,13 @@ def worst_pose(
         given = [key for key, v in limits.items() if v is not None]
         if given:
             raise InputError(given[0], "only used with certify=True", f"certify=True with {given[0]}, or no {given[0]}")
+        # the sampled search reports no progress: a bar asked for (True, a callable) would not come
+        if check_progress(progress) is not None and progress is not False:
+            raise InputError(
+                "progress",
+                f"got {progress!r}: only the certified search (certify=True) reports progress",
+                "certify=True with progress, or progress None / False",
+            )
     from tolsynth.probability.distributions import resolve
 
     distribution = resolve(distribution, mechanism)
