@@ -181,3 +181,22 @@ def test_unknown_certify_option_lists_every_key(planar):
     with pytest.raises(InputError) as e:
         tolsynth.synthesize_workspace(planar, 0.2, 0.99, certify=True, certify_options={"bogus": 1})
     assert e.value.allowed.split(", ") == ["rtol", "tol", "max_boxes", "time_limit", "workers", "margin", "through"]
+
+
+def test_an_unclosed_bound_is_json_null_in_the_certificate_and_the_worst_pose():
+    """One box of the paper's robot proves no finite sigma_1 bound (its upper_bound is inf): the
+    dicts give None there, strict JSON takes them, and every finite number is kept as it is."""
+    import json
+
+    m = tolsynth.load_model("xu_zhang_1988")
+    c = certify_worst_pose(m, "figure3", max_boxes=1, progress=False)
+    assert not c.certified and math.isinf(c.upper_bound)
+    d = json.loads(json.dumps(c.to_dict(), allow_nan=False))
+    assert d["upper_bound"] is None and d["probability_lower_bound"] is None
+    assert d["best_value"] == c.best_value and d["q"] == c.q.tolist() and d["certified"] is False
+    assert "leaves" not in d
+    w = tolsynth.worst_pose(m, "figure3", grid=4, starts=1, certify=True, max_boxes=1)
+    assert math.isinf(w.upper_bound)
+    dw = json.loads(json.dumps(w.to_dict(), allow_nan=False))
+    assert dw["upper_bound"] is None and dw["certificate"]["upper_bound"] is None
+    assert dw["value"] == w.value

@@ -39,6 +39,7 @@ from tolsynth.analysis.interval_ops import round_up as _up
 from tolsynth.checks import check_count, check_positive, check_probability, check_real
 from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.progress import Progress, remaining
+from tolsynth.tabular import jsonable
 
 __all__ = ["Certificate", "certify_worst_pose", "check_limits", "LIMITS", "DEFAULT_RTOL", "DEFAULT_MAX_BOXES"]
 
@@ -146,8 +147,9 @@ class Certificate:
         return float(self.best_value - self.probability_lower_bound)
 
     def to_dict(self) -> dict:
-        """Plain dict for JSON (arrays as lists); the boxes kept are left out (they can be large)."""
-        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items() if k != "leaves"}
+        """Plain dict for JSON (arrays as lists; a bound that did not close, inf or NaN, as None, so
+        ``json.dumps(..., allow_nan=False)`` takes it); the boxes kept are left out (they can be large)."""
+        return jsonable({k: v for k, v in self.__dict__.items() if k != "leaves"}, null=True)
 
     def summary(self) -> str:
         """One line per fact: the proof (or why not), the best pose, what was held and searched."""

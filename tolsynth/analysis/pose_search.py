@@ -36,7 +36,7 @@ from tolsynth.kinematics.joint_space import (
     tangent_directions,
 )
 from tolsynth.probability.stats import p_ball
-from tolsynth.tabular import Tabular
+from tolsynth.tabular import Tabular, jsonable
 from tolsynth.units import units_label
 
 __all__ = ["WorstPose", "worst_pose"]
@@ -129,10 +129,8 @@ class WorstPose(Tabular):
     joint_units: tuple = ()
 
     def to_dict(self) -> dict:
-        """Plain dict (arrays as lists) for JSON."""
-        out = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
-        out["certificate"] = self.certificate.to_dict() if self.certificate is not None else None
-        return out
+        """Plain dict for JSON (arrays as lists, inf and NaN as None, the certificate's own dict)."""
+        return jsonable(self.__dict__, null=True)
 
     def report(self, joint_names: Sequence[str] | None = None, joint_units: Sequence[str] | None = None) -> str:
         """Readable table: the worst pose found beside the reference (joints in deg, or in mm where
