@@ -124,3 +124,30 @@ def test_command_line_takes_per_parameter_shapes():
         timeout=120,
     )
     assert bad.returncode != 0 and "Traceback" not in bad.stderr and "--dist" in bad.stderr
+
+
+def test_shapes_of_names_the_entry_field_and_the_allowed_values():
+    """Without a mechanism an unknown name is the same UnknownNameError a mechanism gives (the
+    entry as the field, the names allowed); a bad shape, the "*" default included, names its entry
+    and lists every shape."""
+    from tolsynth.errors import UnknownNameError
+    from tolsynth.probability.distributions import shapes_of
+
+    names = ("l1", "l2", "o1", "o2")
+    with pytest.raises(UnknownNameError) as info:
+        shapes_of({"bad": "uniform"}, names)
+    assert info.value.field == "distribution[bad]" and "'bad'" in str(info.value)
+    assert info.value.allowed == "one of l1, l2, o1, o2"
+    for dist, field in (
+        ({"*": "bogus"}, "distribution[*]"),
+        ({"l1": "truncnormal(20)"}, "distribution[l1]"),
+        (["uniform", "uniform", "uniform", 3], "distribution[o2]"),
+    ):
+        with pytest.raises(OutOfRangeError) as info:
+            shapes_of(dist, names)
+        assert info.value.field == field
+        assert all(s in info.value.allowed for s in ("'uniform'", "'normal'", "'triangular'", "0.5 <= beta <= 8"))
+    m = tolsynth.load_model("planar_2r")
+    with pytest.raises(UnknownNameError) as info:
+        tolsynth.synthesize(m, R=0.5, p=0.99, pose="elbow90", distribution={"bad": "uniform"})
+    assert info.value.field == "distribution[bad]"

@@ -37,7 +37,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from tolsynth.errors import InputError, OutOfRangeError
+from tolsynth.errors import InputError, OutOfRangeError, UnknownNameError
 
 __all__ = [
     "Shape",
@@ -229,13 +229,25 @@ def _sinc(s, lib):
     return lib.if_else(small, 1.0 - s * s / 6.0, lib.sin(safe) / safe)
 
 
+#: the shape names, said by every error about a shape
+SHAPES_ALLOWED = "'uniform', 'normal', 'triangular', 'truncnormal' or 'truncnormal(beta)' with 0.5 <= beta <= 8"
+
+
+def _entry_shape(value, field: str) -> Shape:
+    """The shape of one entry of a per-parameter distribution, an error naming the entry's field."""
+    try:
+        return shape(value)
+    except OutOfRangeError:
+        raise OutOfRangeError(field, f"got {value!r}", SHAPES_ALLOWED) from None
+
+
 @lru_cache(maxsize=None)
 def shape(name) -> Shape:
     """The :class:`Shape` of a name (``"uniform"``, ``"normal"``, ``"triangular"``,
     ``"truncnormal"``, ``"truncnormal(beta)"``), or an :class:`OutOfRangeError` naming the allowed ones."""
     if isinstance(name, Shape):
         return name
-    allowed = "'uniform', 'normal', 'triangular', 'truncnormal' or 'truncnormal(beta)' with 0.5 <= beta <= 8"
+    allowed = SHAPES_ALLOWED
     if not isinstance(name, str):
         raise OutOfRangeError("distribution", f"unknown distribution {name!r}", allowed)
     key = name.strip().lower()
@@ -271,33 +283,26 @@ def shapes_of(distribution, names: Sequence[str], index=None) -> tuple[Shape, ..
                 f"{len(distribution)} shapes for {len(names)} parameters",
                 "a shape name, a mapping name -> shape, or one shape per parameter",
             )
-        out = []
-        for nm, value in zip(names, distribution):
-            try:
-                out.append(shape(value))
-            except OutOfRangeError as exc:
-                raise OutOfRangeError(f"distribution[{nm}]", f"got {value!r}", exc.allowed) from None
-        return tuple(out)
+        return tuple(_entry_shape(value, f"distribution[{nm}]") for nm, value in zip(names, distribution))
     if isinstance(distribution, Mapping):
         if not distribution:
             raise InputError(
                 "distribution", "an empty mapping", "a shape name, or a mapping parameter name -> shape name"
             )
-        default = shape(distribution.get("*", DEFAULT_SHAPE))
+        default = _entry_shape(distribution.get("*", DEFAULT_SHAPE), "distribution[*]")
         out = [default] * len(names)
         for key, value in distribution.items():
             if key == "*":
                 continue
             if index is None:
-                if key not in names:
-                    raise InputError(f"distribution[{key}]", "unknown parameter", ", ".join(names))
+                if key not in names:  # as a mechanism's index says it
+                    raise UnknownNameError(
+                        f"distribution[{key}]", f"unknown error parameter {key!r}", "one of " + ", ".join(names)
+                    )
                 i = names.index(key)
             else:
                 i = index(key, f"distribution[{key}]")
-            try:
-                out[i] = shape(value)
-            except OutOfRangeError as exc:
-                raise OutOfRangeError(f"distribution[{key}]", f"got {value!r}", exc.allowed) from None
+            out[i] = _entry_shape(value, f"distribution[{key}]")
         return tuple(out)
     return (shape(distribution),) * len(names)
 
