@@ -183,3 +183,45 @@ def test_solve_header_keeps_the_digits_of_p_and_lock_lists_its_kind(capsys):
     assert main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--lock", "alpha1=5um"]) == 2
     err = capsys.readouterr().err
     assert "angle unit suffix (rad, mrad" in err and "um" not in err.split("suffix")[1]
+
+
+# --- x0: read by the solvers that start from it, refused where the compiled method solves
+
+
+def test_x0_is_refused_where_the_compiled_method_solves_and_read_by_ipopt():
+    """The compiled interior-point method has its own start, so an x0 given to solver 'auto' on a
+    problem it takes would be ignored: refused naming x0 and the solvers that read it.  IPOPT reads
+    it: from a far start it reaches the same optimum within its tolerance, by another path."""
+    m = tolsynth.load_model("planar_2r")
+    spec = dict(R=0.5, p=0.99, pose="elbow90", probability="gaussian")
+    far = [4.9, 0.002, 40.0, 0.002]
+    for kw in ({}, {"probability": "exact"}):
+        with pytest.raises(InputError) as info:
+            tolsynth.synthesize(m, **{**spec, **kw}, x0=far)
+        assert info.value.field == "x0" and "'ipopt'" in info.value.allowed and "'sumt'" in info.value.allowed
+    cold = tolsynth.synthesize(m, **spec, solver="ipopt")
+    started = tolsynth.synthesize(m, **spec, solver="ipopt", x0=far)
+    assert started.inputs["x0"] == far and not np.array_equal(started.x, cold.x)  # another path
+    assert started.cost == pytest.approx(cold.cost, rel=1e-7)
+    sphere = tolsynth.synthesize(m, **{**spec, "criterion": "sphere"}, x0=far)  # 'auto' runs IPOPT here
+    assert sphere.solver == "ipopt"
+
+
+@pytest.mark.parametrize("solver, passed", [(None, False), ("ipopt", True)])
+def test_pareto_and_budget_pass_the_previous_optimum_only_to_a_solver_that_reads_it(monkeypatch, solver, passed):
+    """Each step of pareto_front and best_accuracy after a success hands x0 on only where it is read."""
+    import tolsynth.synthesis.single as single
+
+    seen = []
+    real = single.synthesize
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("x0") is not None)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(single, "synthesize", spy)
+    m = tolsynth.load_model("planar_2r")
+    kw = dict(pose="elbow90", probability="gaussian", **({} if solver is None else {"solver": solver}))
+    tolsynth.pareto_front(m, R=[0.3, 0.5], p=0.99, **kw)
+    tolsynth.best_accuracy(m, budget=12.0, p=0.99, max_solves=6, **kw)
+    assert len(seen) > 4 and any(seen) is passed

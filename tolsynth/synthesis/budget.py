@@ -83,7 +83,7 @@ def best_accuracy(
     """
     from tolsynth.checks import check_count, check_positive, check_probability
     from tolsynth.kinematics.mechanism import as_mechanism
-    from tolsynth.synthesis.single import synthesize
+    from tolsynth.synthesis.single import STARTING_SOLVERS, synthesize
 
     mechanism = as_mechanism(mechanism)
     budget = check_positive(budget, "budget", "cost units")
@@ -107,7 +107,7 @@ def best_accuracy(
             log.append({"R": spec_R, "p": spec_p, "verdict": "infeasible"})
             return "cannot", None
         if res.feasible and res.cost <= budget:  # (a met design buys it, proven optimal or not)
-            x0 = res.x
+            x0 = res.x if kwargs.get("solver") in STARTING_SOLVERS else None
             out = "buys"
         elif res.lower_bound > budget:
             out = "cannot"

@@ -91,7 +91,7 @@ def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, pro
     from tolsynth.kinematics.mechanism import as_mechanism
     from tolsynth.problem.nlp import ToleranceNLP
     from tolsynth.problem.specification import make_specification
-    from tolsynth.synthesis.single import synthesize
+    from tolsynth.synthesis.single import STARTING_SOLVERS, synthesize
 
     mechanism = as_mechanism(mechanism)
     R_seq, p_seq = np.ndim(R) == 1, np.ndim(p) == 1
@@ -132,7 +132,7 @@ def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, pro
                 )
             else:
                 res = synthesize(mechanism, Rv, pv, distribution, alpha, x0=x0, **kwargs)
-                x0 = res.x if res.success else None
+                x0 = res.x if res.success and kwargs.get("solver") in STARTING_SOLVERS else None
                 rows.append(
                     {
                         "R": Rv,

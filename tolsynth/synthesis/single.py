@@ -87,6 +87,9 @@ DEFAULT_PROBABILITY = "exact"
 
 #: solver name -> private entry point (each solver lives in its own module)
 SOLVERS = {"auto": _auto, "ipopt": _ipopt, "sumt": _sumt}
+#: the solvers that start from a given x0 whatever the problem ("auto" may run the compiled
+#: method, which has its own start): the sweeps pass the previous optimum on to these only
+STARTING_SOLVERS = ("ipopt", "sumt")
 
 
 def synthesize(
@@ -174,7 +177,10 @@ def synthesize(
         them.  Raises :class:`InfeasibleSpecificationError` naming the locked parameters if they
         alone break the specification.
     x0 : sequence, optional
-        Starting tolerances (default: a strictly feasible interior point).
+        Starting tolerances (default: a strictly feasible interior point), read by IPOPT and SUMT
+        (``solver="ipopt"`` or ``"sumt"``, and ``"auto"`` where it runs IPOPT).  Where ``"auto"``
+        solves by the compiled interior-point method, which starts from its own interior point,
+        an ``x0`` is refused (an :class:`InputError`) rather than ignored.
     options : dict, optional
         Solver options.  ``probability="exact"``: max_rounds, max_iter, max_patches (see
         :mod:`tolsynth.solvers.exact`); ``"gaussian"``: IPOPT's and the compiled method's tol,
@@ -329,6 +335,16 @@ def synthesize(
         check_locks(nlp, mechanism.joint_error_parameters)
     nlp.check_feasible()
     eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0, "x0"), "x0", lower=TINY)
+    if eps0 is not None and solver == "auto":
+        from tolsynth.solvers.fast import applies
+
+        if applies(nlp) is None:
+            raise InputError(
+                "x0",
+                "solver 'auto' solves this problem by the compiled interior-point method, which starts "
+                "from its own interior point and does not read x0",
+                f"x0 with solver {' or '.join(repr(s) for s in STARTING_SOLVERS)} (each starts from it), or no x0",
+            )
     with deadline(limit):
         try:
             if probability == "exact":
@@ -373,7 +389,8 @@ def synthesize(
         from tolsynth.analysis.verify import closed_loop
 
         def solve(p_target):
-            return synthesize(mechanism, R, p_target, distribution, alpha, solver, x0=result.x, **again)
+            start = result.x if solver in STARTING_SOLVERS else None
+            return synthesize(mechanism, R, p_target, distribution, alpha, solver, x0=start, **again)
 
         result = closed_loop(
             solve,
