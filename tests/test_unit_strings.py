@@ -127,3 +127,54 @@ def test_design_spec_and_keyword_with_the_same_quantity_in_other_units_agree(m2)
     a = tolsynth.synthesize(m2, spec=oriented, Phi=0.002)
     b = tolsynth.synthesize(m2, **GAUSS, Phi=0.002)
     assert a.cost == pytest.approx(b.cost, rel=1e-12)
+
+
+def test_cost_models_and_processes_read_suffixed_tolerances_in_each_parameters_unit(m2):
+    """A tabulated curve's tolerances and a process's range written with units are the numbers
+    converted by hand into the parameter's tolerance unit (1 um = 0.001 mm; 0.05 deg = 0.8726...
+    mrad), solving the same problem; a unit on a plain number (k, a cost) or of the wrong kind is
+    refused naming the field, never read as another number."""
+    table_mm = {"model": "tabulated", "eps": [0.001, 0.1, 5.0], "costs": [10.0, 3.0, 1.0]}
+    table_units = {**table_mm, "eps": ["1um", "100um", "0.5cm"]}
+    deg = 1000 * math.pi / 180  # mrad per degree
+    angles = {"model": "tabulated", "eps": [0.001, 0.05 * deg, 50.0], "costs": [10.0, 3.0, 1.0]}
+    angles_units = {**angles, "eps": ["1urad", "0.05deg", "0.05rad"]}
+    plain = tolsynth.synthesize(m2, **GAUSS, cost={"l1": table_mm, "o1": angles})
+    res = tolsynth.synthesize(m2, **GAUSS, cost={"l1": table_units, "o1": angles_units})
+    assert res.spec.costs.models[0].eps == pytest.approx(table_mm["eps"], rel=1e-12)
+    assert res.spec.costs.models[2].eps == pytest.approx(angles["eps"], rel=1e-12)
+    assert res.cost == pytest.approx(plain.cost, rel=1e-12)
+    for cost, field in (
+        ({"l1": {"model": "power", "k": "2mm", "alpha": 0.7}}, "cost.k"),
+        ({"l1": {**table_mm, "costs": ["10mm", 3.0, 1.0]}}, "cost.costs[0]"),
+        ({"o1": {**angles, "eps": ["1um", 0.05 * deg, 50.0]}}, "cost.eps[0]"),  # a length for an angle
+    ):
+        with pytest.raises(InputError) as info:
+            tolsynth.synthesize(m2, **GAUSS, cost=cost)
+        assert info.value.field == field
+    power = {"model": "power", "k": 1.0, "alpha": 0.7}
+    by_hand = {"o1": [{"name": "a", "cost": power, "lower": 0.01 * deg, "upper": 1.0 * deg}]}
+    written = {"o1": [{"name": "a", "cost": power, "lower": "0.01deg", "upper": "1deg"}]}
+    a = tolsynth.synthesize_processes(m2, 0.5, 0.99, by_hand, pose="elbow90", probability="gaussian")
+    b = tolsynth.synthesize_processes(m2, 0.5, 0.99, written, pose="elbow90", probability="gaussian")
+    assert b.cost == pytest.approx(a.cost, rel=1e-12)
+    assert b.result.x == pytest.approx(a.result.x, rel=1e-12)
+    with pytest.raises(InputError) as info:  # a length for an angle parameter was read as mm
+        tolsynth.synthesize_processes(
+            m2, 0.5, 0.99, {"o1": [{**written["o1"][0], "lower": "50um"}]}, pose="elbow90", probability="gaussian"
+        )
+    assert info.value.field.endswith("process 'a'.lower") and "angle unit" in str(info.value)
+
+
+def test_sweep_grid_file_reads_R_with_a_unit_and_refuses_one_on_p_or_alpha(tmp_path, capsys):
+    """A grid file's R = "500um" is 0.5 mm; a unit on p or alpha (plain numbers) is an error."""
+    from tolsynth.cli import main
+    from tolsynth.cli.sweep import read_grid_file
+
+    grid = tmp_path / "g.toml"
+    grid.write_text('model = "planar_2r"\nR = ["500um", 0.3]\np = 0.99\n')
+    assert read_grid_file(str(grid))["R"] == pytest.approx([0.5, 0.3], rel=1e-12)
+    grid.write_text('model = "planar_2r"\nR = 0.5\np = 0.99\nalpha = "0.7mm"\n')
+    assert main(["sweep", "--grid", str(grid), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "alpha" in err and "'0.7mm' has a unit" in err and "Traceback" not in err

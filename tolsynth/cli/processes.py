@@ -5,8 +5,8 @@ processes or a table file.
 A table file (TOML or JSON) maps parameter names to lists of processes, each
 ``{name, cost, lower, upper}``: ``cost`` is a cost-model table as in a model file (not a number),
 e.g. ``{model = "power", k = 1, alpha = 0.7}`` for ``k eps^-alpha`` (models: power, chase,
-exponential, tabulated; docs/model_format.md); ``lower``/``upper`` in the parameter's tolerance
-unit::
+exponential, tabulated; docs/model_format.md); ``lower``/``upper`` (and a tabulated cost's
+``eps``) in the parameter's tolerance unit, or strings with a unit suffix (``"50um"``)::
 
     [[h3]]
     name = "turning"

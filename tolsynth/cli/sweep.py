@@ -27,6 +27,7 @@ from tolsynth.cli.args import (
 from tolsynth.cli.params import parse_bounds, parse_per_parameter
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
+from tolsynth.units import split_quantity
 
 __all__ = ["register", "GRID_KEYS", "read_grid_file"]
 
@@ -76,7 +77,9 @@ def read_grid_file(path: str) -> dict:
             text_ok = isinstance(v, str) and key in ("R", "distribution", "criterion", "solver")
             num_ok = isinstance(v, (int, float)) and not isinstance(v, bool) and key in ("R", "p", "alpha")
             if not (text_ok or num_ok):
-                raise InputError(f"--grid {path}: {key}", f"got {v!r}", GRID_KEYS[key])
+                unit = isinstance(v, str) and key in ("p", "alpha") and (split_quantity(v) or (0, None))[1]
+                said = f"{v!r} has a unit, but {key} is a plain number" if unit else f"got {v!r}"
+                raise InputError(f"--grid {path}: {key}", said, GRID_KEYS[key])
         data[key] = [quantity(v, "R", "length", "mm") if key == "R" and isinstance(v, str) else v for v in values]
     return data
 

@@ -554,8 +554,28 @@ MODELS = {
 }
 
 
-def cost_model(spec) -> CostModel:
-    """A :class:`CostModel` from itself or from a dict ``{"model": name, **fields}``."""
+def _read_units(spec: dict, name: str, unit: str | None) -> None:
+    """In place: a tabulated curve's tolerances with a unit suffix (``"20um"``) converted to ``unit``
+    (the parameter's); a suffix elsewhere (plain numbers) or with no unit is refused, not misread."""
+    from tolsynth.checks import check_positive
+    from tolsynth.units import split_quantity
+
+    for key, value in spec.items():
+        listed = isinstance(value, (list, tuple))
+        items = list(value) if listed else [value]
+        for i, v in enumerate(items):
+            if isinstance(v, str) and (split_quantity(v) or (0, None))[1] is not None:
+                where = f"cost.{key}" + (f"[{i}]" if listed else "")
+                if (name, key) != ("tabulated", "eps"):
+                    raise InputError(where, f"{v!r} has a unit, but {key} is a plain number", "a number without a unit")
+                if unit is None:
+                    raise InputError(where, f"{v!r}: no tolerance unit to convert to", "numbers, or cost={name: model}")
+                items[i] = check_positive(v, where, unit)
+        spec[key] = items if listed else value
+
+
+def cost_model(spec, unit: str | None = None) -> CostModel:
+    """A :class:`CostModel` from itself or a dict ``{"model": name, **fields}`` (``unit``: :func:`_read_units`)."""
     if isinstance(spec, CostModel):
         return spec
     if not isinstance(spec, Mapping):
@@ -575,4 +595,5 @@ def cost_model(spec) -> CostModel:
             f"missing {missing}" if missing else f"unknown fields {extra}",
             f"exactly the fields {list(fields)}",
         )
+    _read_units(spec, name, unit)
     return cls(**spec)

@@ -155,14 +155,16 @@ def _power_set(k: tuple, alpha: tuple) -> CostSet:
     return CostSet(tuple(PowerLaw(a, b) for a, b in zip(k, alpha)))
 
 
-def cost_set(cost, names: Sequence[str], index=None, k=None, alpha=None) -> CostSet:
+def cost_set(cost, names: Sequence[str], index=None, k=None, alpha=None, units=None) -> CostSet:
     """The per-parameter models from a user's ``cost`` argument.
 
     ``cost`` is None (the power law from ``k`` and ``alpha``, per parameter arrays), one model
     (every parameter), a sequence of n models, or a dict name -> model for some parameters (the
-    others keep the power law).  A model is a :class:`CostModel` or a dict (see :func:`cost_model`).
+    others keep the power law).  A model is a :class:`CostModel` or a dict (see :func:`cost_model`);
+    ``units``: each parameter's tolerance unit, into which a dict's suffixed tolerances are read.
     """
     n = len(names)
+    unit = (lambda i: None) if units is None else (lambda i: units[i])
 
     def default(i):
         if k is None or alpha is None:
@@ -177,8 +179,9 @@ def cost_set(cost, names: Sequence[str], index=None, k=None, alpha=None) -> Cost
     if cost is None:
         return CostSet(tuple(default(i) for i in range(n)))
     if isinstance(cost, (CostModel, Mapping)) and not (isinstance(cost, Mapping) and "model" not in cost):
-        model = cost_model(cost)
-        return CostSet(tuple(model for _ in range(n)))
+        if isinstance(cost, Mapping):  # read per parameter: a suffixed tolerance takes each one's unit
+            return CostSet(tuple(cost_model(cost, unit(i)) for i in range(n)))
+        return CostSet(tuple(cost for _ in range(n)))
     if isinstance(cost, Mapping):
         idx = index or (lambda key: list(names).index(key))
         models = [None] * n
@@ -189,10 +192,10 @@ def cost_set(cost, names: Sequence[str], index=None, k=None, alpha=None) -> Cost
                 from tolsynth.errors import UnknownNameError
 
                 raise UnknownNameError(f"cost[{key}]", f"no parameter {key!r}", ", ".join(names)) from None
-            models[i] = cost_model(value)
+            models[i] = cost_model(value, unit(i))
         return CostSet(tuple(m if m is not None else default(i) for i, m in enumerate(models)))
     if isinstance(cost, (list, tuple)):
         if len(cost) != n:
             raise InputError("cost", f"expected {n} models, got {len(cost)}", f"one per parameter {list(names)}")
-        return CostSet(tuple(cost_model(c) for c in cost))
+        return CostSet(tuple(cost_model(c, unit(i)) for i, c in enumerate(cost)))
     raise InputError("cost", f"got {cost!r}", "a model, a list of n models, or a dict name -> model")

@@ -247,7 +247,7 @@ def make_specification(
                 raise OutOfRangeError(
                     f"bounds[{nm}]", f"lower {a}, upper {b} ({u})", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})"
                 )
-    costs = cost_set(cost, names, mechanism.index, k=k_v, alpha=alpha_v)
+    costs = cost_set(cost, names, mechanism.index, k=k_v, alpha=alpha_v, units=mechanism.units)
     costs.check_ranges(names, lo, hi)
     z = _z_of_p(p)
     if Phi is not None:

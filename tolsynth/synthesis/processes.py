@@ -186,7 +186,7 @@ def normalise_processes(mechanism, processes) -> dict[str, list[Process]]:
         procs = []
         for j, item in enumerate(plist):
             try:
-                procs.append(Process.make(item))
+                procs.append(Process.make(item, mechanism.units[mechanism.index(nm)]))
             except InputError as exc:
                 name = item.get("name") if isinstance(item, Mapping) else getattr(item, "name", None)
                 which = f"process {name!r}" if name is not None else f"process {j + 1}"
