@@ -123,7 +123,7 @@ def test_sweep_on_dask_worker_processes(xz):
         (dict(R=[0.5, -1.0]), OutOfRangeError, "R"),
         (dict(p=[0.9, 1.5]), OutOfRangeError, "p"),
         (dict(alpha=[0.7, 0.0]), OutOfRangeError, "alpha"),
-        (dict(alpha=[{"h2": 0.5}]), InputError, "alpha"),
+        (dict(alpha=[{"h99": 0.5}]), UnknownNameError, r"alpha\[h99\]"),
         (dict(distribution=["uniform", "cauchy"]), InputError, "distribution"),
         (dict(criterion="box"), InputError, "criterion"),
         (dict(solver=["ipopt", "snopt"]), InputError, "solver"),
