@@ -53,36 +53,43 @@ SOLVERS = ["auto", "ipopt"]
 SLOW_SIZES = [(100, 2), pytest.param(300, 1, marks=pytest.mark.long)]  # 300 poses: a minute a case
 
 
-def _sweep(model, N, seeds, solver):
+def _sweep(model, N, seeds):
+    """Both solvers at each random pose set, against one Clarabel reference per set."""
     mech = tolsynth.load_model(model)
     for seed in range(seeds):
         rng = np.random.default_rng(1000 * N + seed)
         poses = random_poses(mech, N, rng)
         for dist in ("uniform", "normal"):
-            res = tolsynth.synthesize(
-                mech, R=0.5, p=0.99, distribution=dist, alpha=0.7, poses=poses, solver=solver, probability="gaussian"
-            )
-            assert res.success, (model, N, seed, dist, res.status, res.message)
-            assert res.gap <= 1e-6 * res.cost
-            assert_meets_spec(mech, res, 0.5, 0.99, dist, poses)
             ref = clarabel_cost(mech, 0.5, 0.99, dist, 0.7, poses)
-            if ref is not None:
-                assert res.cost == pytest.approx(ref, rel=1e-6), (model, N, seed, dist)
+            for solver in SOLVERS:
+                res = tolsynth.synthesize(
+                    mech,
+                    R=0.5,
+                    p=0.99,
+                    distribution=dist,
+                    alpha=0.7,
+                    poses=poses,
+                    solver=solver,
+                    probability="gaussian",
+                )
+                assert res.success, (model, N, seed, dist, solver, res.status, res.message)
+                assert res.gap <= 1e-6 * res.cost
+                assert_meets_spec(mech, res, 0.5, 0.99, dist, poses)
+                if ref is not None:
+                    assert res.cost == pytest.approx(ref, rel=1e-6), (model, N, seed, dist, solver)
 
 
-@pytest.mark.parametrize("solver", SOLVERS)
 @pytest.mark.parametrize("model", ["xu_zhang_1988", "puma560"])
 @pytest.mark.parametrize("N,seeds", SIZES)
-def test_random_pose_sets_agree_with_clarabel(model, N, seeds, solver):
-    _sweep(model, N, seeds, solver)
+def test_random_pose_sets_agree_with_clarabel(model, N, seeds):
+    _sweep(model, N, seeds)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("solver", SOLVERS)
 @pytest.mark.parametrize("model", ["xu_zhang_1988", "puma560"])
 @pytest.mark.parametrize("N,seeds", SLOW_SIZES)
-def test_random_pose_sets_agree_with_clarabel_large(model, N, seeds, solver):
-    _sweep(model, N, seeds, solver)
+def test_random_pose_sets_agree_with_clarabel_large(model, N, seeds):
+    _sweep(model, N, seeds)
 
 
 def _grid(models, Rs, ps, alphas, solver):
