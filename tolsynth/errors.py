@@ -81,7 +81,8 @@ class InfeasibleSpecificationError(TolsynthError):
     constraint : str
         The constraint that fails even at the tightest tolerances allowed.
     value : float
-        Its value (sigma * z / R) at the tightest tolerances; it must be <= 1.
+        Its value at the tightest tolerances, in the problem's reading: ``sigma * z / R``
+        (Gaussian) or ``(1 - P) / (1 - p)`` (exact); it must be <= 1.
     """
 
     def __init__(self, constraint: str, value: float, message: str):

@@ -5,7 +5,8 @@ fixed variable as a parameter; the dual bound's box is a point there).  Before s
 :func:`check_locks` asks whether the locked tolerances *alone* (every other tolerance at zero,
 which no choice of the others can beat: the covariance grows with every tolerance) already break
 the specification, and if so raises :class:`~tolsynth.errors.InfeasibleSpecificationError` naming
-them.
+them.  Under the exact reading the Gaussian values only pick the blocks to examine; the refusal
+needs the exact probability's proof (an exact P also only falls as any tolerance grows).
 """
 
 from __future__ import annotations
@@ -68,11 +69,15 @@ def apply_locks(mechanism, bounds, locks) -> dict:
     return out
 
 
-def check_locks(nlp, joint_errors=()) -> None:
+def check_locks(nlp, joint_errors=(), refute=None) -> None:
     """Raise :class:`InfeasibleSpecificationError` naming the locked parameters (those with
     ``lower == upper``) if they alone (every other tolerance at zero) violate a constraint of the
     problem ``nlp``.  ``joint_errors`` names the parameters that are joint errors
-    (:mod:`tolsynth.model.joint_errors`): the message calls those the fixed joint errors."""
+    (:mod:`tolsynth.model.joint_errors`): the message calls those the fixed joint errors.
+
+    ``refute`` (the exact reading's, :func:`tolsynth.solvers.exact_refute.exact_refuter`): a block
+    the Gaussian values break is refused only if ``refute(block index, eps)`` proves it, with the
+    exact value in the message; the Gaussian value alone is no proof for bounded errors."""
     spec = nlp.spec
     locked = [nm for nm, a, b in zip(spec.names, spec.lower, spec.upper) if a == b]
     eps = np.where(np.isin(np.array(spec.names), locked), spec.lower, _ZERO)
@@ -83,12 +88,20 @@ def check_locks(nlp, joint_errors=()) -> None:
         what = f"the fixed joint errors {joint}"
     elif joint:
         what += f" (fixed joint errors: {joint})"
-    for label, vals in zip(labels, nlp.all_values(eps)):
-        if vals[0] > 1.0:
-            raise InfeasibleSpecificationError(
-                label,
-                float(vals[0]),
-                f"infeasible specification: {what} alone break the {label} "
-                f"(constraint value {vals[0]:.6g} > 1 with every other tolerance at zero).  Loosen R/Phi "
-                f"or p, or tighten the locked tolerances (or the fixed joint errors).",
-            )
+    for i, (label, vals) in enumerate(zip(labels, nlp.all_values(eps))):
+        if vals[0] <= 1.0:
+            continue
+        if refute is None:
+            value, text = float(vals[0]), f"constraint value {vals[0]:.6g} > 1"
+        else:
+            proof = refute(i, eps)
+            if proof is None:  # the Gaussian reading's failure, not the exact one's
+                continue
+            value, text = proof
+        raise InfeasibleSpecificationError(
+            label,
+            float(value),
+            f"infeasible specification: {what} alone break the {label} "
+            f"({text} with every other tolerance at zero).  Loosen R/Phi "
+            f"or p, or tighten the locked tolerances (or the fixed joint errors).",
+        )

@@ -254,10 +254,12 @@ class ToleranceNLP:
         return [v for v, _ in self.constraint_values(eps)] + [v for v, _, _ in self.sphere_values(eps)]
 
     # -- feasibility ----------------------------------------------------------------------------
-    def check_feasible(self) -> None:
+    def check_feasible(self, refute=None) -> None:
         """Raise :class:`InfeasibleSpecificationError` if even the tightest tolerances (all at
         their lower bounds) violate a constraint: V grows with every eps, so nothing else can
-        do better."""
+        do better.  ``refute`` (the exact reading's, see :func:`tolsynth.model.locks.check_locks`):
+        a block the Gaussian values break is refused only if ``refute(block index, lower)`` proves
+        it, with the exact value in the message."""
         spec = self.spec
         # lambda_max(A_b diag(lower^2) A_b^T) is free of z/R and c: remembered by the blocks' rows
         # and the lower bounds (a sweep over R, p or the distribution checks the same again)
@@ -270,27 +272,31 @@ class ToleranceNLP:
             _LOWER_RAW[key] = (worst / self.scales) ** 2 * spec.c
         else:
             worst = np.sqrt(raw * self.scales**2 / spec.c)
-        bad = (worst > 1.0).nonzero()[0]
-        if len(bad):
-            block, value = self.spec.blocks[bad[0]], float(worst[bad[0]])
-            what = "z/R" if block.kind == "position" else "z/Phi"
+        spheres = self.sphere_values(spec.lower) if spec.sphere_blocks else []
+        bad = [(float(worst[i]), i) for i in (worst > 1.0).nonzero()[0]]
+        bad += [(float(v[0]), len(spec.blocks) + j) for j, (v, _, _) in enumerate(spheres) if v[0] > 1.0]
+        if refute is not None:  # the most violated first: the likeliest to be proven
+            bad.sort(reverse=True)
+        for value, i in bad:
+            if i >= len(spec.blocks):
+                block = spec.sphere_blocks[i - len(spec.blocks)]
+                text = f"P = {spheres[i - len(spec.blocks)][2]:.6g} < p = {block.p:g}"
+                relax = "R or p"
+            else:
+                block = spec.blocks[i]
+                text = f"largest principal sigma*{'z/R' if block.kind == 'position' else 'z/Phi'} = {value:.6g} > 1"
+                relax = "R/Phi or p"
+            if refute is not None:
+                proof = refute(i, spec.lower)
+                if proof is None:  # the Gaussian reading's failure, not the exact one's
+                    continue
+                value, text = proof
             raise InfeasibleSpecificationError(
                 block.label,
-                value,
+                float(value),
                 f"infeasible specification: the {block.label} fails even with every tolerance at its "
-                f"lower bound: largest principal sigma*{what} = {value:.6g} > 1.  Lower the bounds, "
-                f"or relax R/Phi or p.",
+                f"lower bound: {text}.  Lower the bounds, or relax {relax}.",
             )
-        for block, (vals, _, P) in zip(
-            spec.sphere_blocks, self.sphere_values(spec.lower) if spec.sphere_blocks else ()
-        ):
-            if vals[0] > 1.0:
-                raise InfeasibleSpecificationError(
-                    block.label,
-                    float(vals[0]),
-                    f"infeasible specification: the {block.label} fails even with every tolerance at its "
-                    f"lower bound: P = {P:.6g} < p = {block.p:g}.  Lower the bounds, or relax R or p.",
-                )
 
     def interior_start(self, target: float = 0.5) -> np.ndarray:
         """A strictly feasible point, strictly inside the bounds: ``eps_i = lower_i^(1-t) upper_i^t``

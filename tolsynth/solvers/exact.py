@@ -193,7 +193,7 @@ def _feasible_start(cuts: Cuts, u: np.ndarray, lu: np.ndarray, uu: np.ndarray, b
     blk = blocks[cuts.block[bad[j]]]
     raise InfeasibleSpecificationError(
         blk.label,
-        float(Pl[j]),
+        float((1 - Pl[j]) / (1 - pc[j])),
         f"infeasible specification: the {blk.label} fails even with every tolerance "
         f"at its lower bound: exact P = {Pl[j]:.6g} < p = {blk.p:g} along a direction.  Lower the bounds, "
         "or relax R/Phi or p.",

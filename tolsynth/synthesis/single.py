@@ -329,11 +329,16 @@ def synthesize(
         mechanism, R, p, distribution, alpha, k, bounds, pose, poses, Phi, p_orientation, criterion, cost
     )
     nlp = ToleranceNLP(spec)
+    refute = None
+    if probability == "exact":  # the Gaussian pre-checks only screen: the exact values decide
+        from tolsynth.solvers.exact_refute import exact_refuter
+
+        refute = exact_refuter(spec)
     if locks:
         from tolsynth.model.locks import check_locks
 
-        check_locks(nlp, mechanism.joint_error_parameters)
-    nlp.check_feasible()
+        check_locks(nlp, mechanism.joint_error_parameters, refute)
+    nlp.check_feasible(refute)
     eps0 = None if x0 is None else check_vector(mechanism.tolerances(x0, "x0"), "x0", lower=TINY)
     if eps0 is not None and solver == "auto":
         from tolsynth.solvers.fast import applies

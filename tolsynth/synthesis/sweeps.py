@@ -464,6 +464,10 @@ def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dic
     ]
     # a per-parameter alpha (dict) anywhere: the whole column as JSON text, one type per column
     as_text = {a for a in AXES if any(isinstance(pt[a], dict) for pt in points)}
+    from tolsynth.synthesis.single import DEFAULT_PROBABILITY
+
+    # a row whose solve raised still says which reading it was asked in (its error is in that reading)
+    asked = kwargs.get("probability") or DEFAULT_PROBABILITY
     records = []
     for i, point in enumerate(points):
         r = by_index.get(i, {"status": "error", "success": False, "error": "no result returned"})
@@ -474,6 +478,7 @@ def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dic
         for c in result_cols + eps_cols:
             rec[c] = r.get(c)
         rec["error"] = rec["error"] or ""
+        rec["probability"] = rec["probability"] or asked
         rec["message"] = rec["message"] or ""
         records.append(rec)
     columns = ["row", *AXES, *result_cols, *eps_cols]
