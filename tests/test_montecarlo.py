@@ -420,3 +420,39 @@ def test_to_dict_is_json_without_nan():
     d = json.loads(json.dumps(mc.to_dict(), allow_nan=False))
     assert d["kurtosis"][2] is None and d["kurtosis"][:2] == mc.kurtosis[:2].tolist()
     assert d["p_sphere"] == mc.p_sphere and d["n"] == 2000
+
+
+def test_validate_compares_an_exact_design_with_the_exact_linear_model(capsys):
+    """An exact design's analytic column is the linear model's exact probabilities (tests/
+    independent.py's FFT along the Monte Carlo's own directions; the sphere by a 4e6-sample linear
+    Monte Carlo), labelled so; the command line's montecarlo shows the same by default and the
+    Gaussian values of Mechanism.analyze with --probability gaussian."""
+    import tolsynth
+    from tests.independent import fft_at_edge
+    from tolsynth.cli import main
+
+    m = load_model("planar_2r")
+    r = tolsynth.synthesize(m, R=0.5, p=0.99)
+    v = validate(m, r, n=20_000, seed=1)
+    mc = v.montecarlo
+    A = np.asarray(m.sensitivity(m.joints("worst")))[:3]
+    ref = fft_at_edge((mc.principal_directions.T @ A) * r.x, 0.5, 1 << 14)
+    np.testing.assert_allclose(v.p_components_analytic, ref, atol=2e-6)
+    assert v.p_components_analytic[0] >= 0.99 - 1e-6  # the design meets p in its own reading ...
+    gauss = m.analyze(mc.q, r.x, R=0.5).p_components
+    assert gauss[0] < 0.99 - 1e-4  # ... where the Gaussian reading would show it below p
+    rng = np.random.default_rng(3)
+    dr = A @ (r.x[:, None] * rng.uniform(-1, 1, (4, 4_000_000)))
+    inside = np.mean(np.einsum("ib,ib->b", dr, dr) <= 0.25)
+    assert v.p_sphere_analytic == pytest.approx(inside, abs=5e-4)
+    assert mc.analytic == "exact" and "exact linear 0.99" in v.report()
+
+    tol = ",".join(f"{k}={x!r}" for k, x in r.tolerances.items())
+    args = ["montecarlo", "--model", "planar_2r", "--pose", "worst", "--tolerances", tol, "--R", "0.5"]
+    assert main([*args, "--n", "20000", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(out["p_components_analytic"], ref, atol=2e-6)
+    assert main([*args, "--n", "20000", "--json", "--probability", "gaussian"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(out["p_components_analytic"], gauss, rtol=1e-12)
+    assert out["analytic"] == "gaussian"

@@ -50,9 +50,12 @@ __all__ = [
     "NumpyEvaluator",
     "MonteCarloResult",
     "monte_carlo",
+    "exact_linear",
     "wilson_interval",
 ]
 
+#: the readings of the linear model a run's analytic probabilities can be in
+ANALYTIC = ("gaussian", "exact")
 DEFAULT_BATCH = 1 << 14  # samples per batch: a few MB of work arrays, whatever n is
 MAX_BATCH = 1 << 20  # a few hundred MB of work arrays
 
@@ -160,6 +163,27 @@ class _Sampler:
         return self.program(rows)
 
 
+def exact_linear(S, eps, shapes, R: float, U: np.ndarray, axis=None) -> tuple[np.ndarray, float]:
+    """The linear error model's exact probabilities for the rows ``S`` (3 x n, per tolerance unit):
+    ``P(|u_j . d| <= R)`` along each column ``u_j`` of ``U`` (the Monte Carlo's own directions) and
+    ``P(|d| <= R)`` in the sphere, or with ``axis`` (the hand axis; ``S`` the rotation rows) in the
+    cone of half-angle R about it.  The sphere's or cone's value is NaN where its error estimate
+    exceeds 5e-6 (the tables show 5 decimals)."""
+    from tolsynth.probability.exact import ball_probability, cone_probability, direction_probability
+
+    S = np.asarray(S, dtype=float)
+    P, _ = direction_probability(np.abs(U.T @ S) * eps, shapes, R, return_error=True)
+    if axis is None:
+        whole, err = ball_probability(S, eps, shapes, R, tol=1e-6, return_error=True)
+    else:  # to first order the axis turns by the rotation components perpendicular to it
+        a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+        e1 = np.cross(a, np.eye(3)[int(np.argmin(np.abs(a)))])
+        e1 /= np.linalg.norm(e1)
+        E = np.column_stack([e1, np.cross(a, e1)])
+        whole, err = cone_probability(E.T @ S, eps, shapes, R, tol=1e-6, return_error=True)
+    return np.asarray(P, dtype=float), float(whole) if err <= 5e-6 else math.nan
+
+
 def monte_carlo(
     mechanism,
     q,
@@ -175,6 +199,7 @@ def monte_carlo(
     confidence: float = 0.95,
     check_limits: bool = True,
     directions=None,
+    analytic: str = "gaussian",
 ) -> MonteCarloResult:
     """Monte Carlo of the hand position error through the full nonlinear kinematics.
 
@@ -209,6 +234,12 @@ def monte_carlo(
         Level of the intervals (Wilson score for the probabilities, normal for the mean).
     check_limits : bool
         Check the joint values against the limits (named configurations keep their waivers).
+    analytic : {"gaussian", "exact"}
+        The reading of the linear model the ``*_analytic`` probabilities are in: its Gaussian
+        approximation (:meth:`tolsynth.Mechanism.analyze`), or its exact probabilities
+        (:mod:`tolsynth.probability.exact`) along the same principal directions, in the sphere and
+        in the cone (NaN where the sphere's or cone's error estimate exceeds 5e-6).  Recorded in
+        ``result.analytic``.
 
     Returns
     -------
@@ -236,6 +267,8 @@ def monte_carlo(
 
     mechanism = as_mechanism(mechanism)
     distribution = resolve(distribution, mechanism)
+    if not isinstance(analytic, str) or analytic not in ANALYTIC:
+        raise InputError("analytic", f"got {analytic!r}", " or ".join(repr(a) for a in ANALYTIC))
     R = check_positive(R, "R")
     n = _check_n(n)
     seed = _check_seed(seed)
@@ -365,7 +398,15 @@ def monte_carlo(
     p_comp_ci = wilson_interval(inside_comp, n, confidence)
     p_sph = inside_sphere / n
     p_sph_ci = wilson_interval(inside_sphere, n, confidence)
-    pa = np.asarray(ana.p_components)
+    pa, pa_sphere = np.asarray(ana.p_components), float(ana.p_sphere)
+    pa_ori, pa_cone = (np.asarray(ana.p_orientation_components), float(ana.p_cone)) if Phi is not None else (None, None)
+    if analytic == "exact":
+        from tolsynth.probability.distributions import shapes_of
+
+        shapes = shapes_of(distribution, mechanism.error_parameters, mechanism.index)
+        pa, pa_sphere = exact_linear(ana.sensitivity[:3], eps, shapes, R, U)
+        if Phi is not None:
+            pa_ori, pa_cone = exact_linear(ana.sensitivity[3:6], eps, shapes, Phi, Uo, axis=z0)
     extra = {}
     if Ud is not None:
         extra.update(
@@ -376,10 +417,10 @@ def monte_carlo(
             Phi=Phi,
             p_orientation_components=inside_ocomp / n,
             p_orientation_components_ci=wilson_interval(inside_ocomp, n, confidence),
-            p_orientation_components_analytic=np.asarray(ana.p_orientation_components),
+            p_orientation_components_analytic=pa_ori,
             p_cone=inside_cone / n,
             p_cone_ci=wilson_interval(inside_cone, n, confidence),
-            p_cone_analytic=float(ana.p_cone),
+            p_cone_analytic=pa_cone,
         )
     out = MonteCarloResult(
         model=mechanism.name,
@@ -412,9 +453,10 @@ def monte_carlo(
         p_components_analytic_in_ci=(p_comp_ci[:, 0] <= pa) & (pa <= p_comp_ci[:, 1]),
         p_sphere=p_sph,
         p_sphere_ci=p_sph_ci,
-        p_sphere_analytic=float(ana.p_sphere),
-        p_sphere_diff=p_sph - float(ana.p_sphere),
-        p_sphere_analytic_in_ci=bool(p_sph_ci[0] <= ana.p_sphere <= p_sph_ci[1]),
+        p_sphere_analytic=pa_sphere,
+        p_sphere_diff=p_sph - pa_sphere,
+        p_sphere_analytic_in_ci=bool(p_sph_ci[0] <= pa_sphere <= p_sph_ci[1]),
+        analytic=analytic,
         elapsed_s=elapsed,
         samples_per_s=n / elapsed if elapsed > 0 else math.inf,
         **extra,

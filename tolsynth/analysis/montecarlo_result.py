@@ -10,7 +10,13 @@ import numpy as np
 
 from tolsynth.tabular import Tabular, jsonable
 
-__all__ = ["MonteCarloResult"]
+__all__ = ["MonteCarloResult", "ANALYTIC_TEXT"]
+
+#: what the analytic probabilities are, per reading of the linear model
+ANALYTIC_TEXT = {
+    "gaussian": "the linear model's Gaussian approximation (sigma_j, Eq. 6-8)",
+    "exact": "the linear model's exact probabilities (no Gaussian approximation)",
+}
 
 
 def _dist_text(distribution) -> str:
@@ -27,13 +33,14 @@ def _dist_text(distribution) -> str:
 # =============================================================================================
 @dataclass(frozen=True)
 class MonteCarloResult(Tabular):
-    """Monte Carlo error statistics at one pose, next to the analytic (linear, Gaussian) ones.
+    """Monte Carlo error statistics at one pose, next to the analytic (linear model) ones.
 
     Every probability has a two-sided confidence interval (``ci_method``, level ``confidence``);
-    ``*_analytic`` are the values of :meth:`tolsynth.Mechanism.analyze` and ``*_diff`` the Monte
-    Carlo value minus the analytic one.  ``*_analytic_in_ci`` is False where the analytic value
-    lies outside the Monte Carlo interval, i.e. where the linear + Gaussian model is off by more
-    than the sampling noise explains.
+    ``*_analytic`` are the linear model's values in the reading ``analytic`` names (``"gaussian"``:
+    those of :meth:`tolsynth.Mechanism.analyze`; ``"exact"``: its exact probabilities) and
+    ``*_diff`` the Monte Carlo value minus the analytic one.  ``*_analytic_in_ci`` is False where
+    the analytic value lies outside the Monte Carlo interval, i.e. where the linear model (in that
+    reading) is off by more than the sampling noise explains.
 
     Attributes
     ----------
@@ -139,6 +146,8 @@ class MonteCarloResult(Tabular):
     pose_text: str = ""
     #: each joint value's unit, "rad" or "mm" (a joint that slides); empty: all "rad"
     joint_units: tuple = ()
+    #: the reading of the linear model the ``*_analytic`` probabilities are in: "gaussian" or "exact"
+    analytic: str = "gaussian"
 
     def to_dict(self) -> dict:
         """Plain dict for JSON (arrays as lists): every field, with NaN and infinities as None
@@ -172,13 +181,13 @@ class MonteCarloResult(Tabular):
         ]
         for j in range(3):
             lo, hi = self.p_components_ci[j]
-            flag = "" if self.p_components_analytic_in_ci[j] else "analytic outside CI"
+            flag = "" if self.p_components_analytic_in_ci[j] else f"{self.analytic} analytic outside CI"
             lines.append(
                 f"P(|w{j + 1}|<=R)    {self.p_components[j]:12.5f} [{lo:.5f}, {hi:.5f}]  "
                 f"{self.p_components_analytic[j]:10.5f}{self.p_components_diff[j]:+13.5f}  {flag}"
             )
         lo, hi = self.p_sphere_ci
-        flag = "" if self.p_sphere_analytic_in_ci else "analytic outside CI"
+        flag = "" if self.p_sphere_analytic_in_ci else f"{self.analytic} analytic outside CI"
         lines.append(
             f"P(|dr|<=R)    {self.p_sphere:12.5f} [{lo:.5f}, {hi:.5f}]  {self.p_sphere_analytic:10.5f}"
             f"{self.p_sphere_diff:+13.5f}  {flag}"
@@ -211,6 +220,7 @@ class MonteCarloResult(Tabular):
             lo, hi = self.p_cone_ci
             lines.append(f"P(cone)       {self.p_cone:12.5f} [{lo:.5f}, {hi:.5f}]  {self.p_cone_analytic:10.5f}")
         lines.append("R = {:g} mm; w_j along the analytic principal directions; sphere = Eq. 5".format(self.R))
+        lines.append(f"analytic     {ANALYTIC_TEXT[self.analytic]}")
         return "\n".join(lines)
 
 

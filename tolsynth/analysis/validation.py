@@ -14,7 +14,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from tolsynth.analysis.montecarlo import DEFAULT_BATCH, MonteCarloResult, monte_carlo
+from tolsynth.analysis.montecarlo import ANALYTIC, DEFAULT_BATCH, MonteCarloResult, monte_carlo
+from tolsynth.analysis.montecarlo_result import ANALYTIC_TEXT
 from tolsynth.checks import is_real
 from tolsynth.errors import InputError, WorkspaceWarning
 from tolsynth.kinematics.mechanism import as_mechanism
@@ -87,8 +88,10 @@ class ValidationResult(Tabular):
     def report(self) -> str:
         """Readable table: achieved probabilities with intervals against ``p`` and the analytic values."""
         pct = int(round(100 * self.montecarlo.confidence))
+        analytic = "exact linear" if self.montecarlo.analytic == "exact" else "Gaussian"
         lines = [
-            f"validation   p = {self.p:g} asked, R = {self.R:g} mm, {self.distribution}, n = {self.n}, seed = {self.seed}"
+            f"validation   p = {self.p:g} asked, R = {self.R:g} mm, {self.distribution}, n = {self.n}, seed = {self.seed}; "
+            f"{analytic}: {ANALYTIC_TEXT[self.montecarlo.analytic]}"
         ]
         for j in range(3):
             lo, hi = self.p_components_ci[j]
@@ -96,12 +99,12 @@ class ValidationResult(Tabular):
                 "met" if self.components_met[j] else ("SHORT" if self.components_short[j] else "below p (within noise)")
             )
             lines.append(
-                f"P(|w{j + 1}|<=R)  {self.p_components[j]:.5f} [{lo:.5f}, {hi:.5f}] ({pct}%)  analytic "
+                f"P(|w{j + 1}|<=R)  {self.p_components[j]:.5f} [{lo:.5f}, {hi:.5f}] ({pct}%)  {analytic} "
                 f"{self.p_components_analytic[j]:.5f}  {state}"
             )
         lo, hi = self.p_sphere_ci
         lines.append(
-            f"P(|dr|<=R)  {self.p_sphere:.5f} [{lo:.5f}, {hi:.5f}]  analytic {self.p_sphere_analytic:.5f}  "
+            f"P(|dr|<=R)  {self.p_sphere:.5f} [{lo:.5f}, {hi:.5f}]  {analytic} {self.p_sphere_analytic:.5f}  "
             + ("met" if self.sphere_met else "below p (sphere is stricter than Eq. 20)")
         )
         if len(self.per_pose) > 1:
@@ -162,6 +165,7 @@ def validate(
     confidence: float = 0.95,
     progress=None,
     Phi: float | None = None,
+    probability: str | None = None,
 ) -> ValidationResult:
     """Monte Carlo check of an optimum: the probability achieved against the ``p`` asked for.
 
@@ -190,6 +194,10 @@ def validate(
     Phi : float, optional
         Orientation half-angle (rad): the run then also samples the orientation probabilities
         (``montecarlo.p_orientation_components``, ``montecarlo.p_cone``).
+    probability : {"gaussian", "exact"}, optional
+        The reading of the linear model the analytic column is in (:func:`monte_carlo`'s
+        ``analytic``).  Not given: the design's own (``result.probability_kind``: exact
+        probabilities for an exact design), else the Gaussian one for plain tolerances.
 
     Returns
     -------
@@ -204,6 +212,11 @@ def validate(
     (3,)
     """
     tol = tolerances_or_result
+    if probability is None:  # a design is compared with the linear model in its own reading
+        kind = getattr(tol, "probability_kind", None) if not isinstance(tol, (str, Mapping)) else None
+        probability = "exact" if kind == "exact" else "gaussian"
+    elif not isinstance(probability, str) or probability not in ANALYTIC:
+        raise InputError("probability", f"got {probability!r}", " or ".join(repr(a) for a in ANALYTIC))
     if not isinstance(tol, (str, Mapping, np.ndarray, list, tuple)) and hasattr(tol, "tolerances"):
         R = R if R is not None else _attr(tol, "R")
         p = p if p is not None else _attr(tol, "p")
@@ -223,7 +236,7 @@ def validate(
         pose = default_design_pose(mechanism)[0]
     if isinstance(pose, list) and pose and not all(is_real(v) for v in pose):
         runs = [
-            validate(mechanism, tol, R, p, distribution, q, n, seed + k, batch, confidence, progress, Phi)
+            validate(mechanism, tol, R, p, distribution, q, n, seed + k, batch, confidence, progress, Phi, probability)
             for k, q in enumerate(pose)
         ]
         worst = min(runs, key=lambda v: float(np.min(v.p_components)) - v.p)
@@ -243,6 +256,7 @@ def validate(
         confidence=confidence,
         progress=progress,
         Phi=Phi,
+        analytic=probability,
     )
     return ValidationResult(
         p=p,

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from tolsynth.analysis.montecarlo import DEFAULT_BATCH, monte_carlo
+from tolsynth.analysis.montecarlo import ANALYTIC, DEFAULT_BATCH, monte_carlo
 from tolsynth.cli.args import (  # noqa: I001
     add_pose_arguments,
     add_table_out_argument,
@@ -23,6 +23,8 @@ __all__ = ["register"]
 
 
 def _cmd_montecarlo(args) -> int:
+    from tolsynth.synthesis.single import DEFAULT_PROBABILITY
+
     check_table_out(args)  # before any work
     mech = load_model(args.model)
     if hasattr(args, "dist"):
@@ -42,6 +44,7 @@ def _cmd_montecarlo(args) -> int:
         Phi=args.Phi,
         progress=progress,
         confidence=args.confidence,
+        analytic=args.probability or DEFAULT_PROBABILITY,
     )
     record = dict(
         pose=pose_label(q),
@@ -51,6 +54,7 @@ def _cmd_montecarlo(args) -> int:
         Phi_rad=args.Phi,
         n=args.n,
         seed=args.seed,
+        analytic=r.analytic,
     )
     if args.out:
         write_out(r.to_frame(), args, mech, **record)
@@ -93,6 +97,13 @@ def register(sub) -> None:
         type=number("--confidence", "0 < confidence < 1"),
         default=0.95,
         help="level of the confidence intervals",
+    )
+    p.add_argument(
+        "--probability",
+        choices=list(ANALYTIC),
+        default=None,
+        help="the linear model's reading in the analytic column: exact (the default, as a design's: its "
+        "exact probabilities) or gaussian (the paper's: each principal component read as normal)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress report on stderr")
     add_table_out_argument(p, "the probabilities with their intervals and the analytic values")

@@ -365,8 +365,8 @@ def report(
                 Phi=spec.Phi,
             )  # p: as asked, not the loop's target
             validations.append((label, v))
-            if result.probability_kind == "exact":
-                linear_exact[label] = _exact_linear(mech, result, q)
+            if result.probability_kind == "exact":  # validate's analytic column is in the design's reading
+                linear_exact[label] = (v.p_components_analytic, v.p_sphere_analytic)
     pmap = None
     if map_n == 0:
         skipped["map"] = "switched off (map_n = 0)"
@@ -441,20 +441,6 @@ def report(
     if path is not None:
         rep.write(path, format)
     return rep
-
-
-def _exact_linear(mech, result, q) -> tuple:
-    """The linear error model's exact probabilities at ``q``: ``P(|w_j| <= R)`` along the principal
-    directions (the Monte Carlo table's components) and ``P(|dr| <= R)``."""
-    from tolsynth.probability.exact import components_probability
-    from tolsynth.probability.exact_sphere import ball_probability
-
-    spec = result.spec
-    A = np.asarray(mech.sensitivity(np.asarray(q, dtype=float), check_limits=False))[:3]
-    P, _ = components_probability(A, result.x, spec.shapes, spec.R)
-    # shown to 5 decimals: an error estimate within 5e-6 is enough, a larger one leaves the cell empty
-    ball, err = ball_probability(A, result.x, spec.shapes, spec.R, tol=1e-6, return_error=True)
-    return np.asarray(P, dtype=float), float(ball) if err <= 5e-6 else float("nan")
 
 
 def _judge_worst(mech, result, worst, exact: bool, sphere: bool) -> dict:
