@@ -302,3 +302,21 @@ def test_sizes_and_grades_with_unit_suffixes():
         round_to_grades(m, res, table={"o*": {"A": 0.1, "B": "0.2mm"}})
     with pytest.raises(OutOfRangeError, match=r"^sizes\[l1\]: got '5m' \(5000 mm\).*3150"):
         round_to_grades(m, res, sizes={"l1": "5m"}, table=ANGLES)
+
+
+def test_a_size_for_an_angle_is_refused_not_ignored(capsys, tmp_path):
+    """A nominal size is an ISO 286 input for a length; given for an angle it would change
+    nothing, so it is refused naming the field, on the command line by its option."""
+    from tolsynth.cli import main
+
+    m = tolsynth.load_model("planar_2r")
+    res = tolsynth.synthesize(m, R=0.5, p=0.95, probability="gaussian")
+    with pytest.raises(InputError, match=r"o1 is an angle \(mrad\).*length parameters only") as info:
+        round_to_grades(m, res, sizes={"o1": 300}, table={"o*": {"A": 0.1}})
+    assert info.value.field == "sizes[o1]" and "l1, l2" in str(info.value)
+    argv = ["grades", "--model", "planar_2r", "--R", "0.5", "--p", "0.95", "--probability", "gaussian"]
+    table = tmp_path / "angles.toml"
+    table.write_text('["o*"]\nA = 0.1\n', encoding="utf-8")
+    assert main([*argv, "--sizes", "l1=300,o2=300", "--grades", str(table)]) == 2
+    err = capsys.readouterr().err
+    assert "--sizes o2: o2 is an angle (mrad)" in err and "Traceback" not in err

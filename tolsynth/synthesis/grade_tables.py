@@ -56,6 +56,15 @@ def _read_sizes(mechanism, sizes, names):
                 canon = mechanism.error_parameters[mechanism.index(key)]
             except UnknownNameError as exc:
                 raise UnknownNameError(field, f"{key!r} is not an error parameter", exc.allowed) from None
+            par = mechanism.parameters[mechanism.index(canon)]
+            if par.kind != "length":  # ISO 286 sizes are linear; an angle's grades come from the table alone
+                lengths = [q.name for q in mechanism.parameters if q.kind == "length"]
+                raise InputError(
+                    field,
+                    f"{canon} is an angle ({par.unit}): a nominal size applies to length parameters only "
+                    "(an angle's grades come from its grade table)",
+                    "a size for a length parameter: " + (", ".join(lengths) or "this model has none"),
+                )
             out[canon] = _size(value, field)
         return out
     if isinstance(sizes, (str, int, float, np.integer, np.floating)) and not isinstance(sizes, bool):
