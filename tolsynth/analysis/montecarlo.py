@@ -199,7 +199,7 @@ def monte_carlo(
     confidence: float = 0.95,
     check_limits: bool = True,
     directions=None,
-    analytic: str = "gaussian",
+    analytic: str = "exact",
 ) -> MonteCarloResult:
     """Monte Carlo of the hand position error through the full nonlinear kinematics.
 
@@ -234,9 +234,9 @@ def monte_carlo(
         Level of the intervals (Wilson score for the probabilities, normal for the mean).
     check_limits : bool
         Check the joint values against the limits (named configurations keep their waivers).
-    analytic : {"gaussian", "exact"}
-        The reading of the linear model the ``*_analytic`` probabilities are in: its Gaussian
-        approximation (:meth:`tolsynth.Mechanism.analyze`), or its exact probabilities
+    analytic : {"exact", "gaussian"}
+        The reading of the linear model the ``*_analytic`` probabilities are in (default: the
+        package's default reading, exact): its Gaussian approximation (:meth:`tolsynth.Mechanism.analyze`), or its exact probabilities
         (:mod:`tolsynth.probability.exact`) along the same principal directions, in the sphere and
         in the cone (NaN where the sphere's or cone's error estimate exceeds 5e-6).  Recorded in
         ``result.analytic``.
