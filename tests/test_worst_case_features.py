@@ -58,3 +58,22 @@ def test_workspace_exchange_refuses_what_the_worst_case_does_not_read(kw):
     with pytest.raises(InputError) as e:
         tolsynth.synthesize_workspace("planar_2r", R=0.5, probability="worst_case", **kw)
     assert e.value.field == next(iter(kw))
+
+
+@pytest.mark.parametrize("kw", [{"R": 0.5}, {"p": 0.99}])
+def test_best_accuracy_refuses_a_probability_the_worst_case_does_not_have(kw):
+    with pytest.raises(InputError) as e:
+        tolsynth.best_accuracy("planar_2r", 20.0, probability="worst_case", **kw)
+    assert e.value.field == next(iter(kw))
+
+
+def test_best_accuracy_of_the_worst_case_finds_the_smallest_r():
+    m = tolsynth.load_model("planar_2r")
+    out = tolsynth.best_accuracy(m, 20.0, probability="worst_case")
+    assert out.quantity == "R"
+    eps = [out.result.tolerances[n] for n in ("l1", "l2", "o1", "o2")]
+    q = m.configurations["worst"]
+    # the design bought meets its R by the hand Jacobian, spends the budget, and a 1 % smaller R costs more
+    assert planar_2r_worst_case(eps, *q) <= out.value * (1 + 1e-6)
+    assert out.result.cost <= 20.0
+    assert tolsynth.synthesize(m, R=0.99 * out.value, probability="worst_case").cost > 20.0
