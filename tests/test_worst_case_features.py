@@ -77,3 +77,36 @@ def test_best_accuracy_of_the_worst_case_finds_the_smallest_r():
     assert planar_2r_worst_case(eps, *q) <= out.value * (1 + 1e-6)
     assert out.result.cost <= 20.0
     assert tolsynth.synthesize(m, R=0.99 * out.value, probability="worst_case").cost > 20.0
+
+
+def test_contributions_of_a_worst_case_design_are_the_stack_up_terms():
+    m = tolsynth.load_model("xu_zhang_1988")
+    res = tolsynth.synthesize(m, R=0.8, probability="worst_case")
+    c = tolsynth.contributions(res)
+    C = np.asarray(m.sensitivity("worst"))[:3] * np.array([res.tolerances[n] for n in m.error_parameters])
+    signs = np.array(list(itertools.product([-1.0, 1.0], repeat=C.shape[1])))
+    V = signs @ C.T
+    k = int(np.argmax(np.einsum("ij,ij->i", V, V)))
+    h = float(np.linalg.norm(V[k]))
+    u = V[k] / h  # the brute-force farthest corner's direction
+    order = [list(c.names).index(n) for n in m.error_parameters]
+    assert h == pytest.approx(0.8, rel=1e-6)
+    assert c.worst[0] == pytest.approx(h, rel=1e-9)
+    assert c.terms[0].sum() == pytest.approx(h, rel=1e-9)
+    np.testing.assert_allclose(c.terms[0][order], np.abs(u @ C), rtol=1e-7, atol=1e-12)
+
+
+def test_cli_contributions_of_a_worst_case_design(capsys):
+    from tolsynth.cli import main
+
+    assert main(["solve", "--model", "planar_2r", "--R", "0.5", "--probability", "worst_case", "--contributions"]) == 0
+    assert "term |u . a_i| eps_i" in capsys.readouterr().out
+
+
+def test_report_of_a_worst_case_design_is_refused_before_any_work(tmp_path):
+    m = tolsynth.load_model("planar_2r")
+    res = tolsynth.synthesize(m, R=0.5, probability="worst_case")
+    with pytest.raises(InputError) as e:
+        tolsynth.report(res, mechanism=m, path=str(tmp_path / "r.md"))
+    assert e.value.field == "source"
+    assert not (tmp_path / "r.md").exists()

@@ -101,10 +101,12 @@ def _contributions(args, results: dict) -> dict:
 
 def _print_contributions(reps: dict) -> None:
     for label, rep in reps.items():
-        print(
-            f"contributions{' of ' + label if len(reps) > 1 else ''} (share of each principal variance, of tr V "
-            "and of 1 - P(sphere)):"
+        what = (
+            "each parameter's term |u . a_i| eps_i of the worst case along its direction u"
+            if hasattr(rep, "terms")
+            else "share of each principal variance, of tr V and of 1 - P(sphere)"
         )
+        print(f"contributions{' of ' + label if len(reps) > 1 else ''} ({what}):")
         print(rep.format())
 
 
