@@ -110,3 +110,19 @@ def test_report_of_a_worst_case_design_is_refused_before_any_work(tmp_path):
         tolsynth.report(res, mechanism=m, path=str(tmp_path / "r.md"))
     assert e.value.field == "source"
     assert not (tmp_path / "r.md").exists()
+
+
+def test_worst_case_lock_that_alone_breaks_r_is_named():
+    from tolsynth.errors import InfeasibleSpecificationError
+
+    # h3 is a length along a joint axis: its sensitivity is a unit vector, so 5 mm alone is 5 / 0.8 R
+    with pytest.raises(InfeasibleSpecificationError) as e:
+        tolsynth.synthesize("xu_zhang_1988", R=0.8, probability="worst_case", locks={"h3": 5})
+    assert "locked tolerances ['h3']" in str(e.value)
+    assert e.value.value == pytest.approx(6.25, rel=1e-9)
+
+
+def test_worst_case_summary_marks_a_lock_fixed():
+    res = tolsynth.synthesize("xu_zhang_1988", R=0.8, probability="worst_case", locks={"h3": 0.3})
+    line = next(ln for ln in res.summary().splitlines() if ln.strip().startswith("h3 ="))
+    assert line.endswith("[fixed]")
