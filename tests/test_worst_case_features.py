@@ -126,3 +126,30 @@ def test_worst_case_summary_marks_a_lock_fixed():
     res = tolsynth.synthesize("xu_zhang_1988", R=0.8, probability="worst_case", locks={"h3": 0.3})
     line = next(ln for ln in res.summary().splitlines() if ln.strip().startswith("h3 ="))
     assert line.endswith("[fixed]")
+
+
+@pytest.mark.parametrize(
+    "kw, field",
+    [
+        ({"distribution": "normal"}, "distribution"),
+        ({"criterion": "sphere"}, "criterion"),
+        ({"p_orientation": 0.9}, "p_orientation"),
+        ({"Phi": 0.01, "p_orientation": 0.9}, "p_orientation"),
+        ({"probability": "worstcase"}, "probability"),
+    ],
+)
+def test_synthesize_refuses_what_the_worst_case_would_ignore(kw, field):
+    kw = {"probability": "worst_case", **kw}
+    with pytest.raises(InputError) as e:
+        tolsynth.synthesize("planar_2r", R=0.5, **kw)
+    assert e.value.field == field
+    if field == "probability":
+        assert "'worst_case'" in str(e.value)
+
+
+def test_worst_case_summary_shows_no_negative_gap():
+    from dataclasses import replace
+
+    res = tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case")
+    shown = replace(res, gap=-7.37e-11)  # what rounding left on the command line
+    assert "gap 0.00e+00" in shown.summary()

@@ -97,7 +97,8 @@ class WorstCaseResult(SynthesisResult):
         tolerances and the worst-case value of every pose."""
         lines = [
             f"{self.solver} (worst case: every error anywhere in its band): {self.status} ({self.message})",
-            f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})",
+            # a gap below zero is the rounding of two equal numbers (the bound is valid): shown as 0
+            f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {max(self.gap, 0.0):.2e})",
         ]
         st = self.statistical
         if st:
