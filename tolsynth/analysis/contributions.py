@@ -30,7 +30,7 @@ import numpy as np
 
 from tolsynth.errors import InputError
 
-__all__ = ["contributions", "Contributions"]
+__all__ = ["contributions", "Contributions", "StackUp"]
 
 
 @dataclass(frozen=True)
@@ -157,6 +157,118 @@ class Contributions:
         return {"R": self.R, "poses": list(self.poses), "sigma": self.sigma.tolist(), "rows": self.rows()}
 
 
+@dataclass(frozen=True)
+class StackUp:
+    """A worst-case design's contributions: at each pose, the terms ``|u . a_i| eps_i`` (mm) of the
+    arithmetic stack-up along the direction ``u`` of the farthest point of the error zonotope; they
+    add up to the largest hand error ``h`` over every error in its band.
+
+    Attributes: ``names``, ``units``, ``tolerances``, ``poses`` as :class:`Contributions`;
+    ``terms`` (m, n) mm; ``directions`` (m, 3) the unit u per pose; ``worst`` (m,) h in mm;
+    ``R`` mm."""
+
+    names: tuple
+    units: tuple
+    tolerances: np.ndarray
+    poses: tuple
+    terms: np.ndarray
+    directions: np.ndarray
+    worst: np.ndarray
+    R: float | None = None
+
+    def rows(self) -> list[dict]:
+        """One dict per (pose, parameter): its term (mm) and its share of the worst case."""
+        return [
+            {
+                "pose": pose,
+                "parameter": name,
+                "unit": self.units[i],
+                "tolerance": float(self.tolerances[i]),
+                "term_mm": float(self.terms[b, i]),
+                "share_worst_case": float(self.terms[b, i] / self.worst[b]) if self.worst[b] > 0 else 0.0,
+            }
+            for b, pose in enumerate(self.poses)
+            for i, name in enumerate(self.names)
+        ]
+
+    def table(self):
+        """A pandas DataFrame of :meth:`rows` if pandas is installed, else the list of dicts."""
+        try:
+            import pandas as pd
+        except ImportError:
+            return self.rows()
+        return pd.DataFrame(self.rows())
+
+    def ranking(self, pose: int = 0) -> list[str]:
+        """Parameters by decreasing term at one pose."""
+        return [self.names[i] for i in np.argsort(-self.terms[pose], kind="stable")]
+
+    def format(self) -> str:
+        """Readable table per pose: the worst case and its direction, then each term, largest first."""
+        lines = []
+        for b, pose in enumerate(self.poses):
+            d = ", ".join(f"{v:.4f}" for v in self.directions[b])
+            lines.append(
+                f"pose {pose}: worst case |dr| = {self.worst[b]:.6g} mm"
+                + (f" = {self.worst[b] / self.R:.6f} R" if self.R else "")
+                + f" along ({d})"
+            )
+            lines.append(f"  {'parameter':>10} {'tolerance':>19} {'term mm':>11} {'share %':>8}")
+            for i in np.argsort(-self.terms[b], kind="stable"):
+                share = 100 * self.terms[b, i] / self.worst[b] if self.worst[b] > 0 else 0.0
+                lines.append(
+                    f"  {self.names[i]:>10} {self.tolerances[i]:>9.4g} {self.units[i]:<9}"
+                    f" {self.terms[b, i]:>11.5g} {share:>8.2f}"
+                )
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        return self.format()
+
+    def to_dict(self) -> dict:
+        """Plain dict (R, poses, worst, directions, :meth:`rows`) for JSON."""
+        return {
+            "R": self.R,
+            "poses": list(self.poses),
+            "worst_case_mm": self.worst.tolist(),
+            "directions": self.directions.tolist(),
+            "rows": self.rows(),
+        }
+
+
+def _stack_up(source, mats, distribution, R) -> StackUp:
+    """The worst-case design's terms at each pose (:class:`StackUp`): the direction of the farthest
+    point of the zonotope (:func:`tolsynth.solvers.worst_case_zonotope.zonotope_max`), where each
+    error sits at the end of its band that moves the hand along it."""
+    from tolsynth.solvers.worst_case_zonotope import zonotope_max
+
+    if distribution is not None:  # no shape enters the worst case
+        raise InputError(
+            "distribution",
+            f"{distribution!r} with a worst-case result (every error anywhere in its band, whatever its shape)",
+            "no distribution",
+        )
+    eps = np.asarray(source.x, dtype=float)
+    terms, dirs, worst = [], [], []
+    for _, A in mats:
+        C = np.asarray(A, dtype=float) * eps
+        h, _, u = zonotope_max(C)
+        terms.append(np.abs(u @ C))
+        dirs.append(u)
+        worst.append(h)
+    names = tuple(source.tolerances)
+    return StackUp(
+        names,
+        tuple(source.units[nm] for nm in names),
+        eps,
+        tuple(p for p, _ in mats),
+        np.array(terms),
+        np.array(dirs),
+        np.array(worst),
+        source.spec.R if R is None else R,
+    )
+
+
 def _position_rows(spec) -> list[tuple[str, np.ndarray]]:
     """(pose label, 3 x n position sensitivity) from a specification's blocks."""
     out, seen = [], set()
@@ -194,7 +306,9 @@ def contributions(
 
     Returns
     -------
-    Contributions
+    Contributions, or for a worst-case result (``probability="worst_case"``) :class:`StackUp`: the
+    terms ``|u . a_i| eps_i`` of the arithmetic stack-up along the direction u of the largest error,
+    which add up to it (no variance and no distribution enter there).
     """
     from tolsynth.kinematics.mechanism import Mechanism, load_model
     from tolsynth.probability.stats import check_positive, principal, variance_divisor
@@ -205,7 +319,8 @@ def contributions(
         names = tuple(source.tolerances)
         units = tuple(source.units[nm] for nm in names)
         eps = source.x
-        distribution = distribution or spec.distribution
+        worst_case = (source.inputs or {}).get("probability") == "worst_case"
+        distribution = distribution if worst_case else distribution or spec.distribution
         R = spec.R if R is None else R
         if mechanism is not None and poses is not None:
             mats = [
@@ -220,6 +335,8 @@ def contributions(
                     "the result has no position constraint to attribute",
                     "a result with a position specification, or a mechanism and poses",
                 )
+        if worst_case:
+            return _stack_up(source, mats, distribution, R)
     else:
         mech = source if isinstance(source, Mechanism) else load_model(source)
         if tolerances is None:

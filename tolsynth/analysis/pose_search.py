@@ -27,13 +27,12 @@ from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.kinematics.batch_stats import _criterion_batch, principal_std_batch
 from tolsynth.kinematics.joint_space import (
     MODEL_REFERENCE,
-    STREAK,
     _feasible,
     _limits,
     _reference,
+    grid_and_compass,
     hold_fixed,
     scaled_joints,
-    tangent_directions,
 )
 from tolsynth.probability.stats import p_ball
 from tolsynth.tabular import Tabular, jsonable
@@ -377,70 +376,10 @@ def worst_pose(
             n_eval += int(np.count_nonzero(ok))
         return val
 
-    # (2) coarse grid
-    if k == 0:
-        U = np.zeros((0, 1))
-        vals = evaluate(U)
-        g = 1
-    else:
-        g = int(grid) if grid is not None else max(5, int(math.floor(max_grid_points ** (1.0 / k))))
-        if g < 2:
-            raise OutOfRangeError("grid", f"got {grid}", "an integer >= 2")
-        if g**k > MAX_GRID_POINTS:
-            raise OutOfRangeError(
-                "grid",
-                f"{g}**{k} searched joints = {g**k} points",
-                f"at most {MAX_GRID_POINTS} points (grid <= {int(MAX_GRID_POINTS ** (1 / k))})",
-            )
-        axes = [np.linspace(0.0, 1.0, g)] * k
-        U = np.array([a.ravel() for a in np.meshgrid(*axes, indexing="ij")])
-        vals = evaluate(U, GRID_P_TOL)  # the grid only ranks the starts
-    feasible = np.isfinite(vals)
-    if not np.any(feasible):
-        raise OutOfRangeError(
-            "joint limits",
-            "no grid point satisfies every joint limit and constraint",
-            "a non-empty feasible joint space",
-        )
-    n_grid = int(np.count_nonzero(feasible))
-
-    # (3) local generating-set search from the best separated grid points
-    order = np.argsort(-vals)
-    picked: list[int] = []
-    h0 = 1.0 / (g - 1) if k else 0.0
-    for i in order:
-        if not np.isfinite(vals[i]):
-            break
-        if all(np.max(np.abs(U[:, i] - U[:, p])) > 1.5 * h0 for p in picked):
-            picked.append(int(i))
-        if len(picked) >= starts:
-            break
-    best_u = U[:, picked[0]].copy()
-    if k:
-        D = tangent_directions(mechanism, free, hi[free] - lo[free])
-        X = U[:, picked].copy()  # (k, S)
-        F = vals[picked].copy()
-        h = np.full(len(picked), 0.5 * h0)
-        streak = np.zeros(len(picked), dtype=int)
-        while np.any(h >= step_tol):
-            act = np.flatnonzero(h >= step_tol)
-            P = X[:, act, None] + h[act][None, :, None] * D.T[:, None, :]  # (k, A, nd)
-            fv = evaluate(P.reshape(k, -1)).reshape(len(act), -1)
-            j = np.argmax(fv, axis=1)
-            gain = fv[np.arange(len(act)), j]
-            better = gain > F[act] + 1e-14 * np.abs(F[act])
-            for a_i, s in enumerate(act):
-                if better[a_i]:
-                    X[:, s] = P[:, a_i, j[a_i]]
-                    F[s] = gain[a_i]
-                    streak[s] += 1
-                    if streak[s] >= STREAK:  # a run of successes doubles the step: no creep along a ridge
-                        h[s], streak[s] = min(2.0 * h[s], 0.5 * h0), 0
-                else:
-                    h[s] *= 0.5
-                    streak[s] = 0
-        b = int(np.argmax(F))
-        best_u = X[:, b]
+    # (2) coarse grid, (3) local generating-set search from the best separated grid points
+    best_u, g, n_grid, n_starts = grid_and_compass(
+        mechanism, evaluate, free, lo, hi, grid, max_grid_points, starts, step_tol, MAX_GRID_POINTS, GRID_P_TOL
+    )
     q = full(best_u[:, None])[:, 0]
     exact_search = ""
     if criterion == "components" and probability == "exact":
@@ -542,7 +481,7 @@ def worst_pose(
         n_grid=n_grid,
         n_evaluations=n_eval,
         elapsed_s=time.perf_counter() - t0,
-        method=f"grid {g}^{k} over {', '.join(names[j] for j in free) or '-'}, then pattern search from {len(picked)} starts"
+        method=f"grid {g}^{k} over {', '.join(names[j] for j in free) or '-'}, then pattern search from {n_starts} starts"
         + exact_search
         + (f"; certified search: {cert.method}" if cert is not None else ""),
         certified=None if cert is None else cert.certified,

@@ -101,10 +101,12 @@ def _contributions(args, results: dict) -> dict:
 
 def _print_contributions(reps: dict) -> None:
     for label, rep in reps.items():
-        print(
-            f"contributions{' of ' + label if len(reps) > 1 else ''} (share of each principal variance, of tr V "
-            "and of 1 - P(sphere)):"
+        what = (
+            "each parameter's term |u . a_i| eps_i of the worst case along its direction u"
+            if hasattr(rep, "terms")
+            else "share of each principal variance, of tr V and of 1 - P(sphere)"
         )
+        print(f"contributions{' of ' + label if len(reps) > 1 else ''} ({what}):")
         print(rep.format())
 
 
@@ -161,15 +163,22 @@ def cmd_solve(args) -> int:
     if args.probability == "worst_case":
         for flag, given in (
             ("--solver both", args.solver == "both"),
-            ("--everywhere", args.everywhere),
             ("--criterion sphere", args.criterion == "sphere"),
         ):
             if given:
                 raise InputError(
                     flag.split()[0],
                     f"{flag} with --probability worst_case",
-                    "one worst-case solve at given poses (ipopt; every direction, so no sphere option)",
+                    "a worst-case solve with ipopt (every direction, so no sphere option)",
                 )
+        for flag, given, allowed in (  # the exchange compares no statistical design and proves no worst case
+            ("--p", args.p is not None, "--everywhere --probability worst_case without --p"),
+            ("--certify", args.everywhere and args.certify, "--everywhere --probability worst_case without --certify"),
+        ):
+            if given and args.everywhere:
+                raise InputError(flag, f"{flag} with --everywhere --probability worst_case", allowed)
+        if args.p is None:  # no statistical design to compare with: no shape is read
+            args.dist = None
     elif args.p is None:
         raise InputError("--p", "missing", "0 < p < 1 (only --probability worst_case reads no p)")
     alpha, kw = _spec_kwargs(mech, args)
@@ -256,6 +265,8 @@ def cmd_solve(args) -> int:
             # what the exchange ranks poses by: the Gaussian sigma ratio, else the probability's margin
             gauss = w.result.probability_kind == "gaussian" and args.criterion != "sphere"
             measure = "sigma z/R" if gauss else f"{w.result.probability_kind} (1-P)/(1-p)"
+            if args.probability == "worst_case":
+                measure = w.worst_quantity
             if w.through:  # the Gaussian reading at the z Eaton's bound needs
                 measure = f"sigma z'/R (z' = {w.through:.4f})"
             if w.margin:  # the rounds are judged at the radius designed for

@@ -293,6 +293,19 @@ def report(
             raise InputError("worst_grid", "got 1", "0 (no search), None (the search's default) or an integer >= 2")
     if not (isinstance(confidence, (int, float)) and 0 < confidence < 1):
         raise InputError("confidence", f"got {confidence!r}", "0 < confidence < 1")
+    # its sections read a probability (p, z, Monte Carlo against p, the probability map, the
+    # Gaussian worst pose), which a worst-case design has none of: refused before any solve
+    worst_case = kwargs.get("probability") == "worst_case" or (
+        isinstance(source, (SynthesisResult, ProcessChoice))
+        and ((getattr(source, "result", source).inputs or {}).get("probability") == "worst_case")
+    )
+    if worst_case:
+        raise InputError(
+            "source" if isinstance(source, (SynthesisResult, ProcessChoice)) else "probability",
+            "a worst-case design: the report's sections read a probability p, which the worst case has none of",
+            "a statistical design (probability 'exact' or 'gaussian'); for a worst-case design its summary(), "
+            "tolsynth.contributions (the stack-up's terms) and synthesize_workspace (the worst case over the workspace)",
+        )
     choice = None
     if isinstance(source, (SynthesisResult, ProcessChoice)):
         if R is not None or p is not None or kwargs or processes is not None:

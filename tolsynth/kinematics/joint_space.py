@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from tolsynth.errors import UnknownNameError
+from tolsynth.errors import OutOfRangeError, UnknownNameError
 
 __all__ = ["MODEL_REFERENCE", "model_reference", "tangent_directions", "hold_fixed", "scaled_joints"]
 
@@ -169,3 +169,79 @@ def scaled_joints(U: np.ndarray, held: dict, free: list, lo: np.ndarray, hi: np.
     for i, j in enumerate(free):
         Q[j] = np.where(U[i] >= 1.0, hi[j], lo[j] + (hi[j] - lo[j]) * U[i])
     return Q
+
+
+def grid_and_compass(mech, evaluate, free, lo, hi, grid, max_grid_points, starts, step_tol, max_points, grid_tol):
+    """The worst-pose search over the ``free`` joints, scaled to [0, 1]: a coarse grid, then from
+    the ``starts`` best, mutually separated grid points a generating-set search (compass search
+    with complete polling, tangents of the linear joint constraints among its directions, the step
+    halved on failure down to ``step_tol``, doubled after a run of successes).  ``evaluate(U,
+    tol)`` gives the values to maximise at the columns of U (-inf where infeasible; ``tol`` the
+    error allowed, ``grid_tol`` on the grid).  Returns ``(best_u, grid points per joint, feasible
+    grid points, starts)``."""
+    k = len(free)
+    # (2) coarse grid
+    if k == 0:
+        U = np.zeros((0, 1))
+        vals = evaluate(U)
+        g = 1
+    else:
+        g = int(grid) if grid is not None else max(5, int(math.floor(max_grid_points ** (1.0 / k))))
+        if g < 2:
+            raise OutOfRangeError("grid", f"got {grid}", "an integer >= 2")
+        if g**k > max_points:
+            raise OutOfRangeError(
+                "grid",
+                f"{g}**{k} searched joints = {g**k} points",
+                f"at most {max_points} points (grid <= {int(max_points ** (1 / k))})",
+            )
+        axes = [np.linspace(0.0, 1.0, g)] * k
+        U = np.array([a.ravel() for a in np.meshgrid(*axes, indexing="ij")])
+        vals = evaluate(U, grid_tol)  # the grid only ranks the starts
+    feasible = np.isfinite(vals)
+    if not np.any(feasible):
+        raise OutOfRangeError(
+            "joint limits",
+            "no grid point satisfies every joint limit and constraint",
+            "a non-empty feasible joint space",
+        )
+    n_grid = int(np.count_nonzero(feasible))
+
+    # (3) local generating-set search from the best separated grid points
+    order = np.argsort(-vals)
+    picked: list[int] = []
+    h0 = 1.0 / (g - 1) if k else 0.0
+    for i in order:
+        if not np.isfinite(vals[i]):
+            break
+        if all(np.max(np.abs(U[:, i] - U[:, p])) > 1.5 * h0 for p in picked):
+            picked.append(int(i))
+        if len(picked) >= starts:
+            break
+    best_u = U[:, picked[0]].copy()
+    if k:
+        D = tangent_directions(mech, free, hi[free] - lo[free])
+        X = U[:, picked].copy()  # (k, S)
+        F = vals[picked].copy()
+        h = np.full(len(picked), 0.5 * h0)
+        streak = np.zeros(len(picked), dtype=int)
+        while np.any(h >= step_tol):
+            act = np.flatnonzero(h >= step_tol)
+            P = X[:, act, None] + h[act][None, :, None] * D.T[:, None, :]  # (k, A, nd)
+            fv = evaluate(P.reshape(k, -1)).reshape(len(act), -1)
+            j = np.argmax(fv, axis=1)
+            gain = fv[np.arange(len(act)), j]
+            better = gain > F[act] + 1e-14 * np.abs(F[act])
+            for a_i, s in enumerate(act):
+                if better[a_i]:
+                    X[:, s] = P[:, a_i, j[a_i]]
+                    F[s] = gain[a_i]
+                    streak[s] += 1
+                    if streak[s] >= STREAK:  # a run of successes doubles the step: no creep along a ridge
+                        h[s], streak[s] = min(2.0 * h[s], 0.5 * h0), 0
+                else:
+                    h[s] *= 0.5
+                    streak[s] = 0
+        b = int(np.argmax(F))
+        best_u = X[:, b]
+    return best_u, g, n_grid, len(picked)

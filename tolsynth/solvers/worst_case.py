@@ -97,7 +97,8 @@ class WorstCaseResult(SynthesisResult):
         tolerances and the worst-case value of every pose."""
         lines = [
             f"{self.solver} (worst case: every error anywhere in its band): {self.status} ({self.message})",
-            f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})",
+            # a gap below zero is the rounding of two equal numbers (the bound is valid): shown as 0
+            f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {max(self.gap, 0.0):.2e})",
         ]
         st = self.statistical
         if st:
@@ -112,8 +113,10 @@ class WorstCaseResult(SynthesisResult):
         lines.append(
             f"iterations {self.iterations}, evaluations {self.function_evaluations}, {self.wall_time * 1e3:.1f} ms"
         )
+        fixed = {n for n, a, b in zip(self.spec.names, self.spec.lower, self.spec.upper) if a == b}  # locked
         for name, value in self.tolerances.items():
             flag = f"  [{self.bounds_active[name]} bound]" if name in self.bounds_active else ""
+            flag = "  [fixed]" if name in fixed else flag
             lines.append(f"  {name:>8} = {value:.6g} {self.units[name]}{flag}")
         for b in self.constraints:
             what = "max |dr| / R" if b.kind.startswith("position") else "max |dphi| / Phi"
@@ -277,9 +280,25 @@ def lagrangian_weights(spec, eps) -> tuple[np.ndarray, float]:
     return B.T @ lam, float(lam.sum())
 
 
-def check_feasible(blocks, lower) -> None:
-    """Raise :class:`InfeasibleSpecificationError` if every tolerance at its lower bound already
-    breaks a block (h grows with every eps_i)."""
+def check_feasible(blocks, lower, upper=None, names=()) -> None:
+    """Raise :class:`InfeasibleSpecificationError` if the locked tolerances (``lower == upper``)
+    alone, every other at zero, break a block (then the message names them, as the statistical
+    path's :func:`tolsynth.model.locks.check_locks`), or if every tolerance at its lower bound
+    does (h grows with every eps_i)."""
+    locked = [] if upper is None else [i for i, (a, b) in enumerate(zip(lower, upper)) if a == b]
+    if locked:
+        alone = np.zeros(len(lower))
+        alone[locked] = np.asarray(lower, dtype=float)[locked]
+        for b, (v, _, _) in zip(blocks, worst_case_values(blocks, alone)):
+            if v > 1.0:
+                limit = "R" if b.kind == "position" else "Phi"
+                raise InfeasibleSpecificationError(
+                    b.label,
+                    v,
+                    f"infeasible specification: the locked tolerances {[names[i] for i in locked]} alone break "
+                    f"the worst case of the {b.label} (max |error| / {limit} = {v:.6g} > 1 with every other "
+                    f"tolerance at zero).  Loosen {limit}, or tighten the locked tolerances.",
+                )
     for b, (v, _, _) in zip(blocks, worst_case_values(blocks, lower)):
         if v > 1.0:
             limit = "R" if b.kind == "position" else "Phi"
@@ -313,7 +332,7 @@ def solve_worst_case(spec, eps0=None, options=None) -> WorstCaseResult:
     lower, upper = np.asarray(spec.lower, dtype=float), np.asarray(spec.upper, dtype=float)
     costs = spec.costs
     n = spec.n
-    check_feasible(blocks, lower)
+    check_feasible(blocks, lower, upper, spec.names)
     if eps0 is None:  # the geometric middle of the bounds scaled (h is homogeneous) to half the limit
         mid = np.sqrt(lower * upper)
         worst = max(v for v, _, _ in worst_case_values(blocks, mid))

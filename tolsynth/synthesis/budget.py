@@ -69,7 +69,8 @@ def best_accuracy(
     **kwargs,
 ) -> BudgetResult:
     """The smallest R at a given p (give ``p``), or the largest p at a given R (give ``R``), that
-    tolerances costing at most ``budget`` achieve.
+    tolerances costing at most ``budget`` achieve.  With ``probability="worst_case"`` give neither:
+    the smallest R whose worst case (every error anywhere in its band) the budget buys.
 
     Keyword arguments are those of :func:`tolsynth.synthesize` (alpha, k, cost, locks, bounds,
     pose, poses, ...).
@@ -90,7 +91,17 @@ def best_accuracy(
     # the bracket's width in ln R (or logit p): NaN would end the bisection at once with R = 1
     rtol = check_positive(rtol, "rtol", "width of the bracket in ln R or logit p", upper=1.0)
     max_solves = check_count(max_solves, "max_solves", lower=2, upper=10_000)
-    if (p is None) == (R is None):
+    worst_case = kwargs.get("probability") == "worst_case"
+    if worst_case:  # no probability to search or to hold: the smallest worst-case R is the answer
+        for name, value in (("R", R), ("p", p)):
+            if value is not None:
+                raise InputError(
+                    name,
+                    f"{name}={value!r} with probability='worst_case', which reads no p (there is no p to "
+                    + ("search at a given R)" if name == "R" else "hold while R is searched)"),
+                    "neither p nor R: the smallest R whose worst case the budget buys",
+                )
+    elif (p is None) == (R is None):
         raise InputError("p/R", "give exactly one of them", "p (then the smallest R is found) or R (the largest p)")
     t0 = time.perf_counter()
     solves = 0
@@ -116,8 +127,8 @@ def best_accuracy(
         log.append({"R": spec_R, "p": spec_p, "cost": res.cost, "lower_bound": res.lower_bound, "verdict": out})
         return out, res
 
-    if p is not None:
-        p = check_probability(p, "p")
+    if p is not None or worst_case:
+        p = None if worst_case else check_probability(p, "p")
         to_x, from_x = math.log, math.exp  # bisection in ln R
         spec = lambda x: (from_x(x), p)  # noqa: E731
         good_is_high = True  # a larger R is easier
@@ -164,7 +175,7 @@ def best_accuracy(
         if v == "unknown":
             # the budget lies within this solve's gap, so the answer lies within about the gap's
             # worth of x of mid: two solves that far to either side decide the bracket there
-            slope = _slope(log, to_x, p is not None)
+            slope = _slope(log, to_x, p is not None or worst_case)
             if slope is None or not slope > 0:
                 certified = False
                 break
@@ -183,7 +194,7 @@ def best_accuracy(
             bad = mid
     ends = sorted([from_x(good), from_x(bad)])
     return BudgetResult(
-        quantity="R" if p is not None else "p",
+        quantity="R" if p is not None or worst_case else "p",
         value=from_x(good),
         bracket=tuple(ends),
         result=good_res,

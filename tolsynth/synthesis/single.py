@@ -266,7 +266,11 @@ def synthesize(
             "pose= (one pose) or poses= (a list, each constrained), not both",
         )
     seed = check_seed(seed)
+    readings = PROBABILITIES + ("worst_case",)
+    if probability is not None and (not isinstance(probability, str) or probability not in readings):
+        raise InputError("probability", f"got {probability!r}", ", ".join(repr(s) for s in readings))
     if probability == "worst_case":  # every error anywhere in its band: no p or distribution needed
+        _refuse_unread(p, distribution, criterion, Phi, p_orientation)
         mechanism = as_mechanism(mechanism)
         pose, _ = resolve_design_pose(mechanism, pose, poses)  # as the statistical solve below chooses it
         return _worst_case(
@@ -433,6 +437,28 @@ def _timed_out(nlp, solver: str, eps0, exc: TimeLimitError) -> SynthesisResult:
         [],
         relaxation_bound=lambda n: n.dual_bound(zero),
     )
+
+
+def _refuse_unread(p, distribution, criterion, Phi, p_orientation) -> None:
+    """The worst case's refusals of what it would ignore, as the command line's: the shape and the
+    orientation probability are read only by the statistical design compared with (so only with
+    p), and the worst case bounds every direction at once, so it has no sphere criterion."""
+    if criterion != "components":
+        raise InputError(
+            "criterion",
+            f"{criterion!r} with probability='worst_case'",
+            "'components' (the worst case bounds |dr| itself: every direction at once)",
+        )
+    if p_orientation is not None and Phi is None:
+        raise InputError("p_orientation", "given without Phi", "give Phi (rad) with it")
+    for name, value in (("distribution", distribution), ("p_orientation", p_orientation)):
+        if value is not None and p is None:
+            raise InputError(
+                name,
+                f"{value!r} with probability='worst_case' and no p: only the statistical design compared "
+                "with (given p) reads it",
+                f"no {name}, or p with it",
+            )
 
 
 def _worst_case(

@@ -26,8 +26,8 @@ class WorkspaceSynthesis(Tabular):
     rounds : list of dict
         Per round: ``n_poses``, ``cost``, ``worst_value`` (the largest value found over the
         workspace at that round's optimum, in the design's reading, :attr:`worst_quantity`: sigma
-        z / R; the sphere's (1 - P)/(1 - p); or the exact (1 - P)/(1 - p) along the worst direction or in
-        the sphere), ``worst_q`` (rad), ``worst_position`` (mm).
+        z / R; the sphere's (1 - P)/(1 - p); the exact (1 - P)/(1 - p) along the worst direction or in
+        the sphere; or the worst case's largest |dr| / R over every error in its band), ``worst_q`` (rad), ``worst_position`` (mm).
     converged : bool
         True when the worst pose found meets the specification to ``tol``, ``worst_value <= 1 +
         tol`` (with ``certify``: when the proven bound does).
@@ -99,6 +99,9 @@ class WorkspaceSynthesis(Tabular):
     def worst_quantity(self) -> str:
         """What ``worst_value`` measures, in the design's reading (each <= 1 meets the specification)."""
         res = self.result
+        if res is not None and (res.inputs or {}).get("probability") == "worst_case":
+            orientation = any(b.kind.startswith("orientation") for b in res.constraints)
+            return "worst-case " + ("max(|dr| / R, |dphi| / Phi)" if orientation else "|dr| / R")
         sphere = any(b.kind.startswith("sphere") for b in res.constraints) if res is not None else False
         if res is not None and res.probability_kind == "exact":
             return "exact (1 - P)/(1 - p) " + ("in the sphere" if sphere else "along the worst direction")
