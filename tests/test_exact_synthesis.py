@@ -531,8 +531,7 @@ def test_command_line_sphere_prints_the_design_and_says_it_is_not_proven(capsys)
     [
         ("components", {"max_iter": 3}, "max_iter=3"),
         ("components", {"max_patches": 1}, "max_patches=1"),
-        # the sphere's unlimited solve takes some 14 s
-        pytest.param("sphere", {"max_iter": 3}, "max_iter=3", marks=pytest.mark.slow),
+        ("sphere", {"max_iter": 3}, "max_iter=3"),
     ],
 )
 def test_a_limit_reached_has_the_status_of_a_limit(criterion, options, limit):

@@ -40,7 +40,7 @@ from tolsynth.probability.exact_rows import evaluate
 from tolsynth.probability.exact_series import KMAX
 from tolsynth.progress import check_deadline
 
-__all__ = ["ball_probability", "cone_probability"]
+__all__ = ["ball_probability", "cone_probability", "planar_part", "azimuths", "radial_nodes"]
 
 #: a matrix whose third singular value is below this fraction of the first is treated as planar
 PLANAR = 1e-12
@@ -87,35 +87,46 @@ def _breaks(b, parts, R, reach) -> np.ndarray:
     return np.unique(np.concatenate([[0.0], np.arccosh(r / R), [T]]))
 
 
-def _disk_level(C, parts, R, naz, tol):
-    """One level of the planar rule with ``naz`` azimuths: (value, error estimate)."""
+def azimuths(naz: int) -> np.ndarray:
+    """The planar rule's ``naz`` unit directions in the plane (the midpoint rule on [0, pi)), (naz, 2)."""
     phi = (np.arange(naz) + 0.5) * math.pi / naz
-    B = np.abs(np.column_stack([np.cos(phi), np.sin(phi)]) @ C)  # (naz, n)
+    return np.column_stack([np.cos(phi), np.sin(phi)])
+
+
+def radial_nodes(B, parts, R, nodes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The radial rule of each azimuth row of ``B`` (naz, n): ``nodes``-point Gauss-Legendre on
+    each piece of ``t`` between the break points.  Returns ``(row, radius R cosh t, weight)`` with
+    the weights of ``sech^2 t dt`` divided by naz, so that ``P = 1 - sum w (1 - Q_row(radius))``
+    (``Q = 1`` beyond the last node)."""
+    naz = B.shape[0]
     bounded = np.array([p.bounded for p in parts])
     sig = np.sqrt(np.sum((B[:, ~bounded] / 3.0) ** 2, axis=1)) if (~bounded).any() else np.zeros(naz)
     reach = B[:, bounded].sum(axis=1) + 12.0 * sig
-    rows, radii, w_lo, w_hi, owner = [], [], [], [], []
+    x, w = _GL[nodes]
+    rows, radii, weights = [], [], []
     for j in range(naz):
         t = _breaks(B[j], parts, R, reach[j])
         a, h = t[:-1], np.diff(t)
-        for n, wl in ((12, True), (24, False)):
-            x, w = _GL[n]
-            tt = (a[:, None] + 0.5 * h[:, None] * (x[None, :] + 1.0)).ravel()
-            ww = (0.5 * h[:, None] * w[None, :]).ravel() / np.cosh(tt) ** 2
-            radii.append(R * np.cosh(tt))
-            rows.append(np.repeat(j, tt.size))
-            (w_lo if wl else w_hi).append(ww)
-            (w_hi if wl else w_lo).append(np.zeros_like(ww))
-            owner.append(np.repeat(j, tt.size))
-    radii, idx = np.concatenate(radii), np.concatenate(rows)
-    wl, wh = np.concatenate(w_lo), np.concatenate(w_hi)
+        a, h = a[h > 0], h[h > 0]  # an azimuth that cannot leave the disk adds nothing
+        tt = (a[:, None] + 0.5 * h[:, None] * (x[None, :] + 1.0)).ravel()
+        weights.append((0.5 * h[:, None] * w[None, :]).ravel() / np.cosh(tt) ** 2 / naz)
+        radii.append(R * np.cosh(tt))
+        rows.append(np.repeat(j, tt.size))
+    return np.concatenate(rows), np.concatenate(radii), np.concatenate(weights)
+
+
+def _disk_level(C, parts, R, naz, tol):
+    """One level of the planar rule with ``naz`` azimuths: (value, error estimate)."""
+    B = np.abs(azimuths(naz) @ C)  # (naz, n)
+    lo, hi = radial_nodes(B, parts, R, 12), radial_nodes(B, parts, R, 24)
+    idx, radii = np.concatenate([lo[0], hi[0]]), np.concatenate([lo[1], hi[1]])
     Q, e, _ = evaluate(B[idx], parts, radii, 0.05 * tol, True)
-    deficit_lo = np.bincount(idx, wl * (1.0 - Q), naz)
-    deficit_hi = np.bincount(idx, wh * (1.0 - Q), naz)
-    rounding = np.bincount(idx, wh * e, naz)
+    m = lo[0].size
+    deficit_lo = np.bincount(lo[0], lo[2] * (1.0 - Q[:m]), naz)
+    deficit_hi = np.bincount(hi[0], hi[2] * (1.0 - Q[m:]), naz)
+    rounding = np.bincount(hi[0], hi[2] * e[m:], naz)
     tails = 1e-30  # Q = 1 - (a normal tail beyond 12 sigma) past the reach
-    I = 1.0 - deficit_hi
-    return float(np.mean(I)), float(np.mean(np.abs(deficit_hi - deficit_lo) + rounding)) + tails
+    return 1.0 - float(deficit_hi.sum()), float(np.sum(np.abs(deficit_hi - deficit_lo) + rounding)) + tails
 
 
 def _disk(C, parts, R, tol, max_az):
@@ -131,12 +142,16 @@ def _disk(C, parts, R, tol, max_az):
         prev, naz = val, 2 * naz
 
 
-def _planar(M):
-    """``(C (2, n), delta)`` when M (3, n) lies within ``PLANAR`` of a plane, else None."""
+def planar_part(M, parts, tol: float):
+    """``(C (2, n), U (3, 2), extra)`` when M (3, n) lies within ``PLANAR`` of a plane (columns of
+    U) and the sphere's probability of ``C Y = U^T M Y`` is within ``extra <= 0.1 tol`` of that of
+    ``M Y`` (module docstring), else None."""
     U, s, _ = np.linalg.svd(M, full_matrices=True)
     if s[0] == 0.0 or s[2] > PLANAR * s[0]:
         return None
-    return U[:, :2].T @ M, float(np.sum(np.abs(U[:, 2] @ M)))
+    C, delta = U[:, :2].T @ M, float(np.sum(np.abs(U[:, 2] @ M)))
+    extra = math.pi * delta**2 * _planar_density_bound(C, parts) if delta > 0 else 0.0
+    return (C, U[:, :2], extra) if extra <= 0.1 * tol else None
 
 
 def _planar_density_bound(C, parts) -> float:
@@ -169,13 +184,11 @@ def ball_probability(
     max_nodes = check_count(max_nodes, "max_nodes", 16)
     parts = tuple(part_of(s) for s in sh)
     M = A * eps
-    plane = _planar(M)
+    plane = planar_part(M, parts, tol)
     if plane is not None:
-        C, delta = plane
-        extra = math.pi * delta**2 * _planar_density_bound(C, parts) if delta > 0 else 0.0
-        if extra <= 0.1 * tol:
-            P, err = _disk(C, parts, R, tol - extra, 2 * max_nodes)
-            return _result(P, err + extra, tol, return_error, "sphere")
+        C, _, extra = plane
+        P, err = _disk(C, parts, R, tol - extra, 2 * max_nodes)
+        return _result(P, err + extra, tol, return_error, "sphere")
     prev, nodes = None, 16
     while True:
         check_deadline("the exact probability in the sphere")
