@@ -153,3 +153,45 @@ def test_worst_case_summary_shows_no_negative_gap():
     res = tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case")
     shown = replace(res, gap=-7.37e-11)  # what rounding left on the command line
     assert "gap 0.00e+00" in shown.summary()
+
+
+def test_worst_case_result_carries_a_sampled_workspace_check_in_the_worst_case():
+    """The planar 2R's single-pose worst-case design, checked at 300 poses drawn uniformly inside
+    the joint limits (seed 0, drawn again here): the largest worst-case |dr| / R is the brute force
+    over all 16 sign patterns at every one of them, reached at the reported pose, over 1 (the
+    design misses R away from its pose), so it warns; summary and to_dict show it once read."""
+    from tolsynth.errors import WorkspaceWarning
+
+    m = tolsynth.load_model("planar_2r")
+    res = tolsynth.synthesize(m, R=0.5, probability="worst_case")
+    assert res.workspace is not None and "workspace check: not computed" in res.summary()
+    assert res.to_dict()["workspace_check"] is None  # never computed by a summary or a dict
+    with pytest.warns(WorkspaceWarning):
+        line = res.workspace.line()
+    eps = [res.tolerances[n] for n in ("l1", "l2", "o1", "o2")]
+    lo, hi = np.radians([-170.0, -150.0]), np.radians([170.0, 150.0])
+    Q = lo[:, None] + (hi - lo)[:, None] * np.random.default_rng(0).random((2, 300))
+    brute = np.array([planar_2r_worst_case(eps, *q) for q in Q.T]) / 0.5
+    ws = res.workspace
+    assert ws.worst == pytest.approx(brute.max(), rel=1e-9) and ws.worst > 1.005
+    assert planar_2r_worst_case(eps, *ws.q) / 0.5 == pytest.approx(ws.worst, rel=1e-9)
+    assert "worst-case |dr|/R" in line and "over the specification" in line
+    d = res.to_dict()["workspace_check"]
+    assert d["probabilities"] == "worst_case" and d["exceeds"] and d["worst"] == ws.worst
+    assert line in res.summary()
+
+
+def test_worst_case_workspace_check_within_r_does_not_warn():
+    """The paper's robot at its worst pose: the largest sampled worst case (0.963) is below 1 and
+    equals the brute force over the 2^11 sign patterns at the reported pose; no warning."""
+    import warnings
+
+    m = tolsynth.load_model("xu_zhang_1988")
+    res = tolsynth.synthesize(m, R=0.5, probability="worst_case")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ws = res.workspace
+        assert ws.worst < 1 and not ws.exceeds and "within the specification" in ws.line()
+    C = np.asarray(m.sensitivity(ws.q))[:3] * res.x
+    signs = np.array(list(itertools.product([-1.0, 1.0], repeat=m.n)))
+    assert np.max(np.linalg.norm(signs @ C.T, axis=1)) / 0.5 == pytest.approx(ws.worst, rel=1e-9)

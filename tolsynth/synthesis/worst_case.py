@@ -107,4 +107,9 @@ def synthesize_worst_case(
     rec.update(probability="worst_case", p_compared=None if p is None else float(p))
     object.__setattr__(result, "inputs", rec)
     object.__setattr__(result, "statistical", stat)
+    if result.feasible:
+        from tolsynth.analysis.validation import WorkspaceCheck
+
+        # the statistical results' sampled check, in the worst case's quantity; computed when read
+        object.__setattr__(result, "workspace", WorkspaceCheck(mechanism, result))
     return result
