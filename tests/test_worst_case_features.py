@@ -195,3 +195,20 @@ def test_worst_case_workspace_check_within_r_does_not_warn():
     C = np.asarray(m.sensitivity(ws.q))[:3] * res.x
     signs = np.array(list(itertools.product([-1.0, 1.0], repeat=m.n)))
     assert np.max(np.linalg.norm(signs @ C.T, axis=1)) / 0.5 == pytest.approx(ws.worst, rel=1e-9)
+
+
+def test_worst_case_result_records_how_its_default_pose_was_chosen():
+    """The PUMA 560 has no 'worst' configuration: the worst-case design is made at the worst-pose
+    search's pose (the documented rule, computed here by calling worst_pose directly), and its
+    inputs and summary say so, as a statistical result's do; a pose given is recorded as no note."""
+    m = tolsynth.load_model("puma560")
+    assert "worst" not in m.configurations
+    lo, hi = (np.asarray(b, dtype=float) for b in m.bounds)
+    q = np.asarray(tolsynth.worst_pose(m, np.sqrt(lo * hi), criterion="sigma", reference=None).q, dtype=float)
+    res = tolsynth.synthesize(m, R=0.5, probability="worst_case")
+    np.testing.assert_allclose(list(res.spec.poses.values())[0], q, atol=1e-12)
+    note = res.inputs["default_pose"]
+    assert "worst-pose search" in note and m.format_joints(q) in note
+    assert f"pose: {note}" in res.summary()
+    given = tolsynth.synthesize(m, R=0.5, probability="worst_case", pose=next(iter(m.configurations)))
+    assert "default_pose" not in given.inputs
