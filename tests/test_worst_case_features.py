@@ -212,3 +212,23 @@ def test_worst_case_result_records_how_its_default_pose_was_chosen():
     assert f"pose: {note}" in res.summary()
     given = tolsynth.synthesize(m, R=0.5, probability="worst_case", pose=next(iter(m.configurations)))
     assert "default_pose" not in given.inputs
+
+
+def test_process_choice_in_the_worst_case_takes_no_p():
+    """synthesize_processes with probability='worst_case' needs no p (its design meets R at the
+    pose over all 16 sign patterns, exactly, by hand); a p given would be ignored, so it is
+    refused, and a statistical reading without p is refused too, each naming p."""
+    from tolsynth.model.cost import PowerLaw
+    from tolsynth.synthesis.processes import Process
+
+    procs = {
+        "l1": [Process("turning", PowerLaw(1.0, 0.7), 0.05, 0.5), Process("grinding", PowerLaw(3.0, 0.7), 0.01, 0.05)]
+    }
+    best = tolsynth.synthesize_processes("planar_2r", 0.5, processes=procs, probability="worst_case")
+    assert best.proven and best.result.probability_kind == "worst_case"
+    eps = [best.result.tolerances[n] for n in ("l1", "l2", "o1", "o2")]
+    assert planar_2r_worst_case(eps, 0.0, 0.0) == pytest.approx(0.5, rel=1e-6)
+    for p, probability in ((0.99, "worst_case"), (None, "gaussian"), (None, None)):
+        with pytest.raises(InputError) as e:
+            tolsynth.synthesize_processes("planar_2r", 0.5, p, procs, probability=probability)
+        assert e.value.field == "p"
