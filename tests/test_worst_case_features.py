@@ -232,3 +232,32 @@ def test_process_choice_in_the_worst_case_takes_no_p():
         with pytest.raises(InputError) as e:
             tolsynth.synthesize_processes("planar_2r", 0.5, p, procs, probability=probability)
         assert e.value.field == "p"
+
+
+def test_sweep_in_the_worst_case_has_no_p(capsys):
+    """A worst-case sweep takes no p and no shape and has no such columns; each row's design meets
+    R at the pose over all 16 sign patterns (by hand); a p (one or a grid) or a distribution would
+    be ignored, so it is refused before any solve, as is a statistical sweep without p.  The
+    command line's sweep offers no worst case (exit 2, one message, no traceback)."""
+    pytest.importorskip("pandas")
+    from tolsynth.cli import main
+
+    df = tolsynth.sweep("planar_2r", [0.5, 0.8], probability="worst_case", client="serial")
+    assert "p" not in df.columns and "distribution" not in df.columns
+    assert "p" not in df.attrs["inputs"]["grid"]
+    assert list(df["probability"]) == ["worst_case"] * 2 and df["success"].all()
+    for _, row in df.iterrows():
+        eps = [row[f"eps_{n}"] for n in ("l1", "l2", "o1", "o2")]
+        assert planar_2r_worst_case(eps, 0.0, 0.0) == pytest.approx(row["R"], rel=1e-6)
+    for kw in ({"p": 0.99}, {"p": [0.9, 0.99]}, {"distribution": "normal"}):
+        with pytest.raises(InputError) as e:
+            tolsynth.sweep("planar_2r", [0.5], probability="worst_case", client="serial", **kw)
+        assert e.value.field == next(iter(kw))
+    with pytest.raises(InputError) as e:
+        tolsynth.sweep("planar_2r", [0.5], client="serial")
+    assert e.value.field == "p"
+    cli = ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.9", "--probability", "worst_case"]
+    with pytest.raises(SystemExit) as ex:
+        main(cli)
+    err = capsys.readouterr().err
+    assert ex.value.code == 2 and "--probability" in err and "Traceback" not in err
