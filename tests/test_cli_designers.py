@@ -239,7 +239,7 @@ def test_solve_worst_case_without_p(capsys):
     )
     assert both["cost"] == pytest.approx(out["cost"], rel=1e-9)
     assert 1.6 < both["cost"] / both["statistical"]["cost"] < 1.8
-    for bad in (["--solver", "both"], ["--everywhere"], ["--criterion", "sphere"]):
+    for bad in (["--solver", "both"], ["--everywhere", "--p", "0.99"], ["--criterion", "sphere"]):
         assert main(["solve", "--model", "planar_2r", "--R", "0.5", "--probability", "worst_case", *bad]) == 2
     assert main(["solve", "--model", "planar_2r", "--R", "0.5"]) == 2  # a statistical design needs --p
     assert "--p" in capsys.readouterr().err

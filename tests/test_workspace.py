@@ -474,3 +474,29 @@ def test_exact_workspace_design_labels_its_values_and_its_verdicts_agree():
     assert d["poses"] == [np.asarray(q, dtype=float).tolist() for q in w.poses] and len(d["rounds"]) == len(w.rounds)
     g = tolsynth.synthesize_workspace(m, R=0.5, p=0.99, probability="gaussian")
     assert g.to_frame().attrs["units"]["worst_value"] == "sigma z / R"
+
+
+def test_binding_poses_with_an_orientation_limit_pair_each_block_with_its_pose(xz):
+    """With Phi each imposed pose has a position and an orientation block.  The binding poses are
+    those where z sigma_1 / R or z sigma_1 / Phi is at 1, by NumPy eigenvalues of S diag(eps^2/3)
+    S^T at each pose (uniform errors); the orientation limit binds somewhere, so the case tests it."""
+    from scipy.stats import norm
+
+    w = tolsynth.synthesize_workspace(xz, 0.5, 0.99, "uniform", 0.7, Phi=0.002, probability="gaussian")
+    assert w.converged and len(w.poses) > 2
+    z, eps = norm.ppf(0.995), w.result.x
+    values = []
+    for q in w.poses:
+        S = np.asarray(xz.sensitivity(q, check_limits=False))
+        V = S @ np.diag(eps**2 / 3) @ S.T
+        values.append(
+            [
+                z * math.sqrt(np.linalg.eigvalsh(V[:3, :3])[-1]) / 0.5,
+                z * math.sqrt(np.linalg.eigvalsh(V[3:, 3:])[-1]) / 0.002,
+            ]
+        )
+    values = np.array(values)
+    assert np.any(values[:, 1] >= 1 - 1e-6)  # the orientation binds somewhere
+    expected = [i for i in range(len(w.poses)) if values[i].max() >= 1 - 1e-6]
+    got = [next(i for i, q in enumerate(w.poses) if q is b) for b in w.binding_poses]
+    assert got == expected and len(expected) < len(w.poses)

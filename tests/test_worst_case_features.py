@@ -153,3 +153,129 @@ def test_worst_case_summary_shows_no_negative_gap():
     res = tolsynth.synthesize("planar_2r", R=0.5, probability="worst_case")
     shown = replace(res, gap=-7.37e-11)  # what rounding left on the command line
     assert "gap 0.00e+00" in shown.summary()
+
+
+def test_worst_case_result_carries_a_sampled_workspace_check_in_the_worst_case():
+    """The planar 2R's single-pose worst-case design, checked at 300 poses drawn uniformly inside
+    the joint limits (seed 0, drawn again here): the largest worst-case |dr| / R is the brute force
+    over all 16 sign patterns at every one of them, reached at the reported pose, over 1 (the
+    design misses R away from its pose), so it warns; summary and to_dict show it once read."""
+    from tolsynth.errors import WorkspaceWarning
+
+    m = tolsynth.load_model("planar_2r")
+    res = tolsynth.synthesize(m, R=0.5, probability="worst_case")
+    assert res.workspace is not None and "workspace check: not computed" in res.summary()
+    assert res.to_dict()["workspace_check"] is None  # never computed by a summary or a dict
+    with pytest.warns(WorkspaceWarning):
+        line = res.workspace.line()
+    eps = [res.tolerances[n] for n in ("l1", "l2", "o1", "o2")]
+    lo, hi = np.radians([-170.0, -150.0]), np.radians([170.0, 150.0])
+    Q = lo[:, None] + (hi - lo)[:, None] * np.random.default_rng(0).random((2, 300))
+    brute = np.array([planar_2r_worst_case(eps, *q) for q in Q.T]) / 0.5
+    ws = res.workspace
+    assert ws.worst == pytest.approx(brute.max(), rel=1e-9) and ws.worst > 1.005
+    assert planar_2r_worst_case(eps, *ws.q) / 0.5 == pytest.approx(ws.worst, rel=1e-9)
+    assert "worst-case |dr|/R" in line and "over the specification" in line
+    d = res.to_dict()["workspace_check"]
+    assert d["probabilities"] == "worst_case" and d["exceeds"] and d["worst"] == ws.worst
+    assert line in res.summary()
+
+
+def test_worst_case_workspace_check_within_r_does_not_warn():
+    """The paper's robot at its worst pose: the largest sampled worst case (0.963) is below 1 and
+    equals the brute force over the 2^11 sign patterns at the reported pose; no warning."""
+    import warnings
+
+    m = tolsynth.load_model("xu_zhang_1988")
+    res = tolsynth.synthesize(m, R=0.5, probability="worst_case")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ws = res.workspace
+        assert ws.worst < 1 and not ws.exceeds and "within the specification" in ws.line()
+    C = np.asarray(m.sensitivity(ws.q))[:3] * res.x
+    signs = np.array(list(itertools.product([-1.0, 1.0], repeat=m.n)))
+    assert np.max(np.linalg.norm(signs @ C.T, axis=1)) / 0.5 == pytest.approx(ws.worst, rel=1e-9)
+
+
+def test_worst_case_result_records_how_its_default_pose_was_chosen():
+    """The PUMA 560 has no 'worst' configuration: the worst-case design is made at the worst-pose
+    search's pose (the documented rule, computed here by calling worst_pose directly), and its
+    inputs and summary say so, as a statistical result's do; a pose given is recorded as no note."""
+    m = tolsynth.load_model("puma560")
+    assert "worst" not in m.configurations
+    lo, hi = (np.asarray(b, dtype=float) for b in m.bounds)
+    q = np.asarray(tolsynth.worst_pose(m, np.sqrt(lo * hi), criterion="sigma", reference=None).q, dtype=float)
+    res = tolsynth.synthesize(m, R=0.5, probability="worst_case")
+    np.testing.assert_allclose(list(res.spec.poses.values())[0], q, atol=1e-12)
+    note = res.inputs["default_pose"]
+    assert "worst-pose search" in note and m.format_joints(q) in note
+    assert f"pose: {note}" in res.summary()
+    given = tolsynth.synthesize(m, R=0.5, probability="worst_case", pose=next(iter(m.configurations)))
+    assert "default_pose" not in given.inputs
+
+
+def test_process_choice_in_the_worst_case_takes_no_p():
+    """synthesize_processes with probability='worst_case' needs no p (its design meets R at the
+    pose over all 16 sign patterns, exactly, by hand); a p given would be ignored, so it is
+    refused, and a statistical reading without p is refused too, each naming p."""
+    from tolsynth.model.cost import PowerLaw
+    from tolsynth.synthesis.processes import Process
+
+    procs = {
+        "l1": [Process("turning", PowerLaw(1.0, 0.7), 0.05, 0.5), Process("grinding", PowerLaw(3.0, 0.7), 0.01, 0.05)]
+    }
+    best = tolsynth.synthesize_processes("planar_2r", 0.5, processes=procs, probability="worst_case")
+    assert best.proven and best.result.probability_kind == "worst_case"
+    eps = [best.result.tolerances[n] for n in ("l1", "l2", "o1", "o2")]
+    assert planar_2r_worst_case(eps, 0.0, 0.0) == pytest.approx(0.5, rel=1e-6)
+    for p, probability in ((0.99, "worst_case"), (None, "gaussian"), (None, None)):
+        with pytest.raises(InputError) as e:
+            tolsynth.synthesize_processes("planar_2r", 0.5, p, procs, probability=probability)
+        assert e.value.field == "p"
+
+
+def test_sweep_in_the_worst_case_has_no_p(capsys):
+    """A worst-case sweep takes no p and no shape and has no such columns; each row's design meets
+    R at the pose over all 16 sign patterns (by hand); a p (one or a grid) or a distribution would
+    be ignored, so it is refused before any solve, as is a statistical sweep without p.  The
+    command line's sweep offers no worst case (exit 2, one message, no traceback)."""
+    pytest.importorskip("pandas")
+    from tolsynth.cli import main
+
+    df = tolsynth.sweep("planar_2r", [0.5, 0.8], probability="worst_case", client="serial")
+    assert "p" not in df.columns and "distribution" not in df.columns
+    assert "p" not in df.attrs["inputs"]["grid"]
+    assert list(df["probability"]) == ["worst_case"] * 2 and df["success"].all()
+    for _, row in df.iterrows():
+        eps = [row[f"eps_{n}"] for n in ("l1", "l2", "o1", "o2")]
+        assert planar_2r_worst_case(eps, 0.0, 0.0) == pytest.approx(row["R"], rel=1e-6)
+    for kw in ({"p": 0.99}, {"p": [0.9, 0.99]}, {"distribution": "normal"}):
+        with pytest.raises(InputError) as e:
+            tolsynth.sweep("planar_2r", [0.5], probability="worst_case", client="serial", **kw)
+        assert e.value.field == next(iter(kw))
+    with pytest.raises(InputError) as e:
+        tolsynth.sweep("planar_2r", [0.5], client="serial")
+    assert e.value.field == "p"
+    cli = ["sweep", "--model", "planar_2r", "--R", "0.5", "--p", "0.9", "--probability", "worst_case"]
+    with pytest.raises(SystemExit) as ex:
+        main(cli)
+    err = capsys.readouterr().err
+    assert ex.value.code == 2 and "--probability" in err and "Traceback" not in err
+
+
+def test_cli_worst_case_wording_names_no_probabilities(capsys):
+    """A worst-case solve has no probabilities: its heading says "worst case" once (with or
+    without --p), and with --everywhere each round line reports the largest worst-case |dr| / R."""
+    from tolsynth.cli import main
+
+    base = ["solve", "--model", "planar_2r", "--R", "0.5", "--probability", "worst_case"]
+    assert main(base) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    assert head.count("worst case") == 1 and "probabilit" not in head
+    assert main(base + ["--p", "0.99"]) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    assert head.count("worst case") == 1 and "probabilit" not in head and "p=0.99" in head
+    assert main(base + ["--everywhere"]) == 0
+    rounds = [ln for ln in capsys.readouterr().out.splitlines() if ln.lstrip().startswith("round ")]
+    assert rounds and all("largest worst-case |dr| / R over the workspace" in ln for ln in rounds)
+    assert not any("worst worst" in ln for ln in rounds)

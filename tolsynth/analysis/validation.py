@@ -290,9 +290,13 @@ class WorkspaceCheck:
     probabilities is checked in them, ``(1 - P) / (1 - p)`` with ``P`` the smallest exact
     probability over directions (or in the sphere), at the :attr:`EXACT` sampled poses of largest
     Gaussian value (where the two differ, the Gaussian value would report a pose as over that the
-    exact probabilities pass, or the other way round).  Not a certificate (a sample can miss the
-    worst pose; :func:`tolsynth.synthesize_workspace` designs for every pose and certifies it); a
-    value above 1 is a pose where the design is over its specification.
+    exact probabilities pass, or the other way round).  A worst-case design
+    (``probability="worst_case"``) is checked in its own quantity, the largest worst-case
+    ``|dr| / R`` over every error in its band (with Phi, ``max(|dr| / R, |dphi| / Phi)``: the
+    zonotope maximum of :func:`tolsynth.analysis.worst_case_pose.worst_case_at`) at every sampled
+    pose.  Not a certificate (a sample can miss the worst pose; :func:`tolsynth.synthesize_workspace`
+    designs for every pose and certifies it); a value above 1 is a pose where the design is over
+    its specification.
 
     Computed when first read (:attr:`worst`, :meth:`line`, :meth:`to_dict`; reports and the
     command line's ``solve`` read it), not by ``synthesize`` itself nor by ``result.summary()``,
@@ -331,7 +335,12 @@ class WorkspaceCheck:
         spec = self.result.spec
         Q = self._samples()
         worst, q = math.nan, None
-        if Q.shape[1]:
+        if Q.shape[1] and self.worst_case:
+            from tolsynth.analysis.worst_case_pose import worst_case_at
+
+            eps = self.result.x
+            vals = np.array([worst_case_at(self.mechanism, q_, eps, spec.R, spec.Phi) for q_ in Q.T])
+        elif Q.shape[1]:
             sig = principal_std_batch(self.mechanism, Q, self.result.x, self.distribution)
             if spec.sphere_blocks:
                 from tolsynth.probability.stats import p_ball
@@ -342,9 +351,9 @@ class WorkspaceCheck:
                 vals = sig[:, 0] * spec.z / spec.R
             if self.exact and np.any(np.isfinite(vals)):
                 vals = self._exact_values(Q, vals)
-            if np.any(np.isfinite(vals)):
-                k = int(np.nanargmax(vals))
-                worst, q = float(vals[k]), Q[:, k]
+        if Q.shape[1] and np.any(np.isfinite(vals)):
+            k = int(np.nanargmax(vals))
+            worst, q = float(vals[k]), Q[:, k]
         self._value = (worst, q, int(Q.shape[1]))
         if self.exceeds:
             warnings.warn(WorkspaceWarning(self.line()), stacklevel=3)
@@ -359,6 +368,11 @@ class WorkspaceCheck:
     def exact(self) -> bool:
         """The design was made for the exact probabilities, and is checked in them."""
         return getattr(self.result, "probability_kind", "gaussian") == "exact"
+
+    @property
+    def worst_case(self) -> bool:
+        """The design was made for the worst case, and is checked in it (no probability)."""
+        return getattr(self.result, "probability_kind", "gaussian") == "worst_case"
 
     def _exact_values(self, Q: np.ndarray, gaussian: np.ndarray) -> np.ndarray:
         """``(1 - P) / (1 - p)`` in the exact probabilities.  Per component: every sampled pose
@@ -418,7 +432,11 @@ class WorkspaceCheck:
         """One line for summaries and the command line."""
         worst, q, n = self._compute()
         sphere = bool(self.result.spec.sphere_blocks)
-        if self.exact:
+        if self.worst_case:
+            ori = self.result.spec.Phi is not None
+            what = "worst-case " + ("max(|dr|/R, |dphi|/Phi)" if ori else "|dr|/R")
+            how = f"{n} sampled poses, every error anywhere in its band"
+        elif self.exact:
             what = "exact (1-P)/(1-p) " + ("in the sphere" if sphere else "along the worst direction")
             how = (
                 f"{n} sampled poses, exact probabilities at the {self.EXACT} of largest Gaussian value"
@@ -459,5 +477,5 @@ class WorkspaceCheck:
             "n_poses": n,
             "exceeds": self.exceeds,
             "seed": self.seed,
-            "probabilities": "exact" if self.exact else "gaussian",
+            "probabilities": "worst_case" if self.worst_case else "exact" if self.exact else "gaussian",
         }

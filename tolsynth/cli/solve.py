@@ -190,7 +190,8 @@ def cmd_solve(args) -> int:
         + (
             ", the paper's Gaussian criterion (the two solvers' cross-check)"
             if args.solver == "both" and args.probability == "gaussian"
-            else f", {args.probability.replace('_', '-')} probabilities"
+            # without --p the heading already says "worst case" in place of p
+            else ("" if args.probability == "worst_case" and args.p is None else f", {_reading(args)}")
         )
     )
     record = dict(
@@ -271,9 +272,11 @@ def cmd_solve(args) -> int:
                 measure = f"sigma z'/R (z' = {w.through:.4f})"
             if w.margin:  # the rounds are judged at the radius designed for
                 measure += f" at R' = R/(1+{w.margin:g})"
+            # "worst worst-case" says the same word twice
+            word = "largest" if args.probability == "worst_case" else "worst"
             for k, r in enumerate(w.rounds):
                 print(
-                    f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.6g}, worst {measure} over the "
+                    f"  round {k}: {r['n_poses']} pose(s), cost {r['cost']:.6g}, {word} {measure} over the "
                     f"workspace {r['worst_value']:.5f} at hand {_fmt(r['worst_position'])} mm"
                 )
             at = f" at R' = R/(1+{w.margin:g})" if w.margin else ""
@@ -337,7 +340,7 @@ def cmd_solve(args) -> int:
             if args.probability == "exact"
             else SOLVER_LABELS[args.solver]
         )
-        with Working(f"tolsynth solve: {what} ({args.probability.replace('_', '-')} probabilities)"):
+        with Working(f"tolsynth solve: {what} ({_reading(args)})"):
             res = synthesize(mech, args.R, args.p, args.dist, alpha, solver=args.solver, **kw)
         reps = _contributions(args, {"the optimum": res})
         if args.out:
@@ -375,6 +378,11 @@ def cmd_solve(args) -> int:
         print("tolsynth solve: the solver did not converge; the numbers above are not an optimum", file=sys.stderr)
         return 1
     return 0
+
+
+def _reading(args) -> str:
+    """The reading in words: the worst case has no probabilities."""
+    return "worst case" if args.probability == "worst_case" else f"{args.probability} probabilities"
 
 
 #: the progress line's name of each ``--solver`` value

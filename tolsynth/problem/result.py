@@ -180,14 +180,20 @@ class SynthesisResult(Tabular):
             lines.append(f"  {b.label}: {what} = ({vals}); multipliers ({mult})")
         if self.inputs and self.inputs.get("default_pose"):
             lines.append(f"pose: {self.inputs['default_pose']}")
-        if self.workspace is not None:  # shown once computed: a summary runs no search (about a second)
-            lines.append(
-                self.workspace.line()
-                if self.workspace.computed
-                else "workspace check: not computed (result.workspace.line() samples "
-                f"{self.workspace.n} poses; tolsynth.synthesize_workspace designs for every pose)"
-            )
+        lines += self._workspace_lines()
         return "\n".join(lines)
+
+    def _workspace_lines(self) -> list[str]:
+        """The sampled workspace check's line for a summary: shown once computed, so that a summary
+        runs no search (about a second); none where no check is attached."""
+        if self.workspace is None:
+            return []
+        if self.workspace.computed:
+            return [self.workspace.line()]
+        return [
+            f"workspace check: not computed (result.workspace.line() samples {self.workspace.n} poses; "
+            "tolsynth.synthesize_workspace designs for every pose)"
+        ]
 
     def _repr_html_(self) -> str:
         """The summary as an HTML block (Jupyter shows it in place of the dataclass repr)."""

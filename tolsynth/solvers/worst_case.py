@@ -94,7 +94,8 @@ class WorstCaseResult(SynthesisResult):
 
     def summary(self) -> str:
         """Status, cost with bound and gap, the comparison with the statistical design, the
-        tolerances and the worst-case value of every pose."""
+        tolerances, the worst-case value of every pose, how the default design pose was chosen
+        and the sampled workspace check once computed."""
         lines = [
             f"{self.solver} (worst case: every error anywhere in its band): {self.status} ({self.message})",
             # a gap below zero is the rounding of two equal numbers (the bound is valid): shown as 0
@@ -121,7 +122,9 @@ class WorstCaseResult(SynthesisResult):
         for b in self.constraints:
             what = "max |dr| / R" if b.kind.startswith("position") else "max |dphi| / Phi"
             lines.append(f"  {b.label}: {what} = {b.values[0]:.8f} (multiplier {b.multipliers[0]:.4g})")
-        return "\n".join(lines)
+        if self.inputs and self.inputs.get("default_pose"):
+            lines.append(f"pose: {self.inputs['default_pose']}")
+        return "\n".join(lines + self._workspace_lines())
 
     def to_dict(self) -> dict:
         out = super().to_dict()

@@ -224,8 +224,16 @@ class _Search:
         if not isinstance(prob, str) or prob not in _PROBABILITIES:
             raise InputError("probability", f"got {prob!r}", " or ".join(repr(s) for s in _PROBABILITIES))
         self.probability = self.kwargs["probability"] = prob
-        if prob == "worst_case":  # reads no p: no statistical comparison design at every node
-            self.p = None
+        # the worst case reads no p (and compares with no statistical design at each node): a p
+        # given with it would be ignored, so it is refused; every other reading needs one
+        if prob == "worst_case" and p is not None:
+            raise InputError(
+                "p",
+                f"{p!r} with probability='worst_case' (every error anywhere in its band: no probability)",
+                "no p with probability='worst_case', or a statistical probability ('exact', 'gaussian') with it",
+            )
+        if prob != "worst_case" and p is None:
+            raise InputError("p", "missing", "0 < p < 1 (only probability='worst_case' reads no p)")
         self.solves = 0
         self.leaf_cache: dict[tuple, object] = {}
 
@@ -334,7 +342,7 @@ class _Search:
 def synthesize_processes(
     mechanism,
     R: float,
-    p: float | None,
+    p: float | None = None,
     processes=None,
     distribution=None,
     *,
@@ -348,7 +356,8 @@ def synthesize_processes(
     ----------
     mechanism : Mechanism or str
     R, p, distribution
-        As :func:`tolsynth.synthesize`.
+        As :func:`tolsynth.synthesize`; with ``probability="worst_case"`` no p (one given is an
+        :class:`InputError`: the worst case reads none).
     processes : dict
         Parameter name -> list of :class:`Process` (or dicts ``{name, cost, lower, upper}``).
         Parameters not listed keep their cost model and bounds.

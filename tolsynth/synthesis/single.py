@@ -270,9 +270,11 @@ def synthesize(
     if probability is not None and (not isinstance(probability, str) or probability not in readings):
         raise InputError("probability", f"got {probability!r}", ", ".join(repr(s) for s in readings))
     if probability == "worst_case":  # every error anywhere in its band: no p or distribution needed
-        _refuse_unread(p, distribution, criterion, Phi, p_orientation)
+        from tolsynth.synthesis.worst_case import refuse_unread
+
+        refuse_unread(p, distribution, criterion, Phi, p_orientation)
         mechanism = as_mechanism(mechanism)
-        pose, _ = resolve_design_pose(mechanism, pose, poses)  # as the statistical solve below chooses it
+        pose, chosen = resolve_design_pose(mechanism, pose, poses)  # as the statistical solve below chooses it
         return _worst_case(
             mechanism,
             R,
@@ -294,6 +296,7 @@ def synthesize(
             validate,
             verify,
             time_limit,
+            chosen,
         )
     if R is None or p is None:
         missing = "R" if R is None else "p"
@@ -439,28 +442,6 @@ def _timed_out(nlp, solver: str, eps0, exc: TimeLimitError) -> SynthesisResult:
     )
 
 
-def _refuse_unread(p, distribution, criterion, Phi, p_orientation) -> None:
-    """The worst case's refusals of what it would ignore, as the command line's: the shape and the
-    orientation probability are read only by the statistical design compared with (so only with
-    p), and the worst case bounds every direction at once, so it has no sphere criterion."""
-    if criterion != "components":
-        raise InputError(
-            "criterion",
-            f"{criterion!r} with probability='worst_case'",
-            "'components' (the worst case bounds |dr| itself: every direction at once)",
-        )
-    if p_orientation is not None and Phi is None:
-        raise InputError("p_orientation", "given without Phi", "give Phi (rad) with it")
-    for name, value in (("distribution", distribution), ("p_orientation", p_orientation)):
-        if value is not None and p is None:
-            raise InputError(
-                name,
-                f"{value!r} with probability='worst_case' and no p: only the statistical design compared "
-                "with (given p) reads it",
-                f"no {name}, or p with it",
-            )
-
-
 def _worst_case(
     mechanism,
     R,
@@ -482,10 +463,11 @@ def _worst_case(
     validate,
     verify,
     time_limit=None,
+    chosen=None,
 ):
     """``probability="worst_case"`` (:mod:`tolsynth.synthesis.worst_case`), with the statistical
-    design at the same R and p beside it when p is given; ``time_limit`` bounds the worst-case
-    solve (its ``options["time_limit"]``) and the statistical one alike."""
+    design at the same R and p beside it when p is given; ``time_limit`` bounds both solves (the
+    worst case's ``options["time_limit"]``); ``chosen`` is the default pose's note, as recorded."""
     from tolsynth.synthesis.worst_case import synthesize_worst_case
 
     if R is None:
@@ -539,7 +521,10 @@ def _worst_case(
         x0=x0,
         options=options,
         statistical=statistical,
-        inputs=_run_inputs(mechanism, solver, options, locks, x0, None, 0, "worst_case"),
+        inputs={
+            **_run_inputs(mechanism, solver, options, locks, x0, None, 0, "worst_case"),
+            **({"default_pose": chosen} if chosen is not None else {}),
+        },
     )
 
 

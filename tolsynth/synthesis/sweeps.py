@@ -96,15 +96,29 @@ def _check_shape(d):
     return d
 
 
-def _grid(mechanism, R, p, alpha, distribution, criterion, solver) -> list[dict]:
+def _grid(mechanism, R, p, alpha, distribution, criterion, solver, worst_case: bool = False) -> list[dict]:
     from tolsynth.problem.specification import CRITERIA
     from tolsynth.synthesis.single import SOLVERS
 
+    if worst_case:  # no probability and no shape: p and distribution are no axes, None in every row
+        for name, value in (("p", p), ("distribution", distribution)):
+            if value is not None:
+                raise InputError(
+                    name,
+                    f"{value!r} with probability='worst_case' (every error anywhere in its band: no "
+                    f"{'probability' if name == 'p' else 'error shape'} is read)",
+                    f"no {name} with probability='worst_case', or a statistical probability ('exact', "
+                    f"'gaussian') with it",
+                )
+    elif p is None:
+        raise InputError("p", "missing", "0 < p < 1, or a list of them (only probability='worst_case' reads no p)")
     axes = {
         "R": [check_positive(r, "R") for r in _axis(R, "R")],
-        "p": [check_probability(q, "p") for q in _axis(p, "p")],
+        "p": [None] if worst_case else [check_probability(q, "p") for q in _axis(p, "p")],
         "alpha": [_check_alpha(a) for a in _axis(alpha, "alpha")],
-        "distribution": [_check_shape(d) for d in _axis(distribution, "distribution")],
+        "distribution": [None]
+        if worst_case
+        else [_check_shape(d) for d in _axis("uniform" if distribution is None else distribution, "distribution")],
         "criterion": [_check_choice(c, "criterion", CRITERIA) for c in _axis(criterion, "criterion")],
         "solver": [_check_choice(s, "solver", tuple(SOLVERS)) for s in _axis(solver, "solver")],
     }
@@ -291,9 +305,9 @@ def _engine(client, workers, n_rows: int):
 def sweep(
     mechanism,
     R,
-    p,
+    p=None,
     alpha=0.7,
-    distribution="uniform",
+    distribution=None,
     *,
     criterion="components",
     solver="auto",
@@ -311,8 +325,11 @@ def sweep(
         A loaded model, or a model name / path.
     R, p, alpha, distribution, criterion, solver
         Each one value or a list of values; the grid is their Cartesian product, in this order
-        (R mm; 0 < p < 1; alpha a number > 0 or a dict name -> number; distribution "uniform" /
-        "normal"; criterion "components" / "sphere"; solver "auto" / "ipopt" / "sumt").
+        (R mm; 0 < p < 1; alpha a number > 0 or a dict name -> number; distribution "uniform"
+        (None: uniform) / "normal"; criterion "components" / "sphere"; solver "auto" / "ipopt" /
+        "sumt").  With ``probability="worst_case"`` give no p and no distribution (either is an
+        :class:`InputError`: the worst case reads neither); its table has no p and no
+        distribution column.
     client : None, "serial", "processes", dask.distributed.Client or str
         Where the solves run (see :mod:`tolsynth.synthesis.sweeps`); a string with ``://`` is a Dask
         scheduler address.
@@ -355,7 +372,8 @@ def sweep(
     pd = require_pandas("tolsynth.sweep")
     mechanism = as_mechanism(mechanism)
     _check_kwargs(kwargs)
-    points = _grid(mechanism, R, p, alpha, distribution, criterion, solver)
+    worst_case = asked_worst_case(kwargs)
+    points = _grid(mechanism, R, p, alpha, distribution, criterion, solver, worst_case)
     if workers is not None:
         workers = check_count(workers, "workers", lower=1, upper=4096)
     if chunk is not None:
@@ -365,10 +383,17 @@ def sweep(
     solve_kwargs = {**kwargs, "pose": pose} if kwargs.get("poses") is None else kwargs
     # the common arguments checked once, here, on the first grid point (typed errors before work)
     first = points[0]
+    first_p = first["p"]
+    if worst_case:  # what the worst case would ignore refused here, as synthesize refuses it
+        from tolsynth.synthesis.worst_case import _NO_P, refuse_unread
+
+        for c in {pt["criterion"] for pt in points}:
+            refuse_unread(None, None, c, kwargs.get("Phi"), kwargs.get("p_orientation"))
+        first_p = _NO_P  # the specification builder's placeholder: the worst case reads no p
     make_specification(
         mechanism,
         first["R"],
-        first["p"],
+        first_p,
         first["distribution"],
         first["alpha"],
         kwargs.get("k"),
@@ -381,7 +406,7 @@ def sweep(
         kwargs.get("cost"),
     )
     for a in {id(pt["alpha"]): pt["alpha"] for pt in points if isinstance(pt["alpha"], dict)}.values():
-        make_specification(mechanism, first["R"], first["p"], first["distribution"], a)
+        make_specification(mechanism, first["R"], first_p, first["distribution"], a)
 
     n = len(points)
     indexed = list(enumerate(points))
@@ -462,6 +487,8 @@ def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dic
         "message",
         "error",
     ]
+    # the worst case reads no p and no shape: no such columns, rather than a value nothing read
+    axes = [a for a in AXES if not (asked_worst_case(kwargs) and a in ("p", "distribution"))]
     # a per-parameter alpha (dict) anywhere: the whole column as JSON text, one type per column
     as_text = {a for a in AXES if any(isinstance(pt[a], dict) for pt in points)}
     from tolsynth.synthesis.single import DEFAULT_PROBABILITY
@@ -472,7 +499,7 @@ def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dic
     for i, point in enumerate(points):
         r = by_index.get(i, {"status": "error", "success": False, "error": "no result returned"})
         rec = {"row": i}
-        for a in AXES:
+        for a in axes:
             v = point[a]
             rec[a] = json_text(v) if a in as_text else v
         for c in result_cols + eps_cols:
@@ -481,7 +508,7 @@ def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dic
         rec["probability"] = rec["probability"] or asked
         rec["message"] = rec["message"] or ""
         records.append(rec)
-    columns = ["row", *AXES, *result_cols, *eps_cols]
+    columns = ["row", *axes, *result_cols, *eps_cols]
     frame = pd.DataFrame.from_records(records, columns=columns)
     for c in ["cost", "lower_bound", "gap", "max_constraint", "wall_time_s", "time_s", *eps_cols]:
         frame[c] = pd.to_numeric(frame[c], errors="coerce").astype(float)
@@ -496,7 +523,7 @@ def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dic
                 {json_text(pt[a]) if isinstance(pt[a], dict) else pt[a] for pt in points},
                 key=lambda v: (str(type(v)), v),
             )
-            for a in AXES
+            for a in axes
         },
         "common": kwargs,
         **({"default_pose": default_pose} if default_pose else {}),
@@ -523,6 +550,11 @@ def _frame(pd, mechanism, points, rows, engine: str, elapsed: float, kwargs: dic
     }
     out = make_frame(frame, "Sweep", inputs, summary, units)
     return out
+
+
+def asked_worst_case(kwargs: dict) -> bool:
+    """The sweep's rows are worst-case designs (no p, no distribution)."""
+    return kwargs.get("probability") == "worst_case"
 
 
 def json_text(v) -> str:

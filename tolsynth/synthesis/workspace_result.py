@@ -116,13 +116,20 @@ class WorkspaceSynthesis(Tabular):
 
     @property
     def binding_poses(self) -> list:
-        """The imposed poses (rad) whose constraint is active at the last solve (non-zero multiplier)."""
-        out = []
-        for q, b in zip(self.poses, self.result.constraints if self.result is not None else ()):
-            m = np.asarray(b.multipliers, dtype=float)
-            if np.any(m > 1e-9 * max(1.0, float(np.max(np.abs(m))))) or np.any(b.active):
-                out.append(q)
-        return out
+        """The imposed poses (rad) with a constraint active at the last solve (at its limit, or with
+        a multiplier above 1e-6 of the largest), position or orientation: each block is matched to
+        its pose by its label, since with Phi a pose has two blocks.  (An interior-point solver
+        leaves multipliers of about 1e-9 on inactive constraints: not "non-zero".)"""
+        if self.result is None or not self.result.constraints:
+            return []
+        index = {label: i for i, label in enumerate(self.result.spec.poses)}  # the order of self.poses
+        top = max(float(np.max(np.abs(b.multipliers))) for b in self.result.constraints)
+        binding = {
+            index[b.pose]
+            for b in self.result.constraints
+            if np.any(b.active) or np.any(np.asarray(b.multipliers, dtype=float) > 1e-6 * top)
+        }
+        return [q for i, q in enumerate(self.poses) if i in binding]
 
     @property
     def max_violation(self) -> float:

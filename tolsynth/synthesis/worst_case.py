@@ -28,10 +28,32 @@ from tolsynth.solvers.worst_case import (
     solve_worst_case,
 )
 
-__all__ = ["synthesize_worst_case"]
+__all__ = ["refuse_unread", "synthesize_worst_case"]
 
 #: the placeholder probability the specification builder needs (the worst case reads no p)
 _NO_P = 0.5
+
+
+def refuse_unread(p, distribution, criterion, Phi, p_orientation) -> None:
+    """The worst case's refusals of what it would ignore, as the command line's: the shape and the
+    orientation probability are read only by the statistical design compared with (so only with
+    p), and the worst case bounds every direction at once, so it has no sphere criterion."""
+    if criterion != "components":
+        raise InputError(
+            "criterion",
+            f"{criterion!r} with probability='worst_case'",
+            "'components' (the worst case bounds |dr| itself: every direction at once)",
+        )
+    if p_orientation is not None and Phi is None:
+        raise InputError("p_orientation", "given without Phi", "give Phi (rad) with it")
+    for name, value in (("distribution", distribution), ("p_orientation", p_orientation)):
+        if value is not None and p is None:
+            raise InputError(
+                name,
+                f"{value!r} with probability='worst_case' and no p: only the statistical design compared "
+                "with (given p) reads it",
+                f"no {name}, or p with it",
+            )
 
 
 def synthesize_worst_case(
@@ -107,4 +129,9 @@ def synthesize_worst_case(
     rec.update(probability="worst_case", p_compared=None if p is None else float(p))
     object.__setattr__(result, "inputs", rec)
     object.__setattr__(result, "statistical", stat)
+    if result.feasible:
+        from tolsynth.analysis.validation import WorkspaceCheck
+
+        # the statistical results' sampled check, in the worst case's quantity; computed when read
+        object.__setattr__(result, "workspace", WorkspaceCheck(mechanism, result))
     return result
