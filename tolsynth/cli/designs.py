@@ -30,6 +30,7 @@ from tolsynth.cli.args import (
 )
 from tolsynth.cli.params import parse_per_parameter
 from tolsynth.errors import InputError
+from tolsynth.problem.specification import ALPHA_DEFAULT
 
 __all__ = [
     "design_command",
@@ -160,9 +161,9 @@ def design_kwargs(mech, args) -> tuple[dict, dict]:
     from tolsynth.synthesis.single import DEFAULT_PROBABILITY
 
     dist = dist_for(args, mech)
-    alpha = parse_per_parameter(mech, args.alpha, "--alpha", 0.7, "a number > 0 (the paper: 0.7)")
+    alpha = parse_per_parameter(mech, args.alpha, "--alpha", ALPHA_DEFAULT, "a number > 0 (the paper: 0.7)")
     poses = parse_poses(mech, args.pose)
-    kw = dict(distribution=dist, alpha=0.7 if alpha is None else alpha, poses=poses)
+    kw = dict(distribution=dist, alpha=ALPHA_DEFAULT if alpha is None else alpha, poses=poses)
     if args.Phi is not None:
         kw["Phi"] = args.Phi
     if args.probability is not None:

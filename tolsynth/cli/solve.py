@@ -26,6 +26,7 @@ from tolsynth.cli.everywhere import add_everywhere_arguments, exchange_options, 
 from tolsynth.cli.params import parse_bounds, parse_per_parameter
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
+from tolsynth.problem.specification import ALPHA_DEFAULT
 from tolsynth.progress import Working
 
 __all__ = ["register", "side_by_side"]
@@ -124,7 +125,7 @@ def _spec_kwargs(mech, args) -> tuple:
         if args.Phi is None:
             raise InputError("--p-orientation", "given without --Phi", "--Phi ANGLE together with --p-orientation P")
         kw["p_orientation"] = args.p_orientation
-    alpha = parse_per_parameter(mech, args.alpha, "--alpha", 0.7, "a number > 0 (the paper: 0.7)")
+    alpha = parse_per_parameter(mech, args.alpha, "--alpha", ALPHA_DEFAULT, "a number > 0 (the paper: 0.7)")
     k = parse_per_parameter(mech, args.k, "--k", mech.k, "a number > 0")
     bounds = parse_bounds(mech, args.bounds)
     if k is not None:

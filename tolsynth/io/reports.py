@@ -37,6 +37,7 @@ from tolsynth.io.report_certificate import shortfall
 from tolsynth.io.report_figures import _figures
 from tolsynth.io.report_layout import PLOT_INSTALL, _layout
 from tolsynth.io.report_render import _render_html, _render_markdown
+from tolsynth.problem.specification import ALPHA_DEFAULT
 
 __all__ = ["DesignReport", "report", "FORMATS"]
 
@@ -197,7 +198,7 @@ def report(
     R: float | None = None,
     p: float | None = None,
     distribution=None,
-    alpha=0.7,
+    alpha=ALPHA_DEFAULT,
     *,
     mechanism=None,
     processes=None,

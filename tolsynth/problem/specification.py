@@ -178,7 +178,7 @@ def make_specification(
     R: float,
     p: float,
     distribution=None,
-    alpha=0.7,
+    alpha=ALPHA_DEFAULT,
     k=None,
     bounds=None,
     pose="worst",

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from tolsynth.checks import check_mapping, check_options
 from tolsynth.errors import InputError
 from tolsynth.problem.result import SynthesisResult
+from tolsynth.problem.specification import ALPHA_DEFAULT
 from tolsynth.synthesis.single import synthesize
 from tolsynth.tabular import Tabular
 
@@ -63,7 +64,7 @@ class Comparison(Tabular):
         }
 
 
-def compare(mechanism, R: float, p: float, distribution=None, alpha=0.7, **kwargs) -> Comparison:
+def compare(mechanism, R: float, p: float, distribution=None, alpha=ALPHA_DEFAULT, **kwargs) -> Comparison:
     """Solve the same specification with IPOPT and with SUMT + Powell; see :class:`Comparison`.
 
     Keyword arguments are those of :func:`synthesize` (``options`` may be a dict with keys

@@ -18,6 +18,7 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from tolsynth.errors import InputError
+from tolsynth.problem.specification import ALPHA_DEFAULT
 
 __all__ = ["DesignSpec", "SolverOptions", "merge_groups"]
 
@@ -29,7 +30,7 @@ class DesignSpec:
     R: float | None = None
     p: float | None = None
     distribution: Any = None
-    alpha: Any = 0.7
+    alpha: Any = ALPHA_DEFAULT
     k: Any = None
     bounds: Any = None
     pose: Any = None  # None: the model's 'worst' pose, unless poses are given

@@ -17,6 +17,7 @@ import numpy as np
 
 from tolsynth.checks import check_positive, check_probability
 from tolsynth.errors import InfeasibleSpecificationError, InputError
+from tolsynth.problem.specification import ALPHA_DEFAULT
 
 __all__ = ["pareto_front", "ParetoFront"]
 
@@ -75,7 +76,9 @@ class ParetoFront:
         return ax
 
 
-def pareto_front(mechanism, *, R=None, p=None, distribution=None, alpha=0.7, processes=None, **kwargs) -> ParetoFront:
+def pareto_front(
+    mechanism, *, R=None, p=None, distribution=None, alpha=ALPHA_DEFAULT, processes=None, **kwargs
+) -> ParetoFront:
     """Sweep one of R (mm, or strings with a unit: ``["500um", "1mm"]``) or p (give a sequence)
     with the other fixed (a number).
 

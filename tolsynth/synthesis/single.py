@@ -17,7 +17,7 @@ from tolsynth.errors import InputError, TimeLimitError
 from tolsynth.kinematics.mechanism import as_mechanism
 from tolsynth.problem.nlp import ToleranceNLP
 from tolsynth.problem.result import Status, SynthesisResult
-from tolsynth.problem.specification import SPHERE_NODES, make_specification
+from tolsynth.problem.specification import ALPHA_DEFAULT, SPHERE_NODES, make_specification
 from tolsynth.progress import time_limit as deadline
 from tolsynth.solvers.exact import PROBABILITIES
 from tolsynth.synthesis.options import DesignSpec, SolverOptions, merge_groups
@@ -97,7 +97,7 @@ def synthesize(
     R: float | None = None,
     p: float | None = None,
     distribution=None,
-    alpha=0.7,
+    alpha=ALPHA_DEFAULT,
     solver: str = "auto",
     *,
     k=None,

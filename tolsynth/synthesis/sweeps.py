@@ -38,6 +38,7 @@ import numpy as np
 
 from tolsynth.checks import check_count, check_positive, check_probability
 from tolsynth.errors import InputError, MissingDependencyError, OutOfRangeError
+from tolsynth.problem.specification import ALPHA_DEFAULT
 from tolsynth.tabular import jsonable, make_frame, require_pandas, synthesis_row
 
 __all__ = ["sweep", "ENGINES", "MAX_ROWS"]
@@ -306,7 +307,7 @@ def sweep(
     mechanism,
     R,
     p=None,
-    alpha=0.7,
+    alpha=ALPHA_DEFAULT,
     distribution=None,
     *,
     criterion="components",

@@ -14,6 +14,7 @@ from tolsynth.checks import check_count, check_half_angle, check_mapping, check_
 from tolsynth.errors import CertificationWarning, InputError
 from tolsynth.kinematics.joint_space import MODEL_REFERENCE, model_reference
 from tolsynth.probability.stats import z_of_p
+from tolsynth.problem.specification import ALPHA_DEFAULT
 from tolsynth.synthesis.single import COARSE_STEP_TOL, synthesize
 from tolsynth.synthesis.workspace_result import WorkspaceSynthesis
 
@@ -25,7 +26,7 @@ def synthesize_workspace(
     R: float,
     p: float | None = None,
     distribution=None,
-    alpha=0.7,
+    alpha=ALPHA_DEFAULT,
     *,
     pose=MODEL_REFERENCE,
     tol: float = 1e-3,

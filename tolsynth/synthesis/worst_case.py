@@ -21,7 +21,7 @@ from dataclasses import replace
 
 from tolsynth.checks import TINY, check_vector
 from tolsynth.errors import InputError, TolsynthError
-from tolsynth.problem.specification import make_specification
+from tolsynth.problem.specification import ALPHA_DEFAULT, make_specification
 from tolsynth.solvers.worst_case import (
     DEFAULT_OPTIONS,
     WorstCaseResult,
@@ -61,7 +61,7 @@ def synthesize_worst_case(
     R,
     *,
     p=None,
-    alpha=0.7,
+    alpha=ALPHA_DEFAULT,
     solver="ipopt",
     k=None,
     bounds=None,
