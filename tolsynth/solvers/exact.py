@@ -54,6 +54,7 @@ from tolsynth.solvers.exact_certify import LOG_CONCAVE, cover, half_space_bound,
 from tolsynth.solvers.exact_cuts import Cuts, minimise_directions
 from tolsynth.solvers.exact_newton import Barrier
 from tolsynth.solvers.exact_newton import cost_function as _cost_fn
+from tolsynth.solvers.exact_refute import verdict
 from tolsynth.solvers.exact_series import probability
 
 __all__ = [
@@ -191,12 +192,12 @@ def _feasible_start(cuts: Cuts, u: np.ndarray, lu: np.ndarray, uu: np.ndarray, b
     Pl = P.reshape(len(Vk), -1)[-1]
     j = int(np.argmin((Pl - pc) / (1 - pc)))
     blk = blocks[cuts.block[bad[j]]]
+    value, text = verdict(float(Pl[j]), float(pc[j]), f"exact P = {Pl[j]:.6g} < p = {blk.p:g} along a direction")
     raise InfeasibleSpecificationError(
         blk.label,
-        float((1 - Pl[j]) / (1 - pc[j])),
+        value,
         f"infeasible specification: the {blk.label} fails even with every tolerance "
-        f"at its lower bound: exact P = {Pl[j]:.6g} < p = {blk.p:g} along a direction.  Lower the bounds, "
-        "or relax R/Phi or p.",
+        f"at its lower bound: {text}.  Lower the bounds, or relax R/Phi or p.",
     )
 
 
