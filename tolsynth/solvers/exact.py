@@ -49,7 +49,7 @@ import numpy as np
 
 from tolsynth.errors import InfeasibleSpecificationError
 from tolsynth.problem.nlp import ToleranceNLP
-from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult
+from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult, optimality_gap
 from tolsynth.solvers.exact_certify import LOG_CONCAVE, cover, half_space_bound, refine_direction
 from tolsynth.solvers.exact_cuts import Cuts, minimise_directions
 from tolsynth.solvers.exact_newton import Barrier
@@ -419,7 +419,7 @@ def _assemble(opts, nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, inner, 
                 np.concatenate([[mult], np.zeros(3)]),
             )
         )
-    gap = cost - lower
+    gap = optimality_gap(cost, lower)
     proven = all(c.certified for c in covers) and len(covers) == len(blocks)
     can, why = certifiable(shapes, spec)
     detail = (
