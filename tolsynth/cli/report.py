@@ -221,7 +221,8 @@ def register(sub) -> None:
         "--format",
         choices=["html", "md"],
         default=None,
-        help="html or md; default: from the suffix of --out (.md Markdown, else HTML)",
+        help="html or md, which must agree with the suffix of --out (.html or .htm HTML, .md or .markdown "
+        "Markdown; any other suffix is refused); default: from that suffix",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the summary")
     p.set_defaults(func=_cmd_report, task="the report")
