@@ -105,6 +105,21 @@ def test_unset_spec_fields_do_not_count_as_given(xz):
         tolsynth.synthesize(xz, spec=tolsynth.DesignSpec(R=0.5, p=0.99, pose="home"), pose="worst")
 
 
+def test_a_keyword_passed_at_its_default_value_still_conflicts_with_a_group(xz):
+    # alpha=0.7 and criterion="components" are the keywords' defaults, passed explicitly here
+    with pytest.raises(InputError, match=r"^alpha: given as a keyword \(0.7\) and in spec \(0.5\)"):
+        tolsynth.synthesize(xz, spec=tolsynth.DesignSpec(R=0.5, p=0.99, alpha=0.5), alpha=0.7)
+    with pytest.raises(InputError, match=r"^criterion: given as a keyword \('components'\) and in spec"):
+        tolsynth.synthesize(xz, spec=tolsynth.DesignSpec(R=0.5, p=0.99, criterion="sphere"), criterion="components")
+    with pytest.raises(InputError, match=r"^seed: given as a keyword \(0\) and in solver \(3\)"):
+        tolsynth.synthesize(xz, 0.5, 0.99, solver=tolsynth.SolverOptions(seed=3), seed=0)
+    # calls that agree keep their result: alpha 0.5 from the group alone, and given both ways
+    plain = tolsynth.synthesize(xz, R=0.5, p=0.99, alpha=0.5, probability="gaussian")
+    grouped = tolsynth.synthesize(xz, spec=tolsynth.DesignSpec(R=0.5, p=0.99, alpha=0.5), probability="gaussian")
+    both = tolsynth.synthesize(xz, 0.5, 0.99, None, 0.5, spec=tolsynth.DesignSpec(alpha=0.5, probability="gaussian"))
+    assert grouped.cost == plain.cost and both.cost == plain.cost
+
+
 # --- the seed
 
 

@@ -352,3 +352,17 @@ def test_sampled_exchange_round_limit_says_why_with_progress():
     )
     assert rc == 1 and "round limit (2) reached" in err
     assert out["converged"] is False and out["reason"] == w.reason
+
+
+def test_cli_errors_and_reasons_name_the_flags_not_certify_options(capsys):
+    from tolsynth.cli import main
+
+    base = ["solve", "--model", "planar_2r", "--R", "0.5", "--p", "0.99", "--everywhere", "--probability", "gaussian"]
+    assert main([*base, "--certify", "--through-sigma"]) == 2
+    err = capsys.readouterr().err
+    assert "error: --through-sigma: given with the gaussian reading" in err and "certify_options" not in err
+    # a certified search stopped at once: the reason suggests the design margin by its flag
+    assert main([*base, "--certify", "--certify-time-limit", "0.001"]) == 1
+    captured = capsys.readouterr()
+    assert "a design margin (--margin, e.g. 3 tol) gives the proof room" in captured.err
+    assert "certify_options" not in captured.out + captured.err

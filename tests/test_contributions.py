@@ -129,3 +129,18 @@ def test_cli_contributions_and_lock(capsys):
     assert main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--lock", "h3=5"]) == 2
     assert "locked tolerances ['h3']" in capsys.readouterr().err
     assert main(["solve", "--model", "xu_zhang_1988", "--R", "0.5", "--p", "0.99", "--lock", "h3"]) == 2
+
+
+def test_mechanism_input_defaults_to_the_design_pose_and_bad_types_are_typed():
+    delta = tolsynth.load_model("delta")  # no 'worst' configuration: the design pose is searched for
+    res = tolsynth.synthesize(delta, R=0.5, p=0.99)
+    (q,) = res.spec.poses.values()
+    c = tolsynth.contributions(delta, res.tolerances)
+    # the principal sigmas by hand at the pose synthesize designed at: V = A diag(eps^2 / 3) A^T
+    A = delta.sensitivity(q, check_limits=False)[:3]
+    V = (A * (res.x**2 / 3.0)) @ A.T
+    np.testing.assert_allclose(np.sort(c.sigma[0]), np.sqrt(np.clip(np.linalg.eigvalsh(V), 0, None)), rtol=1e-9)
+    with pytest.raises(tolsynth.InputError, match=r"^source: got dict .*contributions\(mechanism, tolerances\)"):
+        tolsynth.contributions(res.tolerances, mechanism=delta)
+    with pytest.raises(tolsynth.InputError, match=r"^mechanism: got str"):
+        tolsynth.contributions(res, mechanism="delta", poses=[q])

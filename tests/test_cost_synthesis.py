@@ -145,3 +145,21 @@ def test_locks():
         tolsynth.synthesize(mech, R=0.5, p=0.99, locks={"zz": 0.1}, probability="gaussian")
     with pytest.raises(tolsynth.OutOfRangeError, match="locks"):
         tolsynth.synthesize(mech, R=0.5, p=0.99, locks={"h3": -0.1}, probability="gaussian")
+
+
+@pytest.mark.parametrize("field", ["k", "alpha"])
+def test_k_or_alpha_named_for_a_parameter_with_a_cost_model_is_refused(field):
+    m = tolsynth.load_model("xu_zhang_1988")
+    value = {"k": 50.0, "alpha": 0.2}[field]
+    with pytest.raises(tolsynth.InputError, match=rf"^{field}\[h3\]: .*cost model \(Chase\) sets its cost") as e:
+        tolsynth.synthesize(m, R=0.5, p=0.99, cost={"h3": Chase(1, 0.4, 1)}, **{field: {"h3": value}})
+    assert e.value.field == f"{field}[h3]"
+    # named for a parameter priced by the power law, it is read as before
+    res = tolsynth.synthesize(m, R=0.5, p=0.99, cost={"h3": Chase(1, 0.4, 1)}, **{field: {"h2": value}})
+    assert res.success
+    # one alpha for all prices the power-law parameters only, and is not refused
+    res = tolsynth.synthesize(m, R=0.5, p=0.99, cost={"h3": Chase(1, 0.4, 1)}, alpha=0.3)
+    i = m.error_parameters.index("h3")
+    # the cost by hand: Chase A + B eps^-k for h3, k_j eps_j^-0.3 for every other parameter
+    by_hand = 1 + 0.4 * res.x[i] ** -1 + sum(m.k[j] * res.x[j] ** -0.3 for j in range(m.n) if j != i)
+    assert res.cost == pytest.approx(by_hand, rel=1e-12)

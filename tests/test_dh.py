@@ -215,7 +215,8 @@ def _links(i, **change):
         ({"links": _links(1, limits=(1, 2, 3))}, ModelFileError, "links[1].limits"),
         ({"links": _links(1, lenght=3.0)}, UnknownNameError, "links[1].lenght"),
         ({"links": _links(0, h=3.0)}, UnknownNameError, "links[0].h"),  # h is the modified convention's
-        ({"links": [GOOD[0], {"a": 1.0}]}, InputError, "links[1].limits"),
+        # no limits: the model-file parser's missing field, as a model file's joint without limits
+        ({"links": [GOOD[0], {"a": 1.0}]}, ModelFileError, "links[1].limits"),
         ({"links": [GOOD[0], 5.0]}, InputError, "links[1]"),
         ({"links": []}, InputError, "links"),
         ({"links": GOOD, "convention": "craig"}, InputError, "convention"),

@@ -79,3 +79,14 @@ def test_sweep_rows_in_the_exact_reading():
     assert list(df["status"]) == ["optimal", "error"]
     assert list(df["probability"]) == ["exact", "exact"]  # the error row names its reading too
     assert "exact P" in df["error"][1]
+
+
+def test_lock_refusal_quotes_the_exact_value():
+    m = tolsynth.load_model("planar_2r")
+    with pytest.raises(tolsynth.InfeasibleSpecificationError) as e:
+        tolsynth.synthesize(m, R=0.5, p=0.99, pose="elbow90", locks={"l1": 0.52})
+    # the one error left, dl1 uniform on +-0.52 mm along link 1: P = 0.5 / 0.52, value = (1 - P) / (1 - p)
+    value = (1 - 0.5 / 0.52) / (1 - 0.99)
+    assert e.value.value == pytest.approx(value, rel=1e-9)
+    assert f"P(|u . dr| <= R) = {0.5 / 0.52:.6g} < p = 0.99" in str(e.value)
+    assert f"value (1 - P)/(1 - p) = {value:.4g} > 1" in str(e.value)

@@ -468,3 +468,21 @@ def test_report_says_which_search_each_largest_value_comes_from():
     verdict = next(b[1] for b in blocks if "At the poses compared" in b[1])
     assert f"reaches {judged['found']:.4f}" in verdict and "the worst pose found by the search" in verdict
     assert f"Section 4's sampled check found at most {ws.worst:.4f} at its {ws.n_poses} sampled poses" in verdict
+
+
+def test_report_format_help_says_the_suffixes_read_and_refused(tmp_path, capsys):
+    from tolsynth.cli import main
+    from tolsynth.errors import InputError
+    from tolsynth.io.reports import check_report_path
+
+    with pytest.raises(SystemExit):
+        main(["report", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "(.html or .htm HTML, .md or .markdown Markdown; any other suffix is refused)" in text
+    assert "else HTML" not in text
+    # what the help says, as the path check does it
+    for name, fmt in (("r.html", "html"), ("r.htm", "html"), ("r.md", "md"), ("r.markdown", "md")):
+        assert check_report_path(tmp_path / name) == fmt
+    for name in ("r.txt", "r"):
+        with pytest.raises(InputError):
+            check_report_path(tmp_path / name)

@@ -157,3 +157,55 @@ def test_sweep_with_per_parameter_alpha_writes_every_format(tmp_path, fmt):
     assert list(back["status"]) == ["optimal", "optimal", "error", "error"]
     np.testing.assert_array_equal(back["cost"].to_numpy(), df["cost"].to_numpy())  # NaN in the error rows
     assert json.loads(back.loc[1, "alpha"]) == alpha and back.attrs["summary"]["failed"] == 2
+
+
+def _planar_2r_normal_lengths(tmp_path):
+    """planar_2r with the two link lengths declared normal in the model file (the offsets uniform)."""
+    from pathlib import Path
+
+    text = (Path(__file__).parents[1] / "models" / "planar_2r.toml").read_text()
+    for name in ("l1", "l2"):
+        text = text.replace(f'name = "{name}"\n', f'name = "{name}"\ndistribution = "normal"\n', 1)
+    path = tmp_path / "p2r_normal.toml"
+    path.write_text(text)
+    return tolsynth.load_model(path)
+
+
+def test_sweep_default_distribution_is_the_model_files(tmp_path):
+    from statistics import NormalDist
+
+    mech = _planar_2r_normal_lengths(tmp_path)
+    # the default, None given explicitly, and uniform asked for by name
+    default = tolsynth.sweep(mech, R=[0.5], p=[0.9, 0.99], client="serial")
+    df = tolsynth.sweep(mech, R=[0.5], p=[0.9, 0.99], distribution=[None, "uniform"], client="serial")
+    assert list(default["cost"]) == list(df[df["distribution"] != '"uniform"']["cost"])
+    for _, row in df.iterrows():
+        asked = "uniform" if row["distribution"] == '"uniform"' else None
+        ref = tolsynth.synthesize(mech, R=row["R"], p=row["p"], distribution=asked)
+        assert row["cost"] == pytest.approx(ref.cost, rel=1e-9)
+    # at p = 0.9 the x error dl1 + dl2 of the stretched arm is binding, in closed form for both shapes
+    # (equal k and alpha: eps_l1 = eps_l2 = e): normal with 3 sigma = e, P(|N(0, 2 e^2 / 9)| <= R) = p;
+    # uniform, the triangle of U1 + U2: 1 - (2 e - R)^2 / (4 e^2) = p
+    R, p = 0.5, 0.9
+    e_normal = 3 * R / (2**0.5 * NormalDist().inv_cdf((1 + p) / 2))
+    e_uniform = R / (2 * (1 - (1 - p) ** 0.5))
+    rows = df[df["p"] == p]
+    normal, uniform = rows.iloc[0], rows.iloc[1]
+    assert normal["eps_l1"] == pytest.approx(e_normal, rel=1e-5) and normal["eps_l2"] == pytest.approx(
+        e_normal, rel=1e-5
+    )
+    assert uniform["eps_l1"] == pytest.approx(e_uniform, rel=1e-5)
+    assert normal["cost"] < uniform["cost"]  # 6.549 against 7.875: the normal rows read normal
+
+
+def test_cli_sweep_default_distribution_is_the_model_files(tmp_path, capsys):
+    from tolsynth.cli import main
+
+    mech = _planar_2r_normal_lengths(tmp_path)
+    ref = tolsynth.synthesize(mech, R=0.5, p=0.99)
+    assert (
+        main(["sweep", "--model", str(tmp_path / "p2r_normal.toml"), "--R", "0.5", "--p", "0.99", "--json", "--quiet"])
+        == 0
+    )
+    (row,) = json.loads(capsys.readouterr().out)["rows"]
+    assert row["cost"] == pytest.approx(ref.cost, rel=1e-9)

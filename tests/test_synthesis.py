@@ -460,3 +460,16 @@ def test_function_evaluations_are_per_solve():
         m, 0.5, 0.99, "uniform", 0.7, solver="ipopt", probability="gaussian", options={"warm_start": True}
     )
     assert warm.iterations <= 3 and 2 <= warm.function_evaluations <= 10 * (warm.iterations + 1)
+
+
+def test_a_gap_below_zero_by_rounding_is_reported_as_zero_and_a_larger_one_is_kept(xz):
+    from tolsynth.problem.result import optimality_gap
+
+    assert optimality_gap(84.41888958793683, 84.41888958793919) == 0.0  # -2.4e-12: rounding
+    assert optimality_gap(84.4, 84.401) == pytest.approx(-1e-3)  # 1.2e-5 of the cost: a real defect, shown
+    assert optimality_gap(84.4, 84.3) == pytest.approx(0.1) and math.isnan(optimality_gap(84.4, math.nan))
+    # these grid points' bounds land above their costs by 2e-12 to 7e-11 (the two computed apart)
+    for R, p, dist in [(0.5, 0.99, "uniform"), (0.5, 0.9, "normal"), (1.0, 0.99, "normal")]:
+        res = synthesize(xz, R=R, p=p, distribution=dist, probability="gaussian")
+        assert res.gap >= 0.0 and res.lower_bound - res.cost < 1e-9 * res.cost
+        assert "gap -" not in res.summary()

@@ -24,6 +24,7 @@ tightening all tolerances by the same small fraction), computed on the CasADi gr
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -281,7 +282,7 @@ def _position_rows(spec) -> list[tuple[str, np.ndarray]]:
 
 
 def contributions(
-    source, tolerances=None, *, pose="worst", poses=None, distribution=None, R=None, mechanism=None
+    source, tolerances=None, *, pose=None, poses=None, distribution=None, R=None, mechanism=None
 ) -> Contributions:
     """Each parameter's share of each principal variance (and of the sphere probability's loss).
 
@@ -294,8 +295,9 @@ def contributions(
         For a mechanism: the tolerances (tolerance units), as accepted by
         :meth:`Mechanism.tolerances`.
     pose, poses : optional
-        For a mechanism: the pose(s) (default the model's ``worst``); for a result, ``mechanism``
-        with ``poses`` overrides the result's poses.
+        For a mechanism: the pose(s) (default the model's design pose, the one
+        :func:`tolsynth.synthesize` takes: :func:`tolsynth.analysis.design_pose.default_design_pose`);
+        for a result, ``mechanism`` with ``poses`` overrides the result's poses.
     distribution : str or dict, optional
         As :func:`tolsynth.synthesize`.
         Default: the result's, or ``"uniform"``.
@@ -310,10 +312,20 @@ def contributions(
     terms ``|u . a_i| eps_i`` of the arithmetic stack-up along the direction u of the largest error,
     which add up to it (no variance and no distribution enter there).
     """
-    from tolsynth.kinematics.mechanism import Mechanism, load_model
+    from tolsynth.analysis.design_pose import resolve_design_pose
+    from tolsynth.kinematics.mechanism import Mechanism, as_mechanism
     from tolsynth.probability.stats import check_positive, principal, variance_divisor
     from tolsynth.problem.result import SynthesisResult
 
+    if not isinstance(source, (SynthesisResult, Mechanism, str, os.PathLike)):
+        raise InputError(
+            "source",
+            f"got {type(source).__name__}",
+            "a SynthesisResult, or a Mechanism / model name / path followed by its tolerances: "
+            "contributions(mechanism, tolerances)",
+        )
+    if mechanism is not None and not isinstance(mechanism, Mechanism):
+        raise InputError("mechanism", f"got {type(mechanism).__name__}", "a Mechanism (with a result and poses)")
     if isinstance(source, SynthesisResult):
         spec = source.spec
         names = tuple(source.tolerances)
@@ -338,7 +350,7 @@ def contributions(
         if worst_case:
             return _stack_up(source, mats, distribution, R)
     else:
-        mech = source if isinstance(source, Mechanism) else load_model(source)
+        mech = as_mechanism(source, "source")
         if tolerances is None:
             raise InputError("tolerances", "missing", "the tolerances to analyse (name -> value, or a list)")
         eps = mech.tolerances(tolerances)
@@ -346,9 +358,11 @@ def contributions(
         from tolsynth.probability.distributions import resolve
 
         distribution = resolve(distribution, mech)
+        # no pose given: the design pose a design of this model is made at (one rule, design_pose.py)
+        pose, _ = resolve_design_pose(mech, pose, poses)
         plist = list(poses) if poses is not None else [pose]
         mats = [
-            (q if isinstance(q, str) else f"#{i}", mech.sensitivity(mech.joints(q), check_limits=False)[:3])
+            (_pose_label(mech, q, i, poses), mech.sensitivity(mech.joints(q), check_limits=False)[:3])
             for i, q in enumerate(plist)
         ]
     c = variance_divisor(distribution, names)
@@ -376,6 +390,13 @@ def contributions(
     return Contributions(
         names, units, np.asarray(eps, dtype=float), tuple(p for p, _ in mats), sigma, dirs, shares, total, sphere, Pb, R
     )
+
+
+def _pose_label(mech, q, i: int, poses) -> str:
+    """A configuration's name; a joint vector of a list by its place, the design pose by its values."""
+    if isinstance(q, str):
+        return q
+    return f"#{i}" if poses is not None else mech.format_joints(q)
 
 
 def _sphere_shares(A: np.ndarray, eps: np.ndarray, c: float, R: float) -> tuple[np.ndarray, float]:

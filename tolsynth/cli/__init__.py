@@ -37,6 +37,7 @@ from tolsynth.cli import (
     workspace,
 )
 from tolsynth.cli.args import HelpFormatter, add_pose_arguments, emit_json, parse_pose, version
+from tolsynth.cli.everywhere import cli_words
 from tolsynth.cli.interrupts import Interrupts, QuietCasadiInterrupt
 from tolsynth.cli.params import parse_tolerances
 from tolsynth.errors import TolsynthError
@@ -121,7 +122,7 @@ def _main(argv) -> int:
             except TolsynthError as exc:
                 if interrupts.seen:
                     raise KeyboardInterrupt from None
-                print(f"{command}: error: {exc}", file=sys.stderr)
+                print(f"{command}: error: {cli_words(str(exc))}", file=sys.stderr)
                 rc = EXIT_INPUT
             sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's final flush
             return rc

@@ -3,10 +3,12 @@
 
 from __future__ import annotations
 
+import re
+
 from tolsynth.cli.args import number, parse_poses, parse_reference
 from tolsynth.errors import InputError
 
-__all__ = ["add_everywhere_arguments", "exchange_options", "reject_exchange_flags"]
+__all__ = ["add_everywhere_arguments", "cli_words", "exchange_options", "reject_exchange_flags"]
 
 #: the options read only with ``--everywhere --certify``: flag, attribute, certify_options key
 CERTIFY_FLAGS = (
@@ -15,6 +17,26 @@ CERTIFY_FLAGS = (
     ("--margin", "margin", "margin"),
     ("--through-sigma", "through", "through"),
 )
+
+
+def cli_words(text: str) -> str:
+    """A library message in the command line's words: the certified search's options by their flags
+    (``certify_options['through']`` is ``--through-sigma``, ``certify_options 'margin': 3e-3`` is
+    ``--margin 3e-3``) and ``probability='gaussian'`` by ``--probability gaussian``, since a command's
+    user set flags, not Python arguments."""
+    flags = {key: flag for flag, _, key in CERTIFY_FLAGS}
+
+    def flag_with(m) -> str:
+        flag = flags.get(m.group(1))
+        if flag is None:
+            return m.group(0)
+        value = m.group(2) if len(m.groups()) > 1 else None
+        return flag if value is None or m.group(1) == "through" else f"{flag} {value}"
+
+    text = re.sub(r"certify_options\['(\w+)'\]", flag_with, text)
+    text = re.sub(r"certify_options '(\w+)': '?([\w.+-]+)'?", flag_with, text)
+    text = re.sub(r"certify_options '(\w+)'", flag_with, text)
+    return text.replace("probability='gaussian'", "--probability gaussian")
 
 
 def add_everywhere_arguments(p) -> None:

@@ -15,7 +15,7 @@ from tolsynth.cli.args import (  # noqa: I001
     parse_poses,
     pose_label,
 )
-from tolsynth.cli.everywhere import add_everywhere_arguments, exchange_options, reject_exchange_flags
+from tolsynth.cli.everywhere import add_everywhere_arguments, cli_words, exchange_options, reject_exchange_flags
 from tolsynth.cli.solve import _parse_locks, _spec_kwargs
 from tolsynth.cli.workspace import _hand_axis
 from tolsynth.errors import InputError
@@ -111,7 +111,7 @@ def _cmd_report(args) -> int:
         if ws is not None:
             print(f"exchange     {'converged' if ws.converged else 'NOT converged'}, {len(ws.poses)} pose(s) imposed")
             if ws.certified is not None:
-                print("             " + ws.certificate_line())
+                print("             " + cli_words(ws.certificate_line()))
         for name, why in rep.skipped.items():
             print(f"left out     {name}: {why}")
         print(
@@ -120,7 +120,7 @@ def _cmd_report(args) -> int:
         )
     if ws is not None and not ws.success and not (ws.converged and res.feasible):
         print(
-            f"tolsynth report: no convergence over the workspace ({ws.reason or 'the last solve failed'}); the "
+            f"tolsynth report: no convergence over the workspace ({cli_words(ws.reason) or 'the last solve failed'}); the "
             "report says so, and its numbers are not an optimum",
             file=sys.stderr,
         )
@@ -221,7 +221,8 @@ def register(sub) -> None:
         "--format",
         choices=["html", "md"],
         default=None,
-        help="html or md; default: from the suffix of --out (.md Markdown, else HTML)",
+        help="html or md, which must agree with the suffix of --out (.html or .htm HTML, .md or .markdown "
+        "Markdown; any other suffix is refused); default: from that suffix",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object (inputs recorded) instead of the summary")
     p.set_defaults(func=_cmd_report, task="the report")

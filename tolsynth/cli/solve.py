@@ -22,7 +22,7 @@ from tolsynth.cli.args import (  # noqa: I001
     workspace_checked,
     write_out,
 )
-from tolsynth.cli.everywhere import add_everywhere_arguments, exchange_options, reject_exchange_flags
+from tolsynth.cli.everywhere import add_everywhere_arguments, cli_words, exchange_options, reject_exchange_flags
 from tolsynth.cli.params import parse_bounds, parse_per_parameter
 from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
@@ -291,7 +291,7 @@ def cmd_solve(args) -> int:
                 )
             )
             if w.certified is not None:  # the certified search's proof (or why there is none)
-                print("  " + w.certificate_line())
+                print("  " + cli_words(w.certificate_line()))
             print(workspace_checked(w.result).summary())
             _print_contributions(reps)
         if not w.success and w.converged and w.result.feasible:  # the sphere's: met, optimality not proven
@@ -303,7 +303,7 @@ def cmd_solve(args) -> int:
             return 0
         if not w.success:
             print(
-                f"tolsynth solve: no convergence over the workspace ({w.reason or 'the last solve failed'}); the "
+                f"tolsynth solve: no convergence over the workspace ({cli_words(w.reason) or 'the last solve failed'}); the "
                 "numbers above are not an optimum",
                 file=sys.stderr,
             )

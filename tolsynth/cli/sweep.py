@@ -234,7 +234,8 @@ def register(sub) -> None:
         "--dist",
         default=None,
         help="distributions, comma-separated: uniform, normal, triangular, truncnormal, truncnormal(beta) "
-        "(one shape for every error per row); default: uniform",
+        "(one shape for every error per row); default: the model file's (its per-parameter distribution, "
+        "else uniform)",
     )
     p.add_argument(
         "--criterion", default=None, help="criteria, comma-separated: components, sphere; default: components"

@@ -199,3 +199,27 @@ def cost_set(cost, names: Sequence[str], index=None, k=None, alpha=None, units=N
             raise InputError("cost", f"expected {n} models, got {len(cost)}", f"one per parameter {list(names)}")
         return CostSet(tuple(cost_model(c, unit(i)) for i, c in enumerate(cost)))
     raise InputError("cost", f"got {cost!r}", "a model, a list of n models, or a dict name -> model")
+
+
+def refuse_unread_power_law(costs: CostSet, names: Sequence[str], index, k, alpha, k_v, alpha_v) -> None:
+    """An InputError for ``k[name]`` / ``alpha[name]`` given by name for a parameter that a cost
+    model prices: the power law's k and alpha do not enter its cost, so the number would be ignored.
+
+    One number (or one per parameter) for k or alpha is the power law of the parameters without a
+    cost model, and is not refused: it names no parameter in particular.  A cost model equal to the
+    power law of the k and alpha given reads them, and is not refused either.
+    """
+    for field_name, value in (("k", k), ("alpha", alpha)):
+        if not isinstance(value, Mapping):
+            continue
+        for key in value:
+            i = index(key, f"{field_name}[{key}]")
+            model = costs.models[i]
+            if model != PowerLaw(float(k_v[i]), float(alpha_v[i])):
+                raise InputError(
+                    f"{field_name}[{key}]",
+                    f"{value[key]!r} for {names[i]}, whose cost model ({type(model).__name__}) sets its cost "
+                    f"(k and alpha are the power law's, read only where no cost model is given)",
+                    f"no {field_name}[{key}]: set that parameter's cost in its cost model, or give it no "
+                    "cost model to price it by k eps^-alpha",
+                )

@@ -127,7 +127,7 @@ def dh_spec(
         A malformed argument: a link that is not a dict, a key a link cannot have, a pattern of
         ``errors`` that selects nothing, an unknown key of ``k``/``bounds``/``tolerance_units``.
     ModelFileError
-        A bad value, found by the model-file parser; its field names the argument
+        A bad or missing value (a link without limits), found by the model-file parser; its field names the argument
         (``links[1].a``, ``links[0].limits``, ``k[a2]``, ``configurations[home]``).
     """
     angle_given = angle_unit is not None
@@ -170,10 +170,6 @@ def dh_spec(
                     "one of " + " or ".join([field] + [a for a, f in aliases.items() if f == field]),
                 )
             values[field] = (key, value)
-        if "limits" not in values:
-            raise InputError(
-                f"{where}.limits", "missing: every joint needs its limits", f"(lower, upper) in {angle_unit}"
-            )
         n = i + 1
         joint = _plain(values["name"][1]) if "name" in values else f"q{n}"
         raw_link: dict[str, Any] = {"theta": joint}
@@ -188,7 +184,8 @@ def dh_spec(
         origin[f"symbols.{sym}"] = f"{where}.offset"
         raw_link["theta_offset"] = sym
         chain_links.append(raw_link)
-        joints.append({"name": joint, "limits": _plain(values["limits"][1])})
+        # limits left out: the model-file parser's own ModelFileError (renamed links[i].limits below)
+        joints.append({"name": joint, **({"limits": _plain(values["limits"][1])} if "limits" in values else {})})
         origin[f"joints[{i}]"] = where
         origin[f"chain.links[{i}]"] = where
 
@@ -326,7 +323,7 @@ def _degrees_guard(symbols, kinds, joints, raw_configs, joint_names) -> None:
 
     found = [f"{s} = {v:g}" for s, v in symbols.items() if kinds[s] == "angle" and big(v)]
     for jt in joints:
-        lim = jt["limits"]
+        lim = jt.get("limits")
         if isinstance(lim, list) and any(big(v) for v in lim):
             found.append(f"{jt['name']} limits {tuple(lim)}")
     for cname, raw in raw_configs.items():

@@ -16,7 +16,7 @@ import numpy as np
 
 from tolsynth.checks import HUGE, TINY, check_half_angle, check_real, check_vector
 from tolsynth.errors import InputError, OutOfRangeError
-from tolsynth.model.cost_set import CostSet, cost_set
+from tolsynth.model.cost_set import CostSet, cost_set, refuse_unread_power_law
 from tolsynth.probability.distributions import resolve, shape, shapes_of
 from tolsynth.probability.stats import check_positive, check_probability, z_of_p
 
@@ -248,6 +248,7 @@ def make_specification(
                     f"bounds[{nm}]", f"lower {a}, upper {b} ({u})", f"{TINY:g} <= lower <= upper <= {HUGE:g} ({u})"
                 )
     costs = cost_set(cost, names, mechanism.index, k=k_v, alpha=alpha_v, units=mechanism.units)
+    refuse_unread_power_law(costs, names, mechanism.index, k, alpha, k_v, alpha_v)
     costs.check_ranges(names, lo, hi)
     z = _z_of_p(p)
     if Phi is not None:

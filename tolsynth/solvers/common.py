@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from tolsynth.problem.nlp import ToleranceNLP
-from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult
+from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult, optimality_gap
 from tolsynth.solvers.sphere_bound import box_bound
 from tolsynth.solvers.sphere_support import support_bound
 
@@ -138,7 +138,7 @@ def assemble(
         bounds_active=bounds_active,
         bound_multipliers=bound_mult,
         lower_bound=lower,
-        gap=cost - lower,
+        gap=optimality_gap(cost, lower),
         iterations=int(iterations),
         function_evaluations=int(evaluations),
         wall_time=float(wall_time),

@@ -49,11 +49,12 @@ import numpy as np
 
 from tolsynth.errors import InfeasibleSpecificationError
 from tolsynth.problem.nlp import ToleranceNLP
-from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult
+from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult, optimality_gap
 from tolsynth.solvers.exact_certify import LOG_CONCAVE, cover, half_space_bound, refine_direction
 from tolsynth.solvers.exact_cuts import Cuts, minimise_directions
 from tolsynth.solvers.exact_newton import Barrier
 from tolsynth.solvers.exact_newton import cost_function as _cost_fn
+from tolsynth.solvers.exact_refute import verdict
 from tolsynth.solvers.exact_series import probability
 
 __all__ = [
@@ -191,12 +192,12 @@ def _feasible_start(cuts: Cuts, u: np.ndarray, lu: np.ndarray, uu: np.ndarray, b
     Pl = P.reshape(len(Vk), -1)[-1]
     j = int(np.argmin((Pl - pc) / (1 - pc)))
     blk = blocks[cuts.block[bad[j]]]
+    value, text = verdict(float(Pl[j]), float(pc[j]), f"exact P = {Pl[j]:.6g} < p = {blk.p:g} along a direction")
     raise InfeasibleSpecificationError(
         blk.label,
-        float((1 - Pl[j]) / (1 - pc[j])),
+        value,
         f"infeasible specification: the {blk.label} fails even with every tolerance "
-        f"at its lower bound: exact P = {Pl[j]:.6g} < p = {blk.p:g} along a direction.  Lower the bounds, "
-        "or relax R/Phi or p.",
+        f"at its lower bound: {text}.  Lower the bounds, or relax R/Phi or p.",
     )
 
 
@@ -418,7 +419,7 @@ def _assemble(opts, nlp, shapes, solver, blocks, cuts, eps, lam, zb, ok, inner, 
                 np.concatenate([[mult], np.zeros(3)]),
             )
         )
-    gap = cost - lower
+    gap = optimality_gap(cost, lower)
     proven = all(c.certified for c in covers) and len(covers) == len(blocks)
     can, why = certifiable(shapes, spec)
     detail = (

@@ -21,7 +21,7 @@ from tolsynth.probability.exact import (
     worst_direction,
 )
 
-__all__ = ["exact_refuter"]
+__all__ = ["exact_refuter", "verdict"]
 
 
 def exact_refuter(spec):
@@ -44,7 +44,7 @@ def exact_refuter(spec):
                 return None
             if P + err >= b.p:
                 return None
-            return (1 - P) / (1 - b.p), f"exact P(|dr| <= R) = {P:.6g} < p = {b.p:g}"
+            return verdict(P, b.p, f"exact P(|dr| <= R) = {P:.6g} < p = {b.p:g}")
         b = blocks[i]
         A = np.asarray(b.A) / scale
         R, p, sym = (spec.R, spec.p, "R") if b.kind == "position" else (spec.Phi, spec.p_orientation, "Phi")
@@ -57,6 +57,13 @@ def exact_refuter(spec):
             return None
         what = "dr" if b.kind == "position" else "dtheta"
         along = ", ".join(f"{x:.4g}" for x in u)
-        return (1 - P) / (1 - p), f"exact P(|u . {what}| <= {sym}) = {P:.6g} < p = {p:g} along u = ({along})"
+        return verdict(P, p, f"exact P(|u . {what}| <= {sym}) = {P:.6g} < p = {p:g} along u = ({along})")
 
     return refute
+
+
+def verdict(P: float, p: float, text: str) -> tuple[float, str]:
+    """``(value, text)``: the exact constraint value ``(1 - P) / (1 - p)`` (> 1 where p is missed)
+    and the message's words with that value quoted, the number the error's ``value`` holds."""
+    value = float((1 - P) / (1 - p))
+    return value, f"{text}; value (1 - P)/(1 - p) = {value:.4g} > 1"

@@ -31,7 +31,7 @@ import numpy as np
 from tolsynth.probability.exact_parts import part_of
 from tolsynth.probability.exact_sphere import azimuths, planar_part, radial_nodes
 from tolsynth.problem.nlp import ToleranceNLP
-from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult
+from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult, optimality_gap
 from tolsynth.solvers.exact_newton import Barrier, cost_function
 from tolsynth.solvers.exact_series import derivatives
 
@@ -214,7 +214,7 @@ def solve_sphere(
         bounds_active={},
         bound_multipliers={},
         lower_bound=lower,
-        gap=cost - lower,
+        gap=optimality_gap(cost, lower),
         iterations=iters,
         function_evaluations=0,
         wall_time=time.perf_counter() - t0,

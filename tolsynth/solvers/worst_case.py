@@ -46,7 +46,7 @@ import numpy as np
 from tolsynth.errors import InfeasibleSpecificationError
 from tolsynth.model.cost import Chase, Exponential, Given, PowerLaw
 from tolsynth.problem.nlp import cost_graph
-from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult
+from tolsynth.problem.result import ConstraintBlock, Status, SynthesisResult, optimality_gap
 from tolsynth.solvers.common import ACTIVE_TOL, FEAS_TOL, GAP_TOL
 from tolsynth.solvers.ipopt import IPOPT_STATUS
 from tolsynth.solvers.worst_case_zonotope import candidate_patterns, zonotope_max, zonotope_patterns
@@ -99,7 +99,7 @@ class WorstCaseResult(SynthesisResult):
         lines = [
             f"{self.solver} (worst case: every error anywhere in its band): {self.status} ({self.message})",
             # a gap below zero is the rounding of two equal numbers (the bound is valid): shown as 0
-            f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {max(self.gap, 0.0):.2e})",
+            f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})",
         ]
         st = self.statistical
         if st:
@@ -449,7 +449,7 @@ def _assemble(spec, blocks, costs, eps, cuts, lam_g, status, message, ok, iters,
         lam_st[active] = _stationary_multipliers(costs, eps, lower, upper, B[active])
         lower_bound = max(lower_bound, dual_bound(costs, lower, upper, B, lam_st))
     lower_bound = min(lower_bound, cost) if math.isfinite(lower_bound) else lower_bound
-    gap = cost - lower_bound
+    gap = optimality_gap(cost, lower_bound)
     worst = max(v for v, _, _ in vals)
     convex = all(convex_in_eps(m, a, b) for m, a, b in zip(costs.models, lower, upper))
     if ok:

@@ -34,6 +34,7 @@ import numpy as np
 
 from tolsynth.checks import check_count
 from tolsynth.errors import InfeasibleSpecificationError, InputError, OutOfRangeError
+from tolsynth.problem.result import optimality_gap
 from tolsynth.synthesis.grade_tables import (
     API_NAMES,
     _candidates,
@@ -408,7 +409,7 @@ class _Search:
                     continue
                 heapq.heappush(heap, (cb, next(counter), child, lag))
         lower = min([inc_cost] + closed + [b for b, *_ in heap])
-        gap = inc_cost - lower
+        gap = optimality_gap(inc_cost, lower)
         eps = self.point(inc)
         values = constraint_values(self.spec, self.prob, eps)
         names = self.spec.names

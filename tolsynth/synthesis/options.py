@@ -14,13 +14,15 @@ is an :class:`~tolsynth.InputError` naming it, never a silent choice.
 
 from __future__ import annotations
 
+import functools
+import inspect
 from dataclasses import dataclass, fields
 from typing import Any
 
 from tolsynth.errors import InputError
 from tolsynth.problem.specification import ALPHA_DEFAULT
 
-__all__ = ["DesignSpec", "SolverOptions", "merge_groups"]
+__all__ = ["DesignSpec", "SolverOptions", "merge_groups", "accepts_groups"]
 
 
 @dataclass(frozen=True)
@@ -87,12 +89,12 @@ def _same_quantity(a, b, unit: str) -> bool:
 
 
 def merge_groups(given: dict, spec, solver_options) -> dict:
-    """``given`` (synthesize's keywords as called) with the groups' fields filled in.
+    """``given`` (the keywords the caller passed, and only those) with the groups' fields filled in.
 
-    A field left at its default in the group counts as not given there (the keyword's value
-    stands), a keyword left at its default takes the group's value, and a field set both ways to
-    different values is an error naming it; ``R`` and ``Phi`` are compared in mm and rad
-    (``R="500um"`` and ``R=0.5`` are the same value).
+    A keyword not passed takes the group's value; a field left at its default in the group counts
+    as not given there (the keyword's value stands); a field set both ways to different values is
+    an error naming it, also where the keyword's value happens to be its default; ``R`` and
+    ``Phi`` are compared in mm and rad (``R="500um"`` and ``R=0.5`` are the same value).
     """
     out = dict(given)
     for group, cls, argname in ((spec, DesignSpec, "spec"), (solver_options, SolverOptions, "solver")):
@@ -107,10 +109,8 @@ def merge_groups(given: dict, spec, solver_options) -> dict:
                 continue
             if _same(value, f.default):  # unset in the group: the keyword stands
                 continue
-            if (
-                _same(out[f.name], f.default)
-                or _same(out[f.name], value)
-                or (f.name in QUANTITIES and _same_quantity(out[f.name], value, QUANTITIES[f.name]))
+            if _same(out[f.name], value) or (
+                f.name in QUANTITIES and _same_quantity(out[f.name], value, QUANTITIES[f.name])
             ):
                 out[f.name] = value
             else:
@@ -118,3 +118,30 @@ def merge_groups(given: dict, spec, solver_options) -> dict:
                     f.name, f"given as a keyword ({out[f.name]!r}) and in {argname} ({value!r})", "one of the two"
                 )
     return out
+
+
+def accepts_groups(fn):
+    """``fn`` (:func:`tolsynth.synthesize`) taking ``spec=`` and ``solver=SolverOptions(...)``: the
+    call is bound to ``fn``'s signature, so that the keywords the caller passed are known as passed
+    (a keyword given at its default value still conflicts with a group's other value), merged
+    with the groups by :func:`merge_groups`, and ``fn`` runs on the result."""
+    signature = inspect.signature(fn)
+    first = next(iter(signature.parameters))
+
+    @functools.wraps(fn)
+    def with_groups(*args, **kwargs):
+        grouped = kwargs.get("spec") is not None or any(
+            isinstance(a, SolverOptions) for a in (*args, kwargs.get("solver"))
+        )
+        if not grouped:
+            return fn(*args, **kwargs)
+        try:
+            passed = dict(signature.bind(*args, **kwargs).arguments)  # only what the caller passed
+        except TypeError:  # a call Python itself refuses: its own message, from fn
+            return fn(*args, **kwargs)
+        spec = passed.pop("spec", None)
+        options = passed.pop("solver") if isinstance(passed.get("solver"), SolverOptions) else None
+        head = passed.pop(first)
+        return fn(head, **merge_groups(passed, spec, options))
+
+    return with_groups

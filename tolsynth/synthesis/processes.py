@@ -43,6 +43,7 @@ import numpy as np
 from tolsynth.errors import InfeasibleSpecificationError, InputError
 from tolsynth.model.cost import CostModel, Tabulated
 from tolsynth.model.process import Process
+from tolsynth.problem.result import optimality_gap
 
 __all__ = ["Process", "ProcessChoice", "synthesize_processes", "enumerate_processes"]
 
@@ -477,7 +478,7 @@ def synthesize_processes(
     open_bounds = [b for b, *_ in heap]
     lower = min(closed_bounds + open_bounds + [search.leaf_bound(inc_choice, incumbent)])
     lower = min(lower, incumbent.cost)
-    gap = incumbent.cost - lower
+    gap = optimality_gap(incumbent.cost, lower)
     return ProcessChoice(
         result=incumbent,
         processes={nm: procs[nm][j].name for nm, j in zip(names, inc_choice)},

@@ -20,7 +20,7 @@ from tolsynth.problem.result import Status, SynthesisResult
 from tolsynth.problem.specification import ALPHA_DEFAULT, SPHERE_NODES, make_specification
 from tolsynth.progress import time_limit as deadline
 from tolsynth.solvers.exact import PROBABILITIES
-from tolsynth.synthesis.options import DesignSpec, SolverOptions, merge_groups
+from tolsynth.synthesis.options import DesignSpec, accepts_groups
 
 __all__ = ["synthesize", "SOLVERS"]
 
@@ -92,6 +92,7 @@ SOLVERS = {"auto": _auto, "ipopt": _ipopt, "sumt": _sumt}
 STARTING_SOLVERS = ("ipopt", "sumt")
 
 
+@accepts_groups  # spec= and solver=SolverOptions(...) merged with the keywords passed
 def synthesize(
     mechanism,
     R: float | None = None,
@@ -216,7 +217,7 @@ def synthesize(
     spec : DesignSpec, optional
         The specification's fields as one object (:mod:`tolsynth.synthesis.options`); ``solver``
         may likewise be a :class:`SolverOptions`.  A group's field at its default is not given there;
-        one given both ways must agree.
+        one given both ways (a keyword passed, even at its default value) must agree.
 
     Returns
     -------
@@ -230,35 +231,6 @@ def synthesize(
     OutOfRangeError, InputError, UnknownNameError
         For bad inputs, naming the field.
     """
-    if spec is not None or isinstance(solver, SolverOptions):
-        args = merge_groups(
-            dict(
-                R=R,
-                p=p,
-                distribution=distribution,
-                alpha=alpha,
-                k=k,
-                bounds=bounds,
-                pose=pose,
-                poses=poses,
-                Phi=Phi,
-                p_orientation=p_orientation,
-                criterion=criterion,
-                cost=cost,
-                locks=locks,
-                probability=probability,
-                options=options,
-                x0=x0,
-                validate=validate,
-                seed=seed,
-                verify=verify,
-                time_limit=time_limit,
-                **({} if isinstance(solver, SolverOptions) else {"solver": solver}),
-            ),
-            spec,
-            solver if isinstance(solver, SolverOptions) else None,
-        )
-        return synthesize(mechanism, **args)
     if pose is not None and poses is not None:  # one of them would be dropped without a word
         raise InputError(
             "pose",

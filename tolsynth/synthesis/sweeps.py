@@ -85,12 +85,15 @@ def _check_alpha(a) -> object:
     return check_positive(a, "alpha", "", upper=ALPHA_MAX)
 
 
-def _check_shape(d):
-    """A shape name (tolsynth.probability.distributions) or a per-parameter mapping, checked later."""
+def _check_shape(d, mechanism):
+    """A shape name (tolsynth.probability.distributions) or a per-parameter mapping, checked later;
+    None is the model file's distribution, written into the point so that the row names what it used."""
     from collections.abc import Mapping
 
-    from tolsynth.probability.distributions import shape
+    from tolsynth.probability.distributions import resolve, shape
 
+    if d is None:
+        return resolve(None, mechanism)
     if isinstance(d, Mapping):
         return d
     shape(d)  # typed error naming distribution
@@ -119,7 +122,7 @@ def _grid(mechanism, R, p, alpha, distribution, criterion, solver, worst_case: b
         "alpha": [_check_alpha(a) for a in _axis(alpha, "alpha")],
         "distribution": [None]
         if worst_case
-        else [_check_shape(d) for d in _axis("uniform" if distribution is None else distribution, "distribution")],
+        else [_check_shape(d, mechanism) for d in _axis(distribution, "distribution")],
         "criterion": [_check_choice(c, "criterion", CRITERIA) for c in _axis(criterion, "criterion")],
         "solver": [_check_choice(s, "solver", tuple(SOLVERS)) for s in _axis(solver, "solver")],
     }
@@ -326,8 +329,9 @@ def sweep(
         A loaded model, or a model name / path.
     R, p, alpha, distribution, criterion, solver
         Each one value or a list of values; the grid is their Cartesian product, in this order
-        (R mm; 0 < p < 1; alpha a number > 0 or a dict name -> number; distribution "uniform"
-        (None: uniform) / "normal"; criterion "components" / "sphere"; solver "auto" / "ipopt" /
+        (R mm; 0 < p < 1; alpha a number > 0 or a dict name -> number; distribution a shape name
+        such as "uniform" / "normal" or a dict name -> shape (None, the default: the model file's
+        distribution, as synthesize reads it, else uniform); criterion "components" / "sphere"; solver "auto" / "ipopt" /
         "sumt").  With ``probability="worst_case"`` give no p and no distribution (either is an
         :class:`InputError`: the worst case reads neither); its table has no p and no
         distribution column.

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tolsynth.problem.result import SynthesisResult
+from tolsynth.problem.result import SynthesisResult, optimality_gap
 from tolsynth.tabular import Tabular, jsonable
 
 __all__ = ["WorkspaceSynthesis"]
@@ -93,7 +93,7 @@ class WorkspaceSynthesis(Tabular):
     def gap(self) -> float:
         """``cost - lower_bound``: the last solve's own gap, and with a design margin also what the
         margin cost."""
-        return self.result.gap if self.bound_at_R is None else self.result.cost - self.bound_at_R
+        return self.result.gap if self.bound_at_R is None else optimality_gap(self.result.cost, self.bound_at_R)
 
     @property
     def worst_quantity(self) -> str:
