@@ -292,7 +292,7 @@ def cmd_solve(args) -> int:
             )
             if w.certified is not None:  # the certified search's proof (or why there is none)
                 print("  " + w.certificate_line())
-            print(workspace_checked(w.result).summary())
+            print(workspace_checked(w.result).summary(cost_line=w.cost_line()))
             _print_contributions(reps)
         if not w.success and w.converged and w.result.feasible:  # the sphere's: met, optimality not proven
             print(
