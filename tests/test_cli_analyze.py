@@ -117,7 +117,8 @@ def test_analyze_text_report(capsys, reference):
     assert main(ARGS[:-1]) == 0
     text = capsys.readouterr().out
     assert "925.0000" in text and "1225.0000" in text
-    p_line = next(line for line in text.splitlines() if line.startswith("P(dr<=R)"))
+    p_line = next(line for line in text.splitlines() if line.startswith("P(|dr|<=R)"))
+    assert p_line.endswith("(sphere, Eq. 5, Gaussian)")
     assert abs(float(p_line.split()[1]) - reference["p_sphere"]) <= 1e-6
 
 

@@ -125,7 +125,7 @@ def test_solve_reaches_alpha_k_bounds_poses_and_p_orientation(capsys):
     assert out["bounds_active"] == {"l1": "upper"}
     inp = out["inputs"]
     assert inp["tolsynth_version"] == tolsynth.__version__ and inp["model"]["name"] == "planar_2r"
-    assert inp["alpha"] == alpha.tolist() and inp["k"] == k.tolist() and inp["poses"] == ["stretched", "elbow90"]
+    assert inp["alpha"] == alpha.tolist() and inp["k"] == k.tolist() and inp["poses_rad"] == ["stretched", "elbow90"]
     assert (
         inp["bounds"][1] == pytest.approx(hi.tolist(), rel=1e-15)
         and inp["p_orientation"] == 0.95

@@ -49,7 +49,8 @@ def test_cli_and_api_design_at_the_same_documented_pose(capsys, name):
     out = _cli_solve(capsys, name)
     res = tolsynth.synthesize(m, **SPEC)
     assert out["cost"] == pytest.approx(res.cost, rel=1e-9)
-    np.testing.assert_allclose(out["inputs"]["poses"][0], q, atol=1e-12)
+    recorded = next(v for k, v in out["inputs"].items() if k.startswith("poses_"))  # the unit in the key
+    np.testing.assert_allclose(recorded[0], q, atol=1e-12)
     np.testing.assert_allclose(list(res.spec.poses.values())[0], q, atol=1e-12)
     assert "worst-pose search" in out["default_pose"]
     # and the design is the one made at that pose when it is given explicitly
@@ -69,7 +70,7 @@ def test_a_worst_configuration_is_the_design_pose_of_a_parallel_robot_too(capsys
     q = np.radians([worst[j] for j in m.joint_names])  # the file's angles are deg
     out = _cli_solve(capsys, str(path))
     res = tolsynth.synthesize(m, **SPEC)
-    assert out["inputs"]["poses"] == ["worst"] and "default_pose" not in out
+    assert out["inputs"]["poses_rad"] == ["worst"] and "default_pose" not in out
     np.testing.assert_allclose(res.spec.poses["worst"], q, atol=1e-12)
     assert out["cost"] == pytest.approx(res.cost, rel=1e-9)
 

@@ -584,3 +584,47 @@ def test_a_cost_for_a_fixed_joint_error_is_refused():
             m, R=0.5, p=0.99, cost={"theta1.servo": {"model": "power", "k": 1.0, "alpha": 0.7}}, probability="gaussian"
         )
     assert info.value.field == "cost[theta1.servo]"
+
+
+SLIDE = """<robot name="slide"><link name="base"/><link name="l1"/><link name="l2"/><link name="tip"/>
+<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+  <origin xyz="0 0 0.5" rpy="0 0 0"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+<joint name="j2" type="prismatic"><parent link="l1"/><child link="l2"/>
+  <origin xyz="0.4 0 0" rpy="0 0 0"/><axis xyz="1 0 0"/><limit lower="0" upper="0.2" effort="1" velocity="1"/></joint>
+<joint name="f" type="fixed"><parent link="l2"/><child link="tip"/><origin xyz="0 0 -0.05" rpy="0 0 0"/></joint>
+</robot>"""
+
+
+def test_servo_error_of_a_slide_is_a_length(tmp_path):
+    """A URDF prismatic joint moves the hand by its value along x (closed form x = 400 + q2 mm at
+    q1 = 0): its servo error is a length in mm with sensitivity (1, 0, 0) mm per mm; an angle unit
+    for it is refused, and so is a clearance (a revolute joint's model)."""
+    from tolsynth.errors import OutOfRangeError, UnknownNameError
+
+    path = tmp_path / "slide.urdf"
+    path.write_text(SLIDE)
+    m = tolsynth.load_urdf(path, "base", "tip")
+    m2 = m.with_joint_errors([tolsynth.JointError("j2", "servo", value=0.01)])
+    assert m2.units[-1] == "mm"
+    np.testing.assert_allclose(m2.sensitivity(np.array([0.0, 50.0]))[:3, -1], [1.0, 0.0, 0.0], atol=1e-12)
+    with pytest.raises(OutOfRangeError, match="not a unit of length"):
+        m.with_joint_errors([tolsynth.JointError("j2", "servo", value=0.01, unit="mrad")])
+    with pytest.raises(UnknownNameError, match=r"it slides \(a prismatic joint\).*allowed: one of j1\)"):
+        m.with_joint_errors([tolsynth.JointError("j2", "clearance", value=0.01)])
+
+
+@pytest.mark.parametrize(
+    "model, joint, allowed",
+    [
+        ("stewart_gough", "q1", "no joint error (each strut's length error is its leg's offset parameter)"),
+        ("delta", "theta1", "kind 'servo' on a revolute actuator"),
+    ],
+)
+def test_clearance_on_a_parallel_robot_says_why_no_joint_qualifies(model, joint, allowed):
+    from tolsynth.errors import UnknownNameError
+
+    m = tolsynth.load_model(model)
+    with pytest.raises(UnknownNameError) as err:
+        m.with_joint_errors([tolsynth.JointError(joint, "clearance", value=0.01)])
+    text = str(err.value)
+    assert "legs end in ball joints" in text and f"(allowed: {allowed})" in text and "one of )" not in text

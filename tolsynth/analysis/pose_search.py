@@ -76,7 +76,10 @@ class WorstPose(Tabular):
         Criterion there (sigma in mm, or the probability).
     principal_std : ndarray (mm)
     p_sphere : float or None
-        ``P(|dr| <= R)`` there (with ``R``).
+        ``P(|dr| <= R)`` there (with ``R``), Gaussian.
+    probability : {"gaussian", "exact"}
+        The reading of :attr:`value` where it is a probability: Gaussian for the sphere, as asked
+        for the components.
     reference, reference_q, reference_position, reference_value, reference_principal_std,
     reference_p_sphere
         The same at the reference configuration (None without one; for ``xu_zhang_1988`` by
@@ -126,6 +129,7 @@ class WorstPose(Tabular):
     certificate: object = None
     #: each joint value's unit, "rad" or "mm" (a joint that slides); empty: all "rad"
     joint_units: tuple = ()
+    probability: str = "gaussian"
 
     def to_dict(self) -> dict:
         """Plain dict for JSON (arrays as lists, inf and NaN as None, the certificate's own dict)."""
@@ -136,9 +140,9 @@ class WorstPose(Tabular):
         ``joint_units`` says so, as :attr:`tolsynth.Mechanism.joint_units` does; hand in mm)."""
         unit = {
             "sigma": "mm (largest principal sigma)",
-            "probability": "(P(|dr|<={R:g} mm))",
-            "components": "(smallest P(|u.dr|<={R:g} mm))",
-        }[self.criterion].format(R=self.R)
+            "probability": "(Gaussian P(|dr|<={R:g} mm))",
+            "components": "(smallest {p} P(|u.dr|<={R:g} mm))",
+        }[self.criterion].format(R=self.R, p={"gaussian": "Gaussian"}.get(self.probability, self.probability))
         names = joint_names or [f"q{i + 1}" for i in range(len(self.q))]
         units = tuple(joint_units or ["deg"] * len(self.q))
         lines = [f"worst pose   criterion {self.criterion} {unit}, {self.distribution} errors; {self.method}"]
@@ -164,7 +168,7 @@ class WorstPose(Tabular):
         )
         if self.p_sphere is not None:
             row(
-                "P(|dr|<=R)",
+                "P(|dr|<=R), Gaussian",
                 f"{self.p_sphere:.6f}",
                 None if self.reference_p_sphere is None else f"{self.reference_p_sphere:.6f}",
             )
@@ -490,6 +494,7 @@ def worst_pose(
         boxes=None if cert is None else cert.boxes,
         certificate=cert,
         joint_units=mechanism.joint_value_units,
+        probability=probability if criterion == "components" else "gaussian",
         **ref,
     )
 

@@ -468,12 +468,15 @@ class WorkspaceCheck:
 
     def to_dict(self) -> dict:
         """Plain dict for JSON: the largest value (None where no sampled pose could be evaluated),
-        its pose (rad), the sample, and the verdict in words (:meth:`line`)."""
+        its pose (the key naming its unit: :func:`tolsynth.units.joint_values`), the sample, and the
+        verdict in words (:meth:`line`)."""
+        from tolsynth.units import joint_values
+
         worst, q, n = self._compute()
         return {
             "worst": worst if math.isfinite(worst) else None,
             "line": self.line(),
-            "q": None if q is None else np.asarray(q).tolist(),
+            **joint_values(None if q is None else np.asarray(q).tolist(), self.mechanism.joint_value_units),
             "n_poses": n,
             "exceeds": self.exceeds,
             "seed": self.seed,

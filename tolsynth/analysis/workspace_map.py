@@ -96,6 +96,8 @@ class ProbabilityMap(Tabular):
     units: dict = field(default_factory=lambda: {"u": "mm", "v": "mm", "sigma": "mm", "Q": "rad", "R": "mm"})
     #: each joint value's unit, "rad" or "mm" (a joint that slides); empty: all "rad"
     joint_units: tuple = ()
+    #: the reading of P: the Gaussian (normal errors of the same variances), whatever the distribution
+    probability: str = "gaussian"
 
     @property
     def reachable(self) -> np.ndarray:

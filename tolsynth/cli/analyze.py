@@ -86,8 +86,8 @@ def cmd_analyze(args) -> int:
     for j in range(3):
         print(f"  direction {j + 1} {_fmt_vec(a.principal_directions[:, j], '{:+.4f}')}")
     print(f"R            {args.R:g} mm")
-    print("P(|w_j|<=R)  " + _fmt_vec(a.p_components, "{:.6f}"))
-    print(f"P(dr<=R)     {a.p_sphere:.6f}  (sphere, Eq. 5)")
+    print("P(|w_j|<=R)  " + _fmt_vec(a.p_components, "{:.6f}") + "  (Gaussian)")
+    print(f"P(|dr|<=R)   {a.p_sphere:.6f}  (sphere, Eq. 5, Gaussian)")
     if args.Phi is not None:
         print(f"Phi          {args.Phi:g} rad; orientation sigma = {_fmt_vec(a.orientation_principal_std)} rad")
         print("P(|phi_j|<=Phi) " + _fmt_vec(a.p_orientation_components, "{:.6f}"))

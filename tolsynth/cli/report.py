@@ -107,7 +107,9 @@ def _cmd_report(args) -> int:
         )
     else:
         print(f"report       {files[0]}" + (f" (+ {len(files) - 1} figure files)" if len(files) > 1 else ""))
-        print(f"optimum      cost {res.cost:.8g}, dual bound {res.lower_bound:.8g}, gap {res.gap:.2e} ({res.status})")
+        print(
+            f"optimum      {ws.cost_line() if ws is not None else f'cost {res.cost:.8g}, dual bound {res.lower_bound:.8g}, gap {res.gap:.2e}'} ({res.status})"
+        )
         if ws is not None:
             print(f"exchange     {'converged' if ws.converged else 'NOT converged'}, {len(ws.poses)} pose(s) imposed")
             if ws.certified is not None:

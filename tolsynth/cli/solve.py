@@ -28,6 +28,7 @@ from tolsynth.errors import InputError
 from tolsynth.kinematics.mechanism import load_model
 from tolsynth.problem.specification import ALPHA_DEFAULT
 from tolsynth.progress import Working
+from tolsynth.units import joint_values
 
 __all__ = ["register", "side_by_side"]
 
@@ -228,7 +229,7 @@ def cmd_solve(args) -> int:
                 frame,
                 args,
                 mech,
-                start_pose=pose_label(start) if start is not None else None,
+                **joint_values(pose_label(start) if start is not None else None, mech.joint_value_units, "start_pose"),
                 everywhere=True,
                 **record,
             )
@@ -252,7 +253,11 @@ def cmd_solve(args) -> int:
             if reps:
                 out["contributions"] = reps["the design"].to_dict()
             out["inputs"] = inputs_record(
-                args, mech, start_pose=pose_label(start) if start is not None else None, everywhere=True, **record
+                args,
+                mech,
+                **joint_values(pose_label(start) if start is not None else None, mech.joint_value_units, "start_pose"),
+                everywhere=True,
+                **record,
             )
             emit_json(out)
         else:
@@ -292,7 +297,7 @@ def cmd_solve(args) -> int:
             )
             if w.certified is not None:  # the certified search's proof (or why there is none)
                 print("  " + cli_words(w.certificate_line()))
-            print(workspace_checked(w.result).summary())
+            print(workspace_checked(w.result).summary(cost_line=w.cost_line()))
             _print_contributions(reps)
         if not w.success and w.converged and w.result.feasible:  # the sphere's: met, optimality not proven
             print(
@@ -312,7 +317,7 @@ def cmd_solve(args) -> int:
     reject_exchange_flags(args, certify_alone=False)
     poses = parse_poses(mech, args.pose)
     kw["poses"] = poses
-    record["poses"] = [pose_label(q) for q in poses]
+    record.update(joint_values([pose_label(q) for q in poses], mech.joint_value_units, "poses"))
     where = ", ".join(q if isinstance(q, str) else mech.format_joints(q) for q in poses)
     if args.solver == "both":
         with Working("tolsynth solve: IPOPT and SUMT + Powell"):

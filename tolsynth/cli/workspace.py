@@ -156,8 +156,11 @@ def _cmd_map(args) -> int:
         print(f"tolerances   {label}")
         print(f"extent       {pm.u[0]:.1f} .. {pm.u[-1]:.1f} x {pm.v[0]:.1f} .. {pm.v[-1]:.1f} mm")
         if rch.any():
-            print(f"P(dr<=R)     {np.nanmin(pm.P):.4f} .. {np.nanmax(pm.P):.4f}  (R = {pm.R:g} mm, {pm.distribution})")
-            print(f"lowest P     {pm.worst[2]:.4f} at ({pm.worst[0]:.1f}, {pm.worst[1]:.1f}) mm")
+            print(
+                f"P(|dr|<=R)   {np.nanmin(pm.P):.4f} .. {np.nanmax(pm.P):.4f}  (Gaussian: normal errors of the "
+                f"{pm.distribution} errors' variances; R = {pm.R:g} mm)"
+            )
+            print(f"lowest P     {pm.worst[2]:.4f} (Gaussian) at ({pm.worst[0]:.1f}, {pm.worst[1]:.1f}) mm")
         print(f"reference    {pm.reference or 'none'}")
         print(f"branch       {pm.branch}")
         print(

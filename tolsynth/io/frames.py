@@ -226,6 +226,7 @@ def _map_frame(pm):
         "hand_axis": pm.hand_axis,
         "R_mm": pm.R,
         "distribution": pm.distribution,
+        "probability": pm.probability,
         "tolerances": pm.tolerances,
         "tolerance_label": pm.tolerance_label,
         "reference": pm.reference,

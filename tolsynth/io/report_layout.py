@@ -9,23 +9,9 @@ import math
 import numpy as np
 
 from tolsynth.io.report_certificate import certificate_blocks, exact_certificate
+from tolsynth.io.report_spec import _is_exact, specification_blocks
 
 PLOT_INSTALL = 'pip install "tolsynth[plot]"'
-
-
-def _is_exact(res) -> bool:
-    """Whether ``res`` was designed with ``probability="exact"``."""
-    return (getattr(res, "inputs", None) or {}).get("probability") == "exact" or any(
-        b.kind.endswith("(exact)") for b in res.constraints
-    )
-
-
-def _asked_p(res, spec) -> str:
-    """p as asked; after a closed loop (verify) the design's tighter target beside it."""
-    ver = getattr(res, "verification", None)
-    if ver is None or abs(ver.p - spec.p) <= 1e-15:
-        return f"{spec.p:g}"
-    return f"{ver.p:g} asked (the design's target after the closed loop: {spec.p:.6g})"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -41,7 +27,7 @@ def _vec(v, fmt=".3f") -> str:
 
 
 def _layout(rep) -> list[tuple]:
-    from tolsynth.probability.distributions import describe, label
+    from tolsynth.probability.distributions import label
     from tolsynth.version import __version__
 
     mech, res, spec = rep.mechanism, rep.result, rep.result.spec
@@ -65,50 +51,7 @@ def _layout(rep) -> list[tuple]:
         )
 
     # 1. specification
-    B.append(("h", 2, "1. Specification"))
-    alpha = np.asarray(spec.alpha, dtype=float)
-    alpha_txt = (
-        f"{alpha[0]:g} (every parameter)"
-        if np.all(alpha == alpha[0])
-        else ", ".join(f"{n} {a:g}" for n, a in zip(spec.names, alpha))
-    )
-    kv = [
-        ("model", f"{mech.name}: {mech.title}"),
-        ("position accuracy R", f"{spec.R:g} mm"),
-        (
-            "probability p",
-            _asked_p(res, spec)
-            + (
-                " per principal component (the paper's Eq. 20)"
-                if spec.criterion == "components"
-                else " of the sphere P(|dr| <= R)"
-            ),
-        ),
-        ("criterion", spec.criterion),
-        (
-            "probability model",
-            "exact (the linear error model's own probabilities, no Gaussian reading)"
-            if _is_exact(res)
-            else "gaussian (the paper's: each principal component read as normal)",
-        ),
-        ("z(p)", f"{spec.z:.6g}"),
-        ("error distribution", f"{label(spec.distribution)}: {describe(spec.distribution)}"),
-        ("cost exponent alpha", alpha_txt),
-    ]
-    if spec.Phi is not None:
-        kv.append(("orientation accuracy Phi", f"{spec.Phi:g} rad, probability {spec.p_orientation:g}"))
-    for lbl, q in spec.poses.items():
-        kv.append((f"pose '{lbl}'", f"joints {mech.format_joints(q)} ({', '.join(mech.joint_names)})"))
-    kv.append(
-        (
-            "solver",
-            f"{res.solver}: {res.status} ({res.message}); {res.iterations} iterations, {res.wall_time * 1e3:.1f} ms",
-        )
-    )
-    locks = (res.inputs or {}).get("locks")
-    if locks:
-        kv.append(("fixed tolerances", ", ".join(f"{k} = {v:g}" for k, v in locks.items())))
-    B.append(("kv", kv))
+    B += specification_blocks(rep)
 
     # 2. model
     B.append(("h", 2, "2. Model"))
@@ -198,15 +141,22 @@ def _layout(rep) -> list[tuple]:
 
     # 4. certificate
     B.append(("h", 2, "4. Certificate"))
-    rel = res.gap / abs(res.cost) if res.cost else float("nan")
+    xw = rep.workspace  # an exchange's bound is its own (the last solve's holds at its poses only)
+    lower, gap = (xw.lower_bound, xw.gap) if xw is not None else (res.lower_bound, res.gap)
+    rel = gap / abs(res.cost) if res.cost else float("nan")
     B.append(
         (
             "kv",
             [
                 ("cost", f"{res.cost:.8g}"),
-                ("dual lower bound", f"{res.lower_bound:.8g}"),
-                ("gap (cost - bound)", f"{res.gap:.2e}"),
+                ("lower bound over every pose" if xw is not None else "dual lower bound", f"{lower:.8g}"),
+                ("gap (cost - bound)", f"{gap:.2e}"),
                 ("relative gap", f"{rel:.2e}"),
+                *(
+                    [(f"the last solve's dual bound at its {len(xw.poses)} poses", f"{res.lower_bound:.8g}")]
+                    if xw
+                    else []
+                ),
                 (
                     "largest (1-P)/(1-p)" if _is_exact(res) else "largest sigma z / limit",
                     f"{res.max_constraint:.6f} (<= 1 meets the specification)",
@@ -274,15 +224,20 @@ def _layout(rep) -> list[tuple]:
         (
             "p",
             "Each parameter's share of each principal variance of the hand position (exact: the shares add "
-            "to 100 %), of the total variance tr V and, with R, of the sphere probability's loss 1 - P(|dr| <= R) "
+            "to 100 %), of the total variance tr V and, with R, of the Gaussian sphere probability's loss 1 - P(|dr| <= R) "
             "(normalised elasticities). Where two principal sigma coincide (two active constraints) the split "
             "between them is arbitrary; their sum is not.",
         )
     )
     for b, pose in enumerate(c.poses):
         head = f"pose '{pose}': principal sigma {_vec(c.sigma[b], '.4g')} mm"
+        exact = rep.linear_exact.get(pose)  # an exact design's exact sphere probability, where computed
         if c.P_sphere is not None:
-            head += f", P(|dr| <= {c.R:g} mm) = {c.P_sphere[b]:.6f}"
+            head += f", P(|dr| <= {c.R:g} mm) = " + (
+                f"{exact[1]:.6f} exact (Gaussian {c.P_sphere[b]:.6f}, the one the last column splits)"
+                if exact is not None
+                else f"{c.P_sphere[b]:.6f} Gaussian"
+            )
         B.append(("h", 3, head))
         rows = []
         for i in np.argsort(-c.shares[b, :, 0], kind="stable"):
@@ -516,7 +471,7 @@ def _layout(rep) -> list[tuple]:
         if w.p_sphere is not None:
             rows.append(
                 [
-                    "P(|dr| <= R)",
+                    "P(|dr| <= R), Gaussian",
                     f"{w.p_sphere:.4f}",
                     f"{w.reference_p_sphere:.4f}" if w.reference_p_sphere is not None else "-",
                 ]

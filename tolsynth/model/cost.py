@@ -45,7 +45,8 @@ that is ``c''(u) - 2 c'(u) >= 0``, which is *weaker* than convexity in ``u`` (``
 
 * power law and Chase: convex in ``u`` (hence in ``y``) everywhere;
 * exponential: convex in ``u`` only where ``B eps >= 1``, but convex in ``y`` everywhere
-  (``c'' - 2c' = A B eps e^{-B eps} (B eps + 1) > 0``): the certificate holds on any range;
+  (``c'' - 2c' = A B eps e^{-B eps} (B eps + 1) > 0``): the certificate holds on any range (the
+  exact reading's set is convex in ``eps``, not ``y``: there it is certified in ``eps``, see exact.py);
 * tabulated: convex in ``y`` iff ``g'' + g'^2 - 2 g' >= 0`` for the log-log interpolant ``g``;
   checked exactly (a quartic per interval, its minimum from the roots of its derivative), see
   :meth:`Tabulated.convex_in_y`.  Where it fails the problem may have local optima: no certificate

@@ -12,9 +12,10 @@ Servo / encoder error (``kind = "servo"``)
     quantisation, tolerance ``value = q/2``), or with a normal servo error (``3 sigma = value``,
     the synthesis' ``distribution="normal"``).  It is added to the joint variable itself, before
     the closed loops are solved, so a servo error of a joint that drives a loop (the paper's
-    theta'2) moves the loop's passive joint too.  Every joint of the model format is revolute, so
-    a servo error is an angle (an angle unit, default mrad); a prismatic joint's displacement
-    error would be a length at the same place, but the format has no prismatic joints.
+    theta'2) moves the loop's passive joint too.  A servo error of a joint that turns is an angle
+    (an angle unit, default mrad); of one that slides (a URDF's prismatic joint) a length (default
+    mm), added to the joint's value in mm.  A parallel robot's strut has none: its length error is
+    its leg's offset parameter.
 
 Clearance of a revolute joint (``kind = "clearance"``)
     The journal (pin) floats inside its bearing (hole).  The model is the small-displacement
@@ -174,13 +175,29 @@ def _check(je: JointError, i: int, spec) -> JointError:
     if not isinstance(je.kind, str) or je.kind not in KINDS:
         raise InputError(f"{where}.kind", f"unknown kind {je.kind!r}", " or ".join(repr(k) for k in KINDS))
     actuated = list(spec.joint_names)
+    slides = set(getattr(spec, "length_joints", ()))  # prismatic joints: their values are lengths
     chain = [link.theta for link in spec.links]
-    allowed = actuated if je.kind == "servo" else chain
+    allowed = actuated if je.kind == "servo" else [j for j in chain if j not in slides]
     if not isinstance(je.joint, str) or je.joint not in allowed:
-        what = "an actuated joint" if je.kind == "servo" else "a joint turned by a link of the chain"
-        raise UnknownNameError(f"{where}.joint", f"{je.joint!r} is not {what}", "one of " + ", ".join(allowed))
-    unit = DEFAULT_UNIT[je.kind] if je.unit is None else je.unit
-    want = "angle" if je.kind == "servo" else "length"
+        what = "an actuated joint" if je.kind == "servo" else "a revolute joint of a serial chain"
+        if not allowed:  # a parallel robot: no serial chain, its legs' ends are ball joints
+            why = f"{spec.name} has none (a parallel robot's legs end in ball joints, whose clearance is not modelled)"
+        elif je.joint in slides:
+            why = "it slides (a prismatic joint): the clearance model is a revolute joint's pin in its bearing"
+        else:
+            why = ""
+        raise UnknownNameError(
+            f"{where}.joint",
+            f"{je.joint!r} is not {what}" + (f": {why}" if why else ""),
+            "one of " + ", ".join(allowed)
+            if allowed
+            else "kind 'servo' on a revolute actuator"
+            if set(actuated) - slides
+            else "no joint error (each strut's length error is its leg's offset parameter)",
+        )
+    slide = je.kind == "servo" and je.joint in slides  # a slide's servo error is a length
+    unit = ("mm" if slide else DEFAULT_UNIT[je.kind]) if je.unit is None else je.unit
+    want = "angle" if je.kind == "servo" and not slide else "length"
     if not isinstance(unit, str) or unit_kind(unit) != want:
         from tolsynth.units import ANGLE_UNITS, LENGTH_UNITS
 
@@ -209,7 +226,7 @@ def _check(je: JointError, i: int, spec) -> JointError:
 
         top = 2 * math.pi / to_base(unit)
         key, v = ("value", value) if value is not None else ("bounds.upper", bounds[1])
-        if v > top * (1 + 1e-12):
+        if not slide and v > top * (1 + 1e-12):
             raise OutOfRangeError(f"{where}.{key}", f"{v:g} {unit} is more than a full turn", f"up to {top:g} {unit}")
         for key in ("axial", "length"):
             if getattr(je, key) is not None:
@@ -257,7 +274,7 @@ def joint_parameters(spec, joint_errors: Sequence[JointError]) -> tuple:
     """The error parameters (:class:`tolsynth.model.spec.ErrorParameter`) of the joint errors, checked
     against the mechanism ``spec`` (names unique, also against its link parameters)."""
     from tolsynth.model.spec import ErrorParameter
-    from tolsynth.units import to_base
+    from tolsynth.units import to_base, unit_kind
 
     if isinstance(joint_errors, JointError) or not isinstance(joint_errors, Sequence):
         raise InputError("joint_errors", f"got {joint_errors!r:.60}", "a list of tolsynth.JointError")
@@ -286,7 +303,7 @@ def joint_parameters(spec, joint_errors: Sequence[JointError]) -> tuple:
                     lower=lo,
                     upper=hi,
                     label=f"servo error of {je.joint}",
-                    kind="angle",
+                    kind=unit_kind(je.unit),
                     at_joint=(je.joint, "q"),
                     **common,
                 )

@@ -162,11 +162,12 @@ class SynthesisResult(Tabular):
         """Largest ``sigma_j z / R`` over all blocks (<= 1 means the specification is met)."""
         return float(max(b.values[0] for b in self.constraints))
 
-    def summary(self) -> str:
-        """Readable summary: status, cost, bound and gap, tolerances with units and bound markers, constraint values and multipliers."""
+    def summary(self, cost_line: str | None = None) -> str:
+        """Readable summary: status, cost, bound and gap, tolerances with units and bound markers, constraint values and multipliers.
+        ``cost_line`` replaces the cost, bound and gap line (a workspace exchange's bound is its own)."""
         lines = [
             f"{self.solver}: {self.status} ({self.message})",
-            f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})",
+            cost_line or f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})",
             f"iterations {self.iterations}, evaluations {self.function_evaluations}, {self.wall_time * 1e3:.1f} ms",
             f"probabilities: {self.probability_kind}",
         ]

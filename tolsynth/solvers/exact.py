@@ -12,9 +12,10 @@ symmetric log-concave densities (uniform, normal, triangular, truncated normal) 
 is convex: Lagoa, Li & Sznaier, "Probabilistically constrained linear programs and risk-adjusted
 controller design", SIAM J. Optim. 15(3), 2005.  ``x`` is linear in ``eps``, so each direction's
 feasible set is convex in ``eps``, closed downwards (P falls as any error grows), hence convex in
-``u = ln eps`` as well; the intersection over directions and poses is convex, the cost
-``sum_i c_i(u_i)`` is convex in u, and a KKT point is the global optimum.  The tests check the
-claim numerically (midpoints of feasible designs stay feasible).
+``u = ln eps`` as well, and in any mix of the two coordinates; the intersection over directions and
+poses is convex, and where each cost ``c_i`` is convex in ``u_i`` or in ``eps_i`` (the exponential
+where ``B eps < 1``) the problem is convex in that mix, so a KKT point (the same in ``u``) is the
+global optimum.  The tests check the claim numerically (midpoints of feasible designs stay feasible).
 
 **The method.**  An exchange: the constraint is imposed on a finite set of (pose, direction) cuts,
 the cut problem solved by a primal-dual interior-point Newton method on the exact series
@@ -56,6 +57,7 @@ from tolsynth.solvers.exact_newton import Barrier
 from tolsynth.solvers.exact_newton import cost_function as _cost_fn
 from tolsynth.solvers.exact_refute import verdict
 from tolsynth.solvers.exact_series import probability
+from tolsynth.solvers.worst_case import convex_in_eps
 
 __all__ = [
     "solve_exact",
@@ -123,17 +125,23 @@ def _blocks(spec) -> list[_Block]:
 
 def certifiable(shapes, spec) -> tuple[bool, str]:
     """Whether the convexity argument holds: every shape symmetric log-concave and every cost
-    convex in ``u = ln eps`` on its range; else the reason."""
+    convex in ``u = ln eps`` or in ``eps`` on its range (the feasible set is convex in any mix of
+    the two); else the reason."""
     bad = sorted({s.name for s in shapes if s.kind not in LOG_CONCAVE})
     if bad:
         return False, f"the error shape(s) {bad} are not symmetric log-concave: no certificate exists"
     costs = spec.costs
     if costs.power_law() is None:
         nonconvex = [
-            nm for nm, m, a, b in zip(spec.names, costs.models, spec.lower, spec.upper) if not m.convex_in_u(a, b)
+            nm
+            for nm, m, a, b in zip(spec.names, costs.models, spec.lower, spec.upper)
+            if not (m.convex_in_u(a, b) or convex_in_eps(m, a, b))
         ]
         if nonconvex:
-            return False, f"the cost of {nonconvex} is not convex in ln eps on its range"
+            return False, (
+                f"the cost of {nonconvex} is convex neither in eps nor in ln eps on its range "
+                "(the exact reading's certificate needs one of them; probability='gaussian' needs convexity in eps^2)"
+            )
     return True, ""
 
 

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tolsynth.solvers.exact_series import derivatives, probability
+from tolsynth.solvers.worst_case import _linear_min, convex_in_eps
 
 __all__ = ["cover", "Cover", "half_space_bound", "LOG_CONCAVE"]
 
@@ -341,6 +342,31 @@ def _one_dim_min(costs, w: np.ndarray, lu: np.ndarray, uu: np.ndarray) -> tuple[
     return vals, us, curvs
 
 
+def _eps_coordinates(costs, lu, uu) -> np.ndarray:
+    """Per parameter: True where the cost is convex in eps but not in ``u = ln eps`` on its box."""
+    if costs.power_law() is not None:
+        return np.zeros(lu.size, dtype=bool)
+    return np.array(
+        [
+            b - a > 1e-12 and not m.convex_in_u(math.exp(a), math.exp(b)) and convex_in_eps(m, math.exp(a), math.exp(b))
+            for m, a, b in zip(costs.models, lu, uu)
+        ]
+    )
+
+
+def _mixed_min(costs, w, lu, uu, lin) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_one_dim_min`, with ``min over [e^lu_i, e^uu_i] of c_i(eps) + w_i eps`` where ``lin``:
+    the values, the minimisers in each parameter's coordinate, and ``1 / c_i''`` in it."""
+    val, z, curv = _one_dim_min(costs, w, lu, uu)
+    for i in np.flatnonzero(lin):
+        m = costs.models[i]
+        val[i], u = _linear_min(m, float(w[i]), float(lu[i]), float(uu[i]))
+        z[i] = math.exp(u)
+        c2 = float(m.d2u(np.array([u]))[0] - m.du(np.array([u]))[0])  # eps^2 d2c/deps2
+        curv[i] = z[i] ** 2 / c2 if lu[i] < u < uu[i] and c2 > 0 else 0.0
+    return val, z, curv
+
+
 def _convex_min(m, w, a, b) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``min over [a, b] of c(u) + w u`` for one cost model convex in u, every element at once.
     The derivative increases: where it has one sign over the range the minimum is at an end;
@@ -401,7 +427,19 @@ def half_space_bound(costs, lu, uu, u_star, c_rows, R_rows, p_rows, shapes, lam0
     # rows); its error bound widens the half-spaces by lam . delta, which the multipliers of a high p
     # (about 1 / (1 - p)) carry past the certificate's gap: then to the tolerance that keeps the
     # widening below WIDEN_SHARE of the cost
-    reach = np.maximum(np.abs(lu - u_star - s[:, None]), np.abs(uu - u_star - s[:, None]))
+    # a cost convex in eps but not in u takes eps itself as its half-spaces' coordinate: the cut's set
+    # is convex in any mix of eps and ln eps (convex in eps and closed downwards), and the dual's
+    # one-dimensional minimum is then global and meets the cost at a KKT point
+    lin = _eps_coordinates(costs, lu, uu)
+    Us = u_star + s[:, None]
+    Es = np.exp(Us)
+    to_z = np.where(lin, 1.0 / Es, 1.0)  # d/dz = d/du / eps in an eps coordinate
+    Zs = np.where(lin, Es, Us)
+    reach = np.where(
+        lin,
+        np.maximum(np.abs(np.exp(lu) - Es), np.abs(np.exp(uu) - Es)),
+        np.maximum(np.abs(lu - Us), np.abs(uu - Us)),
+    )
     total = costs.total(u_star)
     if total is None:
         total = math.fsum(float(m.value(x)) for m, x in zip(costs.models, u_star))
@@ -411,14 +449,14 @@ def half_space_bound(costs, lu, uu, u_star, c_rows, R_rows, p_rows, shapes, lam0
         _, G, _, _, eG = derivatives(
             c_rows * np.exp(s)[:, None], u_star, shapes, R_rows, tol=tol, hessian=False, rigorous=True
         )
-        delta = (eG * reach).sum(axis=1)
+        delta = (eG * to_z * reach).sum(axis=1)
         widening, budget = float(lam_abs @ delta), WIDEN_SHARE * abs(total)
         if widening <= budget or tol <= MIN_GRAD_TOL:
             break
         tol = max(tol * 0.5 * budget / widening, MIN_GRAD_TOL)
     P, eP = Ps, es_
-    hs = np.maximum(-G, 0.0)  # the true gradient is <= 0: clipping only moves the estimate closer
-    cj = hs @ u_star + s * hs.sum(axis=1) + delta
+    hs = np.maximum(-G, 0.0) * to_z  # the true gradient is <= 0: clipping only moves the estimate closer
+    cj = (hs * Zs).sum(axis=1) + delta
     if not np.all(P + eP <= p_rows):  # still above p after the search: that cut gives no half-space
         keep = P + eP <= p_rows
         hs, cj = hs[keep], cj[keep]
@@ -430,8 +468,8 @@ def half_space_bound(costs, lu, uu, u_star, c_rows, R_rows, p_rows, shapes, lam0
 
     def dual(lam):
         w = lam @ hs
-        val, u, curv = _one_dim_min(costs, w, lu, uu)
-        return math.fsum(val.tolist()) - float(lam @ cj), hs @ u - cj, -(hs * curv[None, :]) @ hs.T
+        val, z, curv = _mixed_min(costs, w, lu, uu, lin)
+        return math.fsum(val.tolist()) - float(lam @ cj), hs @ z - cj, -(hs * curv[None, :]) @ hs.T
 
     # any multipliers give a valid bound: the ascent stops once the bound is within 1e-8 of the
     # cost at u_star, far inside the certificate's 1e-6, or, while more than 1e-4 of it is missing

@@ -92,14 +92,14 @@ class WorstCaseResult(SynthesisResult):
         st = self.statistical
         return None if not st or not st.get("cost") else self.cost / st["cost"]
 
-    def summary(self) -> str:
+    def summary(self, cost_line: str | None = None) -> str:
         """Status, cost with bound and gap, the comparison with the statistical design, the
         tolerances, the worst-case value of every pose, how the default design pose was chosen
-        and the sampled workspace check once computed."""
+        and the sampled workspace check once computed; ``cost_line`` as in
+        :meth:`SynthesisResult.summary`."""
         lines = [
             f"{self.solver} (worst case: every error anywhere in its band): {self.status} ({self.message})",
-            # a gap below zero is the rounding of two equal numbers (the bound is valid): shown as 0
-            f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})",
+            cost_line or f"cost {self.cost:.8g}  (dual bound {self.lower_bound:.8g}, gap {self.gap:.2e})",
         ]
         st = self.statistical
         if st:

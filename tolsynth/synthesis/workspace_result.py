@@ -137,6 +137,15 @@ class WorkspaceSynthesis(Tabular):
         worst pose the search found (0 where they meet it everywhere it looked)."""
         return max(0.0, self.worst_value - 1.0) if self.rounds else float("nan")
 
+    def cost_line(self) -> str:
+        """The cost with what is proven of it: the exchange's lower bound and gap, then the last
+        solve's own dual bound, labelled as holding at its poses only."""
+        res = self.result
+        return (
+            f"cost {res.cost:.8g}  (lower bound {self.lower_bound:.8g} over every pose, gap {self.gap:.2e}; "
+            f"the last solve's dual bound at its {len(self.poses)} pose(s) {res.lower_bound:.8g})"
+        )
+
     def certificate_line(self) -> str:
         """The certified search's proven bound over the whole joint space, or why there is none."""
         if self.certified is None:
@@ -228,5 +237,5 @@ class WorkspaceSynthesis(Tabular):
             lines.append("afterwards: no worst-pose search (no round finished)")
         if self.certified is not None:
             lines.append(self.certificate_line())
-        lines.append(self.result.summary())
+        lines.append(self.result.summary(cost_line=self.cost_line()))
         return "\n".join(lines)
