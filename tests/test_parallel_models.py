@@ -16,7 +16,7 @@ import tolsynth
 from model_text import assert_defect_named
 from model_text import drop_at as _drop
 from model_text import set_at as _set
-from tolsynth.errors import InputError
+from tolsynth.errors import InputError, OutOfRangeError
 from tolsynth.probability.stats import z_of_p
 
 
@@ -110,8 +110,10 @@ def test_servo_errors_of_revolute_actuators_and_what_is_refused():
     S = d2.sensitivity("corner")
     assert np.allclose(S[:, -1], S[:, d.index("A2.offset")], rtol=0, atol=1e-12)
     h = tolsynth.load_model("stewart_gough")
-    with pytest.raises(InputError, match="strut"):
-        h.with_joint_errors([tolsynth.JointError("q1", "servo", value=0.1, unit="mrad")]).sensitivity("home")
+    with pytest.raises(InputError, match="strut"):  # a strut's length error is its leg's offset
+        h.with_joint_errors([tolsynth.JointError("q1", "servo", value=0.1, unit="mm")]).sensitivity("home")
+    with pytest.raises(OutOfRangeError, match="not a unit of length"):  # a strut slides: no angle
+        h.with_joint_errors([tolsynth.JointError("q1", "servo", value=0.1, unit="mrad")])
     with pytest.raises(InputError):
         h.with_joint_errors([tolsynth.JointError("q1", "clearance", value=0.01)])
 
