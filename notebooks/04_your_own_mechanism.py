@@ -182,13 +182,14 @@ for pose in ("stretched", "folded"):
 #
 # Specification: the hand point within `R = 0.1 mm` with probability 0.99 per principal component,
 # and the hand orientation within `Phi = 1 mrad` with the same probability (Eq. 21, which the paper
-# states but does not use in its example).  First, as the paper does, at one pose (the stretched
-# arm):
+# states but does not use in its example), read as the paper reads it (`probability="gaussian"`:
+# `z(p) sigma_j <= R`; notebook 11 sets it beside the exact reading, the package's default).
+# First, as the paper does, at one pose (the stretched arm):
 
 # %%
 R, p, Phi, alpha = 0.1, 0.99, 1e-3, 0.7
 z = tolsynth.z_of_p(p)
-res1 = tolsynth.synthesize(m, R, p, "uniform", alpha, pose="stretched", Phi=Phi)
+res1 = tolsynth.synthesize(m, R, p, "uniform", alpha, pose="stretched", Phi=Phi, probability="gaussian")
 print(res1.summary())
 
 # %% [markdown]
@@ -224,7 +225,7 @@ print(
 
 # %%
 ws = tolsynth.synthesize_workspace(
-    m, R, p, "uniform", alpha, pose="stretched", Phi=Phi, search={"reference": "stretched"}
+    m, R, p, "uniform", alpha, pose="stretched", Phi=Phi, search={"reference": "stretched"}, probability="gaussian"
 )
 assert ws.success, ws.result.message
 res, poses = ws.result, ws.poses
@@ -271,7 +272,7 @@ plt.show()
 
 # %%
 designs = {"uniform": res}
-designs["normal"] = tolsynth.synthesize(m, R, p, "normal", alpha, poses=poses, Phi=Phi)
+designs["normal"] = tolsynth.synthesize(m, R, p, "normal", alpha, poses=poses, Phi=Phi, probability="gaussian")
 checks = {}
 for dist, r in designs.items():
     checks[dist] = validate(m, r, R=R, p=p, distribution=dist, pose=worst_q, n=1_000_000, seed=4)
@@ -324,8 +325,9 @@ print("orientation sigma_j z / Phi (linear Gaussian model):", (ana.orientation_p
 # %% [markdown]
 # With uniform errors each orientation component is a sum of a few *bounded* small rotations.  At
 # this pose its largest possible value is (at or) below `Phi`, so the Monte Carlo finds the
-# orientation inside its zone in (practically) every sample, while the Gaussian model, whose tails
-# are unbounded, puts a little probability outside.  The same mechanism, less extreme, makes the
+# orientation inside its zone in (practically) every sample, as the linear model's exact
+# probabilities (the report's last column) say, while its Gaussian reading, whose tails are
+# unbounded, puts a little probability outside (`sigma_j z / Phi` up to 0.98).  The same mechanism, less extreme, makes the
 # position probabilities above come out higher than the model says.
 #
 # To do the same for your mechanism: copy `MODEL`, change the chain, joints and error parameters,
