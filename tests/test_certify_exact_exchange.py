@@ -117,8 +117,8 @@ def test_exact_certified_minimum_on_the_paper_robot_against_an_independent_searc
     M = m.sensitivity(c.q, check_limits=False)[:3] * eps
     assert fft_at_edge((c.direction @ M)[None], 0.5, 1 << 14)[0] == pytest.approx(c.best_value, abs=2e-7)
     lowest = 1.0
-    poses = [(140.0, 90.0, t4) for t4 in (20.0, 30.0, 35.0, 40.0, 45.0, 50.0, 60.0)]
-    poses += [(141.0, 90.0, 40.0), (141.0, 91.0, 40.0), (150.0, 95.0, 40.0), (160.0, 90.0, 40.0)]
+    poses = [(140.0, 90.0, t4) for t4 in (20.0, 35.0, 45.0, 60.0)]
+    poses += [(141.0, 91.0, 40.0), (160.0, 90.0, 40.0)]
     for t2, tp2, t4 in poses:
         A = m.sensitivity(np.radians([0.0, t2, tp2, t4, 0.0]))[:3]
         lowest = min(lowest, independent_worst(A * eps, 0.5)[0])
@@ -213,6 +213,7 @@ def test_exact_minimum_on_five_searched_joints_settled_from_the_sigma_bound(monk
     assert not c0.certified and c0.probability_lower_bound < 0.9 and "sigma_1" not in c0.method
 
 
+@pytest.mark.slow  # about 10 s: a certified Gaussian exchange and FFT searches at its poses
 def test_exact_reading_proven_through_sigma_on_the_paper_robot():
     """``certify_options={"through": "sigma"}``: the Gaussian reading's certified exchange at the
     z where Eaton's bound proves p - 1e-6 (3.027 at p 0.99, tol 1e-3); the proven sigma_1 then

@@ -29,7 +29,7 @@ import fuzz_cases as fc
 
 pytestmark = pytest.mark.filterwarnings("error:::tolsynth")
 
-EXAMPLES = {"default": 20, "ci": 120, "long": 400}
+EXAMPLES = {"default": 20, "ci": 50, "long": 400}
 if os.environ.get("HYPOTHESIS_PROFILE") == "long":
     EXAMPLES["default"] = EXAMPLES["long"]
 PROFILES = [

@@ -50,7 +50,11 @@ def reference_pose(mech):
 SIZES = [(1, 2), (3, 2), (10, 2), (30, 1)]
 #: the default engine and IPOPT (the general path and the cross-check)
 SOLVERS = ["auto", "ipopt"]
-SLOW_SIZES = [(100, 2), pytest.param(300, 1, marks=pytest.mark.long)]  # 300 poses: a minute a case
+SLOW_SIZES = [
+    (100, 1),
+    pytest.param(100, 3, marks=pytest.mark.long),
+    pytest.param(300, 1, marks=pytest.mark.long),
+]  # 300 poses: a minute a case
 
 
 def _sweep(model, N, seeds):
