@@ -27,7 +27,7 @@ class WorkspaceSynthesis(Tabular):
         Per round: ``n_poses``, ``cost``, ``worst_value`` (the largest value found over the
         workspace at that round's optimum, in the design's reading, :attr:`worst_quantity`: sigma
         z / R; the sphere's (1 - P)/(1 - p); the exact (1 - P)/(1 - p) along the worst direction or in
-        the sphere; or the worst case's largest |dr| / R over every error in its band), ``worst_q`` (rad), ``worst_position`` (mm).
+        the sphere; or the worst case's largest ``|dr| / R`` over every error in its band), ``worst_q`` (rad), ``worst_position`` (mm).
     converged : bool
         True when the worst pose found meets the specification to ``tol``, ``worst_value <= 1 +
         tol`` (with ``certify``: when the proven bound does).
