@@ -34,6 +34,15 @@ from tolsynth.errors import InputError
 __all__ = ["contributions", "Contributions", "StackUp"]
 
 
+def _frame(rows: list[dict]):
+    """``rows`` as a pandas DataFrame where pandas is installed (an optional extra), else as they are."""
+    try:
+        import pandas as pd
+    except ImportError:
+        return rows
+    return pd.DataFrame(rows)
+
+
 @dataclass(frozen=True)
 class Contributions:
     """Each parameter's share of the error at one set of tolerances, per pose.
@@ -97,11 +106,7 @@ class Contributions:
 
     def table(self):
         """A pandas DataFrame of :meth:`rows` if pandas is installed, else the list of dicts."""
-        try:
-            import pandas as pd
-        except ImportError:
-            return self.rows()
-        return pd.DataFrame(self.rows())
+        return _frame(self.rows())
 
     def ranking(self, pose: int = 0) -> list[str]:
         """Parameters by decreasing share of the largest principal variance at one pose."""
@@ -194,11 +199,7 @@ class StackUp:
 
     def table(self):
         """A pandas DataFrame of :meth:`rows` if pandas is installed, else the list of dicts."""
-        try:
-            import pandas as pd
-        except ImportError:
-            return self.rows()
-        return pd.DataFrame(self.rows())
+        return _frame(self.rows())
 
     def ranking(self, pose: int = 0) -> list[str]:
         """Parameters by decreasing term at one pose."""
