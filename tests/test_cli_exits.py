@@ -183,7 +183,7 @@ def test_ctrl_c_anywhere_in_reproduce_is_one_line(after):
     assert "Traceback" not in err and "KeyboardInterrupt" not in err and "CasADi" not in err
 
 
-@pytest.mark.slow
+@pytest.mark.long  # the default run interrupts reproduce at four of these times
 def test_ctrl_c_many_times_in_reproduce():
     """Nine interrupts spread over a whole run, 0.6 s apart: all 130, one line.  They start at
     0.4 s, once the interpreter's own start-up is over (the first milliseconds, which the package
