@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 import tolsynth
+from test_joint_units_display import SLIDE  # the one-slide URDF of the units tests
 from test_kinematics import (
     PUMA_SYM,
     TOL_UNIT,
@@ -584,15 +585,6 @@ def test_a_cost_for_a_fixed_joint_error_is_refused():
             m, R=0.5, p=0.99, cost={"theta1.servo": {"model": "power", "k": 1.0, "alpha": 0.7}}, probability="gaussian"
         )
     assert info.value.field == "cost[theta1.servo]"
-
-
-SLIDE = """<robot name="slide"><link name="base"/><link name="l1"/><link name="l2"/><link name="tip"/>
-<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
-  <origin xyz="0 0 0.5" rpy="0 0 0"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
-<joint name="j2" type="prismatic"><parent link="l1"/><child link="l2"/>
-  <origin xyz="0.4 0 0" rpy="0 0 0"/><axis xyz="1 0 0"/><limit lower="0" upper="0.2" effort="1" velocity="1"/></joint>
-<joint name="f" type="fixed"><parent link="l2"/><child link="tip"/><origin xyz="0 0 -0.05" rpy="0 0 0"/></joint>
-</robot>"""
 
 
 def test_servo_error_of_a_slide_is_a_length(tmp_path):
